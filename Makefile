@@ -1,0 +1,42 @@
+# Two commands: `make run` (the thesis baseline on 2 MPI ranks) and `make test`.
+# Both set everything up on a fresh Debian 12 machine (idempotent, seconds when done).
+VENV    ?= .venv
+PY      := $(VENV)/bin/python
+NP      ?= 2
+CASE    ?= jobs/thesis_baseline.toml
+OUT     ?= results/thesis_baseline
+# Open MPI refuses to run as root unless told; harmless otherwise.
+export OMPI_ALLOW_RUN_AS_ROOT := 1
+export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
+# Oversubscription keeps `-n 2` working on 1-core CI machines.
+MPIRUN  ?= mpirun --oversubscribe -n $(NP)
+
+.PHONY: setup run test test-serial test-mpi lint bench clean docs
+
+setup:
+	@bash tools/setup.sh
+
+run: setup
+	$(MPIRUN) $(PY) -m railvib_hpc run $(CASE) --out $(OUT)
+
+test: setup
+	$(PY) -m pytest -q
+	$(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
+
+test-serial: setup
+	$(PY) -m pytest -q
+
+test-mpi: setup
+	$(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
+
+lint: setup
+	$(VENV)/bin/ruff check railvib_hpc tests bench
+
+docs: setup
+	$(PY) -m railvib_hpc.docs
+
+bench: setup
+	$(PY) bench/mesh_bench.py
+
+clean:
+	rm -rf results .pytest_cache

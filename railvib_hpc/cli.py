@@ -1,0 +1,145 @@
+"""Command line: ``railvib COMMAND CASE.toml [--out DIR] [--set key=value ...] [-- PETSc options]``.
+
+Exit codes: 0 success, 2 user error (bad case file, bad mesh), 3 a stage that is
+not implemented yet, 1 anything else (a bug: the traceback is printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .config import Case, load_case
+from .errors import NotImplementedStage, UserError
+from .log import Reporter
+from .parallel import on_root, world
+
+STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
+STUDIES = ("convergence", "modes", "reflection", "speed")
+#: Stages not built yet, with the issue that builds them.
+MISSING = {
+    "modal": "distributed assembly and SLEPc modal analysis",
+    "mbs": "reduced multibody simulation",
+    "reconstruct": "parallel field reconstruction",
+    "assess": "vibration assessment",
+}
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="railvib",
+        description="Train-induced vibration of buildings next to railway tracks "
+                    "(gmsh + PETSc/SLEPc + reduced multibody dynamics).",
+        epilog="Options after a bare '--' are passed to PETSc/SLEPc, e.g. "
+               "'-- -railvib_eig_eps_tol 1e-10 -log_view'.")
+    p.add_argument("--version", action="version", version=f"railvib-hpc {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    helps = {
+        "check": "validate a case file (no computation)",
+        "mesh": "build the gmsh model, check its quality, write mesh.msh/.h5/.xdmf",
+        "modal": "assemble K, M and extract mass-normalised modes",
+        "mbs": "roll the vehicle over the flexible track in modal coordinates",
+        "reconstruct": "rebuild displacement/velocity/acceleration fields of every node",
+        "assess": "evaluate the building response against vibration standards",
+        "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
+        "study": "convergence / modes / reflection / speed studies",
+    }
+    for name, text in helps.items():
+        sp = sub.add_parser(name, help=text, description=text)
+        if name == "study":
+            sp.add_argument("kind", choices=STUDIES, help="which study")
+        sp.add_argument("case", help="case file (TOML)")
+        sp.add_argument("--out", type=Path, default=None,
+                        help="output folder (default: results/<case.name>)")
+        sp.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE",
+                        help="override a case key, e.g. --set mesh.refinement=2 (repeatable)")
+    return p
+
+
+def _split_petsc(argv: list[str]) -> tuple[list[str], list[str]]:
+    if "--" in argv:
+        k = argv.index("--")
+        return argv[:k], argv[k + 1:]
+    return argv, []
+
+
+def _out_dir(args: argparse.Namespace, case: Case) -> Path:
+    return args.out if args.out is not None else Path("results") / case["case.name"]
+
+
+def _cmd_check(case: Case, rep: Reporter) -> int:
+    from .mesh.layout import build_layout
+
+    lay = build_layout(case)
+    rep.info(f"case '{case['case.name']}' is valid (preset '{case['case.preset']}', "
+             f"file {case.path or '<defaults>'})")
+    rep.info(f"  track: {len(lay.sleeper_x)} sleepers, flexible rail "
+             f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
+    rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
+             + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
+    return 0
+
+
+def _cmd_mesh(case: Case, out: Path, rep: Reporter) -> int:
+    from .mesh.stage import format_report, run_mesh_stage
+
+    def work():
+        with rep.stage("mesh"):
+            _, report = run_mesh_stage(case, out, rep)
+        rep.info(format_report(report))
+        rep.info("mesh timings: " + ", ".join(f"{k} {v:.2f} s"
+                                                for k, v in report["timings"].items()))
+        rep.info(f"wrote {out / 'mesh.xdmf'} (open in ParaView), {out / 'mesh.h5'}"
+                 + ("" if case["mesh.file"] else f", {out / 'mesh.msh'}"))
+        return report
+
+    on_root(work, broadcast_result=False)
+    return 0
+
+
+def _missing(stage: str) -> NotImplementedStage:
+    return NotImplementedStage(f"stage '{stage}' ({MISSING[stage]}) is not implemented yet")
+
+
+def run(argv: list[str] | None = None) -> int:
+    """Parse arguments and run a command; returns the exit code (raises nothing for user errors)."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    argv, petsc_options = _split_petsc(argv)
+    args = _parser().parse_args(argv)
+    comm = world()
+    rep = Reporter(comm.rank)
+    try:
+        case = on_root(lambda: load_case(args.case, args.overrides))
+        out = _out_dir(args, case)
+        if args.command == "check":
+            return _cmd_check(case, rep)
+        if args.command == "mesh":
+            return _cmd_mesh(case, out, rep)
+        if args.command in MISSING:
+            raise _missing(args.command)
+        if args.command == "study":
+            raise NotImplementedStage(f"study '{args.kind}' is not implemented yet")
+        # run: every stage in order; report the ones that do not exist yet
+        _cmd_check(case, rep)
+        _cmd_mesh(case, out, rep)
+        for stage in ("modal", "mbs", "reconstruct", "assess"):
+            rep.info(f"[{stage}] not implemented yet ({MISSING[stage]})")
+        rep.info("\n" + rep.timing_table())
+        rep.info("pipeline incomplete: stages modal, mbs, reconstruct, assess are not "
+                 "implemented yet")
+        return NotImplementedStage.exit_code
+    except UserError as exc:
+        if comm.rank == 0:
+            print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)
+        return exc.exit_code
+    finally:
+        if petsc_options:
+            rep.info("PETSc options given: " + " ".join(petsc_options))
+
+
+def main() -> int:
+    """Console-script entry point."""
+    return run()

@@ -1,0 +1,1 @@
+"""Input/output: HDF5 + XDMF files for ParaView, atomic writes, result reuse."""

@@ -1,0 +1,115 @@
+"""Mesh files: ``mesh.h5`` (arrays + provenance) and ``mesh.xdmf`` for ParaView.
+
+Layout of ``mesh.h5``::
+
+    /mesh/points            (n, 3) float64   node coordinates [m]
+    /mesh/hexes             (ne, 8) int64    8-node hexahedra (VTK order)
+    /mesh/hex_part          (ne,) int32      part id of each hex
+    /mesh/lines             (nl, 2) int64    beams and spring-dampers
+    /mesh/line_part         (nl,) int32      part id of each line element
+    /mesh/node_sets/<name>  (k,) int64       bottom, x_faces, y_faces
+    /mesh/probes/names      (p,) str         named probe points
+    /mesh/probes/coords     (p, 3) float64
+    /mesh/probes/nearest_node (p,) int64
+    attrs: part_names (JSON {id: name}), inputs_sha256, railvib_version, case_toml
+
+The XDMF file holds two grids sharing the points: ``solids`` (Hexahedron) and
+``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell data.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..mesh.model import Mesh
+from ..schema import PART_ID
+from .atomic import atomic_path, write_text_atomic
+
+
+def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
+    """Write ``mesh.h5`` atomically (serial, rank 0)."""
+    import h5py
+
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        g = f.create_group("mesh")
+        g.create_dataset("points", data=mesh.points)
+        g.create_dataset("hexes", data=mesh.hexes)
+        g.create_dataset("hex_part", data=mesh.hex_part)
+        g.create_dataset("lines", data=mesh.lines)
+        g.create_dataset("line_part", data=mesh.line_part)
+        ns = g.create_group("node_sets")
+        for name, nodes in mesh.node_sets.items():
+            ns.create_dataset(name, data=nodes)
+        pr = g.create_group("probes")
+        names = list(mesh.probes)
+        pr.create_dataset("names", data=np.array(names, dtype=h5py.string_dtype()))
+        coords = np.array([mesh.probes[n] for n in names], dtype=float).reshape(-1, 3)
+        pr.create_dataset("coords", data=coords)
+        pr.create_dataset("nearest_node",
+                          data=np.array([mesh.nearest_node(c) for c in coords], dtype=np.int64))
+        f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
+        for k, v in attrs.items():
+            f.attrs[k] = v
+
+
+def read_mesh_h5(path: Path) -> tuple[Mesh, dict]:
+    """Read ``mesh.h5``; returns the mesh and the file attributes."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        g = f["mesh"]
+        names = [n.decode() if isinstance(n, bytes) else n for n in g["probes/names"][()]]
+        coords = g["probes/coords"][()]
+        mesh = Mesh(points=g["points"][()], hexes=g["hexes"][()], hex_part=g["hex_part"][()],
+                    lines=g["lines"][()], line_part=g["line_part"][()],
+                    node_sets={k: v[()] for k, v in g["node_sets"].items()},
+                    probes={n: tuple(map(float, c)) for n, c in zip(names, coords)})
+        attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
+    return mesh, attrs
+
+
+def mesh_xdmf(h5_name: str, mesh: Mesh) -> str:
+    """XDMF text describing ``mesh.h5`` (relative path ``h5_name``)."""
+    n, ne, nl = mesh.n_nodes, len(mesh.hexes), len(mesh.lines)
+    h5 = f'Format="HDF">{h5_name}:/mesh'
+
+    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
+           f'Precision="8" {h5}/points</DataItem></Geometry>')
+    return f"""<?xml version="1.0" ?>
+<Xdmf Version="3.0">
+  <Domain>
+    <Grid Name="railvib_model" GridType="Collection" CollectionType="Spatial">
+      <Grid Name="solids" GridType="Uniform">
+        <Topology TopologyType="Hexahedron" NumberOfElements="{ne}">
+          <DataItem Dimensions="{ne} 8" NumberType="Int" Precision="8" {h5}/hexes</DataItem>
+        </Topology>
+        {geo}
+        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
+          <DataItem Dimensions="{ne}" NumberType="Int" Precision="4" {h5}/hex_part</DataItem>
+        </Attribute>
+      </Grid>
+      <Grid Name="beams_and_pads" GridType="Uniform">
+        <Topology TopologyType="Polyline" NodesPerElement="2" NumberOfElements="{nl}">
+          <DataItem Dimensions="{nl} 2" NumberType="Int" Precision="8" {h5}/lines</DataItem>
+        </Topology>
+        {geo}
+        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
+          <DataItem Dimensions="{nl}" NumberType="Int" Precision="4" {h5}/line_part</DataItem>
+        </Attribute>
+      </Grid>
+    </Grid>
+  </Domain>
+</Xdmf>
+"""
+
+
+def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> dict[str, Path]:
+    """Write ``mesh.h5`` then ``mesh.xdmf`` (XDMF last: it never points at a partial file)."""
+    h5 = out_dir / "mesh.h5"
+    xdmf = out_dir / "mesh.xdmf"
+    write_mesh_h5(h5, mesh, attrs)
+    write_text_atomic(xdmf, mesh_xdmf(h5.name, mesh))
+    return {"h5": h5, "xdmf": xdmf}

@@ -1,0 +1,234 @@
+"""Build the thesis model with gmsh (rank 0 only) and read gmsh meshes.
+
+The geometry is created with gmsh's built-in kernel as structured blocks from
+:mod:`railvib_hpc.mesh.layout`; every block is a transfinite, recombined volume
+(8-node hexahedra). Rails are transfinite curves at the rail height, sleepers
+are the block edges on the ballast crest (so they share the ballast surface
+nodes), rail pads are one-element curves from each rail node above a sleeper to
+the sleeper node below, in three physical groups ``pad_x``, ``pad_y``,
+``pad_z`` over the same curves (three spring elements per crossing).
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import MeshError
+from ..schema import BEAM_PARTS, PAD_PARTS, PART_ID, SOLID_PARTS
+from .layout import Layout
+from .model import Mesh
+
+NODE_SETS = ("bottom", "x_faces", "y_faces")
+
+
+@contextmanager
+def gmsh_session(verbose: bool = False):
+    """Initialise gmsh for the duration of a ``with`` block (rank 0 only)."""
+    import gmsh
+
+    gmsh.initialize(["-noenv"], readConfigFiles=False)
+    gmsh.option.setNumber("General.Terminal", 1 if verbose else 0)
+    gmsh.option.setNumber("General.NumThreads", 1)
+    try:
+        yield gmsh
+    finally:
+        gmsh.finalize()
+
+
+def build_geometry(gmsh, lay: Layout) -> None:
+    """Create points, curves, surfaces and volumes of the layout, with transfinite settings."""
+    geo = gmsh.model.geo
+    points: dict[tuple, int] = {}
+    lines: dict[tuple, int] = {}
+    surfaces: dict[frozenset, int] = {}
+    by_part: dict[str, list[int]] = {p: [] for p in SOLID_PARTS}
+    boundary: dict[str, list[int]] = {s: [] for s in NODE_SETS}
+    xmin, xmax, ymin, ymax, zmin, _ = lay.bounds
+    eps = 1e-7
+
+    def point(key: tuple) -> int:
+        tag = points.get(key)
+        if tag is None:
+            tag = geo.addPoint(*lay.vertex(*key))
+            points[key] = tag
+        return tag
+
+    def line(ka: tuple, kb: tuple, ndiv: int) -> int:
+        """Signed tag of the curve from vertex ka to kb."""
+        key = (ka, kb) if ka < kb else (kb, ka)
+        tag = lines.get(key)
+        if tag is None:
+            tag = geo.addLine(point(key[0]), point(key[1]))
+            geo.mesh.setTransfiniteCurve(tag, ndiv + 1)
+            lines[key] = tag
+        return tag if key[0] == ka else -tag
+
+    def face(corners: list[tuple], divs: list[int]) -> int:
+        key = frozenset(corners)
+        tag = surfaces.get(key)
+        if tag is None:
+            loop = [line(corners[k], corners[(k + 1) % 4], divs[k]) for k in range(4)]
+            tag = geo.addPlaneSurface([geo.addCurveLoop(loop)])
+            geo.mesh.setTransfiniteSurface(tag)
+            geo.mesh.setRecombine(2, tag)
+            surfaces[key] = tag
+        return tag
+
+    for blk in lay.blocks:
+        i, j, z0, z1 = blk.i, blk.j, round(blk.z0, 9), round(blk.z1, 9)
+        nx, ny, nz = int(lay.nx[i]), int(lay.ny[j]), lay.zdiv[(z0, z1)]
+        v = {(a, b, c): (i + a, j + b, (z0, z1)[c]) for a in (0, 1) for b in (0, 1) for c in (0, 1)}
+        faces = {
+            "zlo": face([v[0, 0, 0], v[1, 0, 0], v[1, 1, 0], v[0, 1, 0]], [nx, ny, nx, ny]),
+            "zhi": face([v[0, 0, 1], v[1, 0, 1], v[1, 1, 1], v[0, 1, 1]], [nx, ny, nx, ny]),
+            "ylo": face([v[0, 0, 0], v[1, 0, 0], v[1, 0, 1], v[0, 0, 1]], [nx, nz, nx, nz]),
+            "yhi": face([v[0, 1, 0], v[1, 1, 0], v[1, 1, 1], v[0, 1, 1]], [nx, nz, nx, nz]),
+            "xlo": face([v[0, 0, 0], v[0, 1, 0], v[0, 1, 1], v[0, 0, 1]], [ny, nz, ny, nz]),
+            "xhi": face([v[1, 0, 0], v[1, 1, 0], v[1, 1, 1], v[1, 0, 1]], [ny, nz, ny, nz]),
+        }
+        vol = geo.addVolume([geo.addSurfaceLoop(list(faces.values()))])
+        geo.mesh.setTransfiniteVolume(vol)
+        by_part[blk.part].append(vol)
+        x_lo, x_hi = lay.xb[i], lay.xb[i + 1]
+        y_lo, y_hi = lay.yb[j], lay.yb[j + 1]
+        if abs(blk.z0 - zmin) < eps:
+            boundary["bottom"].append(faces["zlo"])
+        if abs(x_lo - xmin) < eps:
+            boundary["x_faces"].append(faces["xlo"])
+        if abs(x_hi - xmax) < eps:
+            boundary["x_faces"].append(faces["xhi"])
+        if abs(y_lo - ymin) < eps:
+            boundary["y_faces"].append(faces["ylo"])
+        if abs(y_hi - ymax) < eps:
+            boundary["y_faces"].append(faces["yhi"])
+
+    # --- rails, sleepers, pads
+    ix = {round(float(x), 9): k for k, x in enumerate(lay.xb)}
+    iy = {round(float(y), 9): k for k, y in enumerate(lay.yb)}
+    zs = round(lay.sleeper_z, 9)
+    sleeper_curves, rail_curves, rigid_curves, pad_curves = [], [], [], []
+    for y in lay.rail_y:
+        rail_pts = [geo.addPoint(lay.rigid_ends[0], y, lay.rail_z)]
+        rail_pts += [geo.addPoint(float(x), y, lay.rail_z) for x in lay.sleeper_x]
+        rail_pts.append(geo.addPoint(lay.rigid_ends[1], y, lay.rail_z))
+        for k in range(len(rail_pts) - 1):
+            c = geo.addLine(rail_pts[k], rail_pts[k + 1])
+            rigid = k == 0 or k == len(rail_pts) - 2
+            geo.mesh.setTransfiniteCurve(c, 2 if rigid else lay.rail_div + 1)
+            (rigid_curves if rigid else rail_curves).append(c)
+        jy = iy[round(y, 9)]
+        for k, x in enumerate(lay.sleeper_x):
+            c = geo.addLine(rail_pts[k + 1], point((ix[round(float(x), 9)], jy, zs)))
+            geo.mesh.setTransfiniteCurve(c, 2)
+            pad_curves.append(c)
+    js = [iy[round(float(y), 9)] for y in lay.sleeper_y]
+    for x in lay.sleeper_x:
+        i = ix[round(float(x), 9)]
+        for j in range(js[0], js[-1]):
+            sleeper_curves.append(abs(lines[((i, j, zs), (i, j + 1, zs))]))
+
+    geo.synchronize()
+    for part, vols in by_part.items():
+        if vols:
+            gmsh.model.addPhysicalGroup(3, vols, PART_ID[part], name=part)
+    for part, curves in (("rail", rail_curves), ("rigid_rail", rigid_curves),
+                         ("sleeper", sleeper_curves)):
+        gmsh.model.addPhysicalGroup(1, curves, PART_ID[part], name=part)
+    for part in PAD_PARTS:
+        gmsh.model.addPhysicalGroup(1, pad_curves, PART_ID[part], name=part)
+    for k, (name, faces) in enumerate(boundary.items()):
+        gmsh.model.addPhysicalGroup(2, sorted(set(faces)), 101 + k, name=name)
+
+
+def extract_mesh(gmsh) -> Mesh:
+    """Read nodes, hexahedra, beam/pad elements and node sets from the current gmsh model.
+
+    Raises
+    ------
+    MeshError
+        Missing physical groups or unsupported element types.
+    """
+    tags, coords, _ = gmsh.model.mesh.getNodes()
+    tags = np.asarray(tags, dtype=np.int64)
+    coords = np.asarray(coords).reshape(-1, 3)
+    index = np.full(tags.max() + 1, -1, dtype=np.int64)
+    index[tags] = np.arange(len(tags))
+
+    groups = {gmsh.model.getPhysicalName(d, t): (d, t) for d, t in gmsh.model.getPhysicalGroups()}
+    missing = [p for p in (*SOLID_PARTS[:3], *BEAM_PARTS, *PAD_PARTS) if p not in groups]
+    if missing:
+        raise MeshError(f"mesh has no physical group(s) {missing}; required names: "
+                        f"{', '.join(SOLID_PARTS + BEAM_PARTS + PAD_PARTS)}")
+
+    def elements(dim: int, tag: int, etype: int, nper: int) -> np.ndarray:
+        chunks = []
+        for ent in gmsh.model.getEntitiesForPhysicalGroup(dim, tag):
+            types = gmsh.model.mesh.getElementTypes(dim, ent)
+            bad = [t for t in types if t != etype]
+            if bad:
+                name = gmsh.model.mesh.getElementProperties(bad[0])[0]
+                raise MeshError(f"physical group '{gmsh.model.getPhysicalName(dim, tag)}' holds "
+                                f"'{name}' elements; only 8-node hexahedra (solids) and 2-node "
+                                "lines (beams, pads) are supported")
+            _, nodes = gmsh.model.mesh.getElementsByType(etype, ent)
+            chunks.append(np.asarray(nodes, dtype=np.int64).reshape(-1, nper))
+        if not chunks:
+            return np.zeros((0, nper), dtype=np.int64)
+        return index[np.concatenate(chunks)]
+
+    hexes, hex_part, lines, line_part = [], [], [], []
+    for part in SOLID_PARTS:
+        if part in groups:
+            conn = elements(*groups[part], 5, 8)
+            hexes.append(conn)
+            hex_part.append(np.full(len(conn), PART_ID[part], dtype=np.int32))
+    for part in (*BEAM_PARTS, *PAD_PARTS):
+        conn = elements(*groups[part], 1, 2)
+        lines.append(conn)
+        line_part.append(np.full(len(conn), PART_ID[part], dtype=np.int32))
+    node_sets = {}
+    for name in NODE_SETS:
+        if name in groups:
+            nodes, _ = gmsh.model.mesh.getNodesForPhysicalGroup(*groups[name])
+            node_sets[name] = np.unique(index[np.asarray(nodes, dtype=np.int64)])
+    return Mesh(points=coords, hexes=np.concatenate(hexes), hex_part=np.concatenate(hex_part),
+                lines=np.concatenate(lines), line_part=np.concatenate(line_part),
+                node_sets=node_sets)
+
+
+def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False) -> tuple[Mesh, dict]:
+    """Generate the model with gmsh; optionally write the ``.msh``. Returns mesh and timings."""
+    timings = {}
+    with gmsh_session(verbose) as gmsh:
+        gmsh.model.add("railvib")
+        t0 = time.perf_counter()
+        build_geometry(gmsh, lay)
+        timings["geometry"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        gmsh.model.mesh.generate(3)
+        timings["meshing"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        mesh = extract_mesh(gmsh)
+        timings["extract"] = time.perf_counter() - t0
+        if msh_path is not None:
+            t0 = time.perf_counter()
+            gmsh.option.setNumber("Mesh.Binary", 1)
+            tmp = msh_path.with_name(msh_path.name + ".part.msh")
+            gmsh.write(str(tmp))
+            tmp.replace(msh_path)
+            timings["write_msh"] = time.perf_counter() - t0
+    return mesh, timings
+
+
+def read_msh(path: Path) -> Mesh:
+    """Read a user's gmsh ``.msh`` with the project's physical-group names."""
+    with gmsh_session() as gmsh:
+        try:
+            gmsh.open(str(path))
+        except Exception as exc:  # gmsh raises a bare Exception
+            raise MeshError(f"mesh.file = '{path}': gmsh cannot read it ({exc})") from None
+        return extract_mesh(gmsh)

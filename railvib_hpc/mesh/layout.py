@@ -1,0 +1,245 @@
+"""Block decomposition of the thesis model (pure Python, no gmsh).
+
+The model is cut by planes at every sleeper, every building face and every
+layer boundary into axis-aligned blocks; each block is a hexahedral gmsh
+volume meshed as a structured (transfinite) grid. The number of divisions of
+an interval depends only on the interval, so neighbouring blocks always share
+their face grids: the mesh is conformal by construction. The embankment
+shoulders are blocks whose outer vertices are moved onto the 1:1 slopes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..config import Case
+
+_TOL = 1e-9
+
+
+def _merge(values: list[float]) -> np.ndarray:
+    v = np.sort(np.asarray(values, dtype=float))
+    keep = np.concatenate(([True], np.diff(v) > 1e-7))
+    return v[keep]
+
+
+@dataclass
+class Block:
+    """One structured block: intervals ``i`` (x), ``j`` (y) and z from ``z0`` to ``z1``."""
+
+    i: int
+    j: int
+    z0: float
+    z1: float
+    part: str
+
+
+@dataclass
+class Layout:
+    """Breakpoints, divisions and labelled blocks of the model.
+
+    Attributes
+    ----------
+    xb, yb
+        Breakpoints along x and y.
+    nx, ny
+        Element divisions of each x / y interval.
+    blocks
+        The non-empty blocks.
+    zdiv
+        Divisions of each z interval, keyed by ``(z0, z1)`` rounded.
+    sleeper_x
+        x of every sleeper.
+    rail_x
+        x of the rail nodes that bound a rail *curve* (rigid ends and sleepers).
+    rail_div
+        Rail elements per sleeper bay.
+    """
+
+    xb: np.ndarray
+    yb: np.ndarray
+    nx: np.ndarray
+    ny: np.ndarray
+    blocks: list[Block]
+    zdiv: dict[tuple[float, float], int]
+    sleeper_x: np.ndarray
+    rail_y: tuple[float, float]
+    rail_z: float
+    rail_div: int
+    rigid_ends: tuple[float, float]
+    sleeper_y: np.ndarray
+    sleeper_z: float
+    deform: dict = field(default_factory=dict)
+    bounds: tuple[float, float, float, float, float, float] = (0, 0, 0, 0, 0, 0)
+    probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+
+    def vertex(self, i: int, j: int, z: float) -> tuple[float, float, float]:
+        """Coordinates of grid vertex (x index, y index, z), with shoulder slopes applied."""
+        y = float(self.yb[j])
+        hw = self.deform.get((j, round(z, 9)))
+        if hw is not None:
+            y = hw
+        return float(self.xb[i]), y, float(z)
+
+
+def _ndiv(length: float, size: float, refinement: float) -> int:
+    return max(1, int(round(length * refinement / size - 1e-9)))
+
+
+def build_layout(case: Case) -> Layout:
+    """Compute the block decomposition for a validated case."""
+    g, t, b, m, d = (case[s] for s in ("geometry", "track", "building", "mesh", "domain"))
+    r = m["refinement"]
+    sp = t["sleeper_spacing"]
+    nbays = int(round(t["rail_length"] / sp))
+    sleeper_x = g["x1"] + sp * np.arange(nbays + 1)
+
+    # --- building lines (local offsets from the base point)
+    half = 0.5 * (g["x3"] - g["x2"])
+    fs, cs, wt = b["footing_size"], b["column_size"], b["wall_thickness"]
+    a = half - fs                 # inner edge of the footings
+    c0 = half - fs / 2 - cs / 2   # inner column face
+    c1 = half - fs / 2 + cs / 2   # outer column face
+    wi = half - wt                # inner wall face
+    offs = [a, c0, c1, wi, half]
+
+    xmin = g["x1"] - d["extra_length"]
+    xmax = g["x4"] + d["extra_length"]
+    xb = _merge([xmin, xmax, *sleeper_x, *(g["xbb"] + s * o for o in offs for s in (-1, 1))])
+    ymin = g["ys4"] - d["extra_width"]
+    hs, hg, toe = t["sleeper_length"] / 2, t["gauge"] / 2, -g["ys1"]
+    yb = _merge([ymin, g["ys0"], -toe, toe, -hs, hs, -hg, hg,
+                 *(g["ybb"] + s * o for o in offs for s in (-1, 1))])
+
+    # --- divisions per interval
+    h_track = sp / m["soil_elements_per_bay"]
+    h_bldg = sp / m["soil_elements_per_bay_building"]
+    nx = np.array([
+        _ndiv(x1 - x0, h_bldg if (x0 >= g["x2"] - _TOL and x1 <= g["x3"] + _TOL) else h_track, r)
+        for x0, x1 in zip(xb[:-1], xb[1:])])
+
+    def ydiv(y0: float, y1: float) -> int:
+        if y0 >= -hg - _TOL and y1 <= hg + _TOL:
+            return max(1, round(m["sleeper_middle_elements"] * r))
+        if y0 >= -hs - _TOL and y1 <= hs + _TOL:
+            return max(1, round(m["sleeper_outer_elements"] * r))
+        if y0 >= -toe - _TOL and y1 <= toe + _TOL:
+            return max(1, round(m["shoulder_elements"] * r))
+        if y0 >= g["ys3"] - _TOL and y1 <= g["ys2"] + _TOL:
+            return _ndiv(y1 - y0, m["size_building_y"], r)
+        return _ndiv(y1 - y0, m["size_far"], r)
+
+    ny = np.array([ydiv(y0, y1) for y0, y1 in zip(yb[:-1], yb[1:])])
+
+    # --- z levels
+    zbot = g["z0"] - d["extra_depth"]
+    fh, bd, st = b["footing_height"], b["beam_depth"], b["slab_thickness"]
+    zbb = g["zbb"]
+    below = _merge([zbot, g["z0"], zbb, zbb + fh, zbb + fh + bd, g["z1"]])
+    below = below[below <= g["z1"] + _TOL]
+    embank = [g["z1"], g["z2"], g["z3"]]
+    above = _merge([g["z1"], zbb + b["z_slab1_base"] - bd, zbb + b["z_slab1_base"],
+                    zbb + b["z_slab1_base"] + st, zbb + b["z_slab2_base"] - bd,
+                    zbb + b["z_slab2_base"], zbb + b["z_slab2_base"] + st])
+    above = above[above >= g["z1"] - _TOL]
+
+    zdiv: dict[tuple[float, float], int] = {}
+
+    def zkey(z0: float, z1: float) -> tuple[float, float]:
+        return round(z0, 9), round(z1, 9)
+
+    for z0, z1 in zip(below[:-1], below[1:]):
+        size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
+        zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, size, r)
+    for z0, z1 in zip(embank[:-1], embank[1:]):
+        zdiv[zkey(z0, z1)] = max(1, round(m["layer_elements"] * r))
+    for z0, z1 in zip(above[:-1], above[1:]):
+        zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
+
+    # --- classification of blocks by their centre
+    levels = dict(fh=fh, gb=fh + bd, base=g["z1"] - zbb,
+                  s1b=b["z_slab1_base"], s1t=b["z_slab1_base"] + st,
+                  s2b=b["z_slab2_base"], s2t=b["z_slab2_base"] + st)
+
+    def building_part(u: float, v: float, w: float) -> str | None:
+        au, av = abs(u), abs(v)
+        mm = max(au, av)
+        if w < levels["fh"]:
+            if au > a and av > a:
+                return "footing"
+            if mm > wi:
+                return "wall"
+            if (c0 < av < c1 and au < a) or (c0 < au < c1 and av < a):
+                return "beam"
+            return None
+        if w < levels["base"] and mm > wi:
+            return "wall"
+        in_storey = w < levels["s1b"] or levels["s1t"] < w < levels["s2b"]
+        if c0 < au < c1 and c0 < av < c1 and in_storey:
+            return "column"
+        on_beam_level = (w < levels["gb"] or levels["s1b"] - bd < w < levels["s1b"]
+                         or levels["s2b"] - bd < w < levels["s2b"])
+        if on_beam_level and ((c0 < av < c1 and au < c0) or (c0 < au < c1 and av < c0)):
+            return "beam"
+        if au < c1 and av < c1 and (levels["s1b"] < w < levels["s1t"] or
+                                    levels["s2b"] < w < levels["s2t"]):
+            return "slab"
+        return None
+
+    blocks: list[Block] = []
+    for i in range(len(xb) - 1):
+        xc = 0.5 * (xb[i] + xb[i + 1])
+        in_x = g["x2"] < xc < g["x3"]
+        for j in range(len(yb) - 1):
+            yc = 0.5 * (yb[j] + yb[j + 1])
+            in_plan = in_x and g["ys3"] < yc < g["ys2"]
+            for z0, z1 in zip(below[:-1], below[1:]):
+                zc = 0.5 * (z0 + z1)
+                if in_plan and zc > zbb:
+                    part = building_part(xc - g["xbb"], yc - g["ybb"], zc - zbb)
+                else:
+                    part = "subgrade"
+                if part:
+                    blocks.append(Block(i, j, float(z0), float(z1), part))
+            if abs(yc) < toe:
+                blocks.append(Block(i, j, g["z1"], g["z2"], "subballast"))
+                blocks.append(Block(i, j, g["z2"], g["z3"], "ballast"))
+            if in_plan:
+                for z0, z1 in zip(above[:-1], above[1:]):
+                    part = building_part(xc - g["xbb"], yc - g["ybb"], 0.5 * (z0 + z1) - zbb)
+                    if part:
+                        blocks.append(Block(i, j, float(z0), float(z1), part))
+
+    # --- shoulder slopes: move the outer embankment vertices above Z1
+    jlo = int(np.argmin(abs(yb + toe)))
+    jhi = int(np.argmin(abs(yb - toe)))
+    deform = {}
+    slopes = ((g["z2"], g["ballast_bottom_half_width"]), (g["z3"], g["ballast_top_half_width"]))
+    for z, hw in slopes:
+        deform[(jlo, round(z, 9))] = -hw
+        deform[(jhi, round(z, 9))] = hw
+
+    zs = zbb
+    probes = {
+        # top centre of the footing nearest the track, first reached by the train
+        "footing": (g["xbb"] - (half - fs / 2), g["ybb"] + (half - fs / 2), zs + fh),
+        # outer face of the basement wall facing the track, mid-length, mid-height
+        "basement_wall": (g["xbb"], g["ys2"], zs + 0.5 * (g["z1"] - zs)),
+        "slab1": (g["xbb"], g["ybb"], zs + levels["s1t"]),
+        "slab2": (g["xbb"], g["ybb"], zs + levels["s2t"]),
+        "ground_toe": (g["xbb"], -toe, g["z1"]),
+        "ground_mid": (g["xbb"], 0.5 * (-toe + g["ys2"]), g["z1"]),
+        "ground_building": (g["xbb"], g["ys2"], g["z1"]),
+        "ground_far": (g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]),
+        "ground_opposite": (g["xbb"], 0.5 * (toe + g["ys0"]), g["z1"]),
+    }
+
+    return Layout(
+        xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
+        rail_y=(-hg, hg), rail_z=g["z4"],
+        rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
+        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]), sleeper_y=np.array([-hs, -hg, hg, hs]),
+        sleeper_z=g["z3"], deform=deform,
+        bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes)

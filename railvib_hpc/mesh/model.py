@@ -1,0 +1,146 @@
+"""The mesh as numpy arrays, with quality, volume and connectivity checks.
+
+Hexahedra use gmsh/VTK node order (bottom face 0-1-2-3 counter-clockwise seen
+from above, top face 4-5-6-7). All checks are vectorised over elements.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..schema import PART_ID, PARTS
+
+#: For each hex corner, its three edge neighbours in right-handed order.
+_CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
+                               [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
+_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
+                   [0, 4], [1, 5], [2, 6], [3, 7]])
+_REF = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                 [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
+
+
+def hex_shape_gradients(xi: np.ndarray) -> np.ndarray:
+    """Reference gradients of the 8 trilinear shape functions at points ``xi`` (q, 3).
+
+    Returns
+    -------
+    ndarray, shape (q, 8, 3)
+    """
+    xi = np.atleast_2d(xi)
+    f = 1.0 + xi[:, None, :] * _REF[None, :, :]          # (q, 8, 3)
+    d = np.empty_like(f)
+    d[..., 0] = _REF[:, 0] * f[..., 1] * f[..., 2]
+    d[..., 1] = _REF[:, 1] * f[..., 0] * f[..., 2]
+    d[..., 2] = _REF[:, 2] * f[..., 0] * f[..., 1]
+    return d / 8.0
+
+
+_GAUSS2 = np.array([[a, b, c] for c in (-1, 1) for b in (-1, 1) for a in (-1, 1)]) / np.sqrt(3.0)
+
+
+@dataclass
+class Mesh:
+    """Nodes, elements and node sets of the model.
+
+    Attributes
+    ----------
+    points
+        Node coordinates, shape (n, 3), in m.
+    hexes, hex_part
+        8-node hexahedra (ne, 8) and their part ids (see :data:`railvib_hpc.schema.PART_ID`).
+    lines, line_part
+        2-node beam and spring elements (nl, 2) and their part ids.
+    node_sets
+        Boundary node indices: ``bottom``, ``x_faces``, ``y_faces``.
+    probes
+        Named points: ``name -> (x, y, z)``.
+    """
+
+    points: np.ndarray
+    hexes: np.ndarray
+    hex_part: np.ndarray
+    lines: np.ndarray
+    line_part: np.ndarray
+    node_sets: dict[str, np.ndarray] = field(default_factory=dict)
+    probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.points)
+
+    def counts_per_part(self) -> dict[str, int]:
+        """Number of elements in each part (parts with no elements are listed with 0)."""
+        hex_counts = np.bincount(self.hex_part, minlength=len(PARTS) + 1)
+        line_counts = np.bincount(self.line_part, minlength=len(PARTS) + 1)
+        return {p: int(hex_counts[PART_ID[p]] + line_counts[PART_ID[p]]) for p in PARTS}
+
+    def nodes_per_part(self) -> dict[str, int]:
+        """Number of distinct nodes used by each part."""
+        out = {}
+        for p in PARTS:
+            pid = PART_ID[p]
+            conn = np.concatenate([self.hexes[self.hex_part == pid].ravel(),
+                                   self.lines[self.line_part == pid].ravel()])
+            out[p] = int(np.unique(conn).size)
+        return out
+
+    def hex_volumes(self) -> np.ndarray:
+        """Element volumes by 2x2x2 Gauss quadrature (exact for trilinear hexes)."""
+        x = self.points[self.hexes]                              # (ne, 8, 3)
+        dn = hex_shape_gradients(_GAUSS2)                        # (8q, 8, 3)
+        jac = np.einsum("eai,qaj->eqij", x, dn)                  # (ne, q, 3, 3)
+        return np.linalg.det(jac).sum(axis=1)
+
+    def volume_per_part(self) -> dict[str, float]:
+        vol = self.hex_volumes()
+        return {p: float(vol[self.hex_part == PART_ID[p]].sum()) for p in PARTS
+                if np.any(self.hex_part == PART_ID[p])}
+
+    def scaled_jacobians(self) -> np.ndarray:
+        """Minimum corner scaled Jacobian per hex (1 for a cube, <= 0 when inverted)."""
+        x = self.points[self.hexes]                              # (ne, 8, 3)
+        e = x[:, _CORNER_NEIGHBOURS, :] - x[:, :, None, :]       # (ne, 8, 3, 3)
+        e /= np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
+        return np.linalg.det(e).min(axis=1)
+
+    def aspect_ratios(self) -> np.ndarray:
+        """Longest over shortest edge per hex."""
+        x = self.points[self.hexes]
+        lengths = np.linalg.norm(x[:, _EDGES[:, 1]] - x[:, _EDGES[:, 0]], axis=-1)
+        return lengths.max(axis=1) / np.maximum(lengths.min(axis=1), 1e-300)
+
+    def duplicate_nodes(self, tol: float = 1e-8) -> int:
+        """Number of nodes that coincide (within ``tol``) with another node."""
+        key = np.round(self.points / tol).astype(np.int64)
+        _, counts = np.unique(key, axis=0, return_counts=True)
+        return int((counts - 1).sum())
+
+    def unused_nodes(self) -> int:
+        used = np.zeros(self.n_nodes, dtype=bool)
+        used[self.hexes.ravel()] = True
+        used[self.lines.ravel()] = True
+        return int((~used).sum())
+
+    def nonconformal_faces(self) -> int:
+        """Unshared hex faces inside the meshed volume (0 for a conformal mesh)."""
+        from .search import nonconformal_faces
+
+        return nonconformal_faces(self)
+
+    def quality(self) -> dict[str, float]:
+        """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count."""
+        sj = self.scaled_jacobians()
+        ar = self.aspect_ratios()
+        return {
+            "n_nodes": self.n_nodes,
+            "n_hexes": len(self.hexes),
+            "n_lines": len(self.lines),
+            "min_scaled_jacobian": float(sj.min()) if len(sj) else 1.0,
+            "max_aspect_ratio": float(ar.max()) if len(ar) else 1.0,
+            "n_inverted": int((sj <= 0).sum()),
+        }
+
+    def nearest_node(self, xyz: tuple[float, float, float]) -> int:
+        return int(np.argmin(np.linalg.norm(self.points - np.asarray(xyz), axis=1)))

@@ -1,0 +1,71 @@
+"""MPI helpers: root-only work with broadcast results and errors.
+
+Every rank reaches every collective: work that can fail on rank 0 (reading
+files, gmsh) runs inside :func:`on_root`, which broadcasts either the result
+or the exception, so all ranks return or raise together.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+from .errors import UserError
+
+T = TypeVar("T")
+
+
+def world():
+    """The MPI communicator used by railvib (COMM_WORLD)."""
+    from mpi4py import MPI
+
+    return MPI.COMM_WORLD
+
+
+class RootFailure(RuntimeError):
+    """A non-user error raised on rank 0, re-raised on the other ranks."""
+
+
+def on_root(fn: Callable[[], T], comm=None, broadcast_result: bool = True) -> T | None:
+    """Run ``fn`` on rank 0 only and broadcast its outcome.
+
+    Parameters
+    ----------
+    fn
+        Zero-argument callable.
+    comm
+        Communicator (default COMM_WORLD).
+    broadcast_result
+        If False, other ranks receive ``None`` instead of the result (for large results).
+
+    Raises
+    ------
+    UserError
+        On every rank, when ``fn`` raised a user error on rank 0.
+    RootFailure
+        On ranks > 0 when ``fn`` raised any other exception (rank 0 re-raises the original).
+    """
+    comm = comm or world()
+    outcome: tuple[bool, Any]
+    original: BaseException | None = None
+    if comm.rank == 0:
+        try:
+            outcome = (True, fn())
+        except UserError as exc:
+            outcome = (False, exc)
+        except BaseException as exc:
+            original = exc
+            outcome = (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}"))
+    else:
+        outcome = (True, None)
+    if comm.size > 1:
+        ok, payload = outcome
+        msg = comm.bcast((ok, payload if (not ok or broadcast_result) else None), root=0)
+        if comm.rank != 0:
+            outcome = msg
+    ok, payload = outcome
+    if not ok:
+        if original is not None:
+            raise original
+        raise payload
+    return payload

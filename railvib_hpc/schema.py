@@ -1,0 +1,268 @@
+"""The case-file schema: every key, its default, type, unit and meaning.
+
+Defaults reproduce the model the thesis actually solved (the ANSYS APDL script
+of its Appendix A). Where the thesis's Table I disagrees, Table I's values are
+available as the preset ``table1`` (see :data:`PRESETS`).
+
+Conventions
+-----------
+* x runs along the track, y across it (the building lies at negative y),
+  z upwards; the origin is at the start of the first rigid rail, ground
+  bottom at ``z0``.
+* Building coordinates (``building.*``) are measured from the building base
+  point (``geometry.xbb``, ``geometry.ybb``, ``geometry.zbb``), like the APDL
+  script's local system 11.
+* Beam sections: ``iyy`` is the second moment of area for bending in the
+  vertical plane (about the horizontal axis normal to the beam axis), ``izz``
+  for bending in the horizontal plane, ``j`` the torsion constant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Param:
+    """One case-file key.
+
+    Parameters
+    ----------
+    default
+        Default value (the thesis's APDL value where one exists).
+    kind
+        ``"float"``, ``"int"``, ``"str"``, ``"bool"``, ``"floats"`` (list of
+        numbers) or ``"strs"`` (list of strings).
+    unit
+        SI unit, ``"-"`` for dimensionless.
+    doc
+        One-line meaning (shown in the README reference and in errors).
+    check
+        ``"pos"`` (> 0), ``"nonneg"`` (>= 0), ``"poisson"`` (0 <= nu < 0.5),
+        ``"fraction"`` (0 <= x < 1) or ``None``.
+    choices
+        Allowed values for strings (or list items).
+    """
+
+    default: Any
+    kind: str
+    unit: str
+    doc: str
+    check: str | None = None
+    choices: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
+    return {
+        "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos"),
+        "nu": Param(nu, "float", "-", f"Poisson's ratio of the {what}", "poisson"),
+        "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos"),
+    }
+
+
+#: Parts of the model, in the order of their part ids (id = index + 1).
+PARTS: tuple[str, ...] = (
+    "rail", "rigid_rail", "sleeper", "pad_x", "pad_y", "pad_z",
+    "ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
+)
+SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall")
+BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
+PAD_PARTS = ("pad_x", "pad_y", "pad_z")
+BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
+PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
+
+SCHEMA: dict[str, dict[str, Any]] = {
+    "case": {
+        "name": Param("thesis_baseline", "str", "-", "name of the case (used in reports)"),
+        "description": Param("", "str", "-", "free text"),
+        "preset": Param("apdl", "str", "-",
+                        "parameter set for values not given in the file: 'apdl' (what the thesis "
+                        "solved, Appendix A) or 'table1' (the thesis's Table I)",
+                        choices=("apdl", "table1")),
+    },
+    "geometry": {
+        "x0": Param(0.0, "float", "m", "X0: start of the first rigid rail"),
+        "x1": Param(3.0, "float", "m", "X1: start of the flexible rail and of the soil"),
+        "x2": Param(12.6, "float", "m", "X2: building (and its excavation) starts"),
+        "x3": Param(19.8, "float", "m", "X3: building ends"),
+        "x4": Param(24.6, "float", "m", "X4: end of the flexible rail and of the soil"),
+        "ys0": Param(8.25, "float", "m", "YS0: soil edge on the side away from the building"),
+        "ys1": Param(-4.25, "float", "m",
+                     "YS1: toe of the embankment (subballast base half-width is |YS1|)"),
+        "ys2": Param(-9.9, "float", "m", "YS2: building face nearest the track"),
+        "ys3": Param(-17.1, "float", "m", "YS3: building face farthest from the track"),
+        "ys4": Param(-29.1, "float", "m", "YS4: soil edge beyond the building"),
+        "z0": Param(0.0, "float", "m", "Z0: bottom of the subgrade (fixed base)"),
+        "z1": Param(4.8, "float", "m", "Z1: top of the subgrade = ground level"),
+        "z2": Param(5.3, "float", "m", "Z2: top of the subballast"),
+        "z3": Param(5.8, "float", "m", "Z3: top of the ballast = sleeper axis"),
+        "z4": Param(6.00424, "float", "m", "Z4: rail axis height"),
+        "xbb": Param(16.2, "float", "m", "XBB: x of the building base point (centre of its plan)"),
+        "ybb": Param(-13.5, "float", "m", "YBB: y of the building base point (centre of its plan)"),
+        "zbb": Param(2.4, "float", "m", "ZBB: z of the building base (underside of footings)"),
+        "ballast_top_half_width": Param(3.25, "float", "m",
+                                        "half-width of the ballast crest (top of the shoulder)",
+                                        "pos"),
+        "ballast_bottom_half_width": Param(3.75, "float", "m",
+                                           "half-width of the ballast at the subballast top",
+                                           "pos"),
+    },
+    "track": {
+        "rigid_length": Param(3.0, "float", "m", "length of each rigid rail section", "pos"),
+        "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos"),
+        "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos"),
+        "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos"),
+        "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos"),
+        "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos"),
+    },
+    "building": {
+        "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos"),
+        "footing_height": Param(0.6, "float", "m", "HSF: footing height", "pos"),
+        "column_size": Param(0.6, "float", "m", "square column side", "pos"),
+        "beam_width": Param(0.6, "float", "m", "BEAM_WIDTH: width of beams and grade beams", "pos"),
+        "beam_depth": Param(0.6, "float", "m", "depth of beams and grade beams", "pos"),
+        "slab_thickness": Param(0.2, "float", "m", "thickness of both slabs", "pos"),
+        "wall_thickness": Param(0.3, "float", "m", "WALL_WIDTH: basement wall thickness", "pos"),
+        "z_slab1_base": Param(4.2, "float", "m", "Z_SLAB1_BASE: underside of slab 1 above ZBB",
+                              "pos"),
+        "z_slab2_base": Param(8.0, "float", "m", "Z_SLAB2_BASE: underside of slab 2 above ZBB",
+                              "pos"),
+    },
+    "materials": {
+        "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),
+        "rigid_rail": _mat(210e10, 0.30, 7700.0, "rigid rail (its DOFs are fixed)"),
+        "sleeper": _mat(64e9, 0.25, 2570.0, "sleepers"),
+        "ballast": _mat(260e6, 0.25, 1800.0, "ballast"),
+        "subballast": _mat(200e6, 0.20, 1850.0, "subballast"),
+        "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade"),
+        "concrete": _mat(31e9, 0.25, 2500.0, "concrete building"),
+    },
+    "sections": {
+        "rail": {
+            "area": Param(64.5e-4, "float", "m^2", "rail cross-section area", "pos"),
+            "iyy": Param(2010e-8, "float", "m^4", "rail second moment, vertical bending", "pos"),
+            "izz": Param(326e-8, "float", "m^4", "rail second moment, lateral bending", "pos"),
+            "j": Param(2.59e-6, "float", "m^4",
+                       "rail torsion constant (thin-walled estimate of the APDL I-section)", "pos"),
+            "shear_coefficient_y": Param(0.34, "float", "-",
+                                         "Timoshenko shear coefficient, vertical bending", "pos"),
+            "shear_coefficient_z": Param(0.34, "float", "-",
+                                         "Timoshenko shear coefficient, lateral bending", "pos"),
+        },
+        "sleeper": {
+            "area": Param(513.8e-4, "float", "m^2", "sleeper cross-section area", "pos"),
+            "iyy": Param(18907e-8, "float", "m^4", "sleeper second moment, vertical bending",
+                         "pos"),
+            "izz": Param(2.17e-4, "float", "m^4",
+                         "sleeper second moment, horizontal bending (APDL trapezoid section)",
+                         "pos"),
+            "j": Param(3.38e-4, "float", "m^4", "sleeper torsion constant (APDL section)", "pos"),
+            "shear_coefficient_y": Param(0.83, "float", "-",
+                                         "Timoshenko shear coefficient, vertical bending", "pos"),
+            "shear_coefficient_z": Param(0.83, "float", "-",
+                                         "Timoshenko shear coefficient, horizontal bending",
+                                         "pos"),
+        },
+    },
+    "pads": {
+        "kx": Param(70e8, "float", "N/m", "rail pad stiffness along the track", "pos"),
+        "ky": Param(70e8, "float", "N/m", "rail pad stiffness across the track", "pos"),
+        "kz": Param(70e8, "float", "N/m", "rail pad stiffness, vertical", "pos"),
+        "cx": Param(5e5, "float", "N s/m", "rail pad damping along the track", "nonneg"),
+        "cy": Param(5e5, "float", "N s/m", "rail pad damping across the track", "nonneg"),
+        "cz": Param(5e5, "float", "N s/m", "rail pad damping, vertical", "nonneg"),
+    },
+    "mesh": {
+        "refinement": Param(1.0, "float", "-",
+                            "multiplies every element count (1: thesis size, ~56k nodes; "
+                            "2: ~8x the nodes)", "pos"),
+        "file": Param("", "str", "-",
+                      "use this gmsh .msh (same physical-group names) instead of generating; "
+                      "relative to the case file"),
+        "rail_elements_per_bay": Param(5, "int", "-", "rail beam elements between sleepers",
+                                       "pos"),
+        "soil_elements_per_bay": Param(2, "int", "-",
+                                       "soil elements along x per sleeper bay, away from building",
+                                       "pos"),
+        "soil_elements_per_bay_building": Param(4, "int", "-",
+                                                "soil elements along x per bay in line with the "
+                                                "building", "pos"),
+        "sleeper_outer_elements": Param(2, "int", "-",
+                                        "sleeper elements between its end and the rail", "pos"),
+        "sleeper_middle_elements": Param(4, "int", "-", "sleeper elements between the rails",
+                                         "pos"),
+        "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos"),
+        "size_far": Param(0.6, "float", "m",
+                          "element size across the track in the far field and vertically in the "
+                          "upper soil", "pos"),
+        "size_deep": Param(0.8, "float", "m", "vertical element size below the building base",
+                           "pos"),
+        "size_building_y": Param(0.3, "float", "m",
+                                 "building and soil element size across the track in line with "
+                                 "the building", "pos"),
+        "size_building_z": Param(0.6, "float", "m", "building element size vertically", "pos"),
+        "layer_elements": Param(1, "int", "-",
+                                "elements through each of the ballast and subballast layers",
+                                "pos"),
+    },
+    "domain": {
+        "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),
+        "extra_width": Param(0.0, "float", "m", "extra soil width beyond the building (below YS4)",
+                             "nonneg"),
+        "extra_length": Param(0.0, "float", "m",
+                              "extra soil length before X1 and after X4 (track unchanged)",
+                              "nonneg"),
+    },
+    "modal": {
+        "n_modes": Param(300, "int", "-", "number of modes to extract", "pos"),
+        "f_max": Param(0.0, "float", "Hz",
+                       "if > 0: extract all modes below this frequency instead of n_modes",
+                       "nonneg"),
+        "damping_ratio": Param(0.03, "float", "-", "modal damping ratio for all modes",
+                               "fraction"),
+        "lumped_mass": Param(False, "bool", "-", "use lumped instead of consistent mass"),
+    },
+    "vehicle": {
+        "type": Param("wheelset", "str", "-", "load model",
+                      choices=("moving_force", "wheelset", "vehicle")),
+        "speed": Param(30.0, "float", "m/s", "running speed", "pos"),
+    },
+    "output": {
+        "float32": Param(False, "bool", "-", "store reconstructed fields in single precision"),
+        "time_stride": Param(1, "int", "-", "write every n-th time step of the fields", "pos"),
+    },
+    "assessment": {
+        "standards": Param(["iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis"],
+                           "strs", "-", "vibration criteria to evaluate",
+                           choices=("iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis")),
+    },
+}
+
+#: Values of the thesis's Table I where it differs from the APDL script
+#: (../shared/reference/benchmarks.md section 3). Layer depths are the same in
+#: both presets: Table I's "ballast 4.8 m" contradicts the APDL z-levels and
+#: the thesis's own wave speeds.
+PRESETS: dict[str, dict[str, Any]] = {
+    "apdl": {},
+    "table1": {
+        "materials.ballast.nu": 0.3,
+        "materials.ballast.rho": 1300.0,
+        "materials.subballast.nu": 0.35,
+        "materials.subgrade.nu": 0.35,
+        "materials.sleeper.rho": 2750.0,
+        "pads.kx": 26.5e7, "pads.ky": 26.5e7, "pads.kz": 26.5e7,
+        "pads.cx": 4.6e4, "pads.cy": 4.6e4, "pads.cz": 4.6e4,
+    },
+}
+
+
+def iter_params(tree: dict[str, Any] | None = None, prefix: str = ""):
+    """Yield ``(dotted_key, Param)`` for every key of the schema, in order."""
+    tree = SCHEMA if tree is None else tree
+    for name, node in tree.items():
+        key = f"{prefix}{name}"
+        if isinstance(node, Param):
+            yield key, node
+        else:
+            yield from iter_params(node, key + ".")

@@ -1,0 +1,43 @@
+"""Shared fixtures. MPI-aware: ``shared_tmp`` is one folder for all ranks."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from railvib_hpc.config import load_case
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = ROOT / "jobs" / "thesis_baseline.toml"
+
+
+@pytest.fixture
+def shared_tmp():
+    """A temporary folder with the same path on every MPI rank."""
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    path = tempfile.mkdtemp(prefix="railvib-test-") if comm.rank == 0 else None
+    path = Path(comm.bcast(path, root=0))
+    yield path
+    comm.Barrier()
+    if comm.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
+def baseline_mesh():
+    """The thesis baseline mesh at refinement 1 (built once per session) and its report."""
+    from railvib_hpc.mesh.stage import make_mesh
+
+    return make_mesh(load_case(BASELINE))
+
+
+@pytest.fixture(scope="session")
+def baseline_layout():
+    from railvib_hpc.mesh.layout import build_layout
+
+    return build_layout(load_case(BASELINE))

@@ -20,7 +20,6 @@ STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed")
 #: Stages not built yet, with the issue that builds them.
 MISSING = {
-    "modal": "distributed assembly and SLEPc modal analysis",
     "mbs": "reduced multibody simulation",
     "reconstruct": "parallel field reconstruction",
     "assess": "vibration assessment",
@@ -100,6 +99,12 @@ def _cmd_mesh(case: Case, out: Path, rep: Reporter) -> int:
     return 0
 
 
+def _cmd_modal(case: Case, out: Path, comm, rep: Reporter) -> dict:
+    from .modal.stage import run_modal_stage
+
+    return run_modal_stage(case, out, comm, rep)
+
+
 def _missing(stage: str) -> NotImplementedStage:
     return NotImplementedStage(f"stage '{stage}' ({MISSING[stage]}) is not implemented yet")
 
@@ -114,10 +119,18 @@ def run(argv: list[str] | None = None) -> int:
     try:
         case = on_root(lambda: load_case(args.case, args.overrides))
         out = _out_dir(args, case)
+        if args.command in ("modal", "run"):
+            from .petsc_env import init_petsc
+
+            init_petsc(petsc_options)
         if args.command == "check":
             return _cmd_check(case, rep)
         if args.command == "mesh":
             return _cmd_mesh(case, out, rep)
+        if args.command == "modal":
+            _cmd_modal(case, out, comm, rep)
+            rep.info("\n" + rep.timing_table())
+            return 0
         if args.command in MISSING:
             raise _missing(args.command)
         if args.command == "study":
@@ -125,19 +138,19 @@ def run(argv: list[str] | None = None) -> int:
         # run: every stage in order; report the ones that do not exist yet
         _cmd_check(case, rep)
         _cmd_mesh(case, out, rep)
-        for stage in ("modal", "mbs", "reconstruct", "assess"):
+        _cmd_modal(case, out, comm, rep)
+        for stage in MISSING:
             rep.info(f"[{stage}] not implemented yet ({MISSING[stage]})")
         rep.info("\n" + rep.timing_table())
-        rep.info("pipeline incomplete: stages modal, mbs, reconstruct, assess are not "
-                 "implemented yet")
+        rep.info("pipeline incomplete: stages " + ", ".join(MISSING) + " are not implemented yet")
         return NotImplementedStage.exit_code
     except UserError as exc:
         if comm.rank == 0:
             print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)
         return exc.exit_code
     finally:
-        if petsc_options:
-            rep.info("PETSc options given: " + " ".join(petsc_options))
+        if petsc_options and args.command not in ("modal", "run"):
+            rep.info("PETSc options ignored by this command: " + " ".join(petsc_options))
 
 
 def main() -> int:

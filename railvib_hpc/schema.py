@@ -222,6 +222,24 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "damping_ratio": Param(0.03, "float", "-", "modal damping ratio for all modes",
                                "fraction"),
         "lumped_mass": Param(False, "bool", "-", "use lumped instead of consistent mass"),
+        "method": Param("block_lanczos", "str", "-",
+                        "eigensolver: block shift-invert Lanczos (fast, many right-hand sides "
+                        "per MUMPS solve) or SLEPc Krylov-Schur; f_max always uses SLEPc "
+                        "spectrum slicing", choices=("block_lanczos", "krylovschur")),
+        "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos"),
+        "max_basis": Param(0, "int", "-",
+                           "block Lanczos: basis size before a thick restart (0: 3 n_modes, "
+                           "capped at 4 GB of basis vectors)", "nonneg"),
+        "shift_hz": Param(0.0, "float", "Hz",
+                          "shift of the spectral transformation (modes nearest to it)",
+                          "nonneg"),
+        "tol": Param(1e-8, "float", "-", "relative residual tolerance of the eigenpairs", "pos"),
+        "max_restarts": Param(100, "int", "-", "maximum restarts of the eigensolver", "pos"),
+        "fix_sleeper_rotations": Param(True, "bool", "-",
+                                       "fix all rotations of sleeper nodes (thesis, App. A)"),
+        "fix_rail_rotations_at_pads": Param(True, "bool", "-",
+                                            "fix all rotations of rail nodes above the pads "
+                                            "(thesis, App. A)"),
     },
     "vehicle": {
         "type": Param("wheelset", "str", "-", "load model",

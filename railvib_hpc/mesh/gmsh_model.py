@@ -155,6 +155,11 @@ def extract_mesh(gmsh) -> Mesh:
     tags, coords, _ = gmsh.model.mesh.getNodes()
     tags = np.asarray(tags, dtype=np.int64)
     coords = np.asarray(coords).reshape(-1, 3)
+    # Renumber nodes lexicographically by (x, y, z): contiguous node ranges are then compact
+    # slabs along the track, which is how the parallel stages split ownership across ranks.
+    key = np.round(coords, 7)
+    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
+    tags, coords = tags[order], coords[order]
     index = np.full(tags.max() + 1, -1, dtype=np.int64)
     index[tags] = np.arange(len(tags))
 

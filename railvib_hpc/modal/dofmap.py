@@ -1,0 +1,120 @@
+"""Degrees of freedom: mixed 6/3 DOF per node, constraints, global numbering, ownership.
+
+Nodes of beam elements (rails, sleepers) carry 6 DOFs ``ux uy uz rx ry rz``;
+nodes used only by hexahedra (and springs) carry 3. Constrained DOFs are not
+numbered at all (eliminated), so they produce no spurious eigenvalues.
+
+The global numbering follows the mesh node order (nodes are sorted along the
+track when the mesh is built), so it does not depend on the number of MPI
+ranks: rank ``r`` owns a contiguous range of nodes and hence of DOFs, and the
+assembled matrices are identical on 1 and N ranks.
+
+Default constraints reproduce the thesis (Appendix A):
+
+* bottom nodes fixed; nodes on the faces normal to x: ``ux = 0``; on the faces
+  normal to y: ``uy = 0``;
+* rigid rail nodes: all 6 DOFs fixed (this includes the rigid/flexible joints);
+* all rotations of sleeper nodes fixed;
+* all rotations of the rail nodes that carry a pad fixed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mesh.model import Mesh
+from ..schema import PART_ID
+
+COMPONENTS = ("ux", "uy", "uz", "rx", "ry", "rz")
+
+
+@dataclass
+class DofMap:
+    """Global DOF numbers of every node component.
+
+    Attributes
+    ----------
+    index
+        (n_nodes, 6) global DOF number, -1 where the component is constrained or absent.
+    has_rotations
+        (n_nodes,) True for beam nodes (6 DOFs).
+    node_offsets
+        (size + 1,) first node owned by each rank (contiguous ranges), last entry n_nodes.
+    dof_offsets
+        (size + 1,) first global DOF owned by each rank.
+    """
+
+    index: np.ndarray
+    has_rotations: np.ndarray
+    node_offsets: np.ndarray
+    dof_offsets: np.ndarray
+
+    @property
+    def n_dofs(self) -> int:
+        return int(self.dof_offsets[-1])
+
+    def owned_nodes(self, rank: int) -> slice:
+        return slice(int(self.node_offsets[rank]), int(self.node_offsets[rank + 1]))
+
+    def owned_dofs(self, rank: int) -> tuple[int, int]:
+        return int(self.dof_offsets[rank]), int(self.dof_offsets[rank + 1])
+
+
+#: Appendix A: bottom fixed, u_x = 0 on faces normal to x, u_y = 0 on faces normal to y.
+DEFAULT_RULES: dict[str, tuple[str, ...]] = {
+    "bottom": COMPONENTS, "x_faces": ("ux",), "y_faces": ("uy",),
+}
+
+
+def constraint_mask(mesh: Mesh, fix_sleeper_rotations: bool = True,
+                    fix_rail_rotations_at_pads: bool = True,
+                    rules: dict[str, tuple[str, ...]] | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Boolean (n_nodes, 6) mask of constrained components, and the beam-node mask.
+
+    ``rules`` maps a node-set name of the mesh to the components fixed on it
+    (default :data:`DEFAULT_RULES`); the set name ``"all"`` means every node.
+    """
+    n = mesh.n_nodes
+    beam_ids = [PART_ID[p] for p in ("rail", "rigid_rail", "sleeper")]
+    beam_nodes = np.zeros(n, dtype=bool)
+    beam_nodes[mesh.lines[np.isin(mesh.line_part, beam_ids)].ravel()] = True
+    fixed = np.zeros((n, 6), dtype=bool)
+    fixed[~beam_nodes, 3:] = True                       # rotations do not exist there
+    ns = dict(mesh.node_sets, all=np.arange(n))
+    for name, comps in (DEFAULT_RULES if rules is None else rules).items():
+        if name in ns:
+            fixed[np.ix_(ns[name], [COMPONENTS.index(c) for c in comps])] = True
+    fixed[mesh.lines[mesh.line_part == PART_ID["rigid_rail"]].ravel(), :] = True
+    if fix_sleeper_rotations:
+        fixed[mesh.lines[mesh.line_part == PART_ID["sleeper"]].ravel(), 3:] = True
+    if fix_rail_rotations_at_pads:
+        pads = mesh.lines[np.isin(mesh.line_part, [PART_ID[p] for p in ("pad_x", "pad_y",
+                                                                         "pad_z")])]
+        fixed[pads.ravel(), 3:] = True
+    return fixed, beam_nodes
+
+
+def build_dofmap(mesh: Mesh, size: int = 1, fix_sleeper_rotations: bool = True,
+                 fix_rail_rotations_at_pads: bool = True,
+                 rules: dict[str, tuple[str, ...]] | None = None) -> DofMap:
+    """Number the free DOFs in node order and split nodes into ``size`` contiguous ranges.
+
+    The split balances the number of DOFs per rank. ``rules``: see :func:`constraint_mask`.
+    """
+    fixed, beam_nodes = constraint_mask(mesh, fix_sleeper_rotations, fix_rail_rotations_at_pads,
+                                        rules)
+    free = ~fixed
+    index = np.full(fixed.shape, -1, dtype=np.int64)
+    index[free] = np.arange(int(free.sum()))           # row-major: node by node
+    per_node = free.sum(axis=1)
+    cum = np.concatenate(([0], np.cumsum(per_node)))
+    n_dofs = int(cum[-1])
+    targets = np.arange(1, size) * n_dofs / size
+    cuts = np.searchsorted(cum, targets)
+    node_offsets = np.concatenate(([0], cuts, [mesh.n_nodes])).astype(np.int64)
+    dof_offsets = cum[node_offsets].astype(np.int64)
+    return DofMap(index=index, has_rotations=beam_nodes, node_offsets=node_offsets,
+                  dof_offsets=dof_offsets)

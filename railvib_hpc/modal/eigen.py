@@ -1,0 +1,252 @@
+"""SLEPc eigensolve of K phi = lambda M phi (PETSc/SLEPc code).
+
+Krylov-Schur, generalized Hermitian, shift-and-invert with a parallel sparse
+direct Cholesky factorization (MUMPS). The solver object has the options prefix
+``railvib_eig_`` and calls ``setFromOptions`` once, so every setting can be
+overridden on the command line (``railvib modal CASE -- -railvib_eig_eps_ncv 700``).
+
+``n_modes`` mode: the ``n_modes`` eigenvalues closest to the shift (the lowest,
+for the default shift 0 on a positive definite K). ``f_max`` mode: every
+eigenvalue in [shift, (2 pi f_max)^2] by spectrum slicing, MUMPS inertia
+counts guaranteeing none is missed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import UserError
+
+PREFIX = "railvib_eig_"
+
+
+class EigenSolveError(UserError):
+    """The eigensolver did not deliver the requested modes."""
+
+
+@dataclass
+class ModalResult:
+    """Eigenpairs with this rank's rows of the mass-normalised mode matrix."""
+
+    eigenvalues: np.ndarray
+    phi: np.ndarray                    # (n_local_dofs, n_modes)
+    stats: dict = field(default_factory=dict)
+
+    @property
+    def frequencies_hz(self) -> np.ndarray:
+        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
+
+
+def _configure(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
+               max_it: int, mpd: int):
+    from petsc4py import PETSc
+    from slepc4py import SLEPc
+
+    eps = SLEPc.EPS().create(comm)
+    if f_max > 0:
+        # MUMPS reports the inertia (needed by spectrum slicing) only for SBAIJ matrices
+        K, M = K.convert(PETSc.Mat.Type.SBAIJ), M.convert(PETSc.Mat.Type.SBAIJ)
+    eps.setOperators(K, M)
+    eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
+    eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
+    sigma = (2 * np.pi * shift_hz) ** 2
+    st = eps.getST()
+    st.setType(SLEPc.ST.Type.SINVERT)
+    ksp = st.getKSP()
+    ksp.setType(PETSc.KSP.Type.PREONLY)
+    pc = ksp.getPC()
+    pc.setType(PETSc.PC.Type.CHOLESKY)
+    pc.setFactorSolverType("mumps")
+    opts = PETSc.Options()
+    if f_max > 0:
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.ALL)
+        eps.setInterval(sigma, (2 * np.pi * f_max) ** 2)
+        # MUMPS must report the inertia (ICNTL(13) = 1) for spectrum slicing in parallel
+        if not opts.hasName(f"{PREFIX}st_mat_mumps_icntl_13"):
+            opts.setValue(f"{PREFIX}st_mat_mumps_icntl_13", 1)
+        eps.setKrylovSchurDimensions(nev=min(n_modes, 200), mpd=mpd)
+    else:
+        eps.setDimensions(nev=n_modes, mpd=mpd)
+        eps.setTarget(sigma)
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.TARGET_MAGNITUDE)
+    eps.setTolerances(tol, max_it)
+    eps.setOptionsPrefix(PREFIX)
+    eps.setFromOptions()
+    return eps
+
+
+def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
+                tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
+                method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
+                monitor=None) -> ModalResult:
+    """Extract mass-normalised modes.
+
+    Parameters
+    ----------
+    K, M
+        Assembled PETSc matrices (symmetric, K positive definite after constraints).
+    comm
+        Communicator of the matrices.
+    n_modes
+        Number of modes (used when ``f_max`` is 0).
+    f_max
+        If > 0, all modes with frequency in [shift_hz, f_max] (spectrum slicing).
+    shift_hz
+        Shift of the spectral transformation, as a frequency.
+    tol, max_it
+        Relative residual tolerance and maximum restarts.
+    mpd
+        Maximum projected dimension (bounds memory); 0 lets SLEPc decide.
+    method
+        ``"block_lanczos"`` (block shift-invert Lanczos, :mod:`.block_lanczos`) or
+        ``"krylovschur"`` (SLEPc). Spectrum slicing (``f_max``) always uses SLEPc.
+    block_size, max_basis
+        Block Lanczos: right-hand sides per solve and restart size (0: automatic).
+    monitor
+        Progress callback ``monitor(n_converged, n_wanted, basis_size)``.
+
+    Raises
+    ------
+    EigenSolveError
+        When fewer than the requested modes converged.
+    """
+    from petsc4py import PETSc
+
+    n_global = K.getSize()[0]
+    if f_max <= 0 and n_modes >= n_global:
+        raise EigenSolveError(f"modal.n_modes = {n_modes}: must be smaller than the number of "
+                              f"free DOFs ({n_global})")
+    if method == "block_lanczos" and f_max <= 0:
+        return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
+                            monitor)
+    eps = _configure(K, M, comm, n_modes, f_max, shift_hz, tol, max_it,
+                     mpd if mpd > 0 else PETSc.DECIDE)
+    if monitor is not None:
+        eps.setMonitor(lambda e, its, nconv, *a: monitor(min(nconv, n_modes), n_modes,
+                                                         e.getDimensions()[1]))
+    PETSc.Log.begin()                      # event counts (cheap); also enables -log_view
+    solves = PETSc.Log.Event("MatSolve")
+    solves0 = solves.getPerfInfo()["count"]
+    t0 = time.perf_counter()
+    eps.setUp()                            # symbolic + numeric factorization of K - sigma M
+    t1 = time.perf_counter()
+    eps.solve()
+    t2 = time.perf_counter()
+    nconv = eps.getConverged()
+    reason = eps.getConvergedReason()
+    wanted = n_modes if f_max <= 0 else nconv
+    if reason < 0 or nconv < wanted:
+        raise EigenSolveError(
+            f"eigensolver converged {nconv} of {wanted} requested modes (reason {reason}, "
+            f"{eps.getIterationNumber()} restarts); try a larger -{PREFIX}eps_max_it or "
+            f"-{PREFIX}eps_ncv, or fewer modes (modal.n_modes)")
+    if f_max > 0 and nconv == 0:
+        raise EigenSolveError(f"modal.f_max = {f_max}: no mode below this frequency")
+    vr, _ = K.createVecs()
+    n_local = vr.getLocalSize()
+    lam = np.empty(wanted)
+    phi = np.empty((n_local, wanted))
+    for i in range(wanted):
+        lam[i] = eps.getEigenpair(i, vr).real
+        phi[:, i] = vr.getArray()
+    order = np.argsort(lam, kind="stable")
+    lam, phi = lam[order], np.ascontiguousarray(phi[:, order])
+    t3 = time.perf_counter()
+    ksp = eps.getST().getKSP()
+    stats = {
+        "nconv": int(nconv), "restarts": int(eps.getIterationNumber()),
+        "linear_solves": int(solves.getPerfInfo()["count"] - solves0),
+        "eps_type": eps.getType(), "st_type": eps.getST().getType(),
+        "factor_solver": ksp.getPC().getFactorSolverType(),
+        "ncv": int(eps.getDimensions()[1]), "mpd": int(eps.getDimensions()[2]),
+        "tol": float(eps.getTolerances()[0]),
+        "time_factorization": t1 - t0, "time_solve": t2 - t1, "time_extract": t3 - t2,
+    }
+    eps.destroy()
+    result = ModalResult(lam, phi, stats)
+    normalise_and_check(result, K, M, comm)
+    return result
+
+
+def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
+                 block_size: int, max_basis: int, monitor) -> ModalResult:
+    from petsc4py import PETSc
+
+    from .block_lanczos import BlockOperator, block_lanczos, purify_and_project
+
+    opts = PETSc.Options(PREFIX)
+    block_size = opts.getInt("bl_block_size", block_size)
+    max_basis = opts.getInt("bl_max_basis", max_basis)
+    tol = opts.getReal("eps_tol", tol)
+    sigma = (2 * np.pi * shift_hz) ** 2
+    t0 = time.perf_counter()
+    op = BlockOperator(K, M, sigma, comm, PREFIX)
+    r0 = K.getOwnershipRange()[0]
+    try:
+        _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=tol,
+                                     max_basis=max_basis, max_restarts=max_restarts,
+                                     monitor=monitor)
+        t_p = time.perf_counter()
+        lam, X, KX, MX = purify_and_project(op, X, st["block_size"])
+        st["time_purify_project"] = time.perf_counter() - t_p
+    except RuntimeError as exc:
+        raise EigenSolveError(f"{exc}; try a larger -{PREFIX}bl_max_basis or fewer modes "
+                              "(modal.n_modes)") from None
+    finally:
+        op.destroy()
+    t1 = time.perf_counter()
+    order = np.argsort(lam, kind="stable")
+    stats = dict(st, nconv=int(n_modes), eps_type="block_lanczos", st_type="sinvert",
+                 factor_solver="mumps", tol=tol, time_factorization=op.time_factorization,
+                 time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
+    result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats)
+    normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order])
+    return result
+
+
+def _dense(comm, local: np.ndarray, n_global: int):
+    from petsc4py import PETSc
+
+    return PETSc.Mat().createDense(size=((local.shape[0], n_global), (None, local.shape[1])),
+                                   array=np.asfortranarray(local), comm=comm)
+
+
+def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None = None,
+                        MPhi: np.ndarray | None = None) -> None:
+    """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
+
+    ``KPhi``/``MPhi`` may be given when already computed (they are scaled along).
+    """
+    from mpi4py import MPI
+
+    t0 = time.perf_counter()
+    phi = result.phi
+    n_global = K.getSize()[0]
+    if MPhi is None:
+        Phi = _dense(comm, phi, n_global)
+        MPhi = M.matMult(Phi).getDenseArray().copy()
+        Phi.destroy()
+    modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
+    scale = 1.0 / np.sqrt(modal_mass)
+    phi *= scale
+    MPhi = MPhi * scale
+    if KPhi is None:
+        Phi = _dense(comm, phi, n_global)
+        KPhi = K.matMult(Phi).getDenseArray().copy()
+        Phi.destroy()
+    else:
+        KPhi = KPhi * scale
+    gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
+    stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
+    lam = result.eigenvalues
+    res = comm.allreduce(np.sum((KPhi - MPhi * lam) ** 2, axis=0), op=MPI.SUM)
+    knorm = comm.allreduce(np.sum(KPhi**2, axis=0), op=MPI.SUM)
+    result.stats.update({
+        "max_orthonormality_error": float(np.abs(gram - np.eye(len(lam))).max()),
+        "max_stiffness_diag_error": float(np.abs(stiff - np.diag(lam)).max() / lam.max()),
+        "max_relative_residual": float(np.sqrt(res / knorm).max()),
+        "time_checks": time.perf_counter() - t0,
+    })

@@ -1,0 +1,138 @@
+"""Element matrices of the model, grouped in batches, with their global DOF numbers.
+
+Pure numpy: materials and sections come from the case, kernels from
+:mod:`railvib_hpc.fem`. Every batch holds ``(nel, nd)`` DOF numbers (-1 for an
+eliminated DOF) and ``(nel, nd, nd)`` stiffness and mass matrices.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import Case
+from ..fem.beam import beam_mass, beam_stiffness, shear_deformation_factors, shear_modulus
+from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
+from ..fem.spring import spring_matrices
+from ..mesh.model import Mesh
+from ..schema import BUILDING_PARTS, PART_ID
+from .dofmap import DofMap
+
+#: Material section of each solid part.
+SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
+                  **{p: "concrete" for p in BUILDING_PARTS}}
+BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
+PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
+
+
+@dataclass
+class Batch:
+    """Element matrices of one group of elements."""
+
+    dofs: np.ndarray
+    K: np.ndarray
+    M: np.ndarray | None
+
+
+def beam_up_vectors(x: np.ndarray) -> np.ndarray:
+    """Reference vector per beam: global z, or global x for (nearly) vertical beams."""
+    t = x[:, 1] - x[:, 0]
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    up = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    up[np.abs(t[:, 2]) > 0.99] = [1.0, 0.0, 0.0]
+    return up
+
+
+def element_batches(mesh: Mesh, case: Case, dofmap: DofMap, hex_mask: np.ndarray | None = None,
+                    line_mask: np.ndarray | None = None, chunk: int = 20_000
+                    ) -> Iterator[Batch]:
+    """Yield element batches of the selected elements (all if masks are None).
+
+    Parameters
+    ----------
+    mesh, case, dofmap
+        Model, material data and DOF numbering.
+    hex_mask, line_mask
+        Boolean masks selecting the hexahedra / line elements to compute.
+    chunk
+        Maximum number of hexahedra per batch (bounds memory).
+    """
+    lumped = case["modal.lumped_mass"]
+    idx = dofmap.index
+    hex_sel = np.ones(len(mesh.hexes), bool) if hex_mask is None else hex_mask
+    line_sel = np.ones(len(mesh.lines), bool) if line_mask is None else line_mask
+
+    for part, mat_name in SOLID_MATERIAL.items():
+        sel = np.flatnonzero(hex_sel & (mesh.hex_part == PART_ID[part]))
+        mat = case[f"materials.{mat_name}"]
+        for start in range(0, len(sel), chunk):
+            conn = mesh.hexes[sel[start:start + chunk]]
+            x = mesh.points[conn]
+            dofs = idx[conn][:, :, :3].reshape(len(conn), 24)
+            yield Batch(dofs, hex8_stiffness(x, mat["E"], mat["nu"], bbar=True),
+                        hex8_mass(x, mat["rho"], lumped=lumped))
+
+    for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
+        sel = line_sel & (mesh.line_part == PART_ID[part])
+        if not sel.any():
+            continue
+        conn = mesh.lines[sel]
+        x = mesh.points[conn]
+        mat, sec = case[f"materials.{mat_name}"], case[f"sections.{sec_name}"]
+        G = shear_modulus(mat["E"], mat["nu"])
+        up = beam_up_vectors(x)
+        ky, kz = sec["shear_coefficient_y"], sec["shear_coefficient_z"]
+        K = beam_stiffness(x, mat["E"], G, sec["area"], sec["iyy"], sec["izz"], sec["j"], ky, kz,
+                           up)
+        phi_y, phi_z = shear_deformation_factors(x, mat["E"], G, sec["area"], sec["iyy"],
+                                                 sec["izz"], ky, kz)
+        M = beam_mass(x, mat["rho"], sec["area"], sec["iyy"], sec["izz"], up,
+                      rotary_inertia=True, phi_y=phi_y, phi_z=phi_z)
+        if lumped:
+            M = _lump_beam(M)
+        yield Batch(idx[conn].reshape(len(conn), 12), K, M)
+
+    for part, (key, direction) in PAD_DIRECTION.items():
+        sel = line_sel & (mesh.line_part == PART_ID[part])
+        if not sel.any():
+            continue
+        conn = mesh.lines[sel]
+        yield Batch(idx[conn][:, :, direction], spring_matrices(case[f"pads.{key}"],
+                                                                np.full(len(conn), direction)),
+                    None)
+
+
+def _lump_beam(M: np.ndarray) -> np.ndarray:
+    """Row-sum lumping of the translational part; rotary inertia keeps its diagonal."""
+    out = np.zeros_like(M)
+    diag = np.einsum("eii->ei", M).copy()
+    trans = np.r_[0:3, 6:9]
+    diag[:, trans] = M[:, trans][:, :, trans].sum(axis=2)
+    out[:, np.arange(12), np.arange(12)] = diag
+    return out
+
+
+def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
+    """Lumped (row-sum) translational mass of every node (kg); only ``node_mask`` nodes filled.
+
+    Hexahedra contribute their row-sum lumped mass, beams half of ``rho A L`` to each node.
+    """
+    out = np.zeros(mesh.n_nodes)
+    hex_sel = node_mask[mesh.hexes].any(axis=1)
+    for part, mat_name in SOLID_MATERIAL.items():
+        sel = hex_sel & (mesh.hex_part == PART_ID[part])
+        if sel.any():
+            conn = mesh.hexes[sel]
+            diag = hex8_lumped_mass_diagonal(mesh.points[conn], case[f"materials.{mat_name}.rho"])
+            out += np.bincount(conn.ravel(), weights=diag[:, 0::3].ravel(), minlength=len(out))
+    for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
+        sel = node_mask[mesh.lines].any(axis=1) & (mesh.line_part == PART_ID[part])
+        if sel.any():
+            conn = mesh.lines[sel]
+            length = np.linalg.norm(np.diff(mesh.points[conn], axis=1)[:, 0], axis=1)
+            m = case[f"materials.{mat_name}.rho"] * case[f"sections.{sec_name}.area"] * length
+            out += np.bincount(conn.ravel(), weights=np.repeat(m / 2, 2), minlength=len(out))
+    out[~node_mask] = 0.0
+    return out

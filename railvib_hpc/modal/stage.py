@@ -1,0 +1,161 @@
+"""The ``modal`` stage: mesh (reused) -> DOFs -> distributed K, M -> eigensolve -> modes.h5."""
+
+from __future__ import annotations
+
+import json
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..config import Case
+from ..io.modes_io import read_modes_summary, write_modes
+from ..log import Reporter
+from ..mesh.stage import MESH_INPUTS, run_mesh_stage
+from ..parallel import on_root
+from .dofmap import build_dofmap
+from .eigen import solve_modes
+from .elements import nodal_masses
+from .petsc import assemble
+
+#: Keys of [modal] that do not change the modes (excluded from the reuse key).
+_NOT_MODAL_INPUTS = ("damping_ratio",)
+
+
+def modal_digest(case: Case) -> str:
+    """Hash of everything the modes depend on."""
+    import hashlib
+
+    modal = {k: v for k, v in case["modal"].items() if k not in _NOT_MODAL_INPUTS}
+    text = json.dumps({"mesh": case.digest(*MESH_INPUTS),
+                       "physics": case.digest("materials", "sections", "pads"),
+                       "modal": modal}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _max_basis(case: Case, n_dofs: int, size: int) -> int:
+    if case["modal.max_basis"] > 0:
+        return case["modal.max_basis"]
+    cap = int(4e9 / (8.0 * n_dofs))                 # at most ~4 GB of basis vectors in total
+    return max(min(3 * case["modal.n_modes"], cap), case["modal.n_modes"] + 3 * 32)
+
+
+def _progress(rep: Reporter):
+    t_start = time.perf_counter()
+    state = {"last": -1e9}
+
+    def monitor(nconv: int, nev: int, basis: int) -> None:
+        now = time.perf_counter()
+        if now - state["last"] < 2.0 and nconv < nev:
+            return
+        state["last"] = now
+        rep.progress(f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
+                     max(nconv, 0), nev, t_start)
+
+    return monitor
+
+
+def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+    """Compute (or reuse) ``modes.h5`` in ``out_dir``; collective. Returns a summary dict."""
+    key = modal_digest(case)
+    path = out_dir / "modes.h5"
+
+    def previous():
+        if not path.exists():
+            return None
+        summary = read_modes_summary(path)
+        if summary is None:
+            rep.info(f"ignoring incomplete or unreadable {path}; recomputing")
+            return None
+        return summary if summary.get("inputs_sha256") == key else None
+
+    old = on_root(previous)
+    if old is not None:
+        f = old["frequency_hz"]
+        rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
+                 f"{f[0]:.3f} - {f[-1]:.3f} Hz")
+        return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
+                **json.loads(old.get("stats", "{}"))}
+
+    with rep.stage("mesh"):
+        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+    t0 = time.perf_counter()
+    with rep.stage("dofs"):
+        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
+                              case["modal.fix_rail_rotations_at_pads"])
+        rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
+    with rep.stage("assembly"):
+        K, M, ainfo = assemble(mesh, case, dofmap, comm)
+    t_assembly = time.perf_counter() - t0
+    with rep.stage("eigensolve"):
+        result = solve_modes(
+            K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
+            shift_hz=case["modal.shift_hz"], tol=case["modal.tol"],
+            max_it=case["modal.max_restarts"], method=case["modal.method"],
+            block_size=case["modal.block_size"],
+            max_basis=_max_basis(case, dofmap.n_dofs, comm.size), monitor=_progress(rep))
+    K.destroy()
+    M.destroy()
+    with rep.stage("write modes"):
+        translation, rotation, rot_nodes, rot_range, nodes = node_arrays(result.phi, dofmap,
+                                                                          comm.rank)
+        mask = np.zeros(mesh.n_nodes, dtype=bool)
+        mask[nodes] = True
+        masses = nodal_masses(mesh, case, mask)[nodes]
+        stats = dict(result.stats)
+        stats.update({"assembly_" + k: v for k, v in ainfo.items() if isinstance(v, float)})
+        stats["time_assembly_total"] = t_assembly
+        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+        stats["peak_rss_gb_per_rank"] = rss
+        stats["peak_rss_gb_total"] = float(sum(rss))
+        stats["n_dofs"] = dofmap.n_dofs
+        stats["ranks"] = comm.size
+        attrs = {"inputs_sha256": key, "case_toml": case.to_toml(), "railvib_version": __version__,
+                 "petsc_version": _versions()[0], "slepc_version": _versions()[1],
+                 "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}
+        write_modes(path, comm, mesh, nodes, result.eigenvalues, translation, rotation,
+                    rot_nodes, rot_range, masses, dofmap.index, attrs)
+    f = result.frequencies_hz
+    summary = {"reused": False, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
+               **stats}
+    rep.info(f"{len(f)} modes, {f[0]:.3f} - {f[-1]:.3f} Hz; max |Phi^T M Phi - I| = "
+             f"{stats['max_orthonormality_error']:.2e}, max relative residual "
+             f"{stats['max_relative_residual']:.2e}; {stats['linear_solves']} right-hand sides "
+             f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
+    rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
+    return summary
+
+
+def _versions() -> tuple[str, str]:
+    from petsc4py import PETSc
+    from slepc4py import SLEPc
+
+    return (".".join(map(str, PETSc.Sys.getVersion())),
+            ".".join(map(str, SLEPc.Sys.getVersion())))
+
+
+def node_arrays(phi: np.ndarray, dofmap, rank: int):
+    """Reshape this rank's DOF rows of the modes into per-node translation/rotation arrays.
+
+    Returns
+    -------
+    translation : (m, owned nodes, 3)
+    rotation : (m, owned rotation nodes, 3)
+    rotation_nodes : all rotation nodes (global)
+    rot_range : slice of ``rotation_nodes`` owned here
+    nodes : slice of owned nodes
+    """
+    nodes = dofmap.owned_nodes(rank)
+    r0, _ = dofmap.owned_dofs(rank)
+    idx = dofmap.index[nodes]
+    m = phi.shape[1]
+    full = np.zeros((m, idx.shape[0], 6))
+    ok = idx >= 0
+    full[:, ok] = phi[idx[ok] - r0].T
+    rotation_nodes = np.flatnonzero(dofmap.has_rotations)
+    lo, hi = np.searchsorted(rotation_nodes, [nodes.start, nodes.stop])
+    owned_rot = rotation_nodes[lo:hi] - nodes.start
+    return (full[:, :, :3], full[:, owned_rot, 3:], rotation_nodes, slice(int(lo), int(hi)),
+            nodes)

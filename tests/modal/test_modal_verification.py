@@ -1,0 +1,135 @@
+"""Modal analysis against analytic answers, through the distributed PETSc/SLEPc path.
+
+Numbers: ../shared/reference/benchmarks.md section 1 (soil column, beams).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fem_analytic import timoshenko_frequencies, timoshenko_pinned_frequency
+from modal_cases import beam_mesh, column_mesh, soil_case, solve
+
+from railvib_hpc.modal.eigen import EigenSolveError
+
+H = 5.8
+E_SOIL, NU_SOIL, RHO_SOIL = 200e6, 0.2, 1850.0        # subgrade of the thesis
+G_SOIL = E_SOIL / (2 * (1 + NU_SOIL))
+C_S = np.sqrt(G_SOIL / RHO_SOIL)                                    # 212.24 m/s
+C_P = np.sqrt((E_SOIL * NU_SOIL / ((1 + NU_SOIL) * (1 - 2 * NU_SOIL)) + 2 * G_SOIL) / RHO_SOIL)
+SHEAR = [(2 * n - 1) * C_S / (4 * H) for n in (1, 2, 3)]      # 9.148, 27.445, 45.741 Hz
+COMPRESSION = C_P / (4 * H)                                     # 14.939 Hz
+
+
+def test_benchmark_numbers():
+    assert pytest.approx((212.24, 346.58), abs=6e-3) == (C_S, C_P)
+    assert pytest.approx([9.148, 27.445, 45.741], abs=2e-3) == SHEAR
+    assert pytest.approx(14.939, abs=1e-3) == COMPRESSION
+
+
+@pytest.mark.parametrize("nz", [16, 32, 64])
+def test_soil_column_shear_and_compression(nz):
+    case = soil_case()
+    # shear: only ux free (1-D shear beam); compression: only uz free (constrained modulus)
+    shear, *_ = solve(column_mesh(nz), case, {"bottom": ("ux", "uy", "uz"), "all": ("uy", "uz")},
+                      3)
+    comp, *_ = solve(column_mesh(nz), case, {"bottom": ("ux", "uy", "uz"), "all": ("ux", "uy")},
+                     1)
+    # linear elements with consistent mass converge from above with error ~ (k h)^2 / 12
+    for f, exact, n in zip(shear.frequencies_hz, SHEAR, (1, 2, 3)):
+        kh = (2 * n - 1) * np.pi / (2 * H) * (H / nz)
+        assert 0 < f / exact - 1 < 1.05 * kh**2 / 24 + 1e-9
+    kh = np.pi / (2 * H) * (H / nz)
+    assert 0 < comp.frequencies_hz[0] / COMPRESSION - 1 < 1.05 * kh**2 / 24 + 1e-9
+
+
+def test_soil_column_converges_at_rate_two():
+    case = soil_case()
+    sizes, errors = [], []
+    for nz in (8, 16, 32, 64):
+        res, *_ = solve(column_mesh(nz), case,
+                        {"bottom": ("ux", "uy", "uz"), "all": ("uy", "uz")}, 3)
+        sizes.append(H / nz)
+        errors.append(abs(res.frequencies_hz[2] / SHEAR[2] - 1))
+    slope = np.polyfit(np.log(sizes), np.log(errors), 1)[0]
+    assert slope == pytest.approx(2.0, abs=0.05)
+
+
+RAIL = dict(E=210e9, nu=0.3, rho=7700.0, A=64.5e-4, Iyy=2010e-8, Izz=326e-8, k=0.34)
+G_RAIL = RAIL["E"] / (2 * (1 + RAIL["nu"]))
+VERTICAL_ONLY = ("uy", "rx", "rz")           # keep ux, uz, ry: axial + vertical bending
+
+
+def test_short_simply_supported_rail_is_timoshenko_not_euler_bernoulli():
+    L, n = 0.6, 32
+    rules = {"all": VERTICAL_ONLY, "start": ("ux", "uz"), "end": ("uz",)}
+    res, *_ = solve(beam_mesh(n, L), soil_case(), rules, 2)
+    f1 = res.frequencies_hz[0]
+    eb = 1272.0                                              # benchmarks.md, Euler-Bernoulli
+    timo = timoshenko_pinned_frequency(1, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"],
+                                       RAIL["Iyy"], RAIL["rho"])
+    assert f1 < 0.8 * eb                                     # thick beam: far below EB
+    assert f1 == pytest.approx(timo, rel=5e-4)               # O(h^2) error ~1.5e-4 at n = 32
+
+
+def test_long_simply_supported_rail_matches_euler_bernoulli():
+    L, n = 20.0, 40
+    rules = {"all": VERTICAL_ONLY, "start": ("ux", "uz"), "end": ("uz",)}
+    res, *_ = solve(beam_mesh(n, L), soil_case(), rules, 3)
+    for mode in (1, 2, 3):
+        eb = (mode * np.pi / L) ** 2 / (2 * np.pi) * np.sqrt(RAIL["E"] * RAIL["Iyy"] /
+                                                            (RAIL["rho"] * RAIL["A"]))
+        # slenderness: shear + rotary inertia lower f by ~ (q r)^2 (1 + E/kG) / 2 < 0.3 %
+        assert res.frequencies_hz[mode - 1] == pytest.approx(eb, rel=3e-3)
+
+
+def test_cantilever_rail_both_planes():
+    L, n = 2.0, 32
+    res_v, *_ = solve(beam_mesh(n, L), soil_case(), {"all": VERTICAL_ONLY, "start":
+                                                     ("ux", "uz", "ry")}, 3)
+    exact_v = timoshenko_frequencies(3, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"], RAIL["Iyy"],
+                                     RAIL["rho"])
+    assert res_v.frequencies_hz[:3] == pytest.approx(exact_v, rel=1e-3)
+    assert exact_v[0] == pytest.approx(40.16, abs=0.01)       # EB: 40.78 Hz
+    res_h, *_ = solve(beam_mesh(n, L), soil_case(), {"all": ("uz", "rx", "ry"),
+                                                     "start": ("ux", "uy", "rz")}, 3)
+    exact_h = timoshenko_frequencies(3, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"], RAIL["Izz"],
+                                     RAIL["rho"])
+    assert res_h.frequencies_hz[:3] == pytest.approx(exact_h, rel=1e-3)
+
+
+def test_mass_normalised_with_repeated_eigenvalues():
+    # square section (Iyy = Izz, ky = kz): every bending frequency is a double eigenvalue
+    case = soil_case(**{"sections.rail.izz": 2010e-8, "sections.rail.shear_coefficient_z": 0.34})
+    clamped = ("ux", "uy", "uz", "rx", "ry", "rz")
+    res, K, M, _ = solve(beam_mesh(24, 2.0), case, {"start": clamped, "all": ("ux", "rx")}, 6)
+    f = res.frequencies_hz
+    for k in (0, 2, 4):                                # bending pairs, no axial/torsion modes
+        assert f[k] == pytest.approx(f[k + 1], rel=1e-9)
+    st = res.stats
+    assert st["max_orthonormality_error"] < 1e-10      # Phi^T M Phi = I
+    assert st["max_stiffness_diag_error"] < 1e-10      # Phi^T K Phi = diag(omega^2)
+    assert st["max_relative_residual"] < 1e-8
+    phi = res.phi
+    Md = M.convert("dense").getDenseArray()
+    Kd = K.convert("dense").getDenseArray()
+    assert np.allclose(phi.T @ Md @ phi, np.eye(6), atol=1e-10)
+    assert np.allclose(phi.T @ Kd @ phi, np.diag(res.eigenvalues), rtol=1e-9,
+                       atol=1e-9 * res.eigenvalues.max())
+
+
+def test_krylov_schur_and_block_lanczos_agree_and_slicing_finds_all():
+    mesh = column_mesh(40)
+    rules = {"bottom": ("ux", "uy", "uz")}
+    block, *_ = solve(mesh, soil_case(), rules, 12, method="block_lanczos")
+    ks, *_ = solve(mesh, soil_case(), rules, 12, method="krylovschur")
+    assert block.eigenvalues == pytest.approx(ks.eigenvalues, rel=1e-9)
+    fmax = 0.5 * (block.frequencies_hz[9] + block.frequencies_hz[10])
+    sliced, *_ = solve(mesh, soil_case(), rules, 12, f_max=fmax)
+    assert len(sliced.eigenvalues) == 10
+    assert sliced.eigenvalues == pytest.approx(block.eigenvalues[:10], rel=1e-7)
+
+
+def test_too_many_modes_is_a_clear_error():
+    with pytest.raises(EigenSolveError, match="must be smaller than the number of free DOFs"):
+        solve(column_mesh(4), soil_case(), {"bottom": ("ux", "uy", "uz")}, 100)

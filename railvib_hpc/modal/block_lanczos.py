@@ -24,6 +24,7 @@ depend on the number of ranks (beyond round-off).
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 
@@ -31,10 +32,40 @@ import numpy as np
 from scipy.linalg import eigh
 
 
+class InsufficientMemory(RuntimeError):
+    """The factorization (plus the Lanczos basis) would not fit in the available memory."""
+
+
+class FactorizationError(RuntimeError):
+    """MUMPS could not factor the shifted stiffness matrix."""
+
+
+class NotConverged(RuntimeError):
+    """Fewer than the wanted eigenpairs converged within the allowed restarts."""
+
+
+def available_memory_gb(comm) -> float:
+    """MemAvailable summed over the distinct nodes of ``comm`` (Linux), in GB."""
+    from mpi4py import MPI
+
+    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
+    mine = 0.0
+    if node.rank == 0:
+        try:
+            with open("/proc/meminfo") as f:
+                for line in f:
+                    if line.startswith("MemAvailable:"):
+                        mine = float(line.split()[1]) / 1e6
+        except OSError:
+            mine = float("inf")
+    node.Free()
+    return comm.allreduce(mine, op=MPI.SUM)
+
+
 class BlockOperator:
     """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
 
-    def __init__(self, K, M, sigma: float, comm, prefix: str):
+    def __init__(self, K, M, sigma: float, comm, prefix: str, extra_gb: float = 0.0):
         from petsc4py import PETSc
 
         self.K, self.M, self.comm, self.sigma = K, M, comm, sigma
@@ -45,7 +76,39 @@ class BlockOperator:
             self.A.axpy(-sigma, M, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         else:
             self.A = K
-        ksp = PETSc.KSP().create(comm)
+        t0 = time.perf_counter()
+        avail_gb = available_memory_gb(comm)
+        self.factor_memory_gb = self._estimate_factor_memory(prefix)
+        if self.factor_memory_gb + extra_gb > 0.9 * avail_gb:
+            raise InsufficientMemory(
+                f"the model has {self.n_global:,} DOFs: MUMPS estimates "
+                f"~{self.factor_memory_gb:.1f} GB for the Cholesky factor and the Lanczos basis "
+                f"needs ~{extra_gb:.1f} GB, but {avail_gb:.1f} GB are available on "
+                f"{comm.size} rank(s); use a coarser mesh (mesh.refinement), more nodes, a "
+                "smaller modal.max_basis, or MUMPS out-of-core "
+                f"(-- -{prefix}st_mat_mumps_icntl_22 1)")
+        ksp, F = self._factor_solver(prefix)
+        try:
+            ksp.setUp()
+            failed = F.getMumpsInfog(1) < 0    # PETSc flags a failed factorization silently
+        except PETSc.Error:
+            failed = True
+        if failed:
+            raise FactorizationError(f"MUMPS Cholesky factorization of K - sigma M failed "
+                                     f"(INFOG(1) = {F.getMumpsInfog(1)}, INFOG(2) = "
+                                     f"{F.getMumpsInfog(2)}); is the model free to move "
+                                     "(missing supports)? A small positive modal.shift_hz "
+                                     "helps then")
+        self.time_factorization = time.perf_counter() - t0
+        self.ksp = ksp
+        self.factor = F
+        self.n_solves = 0
+        self.time_solves = 0.0
+
+    def _factor_solver(self, prefix: str):
+        from petsc4py import PETSc
+
+        ksp = PETSc.KSP().create(self.comm)
         ksp.setOperators(self.A)
         ksp.setType(PETSc.KSP.Type.PREONLY)
         pc = ksp.getPC()
@@ -53,13 +116,28 @@ class BlockOperator:
         pc.setFactorSolverType("mumps")
         ksp.setOptionsPrefix(prefix + "st_")
         ksp.setFromOptions()
-        t0 = time.perf_counter()
-        ksp.setUp()
-        self.time_factorization = time.perf_counter() - t0
-        self.ksp = ksp
-        self.factor = pc.getFactorMatrix()
-        self.n_solves = 0
-        self.time_solves = 0.0
+        pc.setFactorSetUpSolverType()
+        return ksp, pc.getFactorMatrix()
+
+    def _estimate_factor_memory(self, prefix: str) -> float:
+        """MUMPS's own estimate (GB, all ranks) of the in-core factorization, after analysis only.
+
+        The analysis runs with a 1 MB working-memory cap (ICNTL(23)), so MUMPS stops with
+        INFOG(1) = -19 before allocating anything and reports INFOG(17).
+        """
+        from petsc4py import PETSc
+
+        ksp, F = self._factor_solver(prefix)
+        if F.getType() != "mumps":
+            ksp.destroy()
+            return 0.0
+        F.setMumpsIcntl(23, 1)
+        with contextlib.suppress(PETSc.Error):
+            ksp.setUp()
+        out_of_core = PETSc.Options().getInt(f"{prefix}st_mat_mumps_icntl_22", 0) == 1
+        estimate = F.getMumpsInfog(27 if out_of_core else 17) / 1e3
+        ksp.destroy()
+        return estimate
 
     def _dense(self, arr: np.ndarray):
         from petsc4py import PETSc
@@ -242,7 +320,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
             monitor(0, nev, m)
         if m + 2 * b > max_basis:
             if restarts >= max_restarts:
-                raise RuntimeError(f"block Lanczos: {nconv} of {nev} modes converged after "
+                raise NotConverged(f"block Lanczos: {nconv} of {nev} modes converged after "
                                    f"{restarts} restarts")
             # thick restart: keep the best `keep` Ritz vectors, then the next block
             p = min(keep, len(theta))

@@ -175,7 +175,14 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
                  block_size: int, max_basis: int, monitor) -> ModalResult:
     from petsc4py import PETSc
 
-    from .block_lanczos import BlockOperator, block_lanczos, purify_and_project
+    from .block_lanczos import (
+        BlockOperator,
+        FactorizationError,
+        InsufficientMemory,
+        NotConverged,
+        block_lanczos,
+        purify_and_project,
+    )
 
     opts = PETSc.Options(PREFIX)
     block_size = opts.getInt("bl_block_size", block_size)
@@ -183,7 +190,13 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     tol = opts.getReal("eps_tol", tol)
     sigma = (2 * np.pi * shift_hz) ** 2
     t0 = time.perf_counter()
-    op = BlockOperator(K, M, sigma, comm, PREFIX)
+    n_global = K.getSize()[0]
+    basis = (max_basis if max_basis > 0 else max(2 * n_modes, n_modes + 8 * block_size))
+    extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
+    try:
+        op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb)
+    except (InsufficientMemory, FactorizationError) as exc:
+        raise EigenSolveError(str(exc)) from None
     r0 = K.getOwnershipRange()[0]
     try:
         _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=tol,
@@ -192,7 +205,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
         t_p = time.perf_counter()
         lam, X, KX, MX = purify_and_project(op, X, st["block_size"])
         st["time_purify_project"] = time.perf_counter() - t_p
-    except RuntimeError as exc:
+    except NotConverged as exc:
         raise EigenSolveError(f"{exc}; try a larger -{PREFIX}bl_max_basis or fewer modes "
                               "(modal.n_modes)") from None
     finally:
@@ -201,6 +214,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     order = np.argsort(lam, kind="stable")
     stats = dict(st, nconv=int(n_modes), eps_type="block_lanczos", st_type="sinvert",
                  factor_solver="mumps", tol=tol, time_factorization=op.time_factorization,
+                 factor_memory_gb=op.factor_memory_gb,
                  time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
     result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats)
     normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order])

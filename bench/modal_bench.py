@@ -68,7 +68,10 @@ def run_modal(refinement: str, ranks: int, modes: int) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     wall = time.perf_counter() - t0
     if proc.returncode != 0:
-        return {"error": proc.stderr[-2000:], "wall": wall}
+        lines = [ln for ln in proc.stderr.splitlines() if "error:" in ln] or \
+            proc.stderr.strip().splitlines()[-1:]
+        shutil.rmtree(out, ignore_errors=True)
+        return {"error": lines[0] if lines else f"exit code {proc.returncode}", "wall": wall}
     with h5py.File(out / "modes.h5", "r") as f:
         stats = json.loads(f.attrs["stats"])
         stats["eigenvalues"] = f["modes/eigenvalue"][()].tolist()
@@ -125,7 +128,7 @@ def main() -> None:
     print("|" + "---|" * 15)
     for r, n, s in rows:
         if "error" in s:
-            print(f"| {r} | {n} | failed: {s['error'].strip().splitlines()[-1]} |")
+            print(f"| {r} | {n} | failed after {s['wall']:.0f} s: {s['error'].strip()} |")
             continue
         rate = s["n_hexes"] / n / s["time_assembly_total"]
         print(f"| {r} | {n} | {s['n_nodes']:,} | {s['n_dofs']:,} | {s['n_hexes']:,} | "

@@ -21,17 +21,11 @@ def init_petsc(options: list[str] | None = None) -> None:
     """
     if "petsc4py.PETSc" in sys.modules:
         return
-    if not os.environ.get("PETSC_DIR"):
-        d = _debian_dir("/usr/lib/petscdir/petsc3.*/*-real")
+    for var, pattern in (("PETSC_DIR", "/usr/lib/petscdir/petsc3.*/*-real"),
+                         ("SLEPC_DIR", "/usr/lib/slepcdir/slepc3.*/*-real")):
+        d = None if os.environ.get(var) else _debian_dir(pattern)
         if d:
-            os.environ["PETSC_DIR"] = d
-            path = os.path.join(d, "lib", "python3", "dist-packages")
-            if os.path.isdir(path) and path not in sys.path:
-                sys.path.append(path)
-    if not os.environ.get("SLEPC_DIR"):
-        d = _debian_dir("/usr/lib/slepcdir/slepc3.*/*-real")
-        if d:
-            os.environ["SLEPC_DIR"] = d
+            os.environ[var] = d
             path = os.path.join(d, "lib", "python3", "dist-packages")
             if os.path.isdir(path) and path not in sys.path:
                 sys.path.append(path)

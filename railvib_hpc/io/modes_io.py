@@ -12,6 +12,10 @@ Layout of ``modes.h5``::
     /mesh/rail_nodes       (2, k)          flexible-rail nodes of each rail, sorted along x
     /mesh/nodal_mass       (n,)            lumped translational mass per node [kg]
     /dofs/index            (n, 6)          global DOF number of each component, -1 if fixed
+    /pads/nodes (p, 2), /pads/direction (p,), /pads/stiffness (p,), /pads/damping (p,)
+                                           rail-pad spring-dampers (rail node, sleeper node;
+                                           0 = x, 1 = y, 2 = z; N/m; N s/m), kept for the
+                                           dynamic stage (their damping is not in K or M)
     attrs: inputs_sha256, complete, case_toml, railvib_version, petsc_version,
            slepc_version, stats (JSON), timings (JSON), n_modes, n_dofs
 
@@ -60,7 +64,7 @@ def rail_nodes(mesh: Mesh) -> np.ndarray:
 def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
-                attrs: dict[str, object]) -> None:
+                attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None) -> None:
     """Write ``modes.h5`` (collective: every rank calls it with its own slices).
 
     Parameters
@@ -74,6 +78,8 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
         ``rotation_nodes``.
     nodal_mass
         Masses of the owned nodes.
+    pads
+        ``nodes``, ``direction``, ``stiffness``, ``damping`` arrays of the rail pads.
     """
     import h5py
 
@@ -96,7 +102,7 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
             with h5py.File(tmp, "w", **kw) as f:
                 _write(f, comm.rank == 0 or not parallel, mesh, m, n, eigenvalues, translation,
                        rotation, rotation_nodes, node_range, rot_range, nodal_mass, dof_index,
-                       attrs)
+                       attrs, pads or {})
         except Exception as exc:
             error = f"{type(exc).__name__}: {exc}"
     errors = comm.allgather(error)
@@ -113,7 +119,7 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
 
 
 def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, rotation,
-           rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs) -> None:
+           rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads) -> None:
     # dataset creation is collective: identical calls on every rank
     g = f.create_group("modes")
     d_f = g.create_dataset("frequency_hz", (m,), "f8")
@@ -138,6 +144,8 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     d_pn = pr.create_dataset("names", (len(names),), "S64")
     d_pc = pr.create_dataset("coords", coords.shape, "f8")
     d_dof = f.create_group("dofs").create_dataset("index", dof_index.shape, dof_index.dtype)
+    gp = f.create_group("pads")
+    d_pads = {k: gp.create_dataset(k, v.shape, v.dtype) for k, v in pads.items()}
     for k, v in attrs.items():
         f.attrs[k] = v
     f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
@@ -154,6 +162,8 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
         d_pn[:] = np.array(names, dtype="S64")
         d_pc[...] = coords
         d_dof[...] = dof_index
+        for k, v in pads.items():
+            d_pads[k][...] = v
     if node_range.stop > node_range.start:
         d_t[:, node_range, :] = translation
         d_mass[node_range] = nodal_mass

@@ -32,6 +32,28 @@ import numpy as np
 from scipy.linalg import eigh
 
 
+def dense_block(arr: np.ndarray, n_global: int, comm):
+    """A PETSc dense matrix holding this rank's rows ``arr`` (n_local, b) of a block."""
+    from petsc4py import PETSc
+
+    D = PETSc.Mat().createDense(size=((arr.shape[0], n_global), (None, arr.shape[1])),
+                                comm=comm)
+    D.setUp()
+    D.getDenseArray()[:] = arr
+    D.assemble()
+    return D
+
+
+def sparse_times_block(A, X: np.ndarray, comm) -> np.ndarray:
+    """This rank's rows of ``A X`` for a distributed block X (n_local, b)."""
+    D = dense_block(X, A.getSize()[0], comm)
+    R = A.matMult(D)
+    out = R.getDenseArray().copy()
+    D.destroy()
+    R.destroy()
+    return out
+
+
 class InsufficientMemory(RuntimeError):
     """The factorization (plus the Lanczos basis) would not fit in the available memory."""
 
@@ -140,30 +162,18 @@ class BlockOperator:
         return estimate
 
     def _dense(self, arr: np.ndarray):
-        from petsc4py import PETSc
+        return dense_block(arr, self.n_global, self.comm)
 
-        D = PETSc.Mat().createDense(size=((self.n_local, self.n_global), (None, arr.shape[1])),
-                                    comm=self.comm)
-        D.setUp()
-        D.getDenseArray()[:] = arr
-        D.assemble()
-        return D
+    def _product(self, A, X: np.ndarray) -> np.ndarray:
+        return sparse_times_block(A, X, self.comm)
 
     def mass(self, X: np.ndarray) -> np.ndarray:
-        D = self._dense(X)
-        R = self.M.matMult(D)
-        out = R.getDenseArray().copy()
-        D.destroy()
-        R.destroy()
-        return out
+        """``M X`` for a block X (n_local, b)."""
+        return self._product(self.M, X)
 
     def stiffness(self, X: np.ndarray) -> np.ndarray:
-        D = self._dense(X)
-        R = self.K.matMult(D)
-        out = R.getDenseArray().copy()
-        D.destroy()
-        R.destroy()
-        return out
+        """``K X`` for a block X (n_local, b)."""
+        return self._product(self.K, X)
 
     def apply(self, X: np.ndarray) -> np.ndarray:
         """``(K - sigma M)^-1 M X`` for a block X (n_local, b)."""

@@ -221,13 +221,6 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     return result
 
 
-def _dense(comm, local: np.ndarray, n_global: int):
-    from petsc4py import PETSc
-
-    return PETSc.Mat().createDense(size=((local.shape[0], n_global), (None, local.shape[1])),
-                                   array=np.asfortranarray(local), comm=comm)
-
-
 def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None = None,
                         MPhi: np.ndarray | None = None) -> None:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
@@ -237,22 +230,16 @@ def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None
     from mpi4py import MPI
 
     t0 = time.perf_counter()
+    from .block_lanczos import sparse_times_block
+
     phi = result.phi
-    n_global = K.getSize()[0]
     if MPhi is None:
-        Phi = _dense(comm, phi, n_global)
-        MPhi = M.matMult(Phi).getDenseArray().copy()
-        Phi.destroy()
+        MPhi = sparse_times_block(M, phi, comm)
     modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
     scale = 1.0 / np.sqrt(modal_mass)
     phi *= scale
     MPhi = MPhi * scale
-    if KPhi is None:
-        Phi = _dense(comm, phi, n_global)
-        KPhi = K.matMult(Phi).getDenseArray().copy()
-        Phi.destroy()
-    else:
-        KPhi = KPhi * scale
+    KPhi = sparse_times_block(K, phi, comm) if KPhi is None else KPhi * scale
     gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
     stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
     lam = result.eigenvalues

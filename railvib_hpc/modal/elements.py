@@ -18,7 +18,6 @@ from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
 from ..fem.spring import spring_matrices
 from ..mesh.model import Mesh
 from ..schema import BUILDING_PARTS, PART_ID
-from .dofmap import DofMap
 
 #: Material section of each solid part.
 SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
@@ -29,11 +28,38 @@ PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
 
 @dataclass
 class Batch:
-    """Element matrices of one group of elements."""
+    """Element matrices of one group of elements.
 
-    dofs: np.ndarray
-    K: np.ndarray
-    M: np.ndarray | None
+    Element DOF ``k`` is component ``comp[k]`` of node ``conn[:, slot[k]]``.
+    """
+
+    conn: np.ndarray          # (nel, nn) nodes
+    slot: np.ndarray          # (nd,) node slot of each element DOF
+    comp: np.ndarray          # (nd,) component (0..5) of each element DOF
+    K: np.ndarray             # (nel, nd, nd)
+    M: np.ndarray | None      # (nel, nd, nd) or None (springs)
+
+    def dofs(self, index: np.ndarray) -> np.ndarray:
+        """Global DOF numbers (nel, nd), -1 where eliminated."""
+        return index[self.conn[:, self.slot], self.comp]
+
+
+_HEX_SLOT, _HEX_COMP = np.repeat(np.arange(8), 3), np.tile(np.arange(3), 8)
+_BEAM_SLOT, _BEAM_COMP = np.repeat(np.arange(2), 6), np.tile(np.arange(6), 2)
+
+
+def unique_shapes(x: np.ndarray, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """Group elements that are translated copies of each other.
+
+    Returns the indices of one representative per shape and, for every element, the index
+    of its representative's shape. Structured meshes have few distinct shapes, so the
+    element kernels run once per shape instead of once per element.
+    """
+    rel = x - x[:, :1, :]
+    scale = max(float(np.abs(rel).max()), 1e-300)
+    key = np.round(rel.reshape(len(x), -1) / (scale * tol)).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    return first, inverse.ravel()
 
 
 def beam_up_vectors(x: np.ndarray) -> np.ndarray:
@@ -45,22 +71,21 @@ def beam_up_vectors(x: np.ndarray) -> np.ndarray:
     return up
 
 
-def element_batches(mesh: Mesh, case: Case, dofmap: DofMap, hex_mask: np.ndarray | None = None,
+def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
                     line_mask: np.ndarray | None = None, chunk: int = 20_000
                     ) -> Iterator[Batch]:
     """Yield element batches of the selected elements (all if masks are None).
 
     Parameters
     ----------
-    mesh, case, dofmap
-        Model, material data and DOF numbering.
+    mesh, case
+        Model and material data.
     hex_mask, line_mask
         Boolean masks selecting the hexahedra / line elements to compute.
     chunk
         Maximum number of hexahedra per batch (bounds memory).
     """
     lumped = case["modal.lumped_mass"]
-    idx = dofmap.index
     hex_sel = np.ones(len(mesh.hexes), bool) if hex_mask is None else hex_mask
     line_sel = np.ones(len(mesh.lines), bool) if line_mask is None else line_mask
 
@@ -70,9 +95,11 @@ def element_batches(mesh: Mesh, case: Case, dofmap: DofMap, hex_mask: np.ndarray
         for start in range(0, len(sel), chunk):
             conn = mesh.hexes[sel[start:start + chunk]]
             x = mesh.points[conn]
-            dofs = idx[conn][:, :, :3].reshape(len(conn), 24)
-            yield Batch(dofs, hex8_stiffness(x, mat["E"], mat["nu"], bbar=True),
-                        hex8_mass(x, mat["rho"], lumped=lumped))
+            first, shape_of = unique_shapes(x)
+            xs = x[first]
+            Ks = hex8_stiffness(xs, mat["E"], mat["nu"], bbar=True)
+            Ms = hex8_mass(xs, mat["rho"], lumped=lumped)
+            yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms[shape_of])
 
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
         sel = line_sel & (mesh.line_part == PART_ID[part])
@@ -92,16 +119,15 @@ def element_batches(mesh: Mesh, case: Case, dofmap: DofMap, hex_mask: np.ndarray
                       rotary_inertia=True, phi_y=phi_y, phi_z=phi_z)
         if lumped:
             M = _lump_beam(M)
-        yield Batch(idx[conn].reshape(len(conn), 12), K, M)
+        yield Batch(conn, _BEAM_SLOT, _BEAM_COMP, K, M)
 
     for part, (key, direction) in PAD_DIRECTION.items():
         sel = line_sel & (mesh.line_part == PART_ID[part])
         if not sel.any():
             continue
         conn = mesh.lines[sel]
-        yield Batch(idx[conn][:, :, direction], spring_matrices(case[f"pads.{key}"],
-                                                                np.full(len(conn), direction)),
-                    None)
+        yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
+                    spring_matrices(case[f"pads.{key}"], np.full(len(conn), direction)), None)
 
 
 def _lump_beam(M: np.ndarray) -> np.ndarray:

@@ -34,46 +34,87 @@ class LocalCSR:
 
 
 def local_csr(mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> LocalCSR:
-    """Compute the owned rows of K and M for ``rank`` (pure numpy)."""
+    """Compute the owned rows of K and M for ``rank`` (pure numpy).
+
+    The sparsity pattern is built on the node graph (every pair of nodes sharing an element;
+    8 x 8 per hexahedron instead of 24 x 24) and expanded to DOFs: all DOF rows of a node
+    share the node's column list. Element entries are then placed by index arithmetic and
+    summed with ``bincount``; no sort over all element entries is needed.
+    """
     t0 = time.perf_counter()
     r0, r1 = dofmap.owned_dofs(rank)
-    n_global = dofmap.n_dofs
-    node_mask = np.zeros(mesh.n_nodes, dtype=bool)
-    node_mask[dofmap.owned_nodes(rank)] = True
+    nodes = dofmap.owned_nodes(rank)
+    n0, n1 = nodes.start, nodes.stop
+    n_nodes = mesh.n_nodes
+    idx = dofmap.index
+    free = idx >= 0
+    nfree = free.sum(axis=1)
+    comp_pos = np.cumsum(free, axis=1) - 1                     # rank of a component in its node
+    first = np.where(nfree > 0, np.where(free, idx, np.iinfo(np.int64).max).min(axis=1), 0)
+    node_mask = np.zeros(n_nodes, dtype=bool)
+    node_mask[nodes] = True
     hex_mask = node_mask[mesh.hexes].any(axis=1)
     line_mask = node_mask[mesh.lines].any(axis=1)
-    keys, kvals, mvals = [], [], []
-    t_kernels = 0.0
-    t_k = time.perf_counter()
-    for batch in element_batches(mesh, case, dofmap, hex_mask, line_mask):
-        t_kernels += time.perf_counter() - t_k
-        d = batch.dofs
-        nel, nd = d.shape
-        rows = np.broadcast_to(d[:, :, None], (nel, nd, nd))
-        cols = np.broadcast_to(d[:, None, :], (nel, nd, nd))
-        keep = (rows >= r0) & (rows < r1) & (cols >= 0)
-        keys.append((rows[keep] - r0) * np.int64(n_global) + cols[keep])
-        kvals.append(batch.K[keep])
-        mvals.append(batch.M[keep] if batch.M is not None else np.zeros(int(keep.sum())))
-        t_k = time.perf_counter()
+
+    # --- node graph of the owned rows (diagonal included: every node pairs with itself)
+    keys = [np.arange(n0, n1, dtype=np.int64) * (n_nodes + 1) - n0 * n_nodes]
+    for conn in (mesh.hexes[hex_mask], mesh.lines[line_mask]):
+        a = np.broadcast_to(conn[:, :, None], conn.shape + conn.shape[1:])
+        b = np.broadcast_to(conn[:, None, :], conn.shape + conn.shape[1:])
+        own = (a >= n0) & (a < n1)
+        keys.append((a[own] - n0) * np.int64(n_nodes) + b[own])
+    ukeys = np.unique(np.concatenate(keys))
+    pa, pb = ukeys // n_nodes, ukeys % n_nodes                 # local row node, column node
+    width = nfree[pb]
+    n_local_nodes = n1 - n0
+    rowlen = np.bincount(pa, weights=width, minlength=n_local_nodes).astype(np.int64)
+    node_col_start = np.concatenate(([0], np.cumsum(rowlen)))
+    pair_start = np.cumsum(width) - width - node_col_start[pa]  # offset of pair in its row
+    # columns of each node's rows: the free DOFs of its neighbours, in node order
+    cols_node = (np.repeat(first[pb] - np.cumsum(width) + width, width)
+                 + np.arange(int(width.sum())))
+    rows_per_node = nfree[n0:n1]
+    row_len = np.repeat(rowlen, rows_per_node)
+    indptr = np.concatenate(([0], np.cumsum(row_len))).astype(np.int64)
+    nnz = int(indptr[-1])
+    row_node = np.repeat(np.arange(n_local_nodes), rows_per_node)
+    entry_row = np.repeat(np.arange(len(row_len)), row_len)
+    indices = cols_node[node_col_start[row_node[entry_row]] + np.arange(nnz) - indptr[entry_row]]
     t1 = time.perf_counter()
-    # every owned row gets its diagonal, even if only springs/constraints touch it
-    diag = np.arange(r1 - r0, dtype=np.int64)
-    keys.append(diag * n_global + (diag + r0))
-    kvals.append(np.zeros(len(diag)))
-    mvals.append(np.zeros(len(diag)))
-    allkeys = np.concatenate(keys)
-    uniq, inverse = np.unique(allkeys, return_inverse=True)
-    kdata = np.bincount(inverse, weights=np.concatenate(kvals), minlength=len(uniq))
-    mdata = np.bincount(inverse, weights=np.concatenate(mvals), minlength=len(uniq))
-    rows = uniq // n_global
-    indptr = np.searchsorted(rows, np.arange(r1 - r0 + 1)).astype(np.int64)
-    indices = (uniq % n_global).astype(np.int64)
+
+    kdata = np.zeros(nnz)
+    mdata = np.zeros(nnz)
+    t_kernels = 0.0
+    n_elements = int(hex_mask.sum() + line_mask.sum())
+    t_k = time.perf_counter()
+    for batch in element_batches(mesh, case, hex_mask, line_mask):
+        t_kernels += time.perf_counter() - t_k
+        conn = batch.conn
+        a = conn[:, :, None]
+        b = conn[:, None, :]
+        own = (a >= n0) & (a < n1)
+        pair = np.minimum(np.searchsorted(ukeys, (np.where(own, a, n0) - n0) * np.int64(n_nodes)
+                                          + b), len(ukeys) - 1)
+        node_k = conn[:, batch.slot]                            # (nel, nd)
+        row = idx[node_k, batch.comp] - r0                      # local row or < 0 / >= owned
+        colpos = comp_pos[node_k, batch.comp]                   # (nel, nd)
+        colfree = free[node_k, batch.comp]
+        valid = ((row >= 0) & (row < r1 - r0))[:, :, None] & colfree[:, None, :]
+        pos = (indptr[np.clip(row, 0, r1 - r0 - 1)][:, :, None]
+               + pair_start[pair[:, batch.slot[:, None], batch.slot[None, :]]]
+               + colpos[:, None, :])
+        p = pos[valid]
+        if p.size:
+            lo, hi = int(p.min()), int(p.max()) + 1       # batches touch a band of rows
+            p -= lo
+            kdata[lo:hi] += np.bincount(p, weights=batch.K[valid], minlength=hi - lo)
+            if batch.M is not None:
+                mdata[lo:hi] += np.bincount(p, weights=batch.M[valid], minlength=hi - lo)
+        t_k = time.perf_counter()
     t2 = time.perf_counter()
-    return LocalCSR(indptr, indices, kdata, mdata,
-                    n_elements=int(hex_mask.sum() + line_mask.sum()),
-                    timings={"element_kernels": t_kernels, "scatter": t1 - t0 - t_kernels,
-                             "csr": t2 - t1})
+    return LocalCSR(indptr, indices.astype(np.int64), kdata, mdata, n_elements=n_elements,
+                    timings={"element_kernels": t_kernels, "pattern": t1 - t0,
+                             "scatter": t2 - t1 - t_kernels})
 
 
 def petsc_matrices(csr: LocalCSR, dofmap: DofMap, comm):

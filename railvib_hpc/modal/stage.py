@@ -116,7 +116,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
                  "petsc_version": _versions()[0], "slepc_version": _versions()[1],
                  "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}
         write_modes(path, comm, mesh, nodes, result.eigenvalues, translation, rotation,
-                    rot_nodes, rot_range, masses, dofmap.index, attrs)
+                    rot_nodes, rot_range, masses, dofmap.index, attrs, pad_table(mesh, case))
     f = result.frequencies_hz
     summary = {"reused": False, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                **stats}
@@ -126,6 +126,22 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
     return summary
+
+
+def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:
+    """Rail-pad spring-dampers: node pairs, direction, stiffness and damping."""
+    from ..schema import PART_ID
+
+    rows = []
+    for d, (name, k, c) in enumerate((("pad_x", "kx", "cx"), ("pad_y", "ky", "cy"),
+                                      ("pad_z", "kz", "cz"))):
+        conn = mesh.lines[mesh.line_part == PART_ID[name]]
+        rows.append((conn, np.full(len(conn), d), np.full(len(conn), case[f"pads.{k}"]),
+                     np.full(len(conn), case[f"pads.{c}"])))
+    return {"nodes": np.concatenate([r[0] for r in rows]).reshape(-1, 2).astype(np.int64),
+            "direction": np.concatenate([r[1] for r in rows]).astype(np.int8),
+            "stiffness": np.concatenate([r[2] for r in rows]).astype(float),
+            "damping": np.concatenate([r[3] for r in rows]).astype(float)}
 
 
 def _versions() -> tuple[str, str]:

@@ -50,6 +50,10 @@ def test_modes_file_contents(modal_run):
         mass = f["mesh/nodal_mass"][()].sum()
         hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
         assert int(f.attrs["complete"]) == 1 and len(f.attrs["inputs_sha256"]) == 64
+        # rail pads kept for the dynamic stage: 3 directions x 2 rails x 37 sleepers
+        assert f["pads/nodes"].shape == (3 * 74, 2)
+        assert np.bincount(f["pads/direction"][()]).tolist() == [74, 74, 74]
+        assert np.all(f["pads/damping"][()] == case["pads.cz"])
     from railvib_hpc.io.mesh_io import read_mesh_h5
 
     mesh, _ = read_mesh_h5(modal_run / "mesh.h5")

@@ -19,15 +19,18 @@ setup:
 run: setup
 	$(MPIRUN) $(PY) -m railvib_hpc run $(CASE) --out $(OUT)
 
+# A hung collective must fail the run, not eat the CI budget: each pass has a time limit.
+TIMEOUT ?= timeout --signal=KILL 1500
+
 test: setup
-	$(PY) -m pytest -q
-	$(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
+	$(TIMEOUT) $(PY) -m pytest -q
+	$(TIMEOUT) $(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
 
 test-serial: setup
-	$(PY) -m pytest -q
+	$(TIMEOUT) $(PY) -m pytest -q
 
 test-mpi: setup
-	$(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
+	$(TIMEOUT) $(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
 
 lint: setup
 	$(VENV)/bin/ruff check railvib_hpc tests bench

@@ -71,7 +71,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             return None
         return summary if summary.get("inputs_sha256") == key else None
 
-    old = on_root(previous)
+    old = on_root(previous, comm)
     if old is not None:
         f = old["frequency_hz"]
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "

@@ -1,0 +1,40 @@
+"""Reduced multibody simulation: loads and vehicles rolling over a rail in modal coordinates.
+
+Pure numpy, meant to run on rank 0. Modules:
+
+* :mod:`.coupling` -- interpolation under a wheel / force distribution (Hermite or linear);
+* :mod:`.contact` -- Hertz contact law and Jenkins' constant;
+* :mod:`.propagator` -- exact modal step for piecewise-linear forces;
+* :mod:`.vehicles` -- suspended wheelset and its static equilibrium;
+* :mod:`.integrate` -- moving forces and the coupled wheelset-track time integration;
+* :mod:`.results` -- result container and step-wise storage.
+"""
+
+from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
+from .coupling import RailCoupling, shape_functions
+from .integrate import (
+    MBSResult,
+    auto_time_step,
+    coupled_energy,
+    simulate_moving_force,
+    simulate_wheelset,
+)
+from .propagator import ModalPropagator, modal_propagator
+from .vehicles import SuspendedWheelset, static_equilibrium
+
+__all__ = [
+    "MBSResult",
+    "ModalPropagator",
+    "RailCoupling",
+    "SuspendedWheelset",
+    "auto_time_step",
+    "coupled_energy",
+    "hertz_force",
+    "hertz_penetration",
+    "jenkins_hertz_constant",
+    "modal_propagator",
+    "shape_functions",
+    "simulate_moving_force",
+    "simulate_wheelset",
+    "static_equilibrium",
+]

@@ -105,7 +105,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
         stats = dict(result.stats)
-        stats.update({"assembly_" + k: v for k, v in ainfo.items() if isinstance(v, float)})
+        stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
         rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
         stats["peak_rss_gb_per_rank"] = rss

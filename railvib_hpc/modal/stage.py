@@ -79,7 +79,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                 **json.loads(old.get("stats", "{}"))}
 
-    with rep.stage("mesh"):
+    with rep.stage("mesh (load/build + broadcast)"):
         mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):

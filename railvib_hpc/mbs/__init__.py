@@ -7,7 +7,8 @@ Pure numpy, meant to run on rank 0. Modules:
 * :mod:`.propagator` -- exact modal step for piecewise-linear forces;
 * :mod:`.vehicles` -- suspended wheelset and its static equilibrium;
 * :mod:`.integrate` -- moving forces and the coupled wheelset-track time integration;
-* :mod:`.results` -- result container and step-wise storage.
+* :mod:`.results` -- result container and step-wise storage;
+* :mod:`.modal_input` -- the rails' modal rows read from ``modes.h5``.
 """
 
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
@@ -19,6 +20,7 @@ from .integrate import (
     simulate_moving_force,
     simulate_wheelset,
 )
+from .modal_input import RailModes, read_rail_modes
 from .propagator import ModalPropagator, modal_propagator
 from .vehicles import SuspendedWheelset, static_equilibrium
 
@@ -26,6 +28,7 @@ __all__ = [
     "MBSResult",
     "ModalPropagator",
     "RailCoupling",
+    "RailModes",
     "SuspendedWheelset",
     "auto_time_step",
     "coupled_energy",
@@ -33,6 +36,7 @@ __all__ = [
     "hertz_penetration",
     "jenkins_hertz_constant",
     "modal_propagator",
+    "read_rail_modes",
     "shape_functions",
     "simulate_moving_force",
     "simulate_wheelset",

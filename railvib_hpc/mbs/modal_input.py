@@ -1,0 +1,75 @@
+"""Read the modal basis of the rails from ``modes.h5`` (rank 0) for the multibody core."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .coupling import RailCoupling
+
+
+@dataclass
+class RailModes:
+    """Modal data the multibody simulation needs.
+
+    Attributes
+    ----------
+    omega
+        (m,) natural circular frequencies [rad/s], ascending.
+    rails
+        One :class:`RailCoupling` per rail (negative y first), nodes sorted along x.
+    rail_y
+        (2,) lateral position of each rail [m].
+    rail_z
+        Height of the rail axis [m].
+    """
+
+    omega: np.ndarray
+    rails: tuple[RailCoupling, RailCoupling]
+    rail_y: np.ndarray
+    rail_z: float
+
+
+def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
+    """Rows of the mode shapes at the flexible-rail nodes: vertical displacement and ``ry``.
+
+    Parameters
+    ----------
+    path
+        A complete ``modes.h5`` written by ``railvib modal``.
+    n_modes
+        Use only the lowest ``n_modes`` modes (all by default).
+
+    Raises
+    ------
+    ValueError
+        When the file is incomplete or has no rail nodes.
+    """
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1:
+            raise ValueError(f"{path} is not a complete modes file")
+        m = f["modes/eigenvalue"].shape[0] if n_modes is None else int(n_modes)
+        lam = f["modes/eigenvalue"][:m]
+        rail_nodes = f["mesh/rail_nodes"][()]
+        if rail_nodes.size == 0 or np.any(rail_nodes < 0):
+            raise ValueError(f"{path}: the two rails must have the same number of nodes")
+        points = f["mesh/points"][()]
+        rot_nodes = f["mesh/rotation_nodes"][()]
+        rails, ys = [], []
+        for nodes in rail_nodes:
+            order = np.argsort(nodes)                    # h5py wants increasing indices
+            w = np.empty((m, len(nodes)))
+            w[:, order] = f["modes/translation"][:m, nodes[order], 2]
+            pos = np.searchsorted(rot_nodes, nodes)
+            if not np.array_equal(rot_nodes[np.minimum(pos, len(rot_nodes) - 1)], nodes):
+                raise ValueError(f"{path}: rail nodes without rotations")
+            r = np.empty((m, len(nodes)))
+            r[:, order] = f["modes/rotation"][:m, pos[order], 1]
+            rails.append(RailCoupling(points[nodes, 0], w, r))
+            ys.append(float(points[nodes[0], 1]))
+        rail_z = float(points[rail_nodes[0, 0], 2])
+    return RailModes(np.sqrt(np.maximum(lam, 0.0)), (rails[0], rails[1]), np.array(ys), rail_z)

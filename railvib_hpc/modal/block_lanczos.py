@@ -199,6 +199,11 @@ class BlockOperator:
             self.A.destroy()
 
 
+def default_max_basis(nev: int, block: int) -> int:
+    """Basis size at which block Lanczos restarts when the caller gives none."""
+    return max(2 * nev, nev + 8 * block)
+
+
 def start_block(n_global: int, r0: int, r1: int, b: int, seed: int = 20261123) -> np.ndarray:
     """Rows r0:r1 of a reproducible random (n_global, b) block, whatever the partition."""
     chunk = 65536
@@ -248,7 +253,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     n = op.n_global
     b = max(1, min(block, n // 4 if n >= 8 else 1))
     if max_basis <= 0:
-        max_basis = max(2 * nev, nev + 8 * b)
+        max_basis = default_max_basis(nev, b)
     max_basis = min(max_basis, n - b)
     if nev + 2 * b > max_basis:
         raise ValueError(f"too many modes ({nev}) for {n} DOFs with block size {b}")

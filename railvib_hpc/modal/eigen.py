@@ -181,6 +181,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
         InsufficientMemory,
         NotConverged,
         block_lanczos,
+        default_max_basis,
         purify_and_project,
     )
 
@@ -191,7 +192,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     sigma = (2 * np.pi * shift_hz) ** 2
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
-    basis = (max_basis if max_basis > 0 else max(2 * n_modes, n_modes + 8 * block_size))
+    basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
     extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
     try:
         op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb)

@@ -35,11 +35,13 @@ def modal_digest(case: Case) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _max_basis(case: Case, n_dofs: int, size: int) -> int:
+def _max_basis(case: Case, n_dofs: int) -> int:
+    """``modal.max_basis``, or 3 n_modes capped at ~4 GB of basis vectors (all ranks)."""
     if case["modal.max_basis"] > 0:
         return case["modal.max_basis"]
-    cap = int(4e9 / (8.0 * n_dofs))                 # at most ~4 GB of basis vectors in total
-    return max(min(3 * case["modal.n_modes"], cap), case["modal.n_modes"] + 3 * 32)
+    cap = int(4e9 / (8.0 * n_dofs))
+    return max(min(3 * case["modal.n_modes"], cap),
+               case["modal.n_modes"] + 3 * case["modal.block_size"])
 
 
 def _progress(rep: Reporter):
@@ -95,7 +97,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             shift_hz=case["modal.shift_hz"], tol=case["modal.tol"],
             max_it=case["modal.max_restarts"], method=case["modal.method"],
             block_size=case["modal.block_size"],
-            max_basis=_max_basis(case, dofmap.n_dofs, comm.size), monitor=_progress(rep))
+            max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep))
     K.destroy()
     M.destroy()
     with rep.stage("write modes"):

@@ -20,7 +20,6 @@ STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed")
 #: Stages not built yet, with the issue that builds them.
 MISSING = {
-    "mbs": "reduced multibody simulation",
     "reconstruct": "parallel field reconstruction",
     "assess": "vibration assessment",
 }
@@ -105,6 +104,12 @@ def _cmd_modal(case: Case, out: Path, comm, rep: Reporter) -> dict:
     return run_modal_stage(case, out, comm, rep)
 
 
+def _cmd_mbs(case: Case, out: Path, comm, rep: Reporter) -> dict:
+    from .mbs.stage import run_mbs_stage
+
+    return run_mbs_stage(case, out, comm, rep)
+
+
 def _missing(stage: str) -> NotImplementedStage:
     return NotImplementedStage(f"stage '{stage}' ({MISSING[stage]}) is not implemented yet")
 
@@ -131,6 +136,10 @@ def run(argv: list[str] | None = None) -> int:
             _cmd_modal(case, out, comm, rep)
             rep.info("\n" + rep.timing_table())
             return 0
+        if args.command == "mbs":
+            _cmd_mbs(case, out, comm, rep)
+            rep.info("\n" + rep.timing_table())
+            return 0
         if args.command in MISSING:
             raise _missing(args.command)
         if args.command == "study":
@@ -139,6 +148,7 @@ def run(argv: list[str] | None = None) -> int:
         _cmd_check(case, rep)
         _cmd_mesh(case, out, rep)
         _cmd_modal(case, out, comm, rep)
+        _cmd_mbs(case, out, comm, rep)
         for stage in MISSING:
             rep.info(f"[{stage}] not implemented yet ({MISSING[stage]})")
         rep.info("\n" + rep.timing_table())

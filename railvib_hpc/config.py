@@ -159,6 +159,9 @@ def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
             problems.append((key, value, "expected true or false"))
             return value
     elif kind == "str":
+        if (isinstance(value, int) and not isinstance(value, bool)
+                and str(value) in param.choices):
+            value = str(value)                     # e.g. track_class = 6
         if not isinstance(value, str):
             problems.append((key, value, f"expected a string ({param.doc})"))
             return value
@@ -375,6 +378,55 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     "must be <= 6 (refinement 3 is already ~1.5M nodes)"))
     if case["modal.f_max"] == 0 and case["modal.n_modes"] < 1:
         out.append(("modal.n_modes", case["modal.n_modes"], "must be >= 1"))
+    out.extend(_check_mbs(case))
+    return out
+
+
+def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of [vehicle], [irregularity] and [mbs]."""
+    out: list[tuple[str, Any, str]] = []
+    v, irr, mbs = case["vehicle"], case["irregularity"], case["mbs"]
+    if any(o > 0 for o in v["axle_offsets"]) or not v["axle_offsets"]:
+        out.append(("vehicle.axle_offsets", v["axle_offsets"],
+                    "must be a non-empty list of offsets <= 0 (behind the leading axle)"))
+    if v["contact_span"] >= 2.0 * case["track.gauge"]:
+        out.append(("vehicle.contact_span", v["contact_span"],
+                    f"must be close to the track gauge ({case['track.gauge']:g} m)"))
+    if v["wheelbase"] >= v["bogie_spacing"]:
+        out.append(("vehicle.wheelbase", v["wheelbase"],
+                    f"must be smaller than vehicle.bogie_spacing = {v['bogie_spacing']:g} m"))
+    if v["bogie_spacing"] + v["wheelbase"] >= v["car_length"]:
+        out.append(("vehicle.car_length", v["car_length"],
+                    "must exceed bogie_spacing + wheelbase (the wheels of successive cars "
+                    "must not overlap)"))
+    if v["x_end"] and v["x_end"] <= v["x_start"]:
+        out.append(("vehicle.x_end", v["x_end"],
+                    f"must be 0 (end of the rigid exit rail) or > vehicle.x_start = "
+                    f"{v['x_start']:g} m"))
+    if irr["type"] == "file":
+        if not irr["file"]:
+            out.append(("irregularity.file", "", "irregularity.type = 'file' needs a file"))
+        elif not case.resolve(irr["file"]).is_file():
+            out.append(("irregularity.file", irr["file"],
+                        f"file not found (looked for {case.resolve(irr['file'])})"))
+    classes = {"fra": "123456", "iso8608": "ABCDEFGH"}
+    if irr["type"] in classes and irr["track_class"] not in classes[irr["type"]]:
+        out.append(("irregularity.track_class", irr["track_class"],
+                    f"{irr['type']} classes are " + ", ".join(classes[irr["type"]])))
+    if irr["wavelength_min"] >= irr["wavelength_max"]:
+        out.append(("irregularity.wavelength_min", irr["wavelength_min"],
+                    f"must be < irregularity.wavelength_max = {irr['wavelength_max']:g} m"))
+    if any(w < 0 or not float(w).is_integer() for w in irr["flat_wheels"]):
+        out.append(("irregularity.flat_wheels", irr["flat_wheels"],
+                    "must be wheel indices (integers >= 0)"))
+    modes, ratios = mbs["damping_modes"], mbs["damping_ratios"]
+    if len(modes) != len(ratios):
+        out.append(("mbs.damping_ratios", ratios,
+                    f"needs one ratio per entry of mbs.damping_modes ({len(modes)})"))
+    if any(k < 1 or not float(k).is_integer() for k in modes):
+        out.append(("mbs.damping_modes", modes, "must be mode numbers (integers >= 1)"))
+    if any(not 0.0 <= r < 1.0 for r in ratios):
+        out.append(("mbs.damping_ratios", ratios, "must satisfy 0 <= ratio < 1"))
     return out
 
 

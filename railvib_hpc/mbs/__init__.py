@@ -8,7 +8,11 @@ Pure numpy, meant to run on rank 0. Modules:
 * :mod:`.vehicles` -- suspended wheelset and its static equilibrium;
 * :mod:`.integrate` -- moving forces and the coupled wheelset-track time integration;
 * :mod:`.results` -- result container and step-wise storage;
-* :mod:`.modal_input` -- the rails' modal rows read from ``modes.h5``.
+* :mod:`.modal_input` -- the rails' modal rows read from ``modes.h5``;
+* :mod:`.static_correction` -- residual flexibility of the truncated modes at the wheels;
+* :mod:`.irregularity` -- rail profiles (file, FRA/ISO 8608 spectra) and wheel flats;
+* :mod:`.train` -- cars with two bogies and four wheelsets, trains;
+* :mod:`.stage` -- the ``railvib mbs`` stage (modes.h5 -> mbs.h5 + plots).
 """
 
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
@@ -18,6 +22,7 @@ from .integrate import (
     auto_time_step,
     coupled_energy,
     simulate_moving_force,
+    simulate_vehicle,
     simulate_wheelset,
 )
 from .modal_input import RailModes, read_rail_modes
@@ -39,6 +44,7 @@ __all__ = [
     "read_rail_modes",
     "shape_functions",
     "simulate_moving_force",
+    "simulate_vehicle",
     "simulate_wheelset",
     "static_equilibrium",
 ]

@@ -30,7 +30,12 @@ linearised Hertz contact resonance of a wheel against the rail,
 Hertz tangent stiffness at twice the static wheel load and ``m_wheel`` the
 wheel's effective vehicle mass (``1/m = (B^T M^-1 B)_jj``). Using all modes in
 the rail receptance is conservative (modes stiffer than the step respond
-quasi-statically in the exact propagator). Pass ``dt`` to override.
+quasi-statically in the exact propagator). For a moving vehicle the step is
+also limited to ``2 * points_per_period`` steps per passage of the shortest rail
+element (the contact flexibility varies along each element and, with the
+static correction, sharply near the pads: on the thesis track this rule sets
+dt = 1e-4 s and keeps the peak contact force within 0.6 % of the dt/2 result).
+Pass ``dt`` to override.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ from .contact import hertz_energy, hertz_linear_stiffness
 from .coupling import RailCoupling
 from .propagator import modal_propagator
 from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
+from .static_correction import ContactResidual
 from .vehicles import SuspendedWheelset, static_equilibrium
 
 Irregularity = Callable[[np.ndarray], np.ndarray]
@@ -52,6 +58,7 @@ Irregularity = Callable[[np.ndarray], np.ndarray]
 def auto_time_step(
     omega: np.ndarray, rails: Sequence[RailCoupling] = (),
     vehicle: SuspendedWheelset | None = None, points_per_period: int = 20,
+    speed: float = 0.0,
 ) -> float:
     """Automatic time step (see the module notes).
 
@@ -65,6 +72,8 @@ def auto_time_step(
         The vehicle, or None for moving forces (modal criterion only).
     points_per_period
         Steps per period of the fastest relevant oscillation.
+    speed
+        Vehicle speed [m/s] (0: no element-passage limit).
 
     Returns
     -------
@@ -81,13 +90,18 @@ def auto_time_step(
         w_max = max(w_max, np.sqrt(k_lin * (inv_m + inv_rail)))
     if w_max <= 0.0:
         raise ValueError("cannot choose a time step: no frequency scale; pass dt")
-    return 2.0 * np.pi / w_max / points_per_period
+    dt = 2.0 * np.pi / w_max / points_per_period
+    if vehicle is not None and speed > 0.0 and rails:
+        h_min = min(float(np.min(np.diff(r.x_nodes))) for r in rails)
+        dt = min(dt, h_min / speed / (2 * points_per_period))
+    return dt
 
 
 def simulate_moving_force(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
     loads: float | np.ndarray, x0: float | np.ndarray, speed: float, t_end: float,
-    dt: float | None = None, store_every: int = 1,
+    dt: float | None = None, store_every: int = 1, residual: np.ndarray | None = None,
+    load_rail: Sequence[int] | None = None,
 ) -> MBSResult:
     """Constant vertical forces moving at constant speed over the rail(s), track at rest at t=0.
 
@@ -111,6 +125,11 @@ def simulate_moving_force(
         Time step; default :func:`auto_time_step` (20 steps per period of the highest mode).
     store_every
         Keep every ``store_every``-th step (the last step is always kept).
+    residual
+        (n_r, n_r) residual flexibility for the static correction (rails indexed by
+        ``load_rail``; ``rails`` must then be the sequence of distinct rails).
+    load_rail
+        (n,) rail index of each load (static correction only; default all on rail 0).
 
     Returns
     -------
@@ -119,27 +138,41 @@ def simulate_moving_force(
     """
     p = np.atleast_1d(np.asarray(loads, dtype=float))
     x0a = np.broadcast_to(np.asarray(x0, dtype=float), p.shape)
-    rl = rails_tuple(rails, p.size)
+    rl = rails_tuple(rails, p.size) if residual is None else None
     dt = float(dt) if dt is not None else auto_time_step(omega)
     prop = modal_propagator(omega, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     x = x0a[None, :] + speed * t[:, None]
+    res = None
+    if residual is not None:
+        lr = np.zeros(p.size, int) if load_rail is None else np.asarray(load_rail, int)
+        distinct = (rails,) if isinstance(rails, RailCoupling) else tuple(rails)
+        res = ContactResidual(residual, distinct, lr, x)
+        rl = tuple(distinct[i] for i in lr)
     rows = RowEvaluator(rl, x)
     m = prop.omega.size
     keep = kept_steps(nt, store_every)
-    out = Storage(keep, m, p.size, 0)
+    out = Storage(keep, m, p.size, 0, res.n_dofs if res is not None else 0)
     q, v = np.zeros(m), np.zeros(m)
+
+    def put(n):
+        w = psi.T @ q
+        if res is not None:
+            w = w - res.matrix(n) @ p
+            out.put_loads(n, res.loads(n, p))
+        out.put(n, q, v, prop.acceleration(q, v, Q), p, np.zeros(p.size), w)
+
     psi = rows.rows(0)
     Q = -psi @ p
-    out.put(0, q, v, prop.acceleration(q, v, Q), p, np.zeros(p.size), psi.T @ q)
+    put(0)
     for n in range(1, nt + 1):
         psi = rows.rows(n)
         Q1 = -psi @ p
         q, v = prop.step(q, v, Q, Q1)
         Q = Q1
         if out.wants(n):
-            out.put(n, q, v, prop.acceleration(q, v, Q), p, np.zeros(p.size), psi.T @ q)
+            put(n)
     return out.result(t, x, (), dt, nt, np.zeros(p.size + 1, int))
 
 
@@ -160,9 +193,11 @@ def _solve_contact(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``delta = delta_hat - A h(delta)`` for the Hertz law h; return (delta, F).
 
-    Newton's method on ``delta`` from ``delta_hat``, in plain floats (the system
-    is n_wheels x n_wheels: Python scalars are faster than numpy calls here).
+    Newton's method on ``delta`` from ``delta_hat``. One or two wheels: plain
+    Python floats (faster than numpy calls for 2x2); more wheels: vectorised.
     """
+    if delta_hat.size > 2:
+        return _solve_contact_many(delta_hat, a, delta_old, kh, c, dt, tol, max_iter)
     dhat = delta_hat.tolist()
     if max(dhat) <= 0.0:
         return delta_hat.copy(), np.zeros_like(delta_hat)
@@ -176,12 +211,10 @@ def _solve_contact(
         jac = [[(i == k) + am[i][k] * fd[k][1] for k in range(nw)] for i in range(nw)]
         if nw == 1:
             step = [g[0] / jac[0][0]]
-        elif nw == 2:
+        else:
             det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0]
             step = [(jac[1][1] * g[0] - jac[0][1] * g[1]) / det,
                     (jac[0][0] * g[1] - jac[1][0] * g[0]) / det]
-        else:
-            step = np.linalg.solve(np.array(jac), np.array(g)).tolist()
         d = [d[i] - step[i] for i in range(nw)]
         if max(abs(x) for x in step) <= tol:
             f = [_hertz_scalar(d[i], dold[i], kh, c, dt)[0] for i in range(nw)]
@@ -189,37 +222,96 @@ def _solve_contact(
     raise RuntimeError("contact Newton iteration did not converge; reduce dt")
 
 
-def simulate_wheelset(
+def _hertz_vector(d: np.ndarray, d_old: np.ndarray, kh: float, c: float, dt: float
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised :func:`_hertz_scalar`."""
+    dp = np.maximum(d, 0.0)
+    s = np.sqrt(dp)
+    f = kh * dp * s + c * dp * (d - d_old) / dt
+    df = 1.5 * kh * s + c * np.where(d > 0.0, 2.0 * d - d_old, 0.0) / dt
+    on = (d > 0.0) & (f > 0.0)
+    return np.where(on, f, 0.0), np.where(on, df, 0.0)
+
+
+def _solve_contact_many(delta_hat, a, delta_old, kh, c, dt, tol, max_iter):
+    """Vectorised Newton for many wheels (wheels with ``delta_hat <= 0`` stay free)."""
+    if delta_hat.max() <= 0.0:
+        return delta_hat.copy(), np.zeros_like(delta_hat)
+    d = delta_hat.copy()
+    eye = np.eye(d.size)
+    for _ in range(max_iter):
+        f, df = _hertz_vector(d, delta_old, kh, c, dt)
+        step = np.linalg.solve(eye + a * df[None, :], d + a @ f - delta_hat)
+        d -= step
+        if np.abs(step).max() <= tol:
+            return d, _hertz_vector(d, delta_old, kh, c, dt)[0]
+    raise RuntimeError("contact Newton iteration did not converge; reduce dt")
+
+
+def wheel_rails(rails: RailCoupling | Sequence[RailCoupling], vehicle) -> tuple:
+    """One rail per wheel: a shared rail, one per wheel, or one per ``vehicle.wheel_rail`` index.
+
+    Parameters
+    ----------
+    rails
+        A :class:`RailCoupling`, ``n_wheels`` of them, or the rails indexed by
+        ``vehicle.wheel_rail``.
+    vehicle
+        The vehicle (``n_wheels``; optional ``wheel_rail``).
+
+    Returns
+    -------
+    tuple
+        ``n_wheels`` rails.
+    """
+    nw = vehicle.n_wheels
+    if isinstance(rails, RailCoupling):
+        return (rails,) * nw
+    rails = tuple(rails)
+    wr = getattr(vehicle, "wheel_rail", None)
+    if len(rails) != nw and wr is not None and len(rails) > int(np.max(wr)):
+        return tuple(rails[int(r)] for r in wr)
+    return rails_tuple(rails, nw)
+
+
+def simulate_vehicle(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
-    vehicle: SuspendedWheelset, x0: float, speed: float, t_end: float,
+    vehicle, x0: float, speed: float, t_end: float,
     dt: float | None = None, irregularity: Irregularity | None = None,
     initial_state: tuple[np.ndarray, ...] | None = None, store_every: int = 1,
     points_per_period: int = 20, newton_tol: float = 1e-10, max_iter: int = 50,
+    residual: np.ndarray | None = None, progress: Callable[[int, int], None] | None = None,
 ) -> MBSResult:
-    """A suspended wheelset rolling at constant speed over the modal rail(s).
+    """A vehicle (wheelset, car, train) rolling at constant speed over the modal rail(s).
 
     Parameters
     ----------
     omega
         (m,) natural circular frequencies [rad/s].
     zeta
-        Modal damping ratio(s).
+        Modal damping ratio(s): scalar or (m,).
     rails
-        One :class:`RailCoupling` shared by both wheels, or ``(rail_0, rail_1)``
-        (wheel 0 at ``+contact_span/2`` on rail 0).
+        One :class:`RailCoupling` shared by all wheels, one per wheel, or the
+        rails indexed by ``vehicle.wheel_rail`` (wheel 0 of a wheelset at
+        ``+contact_span/2`` on rail 0).
     vehicle
-        The :class:`SuspendedWheelset`.
+        :class:`SuspendedWheelset` or any object with the same interface
+        (mass/damping/stiffness/contact matrices, external force, Hertz data);
+        optional ``wheel_offsets`` (n_wheels,) along x relative to ``x0`` and
+        ``wheel_rail`` (n_wheels,) rail indices.
     x0
-        Position of the wheelset at t = 0 [m] (e.g. on the rigid rail before the flexible part).
+        Position of the reference (leading) wheel at t = 0 [m] (e.g. on the rigid
+        rail before the flexible part).
     speed
-        Speed [m/s] (0 for a standing wheelset).
+        Speed [m/s] (0 for a standing vehicle).
     t_end
         Simulated time [s] (rounded up to whole steps).
     dt
         Time step; default :func:`auto_time_step`.
     irregularity
         Function of the (n_wheels,) wheel positions returning the (n_wheels,)
-        heights of the undeformed rail tops [m] (positive up); None for smooth rails.
+        heights of the undeformed rail tops [m] (positive up; wheel flats
+        included); None for smooth rails.
     initial_state
         ``(q, q_dot, y, y_dot)``; default: static equilibrium at ``x0``
         (vehicle at rest on the statically deflected rail, no drop impact).
@@ -231,23 +323,37 @@ def simulate_wheelset(
         Contact Newton tolerance, relative to the static Hertz penetration.
     max_iter
         Maximum Newton iterations per step.
+    residual
+        (n_r, n_r) residual flexibility of the rail DOFs for the static
+        correction (:mod:`.static_correction`), rails indexed like
+        ``vehicle.wheel_rail``; None for a pure modal rail.
+    progress
+        Called as ``progress(step, n_steps)`` about every 2 % of the run.
 
     Returns
     -------
     MBSResult
-        Histories; ``y`` holds ``(z, theta)``.
+        Histories (``rail_loads`` holds the rail-DOF loads when ``residual`` is given).
     """
-    rl = rails_tuple(rails, vehicle.n_wheels)
+    rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
     if dt is None:
-        dt = auto_time_step(om, rl, vehicle, points_per_period)
+        dt = auto_time_step(om, rl, vehicle, points_per_period, speed)
     dt = float(dt)
     prop = modal_propagator(om, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     nw = vehicle.n_wheels
-    x = np.full((nt + 1, nw), float(x0)) + speed * t[:, None]
+    offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(nw)), dtype=float)
+    x = float(x0) + offsets[None, :] + speed * t[:, None]
     rows = RowEvaluator(rl, x)
+    res = None
+    if residual is not None:
+        wr = getattr(vehicle, "wheel_rail", None)
+        if wr is None:
+            wr = np.arange(nw) % 2
+        uniq = tuple(rails) if not isinstance(rails, RailCoupling) else (rails,)
+        res = ContactResidual(residual, uniq if len(uniq) > 1 else rl, wr, x)
     irr = (lambda xs: np.zeros(nw)) if irregularity is None else irregularity
     kh, cc = vehicle.hertz_constant, vehicle.contact_damping
     mv, cv, kv = vehicle.mass_matrix(), vehicle.damping_matrix(), vehicle.stiffness_matrix()
@@ -257,11 +363,12 @@ def simulate_wheelset(
     tol = newton_tol * float(np.max((vehicle.static_wheel_loads() / kh) ** (2.0 / 3.0)))
 
     psi = rows.rows(0)
+    c_res = res.matrix(0) if res is not None else 0.0
     r = np.asarray(irr(x[0]), dtype=float)
     if initial_state is None:
         if np.any(om <= 0.0):
             raise ValueError("static initial state needs omega > 0; pass initial_state")
-        flex = psi.T @ (psi / om[:, None] ** 2)
+        flex = psi.T @ (psi / om[:, None] ** 2) + c_res
         y, f = static_equilibrium(vehicle, flex, r)
         q, v = -(psi @ f) / om**2, np.zeros(om.size)
         yd = np.zeros(vehicle.n_dof)
@@ -271,12 +378,25 @@ def simulate_wheelset(
     delta = psi.T @ q + r - b.T @ y
     if f is None:
         f = np.maximum(kh * np.maximum(delta, 0.0) ** 1.5, 0.0)
+    if res is not None:
+        delta = delta - c_res @ f
     ydd = np.linalg.solve(mv, f0 + b @ f - cv @ yd - kv @ y)
     Q = -psi @ f
     m = om.size
-    out = Storage(kept_steps(nt, store_every), m, nw, vehicle.n_dof)
-    out.put(0, q, v, prop.acceleration(q, v, Q), f, delta, psi.T @ q, y, yd, ydd)
+    out = Storage(kept_steps(nt, store_every), m, nw, vehicle.n_dof,
+                  res.n_dofs if res is not None else 0)
+
+    def put(n):
+        w = psi.T @ q
+        if res is not None:
+            w = w - c_res @ f
+        out.put(n, q, v, prop.acceleration(q, v, Q), f, delta, w, y, yd, ydd)
+        if res is not None:
+            out.put_loads(n, res.loads(n, f))
+
+    put(0)
     lost = np.zeros(nw + 1, int)
+    every = max(nt // 50, 1)
     for n in range(1, nt + 1):
         qf, vf = prop.free(q, v, Q)
         psi = rows.rows(n)
@@ -286,8 +406,11 @@ def simulate_wheelset(
         yd_p = yd + 0.5 * dt * ydd
         a0 = s_inv @ (f0 - cv @ yd_p - kv @ y_p)
         delta_hat = psi.T @ qf + r - b.T @ (y_p + 0.25 * dt * dt * a0)
-        delta, f = _solve_contact(delta_hat, psi.T @ bpsi + a_veh, delta, kh, cc, dt, tol,
-                                  max_iter)
+        a_mat = psi.T @ bpsi + a_veh
+        if res is not None:
+            c_res = res.matrix(n)
+            a_mat = a_mat + c_res
+        delta, f = _solve_contact(delta_hat, a_mat, delta, kh, cc, dt, tol, max_iter)
         Q = -psi @ f
         q = qf + prop.b_q1 * Q
         v = vf + prop.b_v1 * Q
@@ -298,8 +421,18 @@ def simulate_wheelset(
         lost[0] += bool(no_contact.any())
         lost[1:] += no_contact
         if out.wants(n):
-            out.put(n, q, v, prop.acceleration(q, v, Q), f, delta, psi.T @ q, y, yd, ydd)
+            put(n)
+        if progress is not None and (n % every == 0 or n == nt):
+            progress(n, nt)
     return out.result(t, x, vehicle.dof_names, dt, nt, lost)
+
+
+def simulate_wheelset(
+    omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
+    vehicle: SuspendedWheelset, x0: float, speed: float, t_end: float, **kwargs,
+) -> MBSResult:
+    """The suspended wheelset rolling over the rails: :func:`simulate_vehicle` (same arguments)."""
+    return simulate_vehicle(omega, zeta, rails, vehicle, x0, speed, t_end, **kwargs)
 
 
 def coupled_energy(
@@ -335,5 +468,7 @@ __all__ = [
     "auto_time_step",
     "coupled_energy",
     "simulate_moving_force",
+    "simulate_vehicle",
     "simulate_wheelset",
+    "wheel_rails",
 ]

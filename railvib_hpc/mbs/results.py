@@ -40,6 +40,9 @@ class MBSResult:
         Number of steps (of all ``n_steps``) at whose end at least one wheel has no contact.
     loss_of_contact_per_wheel
         (n_wheels,) the same count for each wheel.
+    rail_loads
+        (nt, n_r) loads on the rail DOFs (static correction only, else (nt, 0)), see
+        :mod:`.static_correction`.
     """
 
     t: np.ndarray
@@ -58,6 +61,7 @@ class MBSResult:
     n_steps: int
     n_loss_of_contact: int = 0
     loss_of_contact_per_wheel: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    rail_loads: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 def rails_tuple(rails: RailCoupling | Sequence[RailCoupling], n: int) -> tuple:
@@ -84,24 +88,45 @@ def rails_tuple(rails: RailCoupling | Sequence[RailCoupling], n: int) -> tuple:
 
 
 class RowEvaluator:
-    """Modal rows of all wheels at all steps from precomputed shape functions (fast gathers)."""
+    """Modal rows of all wheels at all steps from precomputed shape functions (fast gathers).
+
+    Wheels running on the same rail are evaluated together (one gather per rail
+    and step, vectorised over the wheels).
+    """
 
     def __init__(self, rails: tuple, x: np.ndarray):
         """Precompute elements and weights for positions ``x`` (n_steps + 1, n_wheels)."""
         self.rails = rails
-        self.data = [shape_functions(r.x_nodes, x[:, j], r.hermite) for j, r in enumerate(rails)]
+        self.n_wheels = x.shape[1]
+        groups: dict[int, list[int]] = {}
+        uniq: dict[int, RailCoupling] = {}
+        for j, r in enumerate(rails):
+            groups.setdefault(id(r), []).append(j)
+            uniq[id(r)] = r
+        self.groups = []
+        for key, cols in groups.items():
+            rail = uniq[key]
+            elem, wts, _ = shape_functions(rail.x_nodes, x[:, cols].ravel(), rail.hermite)
+            shape = (x.shape[0], len(cols))
+            self.groups.append((rail, np.array(cols), elem.reshape(shape),
+                                wts.reshape(shape + (wts.shape[1],))))
 
     def rows(self, n: int) -> np.ndarray:
         """(m, n_wheels) modal rows ``psi`` of every wheel at step ``n``."""
-        cols = []
-        for rail, (elem, wts, _) in zip(self.rails, self.data):
+        out = None
+        for rail, cols, elem, wts in self.groups:
             e, w = elem[n], wts[n]
             if rail.hermite:
-                cols.append(rail.phi_w[:, e] * w[0] - rail.phi_r[:, e] * w[1]
-                            + rail.phi_w[:, e + 1] * w[2] - rail.phi_r[:, e + 1] * w[3])
+                block = (rail.phi_w[:, e] * w[:, 0] - rail.phi_r[:, e] * w[:, 1]
+                         + rail.phi_w[:, e + 1] * w[:, 2] - rail.phi_r[:, e + 1] * w[:, 3])
             else:
-                cols.append(rail.phi_w[:, e] * w[0] + rail.phi_w[:, e + 1] * w[1])
-        return np.stack(cols, axis=1)
+                block = rail.phi_w[:, e] * w[:, 0] + rail.phi_w[:, e + 1] * w[:, 1]
+            if len(self.groups) == 1:
+                return block
+            if out is None:
+                out = np.empty((block.shape[0], self.n_wheels))
+            out[:, cols] = block
+        return out
 
 
 def n_steps(t_end: float, dt: float) -> int:
@@ -121,14 +146,15 @@ def kept_steps(nt: int, store_every: int) -> np.ndarray:
 class Storage:
     """Preallocated histories of the kept steps (see :class:`MBSResult`)."""
 
-    def __init__(self, keep: np.ndarray, m: int, nw: int, nd: int):
-        """Allocate for kept steps ``keep``, m modes, nw wheels and nd vehicle DOFs."""
+    def __init__(self, keep: np.ndarray, m: int, nw: int, nd: int, nr: int = 0):
+        """Allocate for kept steps ``keep``, m modes, nw wheels, nd vehicle DOFs, nr rail DOFs."""
         self.keep = keep
         self.slot = {int(n): i for i, n in enumerate(keep)}
         nk = keep.size
         self.q, self.v, self.a = (np.empty((nk, m)) for _ in range(3))
         self.f, self.d, self.w = (np.empty((nk, nw)) for _ in range(3))
         self.y, self.yd, self.ydd = (np.zeros((nk, nd)) for _ in range(3))
+        self.loads = np.zeros((nk, nr))
 
     def wants(self, n: int) -> bool:
         """True if step ``n`` is stored."""
@@ -142,6 +168,10 @@ class Storage:
         if y is not None:
             self.y[i], self.yd[i], self.ydd[i] = y, yd, ydd
 
+    def put_loads(self, n: int, loads: np.ndarray) -> None:
+        """Store the rail-DOF loads of step ``n`` (static correction)."""
+        self.loads[self.slot[n]] = loads
+
     def result(self, t, x, names, dt, nt, lost) -> MBSResult:
         """Build the result; ``lost`` is ``[any wheel, wheel 0, wheel 1, ...]`` step counts."""
         k = self.keep
@@ -149,4 +179,4 @@ class Storage:
                          rail_displacement=self.w, q=self.q, q_dot=self.v, q_ddot=self.a,
                          y=self.y, y_dot=self.yd, y_ddot=self.ydd, dof_names=tuple(names),
                          dt=dt, n_steps=nt, n_loss_of_contact=int(lost[0]),
-                         loss_of_contact_per_wheel=lost[1:].copy())
+                         loss_of_contact_per_wheel=lost[1:].copy(), rail_loads=self.loads)

@@ -171,6 +171,8 @@ def static_equilibrium(
         jac = np.block([[kv, -b], [dh[:, None] * b.T, np.eye(nw) + dh[:, None] * cf]])
         step = np.linalg.solve(jac, -res)
         y, forces = y + step[:nd], forces + step[nd:]
-        if np.max(np.abs(step[nd:])) <= tol * scale:
+        y_scale = float(np.max(np.abs(y))) or 1.0
+        if (np.max(np.abs(step[nd:])) <= tol * scale
+                and np.max(np.abs(step[:nd])) <= tol * y_scale):
             return y, forces
     raise RuntimeError("static equilibrium of the vehicle did not converge")

@@ -193,6 +193,27 @@ class BlockOperator:
         Y.destroy()
         return out
 
+    def solve(self, B: np.ndarray, chunk: int = 64) -> np.ndarray:
+        """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time."""
+        from petsc4py import PETSc
+
+        out = np.empty(B.shape)
+        for c0 in range(0, B.shape[1], chunk):
+            Bc = np.ascontiguousarray(B[:, c0:c0 + chunk])
+            Bd = self._dense(Bc)
+            Y = PETSc.Mat().createDense(size=((self.n_local, self.n_global),
+                                              (None, Bc.shape[1])), comm=self.comm)
+            Y.setUp()
+            Y.assemble()
+            t0 = time.perf_counter()
+            self.factor.matSolve(Bd, Y)
+            self.time_solves += time.perf_counter() - t0
+            self.n_solves += Bc.shape[1]
+            out[:, c0:c0 + chunk] = Y.getDenseArray()
+            Bd.destroy()
+            Y.destroy()
+        return out
+
     def destroy(self) -> None:
         self.ksp.destroy()
         if self.A is not self.K:

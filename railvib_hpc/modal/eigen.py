@@ -34,6 +34,7 @@ class ModalResult:
     eigenvalues: np.ndarray
     phi: np.ndarray                    # (n_local_dofs, n_modes)
     stats: dict = field(default_factory=dict)
+    static: np.ndarray | None = None   # (n_local_dofs, k) K^-1 static_rhs, when asked for
 
     @property
     def frequencies_hz(self) -> np.ndarray:
@@ -81,7 +82,7 @@ def _configure(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: flo
 def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
                 tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
-                monitor=None) -> ModalResult:
+                monitor=None, static_rhs: np.ndarray | None = None) -> ModalResult:
     """Extract mass-normalised modes.
 
     Parameters
@@ -107,6 +108,10 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
         Block Lanczos: right-hand sides per solve and restart size (0: automatic).
     monitor
         Progress callback ``monitor(n_converged, n_wanted, basis_size)``.
+    static_rhs
+        (n_local_dofs, k) right-hand sides solved with the factorization of K
+        when the block solver factors K itself (shift 0); the solutions are
+        returned in ``ModalResult.static`` (None otherwise: factor K separately).
 
     Raises
     ------
@@ -121,7 +126,7 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
                               f"free DOFs ({n_global})")
     if method == "block_lanczos" and f_max <= 0:
         return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
-                            monitor)
+                            monitor, static_rhs)
     eps = _configure(K, M, comm, n_modes, f_max, shift_hz, tol, max_it,
                      mpd if mpd > 0 else PETSc.DECIDE)
     if monitor is not None:
@@ -172,7 +177,8 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
 
 
 def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
-                 block_size: int, max_basis: int, monitor) -> ModalResult:
+                 block_size: int, max_basis: int, monitor,
+                 static_rhs: np.ndarray | None = None) -> ModalResult:
     from petsc4py import PETSc
 
     from .block_lanczos import (
@@ -206,6 +212,11 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
         t_p = time.perf_counter()
         lam, X, KX, MX = purify_and_project(op, X, st["block_size"])
         st["time_purify_project"] = time.perf_counter() - t_p
+        static = None
+        if static_rhs is not None and sigma == 0.0:
+            t_s = time.perf_counter()
+            static = op.solve(static_rhs)
+            st["time_static_solves"] = time.perf_counter() - t_s
     except NotConverged as exc:
         raise EigenSolveError(f"{exc}; try a larger -{PREFIX}bl_max_basis or fewer modes "
                               "(modal.n_modes)") from None
@@ -217,7 +228,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
                  factor_solver="mumps", tol=tol, time_factorization=op.time_factorization,
                  factor_memory_gb=op.factor_memory_gb,
                  time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
-    result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats)
+    result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats, static)
     normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order])
     return result
 

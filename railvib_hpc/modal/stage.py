@@ -19,6 +19,7 @@ from .dofmap import build_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
 from .petsc import assemble
+from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
 
 #: Keys of [modal] that do not change the modes (excluded from the reuse key).
 _NOT_MODAL_INPUTS = ("damping_ratio",)
@@ -74,10 +75,14 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         return summary if summary.get("inputs_sha256") == key else None
 
     old = on_root(previous, comm)
+    want_static = bool(case["mbs.static_correction"])
+    static_path = out_dir / "static.h5"
     if old is not None:
         f = old["frequency_hz"]
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
                  f"{f[0]:.3f} - {f[-1]:.3f} Hz")
+        if want_static and not on_root(lambda: static_is_valid(static_path, key), comm):
+            _static_only(case, out_dir, comm, rep, key)
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                 **json.loads(old.get("stats", "{}"))}
 
@@ -91,13 +96,22 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     with rep.stage("assembly"):
         K, M, ainfo = assemble(mesh, case, dofmap, comm)
     t_assembly = time.perf_counter() - t0
+    static_rhs = None
+    if want_static:
+        load_dofs, table = rail_load_dofs(mesh, dofmap)
+        static_rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
     with rep.stage("eigensolve"):
         result = solve_modes(
             K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
             shift_hz=case["modal.shift_hz"], tol=case["modal.tol"],
             max_it=case["modal.max_restarts"], method=case["modal.method"],
             block_size=case["modal.block_size"],
-            max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep))
+            max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
+            static_rhs=static_rhs)
+    x_static = result.static
+    if want_static and x_static is None:
+        with rep.stage("static solves"):
+            x_static = solve_static(K, M, comm, static_rhs)
     K.destroy()
     M.destroy()
     with rep.stage("write modes"):
@@ -127,7 +141,34 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
              f"{stats['max_relative_residual']:.2e}; {stats['linear_solves']} right-hand sides "
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
+    if want_static:
+        with rep.stage("write static.h5"):
+            write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, key)
+        rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
+                 "rail DOFs (static correction)")
     return summary
+
+
+def _static_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> None:
+    """static.h5 for reused modes: assemble K again and factor it once."""
+    with rep.stage("static correction: mesh + assembly"):
+        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
+                              case["modal.fix_rail_rotations_at_pads"])
+        K, M, _ = assemble(mesh, case, dofmap, comm)
+    load_dofs, table = rail_load_dofs(mesh, dofmap)
+    rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
+    with rep.stage("static solves"):
+        try:
+            x_static = solve_static(K, M, comm, rhs)
+        finally:
+            K.destroy()
+            M.destroy()
+    with rep.stage("write static.h5"):
+        write_static(out_dir / "static.h5", comm, mesh, dofmap, x_static, free, load_dofs,
+                     table, key)
+    rep.info(f"wrote {out_dir / 'static.h5'}: static solutions for {free.size} unit loads on "
+             "the rail DOFs (static correction)")
 
 
 def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:

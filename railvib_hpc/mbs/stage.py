@@ -1,0 +1,424 @@
+"""The ``mbs`` stage: modes.h5 -> vehicle rolling over the flexible track (rank 0) -> mbs.h5.
+
+Everything runs on rank 0 (numpy only); the other ranks wait for the summary
+(or the error) broadcast at the end. Output ``mbs.h5`` (written to a temporary
+name, renamed when complete, reused when its inputs are unchanged):
+
+* ``/time`` (nt,) [s];
+* ``/wheels/x``, ``contact_force`` (positive: wheel pushes the rail down),
+  ``penetration``, ``rail_displacement`` (under the wheel, up positive),
+  ``wheel_height`` (the wheel's contact point, ``B^T y``), ``rail_index``
+  (n_wheels,), all (nt, n_wheels);
+* ``/vehicle/y``, ``y_dot``, ``y_ddot`` (nt, n_dof), attribute ``dof_names``;
+* ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,);
+* ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads and
+  ``/static/q_shift`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` when the static
+  correction is on (attributes ``basis_file``, ``basis``);
+* attributes ``complete``, ``inputs_sha256``, ``modes_sha256``, ``case_toml``,
+  ``stats`` (JSON: time step, steps, wall time, contact-force summary).
+
+PNG plots next to it: ``mbs_contact_force.png`` (force vs position),
+``mbs_wheel_displacement.png`` and ``mbs_rail_deflection.png``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..config import Case
+from ..errors import UserError
+from ..io.atomic import atomic_path
+from ..log import Reporter
+from ..parallel import on_root
+
+
+class MBSInputError(UserError):
+    """The modal input of the multibody simulation is missing or inconsistent."""
+
+
+def _file_digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def mbs_digest(case: Case, modes_sha: str) -> str:
+    """Hash of everything ``mbs.h5`` depends on."""
+    extra = ""
+    if case["irregularity.type"] == "file":
+        extra = _file_digest(case.resolve(case["irregularity.file"]))
+    text = json.dumps({"modes": modes_sha, "vehicle": case.digest("vehicle"),
+                       "irregularity": case.digest("irregularity"), "profile": extra,
+                       "mbs": case.digest("mbs"), "zeta": case["modal.damping_ratio"]},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def modal_damping(case: Case, m: int) -> np.ndarray:
+    """(m,) damping ratios: ``modal.damping_ratio`` with the ``mbs.damping_*`` overrides."""
+    zeta = np.full(m, case["modal.damping_ratio"])
+    for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
+        if int(k) <= m:
+            zeta[int(k) - 1] = r
+    return zeta
+
+
+def build_vehicle(case: Case):
+    """The vehicle of ``[vehicle]`` (None for ``moving_force``)."""
+    from .vehicles import SuspendedWheelset
+
+    v = case["vehicle"]
+    kh = v["k_hertz"] if v["k_hertz"] > 0 else None
+    if v["type"] == "moving_force":
+        return None
+    if v["type"] == "wheelset":
+        return SuspendedWheelset(
+            mass=v["wheelset_mass"], roll_inertia=v["wheelset_roll_inertia"],
+            wheel_radius=v["wheel_radius"], contact_span=v["contact_span"],
+            suspension_span=v["suspension_span"], k_suspension=v["k_suspension"],
+            c_suspension=v["c_suspension"], preload=v["preload"],
+            contact_damping=v["contact_damping"], k_hertz=kh)
+    from .train import RailVehicle, Train
+
+    car = RailVehicle(
+        car_mass=v["car_mass"], car_pitch_inertia=v["car_pitch_inertia"],
+        car_roll_inertia=v["car_roll_inertia"], bogie_mass=v["bogie_mass"],
+        bogie_pitch_inertia=v["bogie_pitch_inertia"], bogie_roll_inertia=v["bogie_roll_inertia"],
+        wheelset_mass=v["car_wheelset_mass"],
+        wheelset_roll_inertia=v["car_wheelset_roll_inertia"],
+        bogie_semi_spacing=0.5 * v["bogie_spacing"], semi_wheelbase=0.5 * v["wheelbase"],
+        car_length=v["car_length"], wheel_radius=v["wheel_radius"],
+        contact_span=v["contact_span"], primary_span=v["primary_span"],
+        secondary_span=v["secondary_span"], k_primary=v["k_primary"], c_primary=v["c_primary"],
+        k_secondary=v["k_secondary"], c_secondary=v["c_secondary"],
+        contact_damping=v["contact_damping"], k_hertz=kh)
+    if v["n_cars"] == 1:
+        return car
+    return Train([car] * v["n_cars"], k_coupler=v["coupler_stiffness"])
+
+
+def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float, float]):
+    """The rail irregularity and wheel flats of ``[irregularity]`` (None when smooth)."""
+    from .irregularity import Irregularity, RailProfile, WheelFlat
+
+    irr = case["irregularity"]
+    profile = None
+    if irr["type"] == "file":
+        profile = RailProfile.from_file(case.resolve(irr["file"]))
+    elif irr["type"] in ("fra", "iso8608"):
+        profile = RailProfile.from_psd(
+            irr["type"], irr["track_class"], x_range, seed=irr["seed"],
+            wavelength_range=(irr["wavelength_min"], irr["wavelength_max"]))
+    flats = ()
+    if irr["flat_depth"] > 0:
+        wheels = [int(w) for w in irr["flat_wheels"]]
+        bad = [w for w in wheels if w >= len(wheel_rail)]
+        if bad:
+            raise MBSInputError(f"irregularity.flat_wheels = {irr['flat_wheels']}: the vehicle "
+                                f"has wheels 0..{len(wheel_rail) - 1}")
+        flats = (WheelFlat(depth=irr["flat_depth"], length=irr["flat_length"], wheels=wheels,
+                           wheel_radius=case["vehicle.wheel_radius"]),)
+    if profile is None and not flats:
+        return None
+    return Irregularity(profile=profile, flats=flats, wheel_rail=wheel_rail)
+
+
+def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
+    v = case["vehicle"]
+    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * 9.81
+    offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
+    rails = np.tile([0, 1], len(v["axle_offsets"]))
+    return np.full(offs.size, force), offs, rails
+
+
+def _read_static(out_dir: Path, modes_sha: str, n_r: int) -> np.ndarray:
+    import h5py
+
+    path = out_dir / "static.h5"
+    if not path.exists():
+        raise MBSInputError(f"mbs.static_correction = true needs {path}: run 'railvib modal' "
+                            "with mbs.static_correction = true first")
+    with h5py.File(path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("modes_sha256") != modes_sha:
+            raise MBSInputError(f"{path} is incomplete or belongs to other modes; rerun "
+                                "'railvib modal' with mbs.static_correction = true")
+        x_rr = f["static/rail_flexibility"][()]
+    if x_rr.shape != (n_r, n_r):
+        raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
+                            f"({n_r}, {n_r})")
+    return x_rr
+
+
+def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
+    """Run the multibody simulation of a case on this process (no MPI); write mbs.h5 + plots.
+
+    Parameters
+    ----------
+    case
+        The validated case.
+    out_dir
+        Folder with ``modes.h5`` (and ``static.h5`` for the static correction).
+    rep
+        Progress reporter.
+
+    Returns
+    -------
+    dict
+        Summary (see ``stats`` in the module notes) with ``reused`` set when an
+        existing complete ``mbs.h5`` with the same inputs was kept.
+    """
+    import h5py
+
+    from .integrate import simulate_moving_force, simulate_vehicle
+    from .modal_input import read_rail_modes
+    from .static_correction import rail_dof_rows, residual_flexibility
+
+    rep = rep or Reporter(0)
+    modes_path = out_dir / "modes.h5"
+    if not modes_path.exists():
+        raise MBSInputError(f"{modes_path} not found: run 'railvib modal' first")
+    with h5py.File(modes_path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1:
+            raise MBSInputError(f"{modes_path} is incomplete: rerun 'railvib modal'")
+        modes_sha = str(f.attrs["inputs_sha256"])
+        m_file = f["modes/eigenvalue"].shape[0]
+    m = case["mbs.n_modes"] or m_file
+    if m > m_file:
+        raise MBSInputError(f"mbs.n_modes = {m}: {modes_path} has only {m_file} modes")
+    key = mbs_digest(case, modes_sha)
+    path = out_dir / "mbs.h5"
+    old = _previous(path, key)
+    if old is not None:
+        rep.info(f"reusing {path} (same modes, vehicle and settings)")
+        return {**old, "reused": True}
+
+    t0 = time.perf_counter()
+    rm = read_rail_modes(modes_path, m)
+    zeta = modal_damping(case, m)
+    vehicle = build_vehicle(case)
+    x_rigid_end = float(max(r.x_nodes[-1] for r in rm.rails)) + case["track.rigid_length"]
+    x_end = case["vehicle.x_end"] or x_rigid_end
+    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
+    if vehicle is None:
+        forces, offsets, wheel_rail = _moving_loads(case)
+    else:
+        offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(vehicle.n_wheels)))
+        wheel_rail = np.asarray(getattr(vehicle, "wheel_rail", np.arange(vehicle.n_wheels) % 2))
+    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+    residual = None
+    if case["mbs.static_correction"]:
+        n_r = rail_dof_rows(rm.rails).shape[1]
+        residual = residual_flexibility(_read_static(out_dir, modes_sha, n_r), rm.rails,
+                                        rm.omega)
+    dt = case["mbs.dt"] or None
+    t_read = time.perf_counter() - t0
+    t_run = time.perf_counter()
+    label = "mbs: time integration"
+
+    last = [t_run]
+
+    def progress(n: int, nt: int) -> None:
+        now = time.perf_counter()
+        if now - last[0] >= 2.0 or n == nt:
+            last[0] = now
+            rep.progress(label, n, nt, t_run)
+
+    if vehicle is None:
+        result = simulate_moving_force(
+            rm.omega, zeta, rm.rails if residual is not None else
+            tuple(rm.rails[i] for i in wheel_rail), forces, x_start + offsets, speed, t_end,
+            dt=dt, store_every=case["mbs.store_every"], residual=residual,
+            load_rail=wheel_rail)
+    else:
+        x_lo = x_start + float(np.min(offsets)) - 1.0
+        irregularity = build_irregularity(case, wheel_rail, (x_lo, x_end + speed *
+                                                             case["vehicle.t_after"] + 1.0))
+        result = simulate_vehicle(
+            rm.omega, zeta, rm.rails, vehicle, x_start, speed, t_end, dt=dt,
+            irregularity=irregularity, store_every=case["mbs.store_every"],
+            points_per_period=case["mbs.points_per_period"], residual=residual,
+            progress=progress)
+    wall = time.perf_counter() - t_run
+    stats = _summary(result, rm.rails, vehicle, wall, t_read, m)
+    stats["static_correction"] = residual is not None
+    rep.info(format_summary(stats))
+    with atomic_path(path) as tmp:
+        _write(tmp, case, result, rm, zeta, wheel_rail, vehicle, residual, key, modes_sha,
+               stats)
+    rep.info(f"wrote {path}")
+    plots = write_plots(out_dir, result, vehicle)
+    rep.info("wrote " + ", ".join(str(p) for p in plots))
+    return {**stats, "reused": False}
+
+
+def _previous(path: Path, key: str) -> dict | None:
+    import h5py
+
+    if not path.exists():
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            if int(f.attrs.get("complete", 0)) == 1 and f.attrs.get("inputs_sha256") == key:
+                return json.loads(f.attrs["stats"])
+    except (OSError, KeyError, ValueError):
+        return None
+    return None
+
+
+def _on_flexible(result, rails) -> np.ndarray:
+    """(nt, n_wheels) True where the wheel is on the flexible rail."""
+    lo = min(r.x_nodes[0] for r in rails)
+    hi = max(r.x_nodes[-1] for r in rails)
+    return (result.x >= lo) & (result.x <= hi)
+
+
+def _summary(result, rails, vehicle, wall: float, t_read: float, m: int) -> dict:
+    on = _on_flexible(result, rails)
+    f = result.contact_force
+    mean = [float(f[on[:, j], j].mean()) if on[:, j].any() else float("nan")
+            for j in range(f.shape[1])]
+    peak = [float(f[:, j].max()) for j in range(f.shape[1])]
+    low = [float(f[:, j].min()) for j in range(f.shape[1])]
+    static = (vehicle.static_wheel_loads().tolist() if vehicle is not None
+              else f[0].tolist())
+    return {
+        "n_modes": m, "dt": result.dt, "n_steps": result.n_steps,
+        "n_stored": int(result.t.size), "t_end": float(result.t[-1]),
+        "time_integration": wall, "time_read": t_read,
+        "steps_per_second": result.n_steps / max(wall, 1e-9),
+        "static_wheel_load": static, "mean_contact_force": mean, "peak_contact_force": peak,
+        "min_contact_force": low,
+        "max_rail_deflection": float(-result.rail_displacement.min()),
+        "loss_of_contact_steps": int(result.n_loss_of_contact),
+        "loss_of_contact_per_wheel": result.loss_of_contact_per_wheel.tolist(),
+    }
+
+
+def format_summary(stats: dict) -> str:
+    """Printable table of the contact forces per wheel and the run statistics."""
+    lines = [f"mbs: {stats['n_modes']} modes, dt = {stats['dt']:.3e} s, {stats['n_steps']} "
+             f"steps in {stats['time_integration']:.2f} s ({stats['steps_per_second']:.0f} "
+             "steps/s)",
+             "  wheel  static [kN]  mean on flexible rail [kN]  peak [kN]  min [kN]  "
+             "steps without contact"]
+    for j, (s, mu, pk, lo) in enumerate(zip(stats["static_wheel_load"],
+                                            stats["mean_contact_force"],
+                                            stats["peak_contact_force"],
+                                            stats["min_contact_force"])):
+        lost = (stats["loss_of_contact_per_wheel"][j]
+                if stats["loss_of_contact_per_wheel"] else 0)
+        lines.append(f"  {j:5d}  {s / 1e3:11.3f}  {mu / 1e3:26.3f}  {pk / 1e3:9.3f}  "
+                     f"{lo / 1e3:8.3f}  {lost:21d}")
+    lines.append(f"  max rail deflection under a wheel: {stats['max_rail_deflection'] * 1e3:.4f}"
+                 " mm")
+    return "\n".join(lines)
+
+
+def _write(path: Path, case: Case, result, rm, zeta, wheel_rail, vehicle, residual,
+           key: str, modes_sha: str, stats: dict) -> None:
+    import h5py
+
+    with h5py.File(path, "w") as f:
+        f["time"] = result.t
+        w = f.create_group("wheels")
+        w["x"] = result.x
+        w["contact_force"] = result.contact_force
+        w["penetration"] = result.penetration
+        w["rail_displacement"] = result.rail_displacement
+        w["rail_index"] = np.asarray(wheel_rail, dtype=np.int64)
+        if vehicle is not None:
+            w["wheel_height"] = result.y @ vehicle.contact_matrix()
+        v = f.create_group("vehicle")
+        v["y"], v["y_dot"], v["y_ddot"] = result.y, result.y_dot, result.y_ddot
+        v.attrs["dof_names"] = json.dumps(list(result.dof_names))
+        v.attrs["type"] = case["vehicle.type"]
+        mg = f.create_group("modal")
+        mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
+        mg["omega"], mg["zeta"] = rm.omega, zeta
+        if residual is not None:
+            from .static_correction import rail_dof_rows
+
+            s = f.create_group("static")
+            g = result.rail_loads
+            ts = result.t
+            s["g"] = g
+            s["g_dot"] = np.gradient(g, ts, axis=0) if ts.size > 2 else np.zeros_like(g)
+            s["g_ddot"] = (np.gradient(s["g_dot"][()], ts, axis=0) if ts.size > 2
+                           else np.zeros_like(g))
+            s["q_shift"] = -(g @ rail_dof_rows(rm.rails).T) / rm.omega**2
+            s.attrs["basis_file"] = "static.h5"
+            s.attrs["basis"] = "static/translation"
+        f.attrs["inputs_sha256"] = key
+        f.attrs["modes_sha256"] = modes_sha
+        f.attrs["case_toml"] = case.to_toml()
+        f.attrs["railvib_version"] = __version__
+        f.attrs["stats"] = json.dumps(stats)
+        f.attrs["complete"] = 1
+
+
+def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
+    """PNG plots: contact force vs position, wheel displacement, rail deflection under wheels."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    nw = result.x.shape[1]
+    show = range(nw) if nw <= 8 else range(0, nw, max(nw // 8, 1))
+
+    def save(fig, name):
+        p = out_dir / name
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, dpi=120, format="png")
+        plt.close(fig)
+        paths.append(p)
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for j in show:
+        ax.plot(result.x[:, j], result.contact_force[:, j] / 1e3, lw=0.8, label=f"wheel {j}")
+    ax.set_xlabel("wheel position x [m]")
+    ax.set_ylabel("contact force [kN]")
+    ax.set_title("Wheel-rail contact force")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=4)
+    save(fig, "mbs_contact_force.png")
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    if vehicle is not None:
+        heights = result.y @ vehicle.contact_matrix()
+        for j in show:
+            ax.plot(result.t, heights[:, j] * 1e3, lw=0.8, label=f"wheel {j}")
+        ax.set_ylabel("wheel vertical displacement [mm]")
+    else:
+        ax.text(0.5, 0.5, "moving forces: no vehicle", ha="center", transform=ax.transAxes)
+    ax.set_xlabel("time [s]")
+    ax.set_title("Wheel displacement at the contact points")
+    ax.grid(alpha=0.3)
+    if vehicle is not None:
+        ax.legend(fontsize=7, ncol=4)
+    save(fig, "mbs_wheel_displacement.png")
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    for j in show:
+        ax.plot(result.x[:, j], result.rail_displacement[:, j] * 1e3, lw=0.8,
+                label=f"wheel {j}")
+    ax.set_xlabel("wheel position x [m]")
+    ax.set_ylabel("rail displacement under the wheel [mm]")
+    ax.set_title("Rail deflection under the wheels")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, ncol=4)
+    save(fig, "mbs_rail_deflection.png")
+    return paths
+
+
+def run_mbs_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+    """Collective: rank 0 simulates (see :func:`simulate_case`), every rank gets the summary."""
+
+    with rep.stage("mbs"):
+        return on_root(lambda: simulate_case(case, out_dir, rep), comm)

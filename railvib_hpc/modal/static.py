@@ -1,0 +1,155 @@
+"""Static solutions for unit loads on the rail DOFs (static correction of the modal basis).
+
+For every rail node of both flexible rails and each of its DOFs ``w`` (vertical
+displacement) and ``ry`` (rotation about the lateral axis), the static response
+``x = K^-1 e`` to a unit load on that DOF. Computed with the Cholesky factor of
+K of the block Lanczos eigensolve when it factors K itself (shift 0), else
+with its own factorization. Written to ``static.h5`` (collective, like
+``modes.h5``):
+
+* ``/static/rail_flexibility`` (n_r, n_r): ``K^-1`` on the rail DOFs (zero rows and
+  columns for constrained DOFs, e.g. rotations fixed at the pads);
+* ``/static/translation`` (n_r, n_nodes, 3): the static displacement fields;
+* ``/static/load_dofs`` (n_r, 3): rail index, node (global id), component (0 w, 1 ry);
+* attributes ``modes_sha256`` (the modes it belongs to), ``complete``.
+
+Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static_correction`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..io.modes_io import h5py_parallel_ok, rail_nodes
+
+
+def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
+    """Global free-DOF index of every rail DOF (-1 if constrained) and its description.
+
+    Returns
+    -------
+    dofs
+        (n_r,) global DOF numbers in the column ordering.
+    table
+        (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
+    """
+    rails = rail_nodes(mesh)
+    if np.any(rails < 0):
+        raise ValueError("the two rails must have the same number of nodes")
+    comp = np.array([2, 4])                        # uz, ry in the node's 6 components
+    nodes = np.repeat(rails.reshape(-1), 2)
+    c = np.tile([0, 1], rails.size)
+    dofs = dofmap.index[nodes, comp[c]]
+    table = np.stack([np.repeat(np.arange(2), rails.shape[1] * 2), nodes, c], axis=1)
+    return dofs.astype(np.int64), table.astype(np.int64)
+
+
+def unit_loads(dofs: np.ndarray, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
+    """This rank's rows of the unit load vectors of the free rail DOFs.
+
+    Returns
+    -------
+    rhs
+        (r1 - r0, n_free) right-hand sides.
+    free
+        (n_free,) columns (positions in ``dofs``) they belong to.
+    """
+    free = np.flatnonzero(dofs >= 0)
+    rhs = np.zeros((r1 - r0, free.size))
+    own = (dofs[free] >= r0) & (dofs[free] < r1)
+    rhs[dofs[free][own] - r0, np.flatnonzero(own)] = 1.0
+    return rhs, free
+
+
+def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0: int,
+                     comm) -> np.ndarray:
+    """``K^-1`` restricted to the rail DOFs (n_r, n_r), from the distributed solutions."""
+    n_r = dofs.size
+    part = np.zeros((n_r, n_r))
+    rows = np.flatnonzero((dofs >= r0) & (dofs < r0 + x_local.shape[0]))
+    part[np.ix_(rows, free)] = x_local[dofs[rows] - r0]
+    from mpi4py import MPI
+
+    out = np.empty_like(part)
+    comm.Allreduce(part, out, op=MPI.SUM)
+    return 0.5 * (out + out.T)
+
+
+def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
+                 dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
+    """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
+    import h5py
+
+    from .stage import node_arrays
+
+    n_r = dofs.size
+    r0 = dofmap.owned_dofs(comm.rank)[0]
+    flex = rail_flexibility(x_local, dofs, free, r0, comm)
+    cols = np.zeros((x_local.shape[0], n_r))
+    cols[:, free] = x_local
+    translation, _, _, _, nodes = node_arrays(cols, dofmap, comm.rank)
+    tmp = comm.bcast(str(path.with_name(f".{path.name}.part-{os.getpid()}"))
+                     if comm.rank == 0 else None, root=0)
+    parallel = h5py_parallel_ok(comm)
+    if not parallel and comm.size > 1:
+        parts = comm.gather(translation, root=0)
+        if comm.rank == 0:
+            translation = np.concatenate(parts, axis=1)
+            nodes = slice(0, mesh.n_nodes)
+    error = None
+    if parallel or comm.rank == 0:
+        try:
+            kw = {"driver": "mpio", "comm": comm} if parallel else {}
+            with h5py.File(tmp, "w", **kw) as f:
+                g = f.create_group("static")
+                d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
+                d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
+                d_l = g.create_dataset("load_dofs", table.shape, "i8")
+                f.attrs["modes_sha256"] = modes_sha
+                f.attrs["complete"] = 0
+                if comm.rank == 0:
+                    d_f[...] = flex
+                    d_l[...] = table
+                if nodes.stop > nodes.start:
+                    d_t[:, nodes, :] = translation
+        except Exception as exc:
+            error = f"{type(exc).__name__}: {exc}"
+    errors = comm.allgather(error)
+    if any(errors):
+        if comm.rank == 0 and os.path.exists(tmp):
+            os.unlink(tmp)
+        raise OSError(f"writing {path} failed: {next(e for e in errors if e)}")
+    if comm.rank == 0:
+        with h5py.File(tmp, "a") as f:
+            f.attrs["complete"] = 1
+        os.replace(tmp, path)
+    comm.Barrier()
+
+
+def static_is_valid(path: Path, modes_sha: str) -> bool:
+    """True when ``static.h5`` exists, is complete and belongs to these modes."""
+    import h5py
+
+    if not path.exists():
+        return False
+    try:
+        with h5py.File(path, "r") as f:
+            return (int(f.attrs.get("complete", 0)) == 1
+                    and f.attrs.get("modes_sha256") == modes_sha)
+    except OSError:
+        return False
+
+
+def solve_static(K, M, comm, rhs: np.ndarray) -> np.ndarray:
+    """``K^-1 rhs`` with its own MUMPS Cholesky factorization (options prefix railvib_eig_)."""
+    from .block_lanczos import BlockOperator
+    from .eigen import PREFIX
+
+    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=16.0 * rhs.size / 1e9)
+    try:
+        return op.solve(rhs)
+    finally:
+        op.destroy()

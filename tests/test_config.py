@@ -153,7 +153,10 @@ def test_cli_user_error_exit_code_2_without_traceback(tmp_path, capsys):
 
 
 def test_cli_stages_not_built_yet_exit_nonzero(capsys):
-    for stage in ("mbs", "reconstruct", "assess"):
+    from railvib_hpc.cli import MISSING
+
+    assert set(MISSING) == {"reconstruct", "assess"}
+    for stage in MISSING:
         assert run([stage, str(ROOT / "jobs" / "thesis_baseline.toml")]) == 3
         assert "not implemented yet" in capsys.readouterr().err
 

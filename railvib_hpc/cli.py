@@ -18,11 +18,6 @@ from .parallel import on_root, world
 
 STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed")
-#: Stages not built yet, with the issue that builds them.
-MISSING = {
-    "reconstruct": "parallel field reconstruction",
-    "assess": "vibration assessment",
-}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -110,8 +105,36 @@ def _cmd_mbs(case: Case, out: Path, comm, rep: Reporter) -> dict:
     return run_mbs_stage(case, out, comm, rep)
 
 
-def _missing(stage: str) -> NotImplementedStage:
-    return NotImplementedStage(f"stage '{stage}' ({MISSING[stage]}) is not implemented yet")
+def _reconstruct_options(case: Case, out: Path) -> dict:
+    """Stride, window, precision, stress times and user probes from ``[output]`` (rank 0)."""
+    import h5py
+    import numpy as np
+
+    mbs = out / "mbs.h5"
+    stride = 1
+    if mbs.exists() and case["output.dt"] > 0:
+        with h5py.File(mbs, "r") as f:
+            t = f["time"][:2]
+        if t.size == 2:
+            stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
+    w = case["output.window"]
+    probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    return {"stride": stride, "window": tuple(w) if w else None,
+            "float32": case["output.float32"], "stress_times": case["output.stress_times"],
+            "user_probes": {f"user_{i + 1}": p for i, p in enumerate(probes)}}
+
+
+def _cmd_reconstruct(case: Case, out: Path, comm, rep: Reporter) -> dict:
+    from .reconstruct import run_reconstruct_stage
+
+    opts = on_root(lambda: _reconstruct_options(case, out), comm)
+    return run_reconstruct_stage(out / "modes.h5", out / "mbs.h5", out, comm, rep, **opts)
+
+
+def _cmd_assess(case: Case, out: Path, comm, rep: Reporter) -> dict:
+    from .assess.stage import run_assess_stage
+
+    return run_assess_stage(case, out, comm, rep)
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -136,12 +159,11 @@ def run(argv: list[str] | None = None) -> int:
             _cmd_modal(case, out, comm, rep)
             rep.info("\n" + rep.timing_table())
             return 0
-        if args.command == "mbs":
-            _cmd_mbs(case, out, comm, rep)
+        single = {"mbs": _cmd_mbs, "reconstruct": _cmd_reconstruct, "assess": _cmd_assess}
+        if args.command in single:
+            single[args.command](case, out, comm, rep)
             rep.info("\n" + rep.timing_table())
             return 0
-        if args.command in MISSING:
-            raise _missing(args.command)
         if args.command == "study":
             raise NotImplementedStage(f"study '{args.kind}' is not implemented yet")
         # run: every stage in order; report the ones that do not exist yet
@@ -149,11 +171,15 @@ def run(argv: list[str] | None = None) -> int:
         _cmd_mesh(case, out, rep)
         _cmd_modal(case, out, comm, rep)
         _cmd_mbs(case, out, comm, rep)
-        for stage in MISSING:
-            rep.info(f"[{stage}] not implemented yet ({MISSING[stage]})")
+        _cmd_reconstruct(case, out, comm, rep)
+        summary = _cmd_assess(case, out, comm, rep)
         rep.info("\n" + rep.timing_table())
-        rep.info("pipeline incomplete: stages " + ", ".join(MISSING) + " are not implemented yet")
-        return NotImplementedStage.exit_code
+        verdict = summary["verdict"]
+        failed = [k for k, v in verdict.items() if v is False]
+        rep.info(f"pipeline complete: {len(verdict)} probes assessed, "
+                 + (f"limits exceeded at {', '.join(failed)}" if failed
+                    else "no limit exceeded"))
+        return 0
     except UserError as exc:
         if comm.rank == 0:
             print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)

@@ -419,6 +419,15 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     if any(w < 0 or not float(w).is_integer() for w in irr["flat_wheels"]):
         out.append(("irregularity.flat_wheels", irr["flat_wheels"],
                     "must be wheel indices (integers >= 0)"))
+    o = case["output"]
+    if o["window"] and (len(o["window"]) != 2 or o["window"][0] >= o["window"][1]
+                        or o["window"][0] < 0):
+        out.append(("output.window", o["window"], "must be empty or [t0, t1] with 0 <= t0 < t1"))
+    if len(o["probes"]) % 3:
+        out.append(("output.probes", o["probes"],
+                    "must be a flat list of x, y, z triples (length a multiple of 3)"))
+    if any(t < 0 for t in o["stress_times"]):
+        out.append(("output.stress_times", o["stress_times"], "times must be >= 0"))
     modes, ratios = mbs["damping_modes"], mbs["damping_ratios"]
     if len(modes) != len(ratios):
         out.append(("mbs.damping_ratios", ratios,

@@ -247,8 +247,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "(Table II), or cars with 2 bogies and 4 wheelsets each",
                       choices=("moving_force", "wheelset", "vehicle")),
         "speed": Param(30.0, "float", "m/s", "running speed", "pos"),
-        "x_start": Param(1.0, "float", "m",
-                         "position of the leading wheel at t = 0 (on the rigid entry rail)"),
+        "x_start": Param(0.0, "float", "m",
+                         "position of the leading wheel at t = 0 (on the rigid entry rail; 0: "
+                         "its start, the thesis's time origin)"),
         "x_end": Param(0.0, "float", "m",
                        "the run ends when the last wheel reaches this position (0: the end of "
                        "the rigid exit rail)", "nonneg"),
@@ -278,6 +279,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "preload": Param(0.0, "float", "N",
                          "wheelset: static downward force of the frame per side (share of a "
                          "car body; 0 in the thesis)", "nonneg"),
+        "k_lateral": Param(25_000.0, "float", "N/m",
+                           "wheelset: lateral suspension stiffness (not in Table II: the vertical "
+                           "value)", "nonneg"),
+        "c_lateral": Param(1_000.0, "float", "N s/m", "wheelset: lateral suspension damping",
+                           "nonneg"),
+        "conicity": Param(0.025, "float", "-",
+                          "wheelset: equivalent tread conicity (UIC 1:40); the contact normals "
+                          "lean inwards and couple lateral motion and the rails' lateral modes",
+                          "nonneg"),
         "k_hertz": Param(0.0, "float", "N/m^1.5",
                          "Hertz constant K_H (0: Jenkins' formula from wheel_radius)", "nonneg"),
         "contact_damping": Param(0.0, "float", "N s/m^2",
@@ -359,13 +369,36 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "modal stage)"),
     },
     "output": {
+        "dt": Param(0.001, "float", "s",
+                    "time step of the reconstructed fields (a multiple of the MBS step; 0: every "
+                    "step stored in mbs.h5)", "nonneg"),
+        "window": Param([], "floats", "s",
+                        "time window [t0, t1] of the reconstructed fields (empty: all)"),
         "float32": Param(False, "bool", "-", "store reconstructed fields in single precision"),
-        "time_stride": Param(1, "int", "-", "write every n-th time step of the fields", "pos"),
+        "stress_times": Param([0.54, 0.61], "floats", "s",
+                              "times of the element stress/strain fields (thesis: 0.54, 0.61 s)"),
+        "probes": Param([], "floats", "m",
+                        "extra probe points as a flat list x1, y1, z1, x2, y2, z2, ..."),
     },
     "assessment": {
         "standards": Param(["iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis"],
                            "strs", "-", "vibration criteria to evaluate",
                            choices=("iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis")),
+        "building_use": Param("residential", "str", "-",
+                              "use of the building: ISO multiplier, FTA category, VC curve, "
+                              "DIN 4150-3 line",
+                              choices=("critical", "residential", "office", "workshop")),
+        "period": Param("day", "str", "-", "assessment period (ISO 10137, DIN 4150-2)",
+                        choices=("day", "night")),
+        "fta_events": Param("frequent", "str", "-", "FTA event frequency",
+                            choices=("frequent", "occasional", "infrequent")),
+        "din4150_2_events": Param(0, "int", "-",
+                                  "train passages per assessment period for DIN 4150-2 KB_FTr "
+                                  "(0: not given; the middle band stays undetermined)",
+                                  "nonneg"),
+        "wave_threshold": Param(0.1, "float", "-",
+                                "wave arrival: first time the acceleration magnitude exceeds "
+                                "this fraction of its peak", "fraction"),
     },
 }
 

@@ -152,13 +152,9 @@ def test_cli_user_error_exit_code_2_without_traceback(tmp_path, capsys):
     assert "Traceback" not in err
 
 
-def test_cli_stages_not_built_yet_exit_nonzero(capsys):
-    from railvib_hpc.cli import MISSING
-
-    assert set(MISSING) == {"reconstruct", "assess"}
-    for stage in MISSING:
-        assert run([stage, str(ROOT / "jobs" / "thesis_baseline.toml")]) == 3
-        assert "not implemented yet" in capsys.readouterr().err
+def test_cli_studies_not_built_yet_exit_3(capsys):
+    assert run(["study", "modes", str(ROOT / "jobs" / "thesis_baseline.toml")]) == 3
+    assert "not implemented yet" in capsys.readouterr().err
 
 
 def test_cli_check_ok_and_console_script():

@@ -184,3 +184,39 @@ class RailCoupling:
         """
         f = np.broadcast_to(np.asarray(forces, dtype=float), _as_positions(x).shape)
         return self.modal_rows(x) @ f
+
+
+def contact_normal_rail(rail: RailCoupling, phi_v: np.ndarray, phi_rz: np.ndarray | None,
+                        lateral_factor: float) -> RailCoupling:
+    """Rail coupling along an inclined contact normal ``(0, lateral_factor, 1)``.
+
+    The displacement of the rail along the normal is ``w + a v`` (``a =
+    lateral_factor``, ``v`` the lateral displacement), and a normal force pushes
+    the rail down and sideways by ``a`` times the force: both are the vertical
+    coupling with the modal rows ``phi_w + a phi_v``. Rotations mix the same
+    way: ``dv/dx = rz`` (rotation about z), so the effective ``phi_r`` (with
+    ``d(w + a v)/dx = -phi_r``) is ``phi_ry - a phi_rz``.
+
+    Parameters
+    ----------
+    rail
+        Vertical coupling (``phi_w``, ``phi_r`` = ``ry``).
+    phi_v
+        (m, k) lateral displacement rows at the same nodes.
+    phi_rz
+        (m, k) rotation about the vertical axis, or None (linear interpolation).
+    lateral_factor
+        ``a``: ``+lambda`` for the rail at negative y, ``-lambda`` at positive y
+        (the wheel pushes its rail outwards).
+
+    Returns
+    -------
+    RailCoupling
+        Coupling of the normal direction.
+    """
+    a = float(lateral_factor)
+    pw = rail.phi_w + a * np.asarray(phi_v, dtype=float)
+    pr = None
+    if rail.phi_r is not None and phi_rz is not None:
+        pr = rail.phi_r - a * np.asarray(phi_rz, dtype=float)
+    return RailCoupling(rail.x_nodes, pw, pr)

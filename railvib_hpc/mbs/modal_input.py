@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .coupling import RailCoupling
+from .coupling import RailCoupling, contact_normal_rail
 
 
 @dataclass
@@ -24,12 +24,29 @@ class RailModes:
         (2,) lateral position of each rail [m].
     rail_z
         Height of the rail axis [m].
+    lateral
+        Per rail ``(phi_v, phi_rz)``: lateral displacement and rotation about z at the
+        same nodes, (m, k) each (for the inclined contact normal of coned wheels).
     """
 
     omega: np.ndarray
     rails: tuple[RailCoupling, RailCoupling]
     rail_y: np.ndarray
     rail_z: float
+    lateral: tuple = ()
+
+    def normal_rails(self, conicity: float) -> tuple[RailCoupling, RailCoupling]:
+        """The rails seen along the contact normals of coned wheels (conicity ``lambda``).
+
+        The rail at negative y gets ``phi_w + lambda phi_v``, the other
+        ``phi_w - lambda phi_v`` (see :func:`.coupling.contact_normal_rail`).
+        """
+        if conicity == 0.0 or not self.lateral:
+            return self.rails
+        out = []
+        for rail, (pv, prz), y in zip(self.rails, self.lateral, self.rail_y):
+            out.append(contact_normal_rail(rail, pv, prz, -np.sign(y) * conicity))
+        return (out[0], out[1])
 
 
 def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
@@ -59,17 +76,19 @@ def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
             raise ValueError(f"{path}: the two rails must have the same number of nodes")
         points = f["mesh/points"][()]
         rot_nodes = f["mesh/rotation_nodes"][()]
-        rails, ys = [], []
+        rails, ys, lateral = [], [], []
         for nodes in rail_nodes:
             order = np.argsort(nodes)                    # h5py wants increasing indices
-            w = np.empty((m, len(nodes)))
-            w[:, order] = f["modes/translation"][:m, nodes[order], 2]
+            tr = np.empty((m, len(nodes), 3))
+            tr[:, order] = f["modes/translation"][:m, nodes[order], :]
             pos = np.searchsorted(rot_nodes, nodes)
             if not np.array_equal(rot_nodes[np.minimum(pos, len(rot_nodes) - 1)], nodes):
                 raise ValueError(f"{path}: rail nodes without rotations")
-            r = np.empty((m, len(nodes)))
-            r[:, order] = f["modes/rotation"][:m, pos[order], 1]
-            rails.append(RailCoupling(points[nodes, 0], w, r))
+            rot = np.empty((m, len(nodes), 3))
+            rot[:, order] = f["modes/rotation"][:m, pos[order], :]
+            rails.append(RailCoupling(points[nodes, 0], tr[:, :, 2], rot[:, :, 1]))
+            lateral.append((np.ascontiguousarray(tr[:, :, 1]), np.ascontiguousarray(rot[:, :, 2])))
             ys.append(float(points[nodes[0], 1]))
         rail_z = float(points[rail_nodes[0, 0], 2])
-    return RailModes(np.sqrt(np.maximum(lam, 0.0)), (rails[0], rails[1]), np.array(ys), rail_z)
+    return RailModes(np.sqrt(np.maximum(lam, 0.0)), (rails[0], rails[1]), np.array(ys), rail_z,
+                     tuple(lateral))

@@ -11,9 +11,11 @@ name, renamed when complete, reused when its inputs are unchanged):
   (n_wheels,), all (nt, n_wheels);
 * ``/vehicle/y``, ``y_dot``, ``y_ddot`` (nt, n_dof), attribute ``dof_names``;
 * ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,);
-* ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads and
-  ``/static/q_shift`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` when the static
-  correction is on (attributes ``basis_file``, ``basis``);
+* ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads (derivatives by
+  finite differences of the stored steps) and ``/static/q_shift``,
+  ``q_shift_dot``, ``q_shift_ddot`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` (and
+  derivatives) when the static correction is on (attributes ``basis_file``,
+  ``basis``): the fields are ``Phi (q + q_shift) + X g``;
 * attributes ``complete``, ``inputs_sha256``, ``modes_sha256``, ``case_toml``,
   ``stats`` (JSON: time step, steps, wall time, contact-force summary).
 
@@ -81,7 +83,8 @@ def build_vehicle(case: Case):
             wheel_radius=v["wheel_radius"], contact_span=v["contact_span"],
             suspension_span=v["suspension_span"], k_suspension=v["k_suspension"],
             c_suspension=v["c_suspension"], preload=v["preload"],
-            contact_damping=v["contact_damping"], k_hertz=kh)
+            contact_damping=v["contact_damping"], k_hertz=kh, k_lateral=v["k_lateral"],
+            c_lateral=v["c_lateral"], conicity=v["conicity"])
     from .train import RailVehicle, Train
 
     car = RailVehicle(
@@ -238,8 +241,9 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
         x_lo = x_start + float(np.min(offsets)) - 1.0
         irregularity = build_irregularity(case, wheel_rail, (x_lo, x_end + speed *
                                                              case["vehicle.t_after"] + 1.0))
+        rails = rm.normal_rails(getattr(vehicle, "conicity", 0.0))
         result = simulate_vehicle(
-            rm.omega, zeta, rm.rails, vehicle, x_start, speed, t_end, dt=dt,
+            rm.omega, zeta, rails, vehicle, x_start, speed, t_end, dt=dt,
             irregularity=irregularity, store_every=case["mbs.store_every"],
             points_per_period=case["mbs.points_per_period"], residual=residual,
             progress=progress)
@@ -350,7 +354,10 @@ def _write(path: Path, case: Case, result, rm, zeta, wheel_rail, vehicle, residu
             s["g_dot"] = np.gradient(g, ts, axis=0) if ts.size > 2 else np.zeros_like(g)
             s["g_ddot"] = (np.gradient(s["g_dot"][()], ts, axis=0) if ts.size > 2
                            else np.zeros_like(g))
-            s["q_shift"] = -(g @ rail_dof_rows(rm.rails).T) / rm.omega**2
+            phi_r = rail_dof_rows(rm.rails)
+            s["q_shift"] = -(g @ phi_r.T) / rm.omega**2
+            s["q_shift_dot"] = -(s["g_dot"][()] @ phi_r.T) / rm.omega**2
+            s["q_shift_ddot"] = -(s["g_ddot"][()] @ phi_r.T) / rm.omega**2
             s.attrs["basis_file"] = "static.h5"
             s.attrs["basis"] = "static/translation"
         f.attrs["inputs_sha256"] = key

@@ -1,19 +1,34 @@
 """Vehicle models for the reduced multibody simulation and their static equilibrium.
 
-:class:`SuspendedWheelset` is the thesis's suspended wheelset (SAMS, Table II)
-reduced to its vertical plane motions: a rigid wheelset with bounce ``z`` (up
-positive, measured from the position of zero penetration on the undeformed
-rail) and roll ``theta`` (positive raises the wheel at ``+contact_span/2``).
-Wheel 0 runs on rail 0 at lateral position ``+contact_span/2``, wheel 1 on rail
-1 at ``-contact_span/2``. A primary suspension (spring + damper per side, at
-``+-suspension_span/2``) connects it to a frame that moves at constant height
-and speed; the frame may push down with a static ``preload`` per side (the
-share of car body weight; 0 in the thesis, whose wheel load 7.69 kN is half
-the wheelset weight 1568 kg * 9.81 m/s^2).
+:class:`SuspendedWheelset` is the thesis's suspended wheelset (SAMS, Table II):
+a rigid wheelset with bounce ``z`` (up positive, measured from the position of
+zero penetration on the undeformed rail), roll ``theta`` (positive raises the
+wheel at ``+contact_span/2``) and lateral displacement ``y`` (global +y).
+Wheel 0 runs on rail 0 (the rail at negative global y) at lateral position
+``+contact_span/2`` of the roll arm, wheel 1 on rail 1. A primary suspension
+(spring + damper per side, at ``+-suspension_span/2``, plus a lateral spring
+and damper) connects it to a frame that moves at constant height, lateral
+position and speed; the frame may push down with a static ``preload`` per side
+(the share of car body weight; 0 in the thesis, whose wheel load 7.69 kN is
+half the wheelset weight 1568 kg * 9.81 m/s^2).
+
+Lateral motion couples through the coned treads (linearised contact
+geometry, conicity ``lambda``): the contact normal of each wheel leans towards
+the track centre, ``n = (0, +-lambda, 1)``. A lateral shift ``y`` of the wheelset
+towards rail 1 lowers the contact point of the wheel on rail 1 by ``lambda y``
+(larger rolling radius) and raises the other, so the wheel heights are
+``B^T y`` with the lateral row ``(+lambda, -lambda)``; the normal forces push the
+wheelset laterally with ``lambda (F_0 - F_1)`` and push the rails outwards
+(:func:`railvib_hpc.mbs.coupling.contact_normal_rail` mixes the rails' lateral
+modal rows into the contact rows accordingly). Lateral creep forces and flange
+contact are not modelled.
 
 Reading of the partly garbled Table II (documented choice): mass 1568 kg,
 roll inertia Ixx = 656 kg m^2, suspension stiffness 25,000 N/m and damping
-1,000 N s/m per side.
+1,000 N s/m per side. Iyy = 168 and Izz = 13,500 kg m^2 belong to pitch and yaw,
+which do not couple to the normal contact forces here. The table gives no
+lateral suspension: the defaults use the vertical values (25 kN/m, 1 kN s/m)
+and the UIC tread inclination 1:40 (conicity 0.025).
 """
 
 from __future__ import annotations
@@ -51,6 +66,10 @@ class SuspendedWheelset:
         Gravitational acceleration [m/s^2].
     k_hertz
         Hertz constant [N/m^1.5]; None for Jenkins' formula.
+    k_lateral, c_lateral
+        Lateral suspension stiffness [N/m] and damping [N s/m] (total).
+    conicity
+        Equivalent conicity ``lambda`` of the treads (0: no lateral coupling).
     """
 
     mass: float = 1568.0
@@ -64,10 +83,15 @@ class SuspendedWheelset:
     contact_damping: float = 0.0
     gravity: float = 9.81
     k_hertz: float | None = None
+    k_lateral: float = 25_000.0
+    c_lateral: float = 1_000.0
+    conicity: float = 0.025
 
-    n_dof = 2
+    n_dof = 3
     n_wheels = 2
-    dof_names = ("z", "roll")
+    dof_names = ("z", "roll", "y")
+    wheel_rail = (0, 1)
+    wheel_offsets = (0.0, 0.0)
 
     @property
     def hertz_constant(self) -> float:
@@ -76,32 +100,32 @@ class SuspendedWheelset:
             self.wheel_radius)
 
     def mass_matrix(self) -> np.ndarray:
-        """(2, 2) mass matrix of ``(z, theta)``."""
-        return np.diag([self.mass, self.roll_inertia])
+        """(3, 3) mass matrix of ``(z, theta, y)``."""
+        return np.diag([self.mass, self.roll_inertia, self.mass])
 
-    def _suspension_matrix(self, k: float) -> np.ndarray:
+    def _suspension_matrix(self, k: float, k_lat: float) -> np.ndarray:
         s = 0.5 * self.suspension_span
-        return np.diag([2.0 * k, 2.0 * k * s * s])
+        return np.diag([2.0 * k, 2.0 * k * s * s, k_lat])
 
     def stiffness_matrix(self) -> np.ndarray:
-        """(2, 2) suspension stiffness matrix."""
-        return self._suspension_matrix(self.k_suspension)
+        """(3, 3) suspension stiffness matrix."""
+        return self._suspension_matrix(self.k_suspension, self.k_lateral)
 
     def damping_matrix(self) -> np.ndarray:
-        """(2, 2) suspension damping matrix."""
-        return self._suspension_matrix(self.c_suspension)
+        """(3, 3) suspension damping matrix."""
+        return self._suspension_matrix(self.c_suspension, self.c_lateral)
 
     def contact_matrix(self) -> np.ndarray:
-        """(2, n_wheels) matrix B: generalised force ``B @ F`` of upward wheel forces F.
+        """(3, n_wheels) matrix B: generalised force ``B @ F`` of the wheels' normal forces F.
 
-        Its transpose maps ``(z, theta)`` to the wheel heights ``B.T @ y``.
+        Its transpose maps ``(z, theta, y)`` to the wheel heights ``B.T @ y``.
         """
-        b = 0.5 * self.contact_span
-        return np.array([[1.0, 1.0], [b, -b]])
+        b, lam = 0.5 * self.contact_span, self.conicity
+        return np.array([[1.0, 1.0], [b, -b], [lam, -lam]])
 
     def external_force(self) -> np.ndarray:
-        """(2,) constant generalised force: gravity and suspension preload."""
-        return np.array([-self.mass * self.gravity - 2.0 * self.preload, 0.0])
+        """(3,) constant generalised force: gravity and suspension preload."""
+        return np.array([-self.mass * self.gravity - 2.0 * self.preload, 0.0, 0.0])
 
     def static_wheel_loads(self) -> np.ndarray:
         """(2,) wheel loads on a rigid, level rail [N]."""
@@ -113,7 +137,7 @@ class SuspendedWheelset:
         Parameters
         ----------
         y, y_dot
-            (..., 2) displacements and velocities.
+            (..., n_dof) displacements and velocities.
 
         Returns
         -------
@@ -151,7 +175,7 @@ def static_equilibrium(
     Returns
     -------
     y
-        (2,) vehicle displacements.
+        (n_dof,) vehicle displacements.
     forces
         (n_wheels,) contact forces (upward on the wheels) [N].
     """

@@ -109,6 +109,7 @@ def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.n
                 d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
                 d_l = g.create_dataset("load_dofs", table.shape, "i8")
                 f.attrs["modes_sha256"] = modes_sha
+                f.attrs["inputs_sha256"] = "static:" + modes_sha
                 f.attrs["complete"] = 0
                 if comm.rank == 0:
                     d_f[...] = flex

@@ -42,11 +42,11 @@ def test_wheelset_passage_writes_mbs_h5_and_plots(modal_dir, tmp_path):
         force = f["wheels/contact_force"][()]
         q = f["modal/q"][()]
         stats = json.loads(f.attrs["stats"])
-        assert f["vehicle/y"].shape == (t.size, 2)
+        assert f["vehicle/y"].shape == (t.size, 3)
         assert f["modal/q_ddot"].shape == q.shape == (t.size, 12)
         assert "static" not in f
-    # entry on the rigid rail at x_start = 1 m, exit when the wheel reaches the rail end
-    assert x[0, 0] == pytest.approx(1.0)
+    # entry on the rigid rail at x_start = 0, exit when the wheel reaches the rail end
+    assert x[0, 0] == pytest.approx(0.0)
     assert x[-1, 0] == pytest.approx(27.6, abs=30.0 * stats["dt"])
     # the wheelset's weight alone: 1568 kg * 9.81 / 2 = 7691 N per wheel (less 0.5 N: the
     # suspension springs, 25 kN/m, stretch by the 20 um Hertz penetration)

@@ -66,13 +66,13 @@ def _kicked(dt: float, kick: float) -> tuple:
 
     Returns the result and the maximum energy error relative to the kick energy.
     """
-    veh = SuspendedWheelset(c_suspension=0.0)
+    veh = SuspendedWheelset(c_suspension=0.0, c_lateral=0.0)
     rest = simulate_wheelset(OMEGA, 0.0, RAILS, veh, 0.37 * L, 0.0, dt, dt=dt)
-    state = (rest.q[0], rest.q_dot[0], rest.y[0], np.array([kick, kick]))
+    state = (rest.q[0], rest.q_dot[0], rest.y[0], np.array([kick, kick, kick]))
     res = simulate_wheelset(OMEGA, 0.0, RAILS, veh, 0.37 * L, 0.0, 0.1, dt=dt,
                             initial_state=state)
     energy = coupled_energy(res, OMEGA, veh)
-    e_kick = 0.5 * (veh.mass + veh.roll_inertia) * kick**2
+    e_kick = 0.5 * (2.0 * veh.mass + veh.roll_inertia) * kick**2
     return res, np.abs(energy - energy[0]).max() / e_kick
 
 
@@ -145,7 +145,7 @@ def _damped_kick(contact_damping: float) -> np.ndarray:
     veh = SuspendedWheelset(contact_damping=contact_damping)
     dt = 1e-5
     rest = simulate_wheelset(OMEGA, 0.0, RAILS, veh, 0.37 * L, 0.0, dt, dt=dt)
-    state = (rest.q[0], rest.q_dot[0], rest.y[0], np.array([0.005, 0.0]))
+    state = (rest.q[0], rest.q_dot[0], rest.y[0], np.array([0.005, 0.0, 0.0]))
     res = simulate_wheelset(OMEGA, 0.0, RAILS, veh, 0.37 * L, 0.0, 0.05, dt=dt,
                             initial_state=state)
     return coupled_energy(res, OMEGA, veh) / (0.5 * veh.mass * 0.005**2)
@@ -160,3 +160,33 @@ def test_contact_and_suspension_damping_dissipate():
     assert np.diff(e_both).max() < 1e-6
     assert e_susp[-1] < e_susp[0] - 0.01
     assert e_both[-1] < e_susp[-1] - 0.05
+
+
+def test_coned_wheels_couple_lateral_motion_and_rail_lateral_modes():
+    """Conicity: an uneven rail pair rolls and shifts the wheelset; statics balance exactly.
+
+    Rail 0 carries an extra 0.1 mm height: the wheel loads differ, the normal
+    forces push the wheelset sideways by lambda (F0 - F1), held by the lateral spring.
+    The lateral rows of the rails enter along the inclined normal.
+    """
+    from railvib_hpc.mbs.coupling import contact_normal_rail
+
+    veh = SuspendedWheelset(conicity=0.05)
+    lam = veh.conicity
+    # lateral rail modes: same shapes as the vertical ones (a test case), normal = w +- lam v
+    r0 = contact_normal_rail(RAILS[0], RAILS[0].phi_w, RAILS[0].phi_r, +lam)
+    r1 = contact_normal_rail(RAILS[1], RAILS[1].phi_w, RAILS[1].phi_r, -lam)
+    np.testing.assert_allclose(r0.phi_w, (1 + lam) * RAILS[0].phi_w)
+    np.testing.assert_allclose(r1.phi_r, (1 + lam) * RAILS[1].phi_r)  # phi_ry - a phi_rz
+    res = simulate_wheelset(OMEGA, 0.03, (r0, r1), veh, 0.4 * L, 0.0, 1e-3, dt=1e-5,
+                            irregularity=lambda x: np.array([1e-4, 0.0]))
+    z, roll, y = res.y[0]
+    f0, f1 = res.contact_force[0]
+    b, s = 0.5 * veh.contact_span, 0.5 * veh.suspension_span
+    assert abs(y) > 1e-9 and abs(roll) > 1e-7
+    assert veh.k_lateral * y == pytest.approx(lam * (f0 - f1), rel=1e-8)
+    assert 2 * veh.k_suspension * s * s * roll == pytest.approx(b * (f0 - f1), rel=1e-8)
+    assert 2 * veh.k_suspension * z + veh.mass * veh.gravity == pytest.approx(f0 + f1,
+                                                                              rel=1e-10)
+    # static: nothing moves afterwards
+    np.testing.assert_allclose(res.y[-1], res.y[0], rtol=1e-9, atol=1e-15)

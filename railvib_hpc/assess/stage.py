@@ -1,0 +1,219 @@
+"""The ``assess`` stage: probe histories -> standards, wave arrivals, thesis comparison, report.
+
+Runs on rank 0 (numpy); every rank gets the summary or the error. Reads
+``probes.h5`` (written by ``railvib reconstruct``) and ``mbs.h5`` (contact
+forces for the report), evaluates every probe against the standards of
+``[assessment]`` and writes ``assessment.json`` plus the report
+(``report.md``, ``report.html``, ``report.json``, ``figures/*.png``).
+
+DIN 4150-3 location per probe: names with ``slab`` are floors (vertical
+floor-slab limit), everything else is assessed as a foundation (footing,
+basement wall, ground points).
+
+Wave arrivals: the load enters the soil when the first wheel reaches the
+flexible rail (``t_entry``); at a probe at distance ``r`` from that point the
+P and S waves arrive at ``t_entry + r / c_P`` and ``t_entry + r / c_S`` (wave
+speeds of the subgrade). The detected arrival is the first time after
+``t_entry`` at which the acceleration magnitude exceeds
+``assessment.wave_threshold`` times its peak; it is compared with both. A
+truncated modal basis is not causal (each mode responds everywhere at once),
+so the detected onset can precede the analytic arrival: the comparison shows
+how well the modes represent wave propagation.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..config import Case
+from ..errors import UserError
+from ..io.atomic import write_text_atomic
+from ..log import Reporter
+from ..parallel import on_root
+
+#: What the thesis reports (../shared/reference/benchmarks.md section 2).
+THESIS = {
+    "slab1_vertical_acceleration": 0.060,
+    "slab2_vertical_acceleration": 0.045,
+    "floor1_total_acceleration": 0.041,
+    "floor2_total_acceleration": 0.052,
+    "building_max_longitudinal_displacement": 0.528e-5,
+    "building_max_transverse_displacement": 0.283e-5,
+    "p_wave_arrival_basement_wall": 0.16,
+    "s_wave_arrival_basement_wall": 0.20,
+}
+
+
+class AssessStageError(UserError):
+    """Missing or inconsistent inputs of the assessment."""
+
+
+def wave_speeds(case: Case) -> tuple[float, float]:
+    """P- and S-wave speeds of the subgrade [m/s]."""
+    e, nu, rho = (case[f"materials.subgrade.{k}"] for k in ("E", "nu", "rho"))
+    c_p = math.sqrt(e * (1 - nu) / (rho * (1 + nu) * (1 - 2 * nu)))
+    c_s = math.sqrt(e / (2 * rho * (1 + nu)))
+    return c_p, c_s
+
+
+def wave_arrival(t: np.ndarray, acceleration: np.ndarray, t_entry: float,
+                 threshold: float) -> float:
+    """First time after ``t_entry`` with ``|a| >= threshold * peak`` (NaN: never)."""
+    mag = np.linalg.norm(acceleration, axis=1)
+    after = t >= t_entry
+    if not after.any():
+        return float("nan")
+    peak = mag[after].max()
+    if peak <= 0.0:
+        return float("nan")
+    idx = np.flatnonzero(after & (mag >= threshold * peak))
+    return float(t[idx[0]]) if idx.size else float("nan")
+
+
+def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Probe histories from ``probes.h5`` (layout of :mod:`railvib_hpc.reconstruct.probes`)."""
+    import h5py
+
+    if not path.exists():
+        raise AssessStageError(f"{path} not found: run 'railvib reconstruct' first")
+    out = {}
+    with h5py.File(path, "r") as f:
+        if int(f.attrs.get("complete", 1)) != 1:
+            raise AssessStageError(f"{path} is incomplete: rerun 'railvib reconstruct'")
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["names"][()]]
+        coords = f["coords"][()]
+        for name, xyz in zip(names, coords):
+            g = f[f"probes/{name}"]
+            out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
+                         "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
+                         "coords": np.asarray(xyz, dtype=float)}
+    return out
+
+
+def _contact(mbs_path: Path):
+    import h5py
+
+    if not mbs_path.exists():
+        return None, None
+    with h5py.File(mbs_path, "r") as f:
+        return f["wheels/x"][()], f["wheels/contact_force"][()]
+
+
+def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
+    """Our values of the quantities the thesis reports."""
+    out: dict[str, float | None] = {}
+    for k, level in (("slab1", "1"), ("slab2", "2")):
+        if k in hist:
+            a = hist[k]["acceleration"]
+            out[f"slab{level}_vertical_acceleration"] = float(np.abs(a[:, 2]).max())
+            out[f"floor{level}_total_acceleration"] = float(np.linalg.norm(a, axis=1).max())
+    out.update(_building_displacements(fields_path))
+    return out
+
+
+def _building_displacements(fields_path: Path) -> dict:
+    """Max |ux| and |uy| over the building nodes in fields.h5 (streamed over time)."""
+    import h5py
+
+    from ..schema import BUILDING_PARTS, PART_ID
+
+    if not fields_path.exists():
+        return {}
+    with h5py.File(fields_path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1:
+            return {}
+        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
+        ids = [PART_ID[p] for p in BUILDING_PARTS]
+        nodes = np.unique(hexes[np.isin(part, ids)])
+        d = f["fields/displacement"]
+        ux = uy = 0.0
+        lo, hi = int(nodes.min()), int(nodes.max()) + 1
+        for s0 in range(0, d.shape[0], 64):
+            blk = d[s0:s0 + 64, lo:hi, :][:, nodes - lo, :]
+            ux = max(ux, float(np.abs(blk[..., 0]).max()))
+            uy = max(uy, float(np.abs(blk[..., 1]).max()))
+    return {"building_max_longitudinal_displacement": ux,
+            "building_max_transverse_displacement": uy}
+
+
+def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
+    """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary."""
+    from .report import write_report
+    from .standards import assess_probe, format_table
+
+    rep = rep or Reporter(0)
+    hist = read_probes(out_dir / "probes.h5")
+    a = case["assessment"]
+    results = {}
+    for name, h in hist.items():
+        location = "floor" if "slab" in name else "foundation"
+        results[name] = assess_probe(
+            h["t"], h["acceleration"], h["velocity"], a["standards"],
+            building_use=a["building_use"], period=a["period"], fta_events=a["fta_events"],
+            din4150_3_location=location,
+            din4150_2_events=a["din4150_2_events"] or None)
+    # wave arrivals relative to the first wheel entering the flexible rail
+    c_p, c_s = wave_speeds(case)
+    x_entry = case["geometry.x1"]
+    t_entry = (x_entry - case["vehicle.x_start"]) / case["vehicle.speed"]
+    y_rail = -0.5 * case["track.gauge"]
+    arrivals = {}
+    for name, h in hist.items():
+        r = float(np.linalg.norm(h["coords"] - np.array([x_entry, y_rail,
+                                                          case["geometry.z4"]])))
+        t_det = wave_arrival(h["t"], h["acceleration"], t_entry, a["wave_threshold"])
+        arrivals[name] = {"distance": r, "t_entry": t_entry, "detected": t_det,
+                          "after_entry": t_det - t_entry,
+                          "p_analytic": r / c_p, "s_analytic": r / c_s,
+                          "apparent_speed": r / (t_det - t_entry) if t_det > t_entry else None}
+    ours = _thesis_comparison(hist, out_dir / "fields.h5")
+    comparison = {k: {"thesis": v, "railvib": ours.get(k)} for k, v in THESIS.items()
+                  if not k.endswith("arrival_basement_wall")}
+    if "basement_wall" in arrivals:
+        w = arrivals["basement_wall"]
+        comparison["p_wave_arrival_basement_wall"] = {
+            "thesis": THESIS["p_wave_arrival_basement_wall"], "railvib": w["after_entry"],
+            "analytic": w["p_analytic"]}
+        comparison["s_wave_arrival_basement_wall"] = {
+            "thesis": THESIS["s_wave_arrival_basement_wall"], "railvib": None,
+            "analytic": w["s_analytic"]}
+    x, force = _contact(out_dir / "mbs.h5")
+    files = write_report(out_dir, results, hist, None if x is None else (x, force))
+    summary = {"results": results, "wave_speeds": {"c_P": c_p, "c_S": c_s},
+               "wave_arrivals": arrivals, "thesis_comparison": comparison,
+               "verdict": {k: v["passed"] for k, v in results.items()},
+               "report": {k: str(p) for k, p in files.items()}}
+    write_text_atomic(out_dir / "assessment.json", json.dumps(summary, indent=1, default=float))
+    rep.info(format_table(results))
+    rep.info(format_comparison(comparison, arrivals, c_p, c_s))
+    rep.info(f"wrote {out_dir / 'assessment.json'}, {files.get('html')}, {files.get('markdown')}")
+    return summary
+
+
+def format_comparison(comparison: dict, arrivals: dict, c_p: float, c_s: float) -> str:
+    """Printable thesis comparison and wave-arrival table."""
+    lines = ["comparison with the thesis (benchmarks.md section 2):",
+             f"  {'quantity':42s} {'thesis':>12s} {'railvib':>12s}"]
+    for k, v in comparison.items():
+        ours = v.get("railvib")
+        lines.append(f"  {k:42s} {v['thesis']:12.4g} "
+                     + (f"{ours:12.4g}" if ours is not None else f"{'-':>12s}")
+                     + (f"   (analytic {v['analytic']:.3f} s)" if "analytic" in v else ""))
+    lines.append(f"wave arrivals (subgrade c_P = {c_p:.1f} m/s, c_S = {c_s:.1f} m/s; time after "
+                 "the first wheel enters the flexible rail):")
+    lines.append(f"  {'probe':16s} {'r [m]':>7s} {'detected [s]':>13s} {'r/c_P [s]':>10s} "
+                 f"{'r/c_S [s]':>10s}")
+    for name, w in arrivals.items():
+        lines.append(f"  {name:16s} {w['distance']:7.2f} {w['after_entry']:13.4f} "
+                     f"{w['p_analytic']:10.4f} {w['s_analytic']:10.4f}")
+    return "\n".join(lines)
+
+
+def run_assess_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+    """Collective: rank 0 assesses (:func:`assess_case`), every rank gets the summary."""
+    with rep.stage("assess"):
+        return on_root(lambda: assess_case(case, out_dir, rep), comm)

@@ -1,0 +1,614 @@
+"""Parallel reconstruction of nodal fields from modal histories: ``fields.h5`` + ``fields.xdmf``.
+
+The nodal displacement, velocity and acceleration of the whole model follow from the
+modal histories by superposition (thesis chapter 5)::
+
+    U(t) = Phi q(t),   V(t) = Phi q_dot(t),   A(t) = Phi q_ddot(t)
+
+with ``Phi`` the (3 n, m) mass-normalised translational mode shapes of ``modes.h5``.
+Additional bases (a static correction, ``extra``) are appended to ``Phi`` as extra
+columns and their coordinates ``g(t)`` to ``q(t)``: they are treated exactly like extra
+modes.
+
+Parallel layout
+---------------
+Every rank owns a contiguous range of nodes (even split, :func:`node_range`). It reads
+its slice of the first ``m`` mode shapes once (``driver="mpio"``, collective, when
+h5py is MPI-enabled and there is more than one rank; otherwise with the plain driver)
+and keeps it as a C-contiguous (m, 3 n_local) matrix. The selected steps are streamed
+in blocks of ``nb`` steps: for each field one BLAS GEMM
+``q_block (nb, m) @ Phi_local (m, 3 n_local)`` fills a C-contiguous output buffer
+(nb, 3 n_local), which is exactly the hyperslab ``[s0:s0+nb, n0:n1, :]`` of the
+(ns, n, 3) dataset, written collectively. One buffer is reused for the three fields.
+
+Memory per rank: ``Phi_local`` (8 (m + k) 3 n_local bytes, the input, e.g. 3.6 GB for
+300 modes and 500 000 nodes per rank) plus the output buffer, whose step count ``nb``
+is chosen so that it stays below :data:`OUTPUT_BUDGET_BYTES` (512 MB; 12 bytes per value
+with ``float32=True``: a float64 GEMM result plus its float32 copy). One million nodes
+and 1000 steps (72 GB of float64 output in total) therefore need about 7.2 GB of mode
+shapes (300 modes) plus 2 x 0.5 GB of buffers on 2 ranks: feasible in 24 GB. Without an
+MPI-enabled h5py and several ranks, rank 0 receives every block and writes it (its
+receive buffer is bounded by the same budget).
+
+``fields.h5`` layout::
+
+    /time                       (ns,)        times of the stored steps [s]
+    /steps                      (ns,)        indices of the stored steps in the histories
+    /fields/displacement        (ns, n, 3)   [m]      contiguous, float64 (float32 option)
+    /fields/velocity            (ns, n, 3)   [m/s]
+    /fields/acceleration        (ns, n, 3)   [m/s^2]
+    /mesh/points (n, 3), /mesh/hexes (ne, 8) (VTK order), /mesh/hex_part (ne,)
+    attrs: complete, n_modes, n_extra, float32, block_steps, modes_file,
+           modes_inputs_sha256, railvib_version (+ caller's attrs, e.g. inputs_sha256)
+
+The file is written under a hidden temporary name; ``complete`` is set and the file is
+renamed by rank 0 only after every rank finished (a failed or killed run never leaves a
+``fields.h5``). ``fields.xdmf`` (rank 0, after the rename) is a temporal collection with
+one grid per stored step whose node attributes are HyperSlab views of the three
+datasets, with the hexahedra and their part ids: ParaView opens it directly.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..io.atomic import write_text_atomic
+from ..io.modes_io import h5py_parallel_ok
+from ..log import Reporter
+from ..parallel import on_root
+
+#: Upper bound for the per-rank output buffers of one block of steps (bytes).
+OUTPUT_BUDGET_BYTES = 512 * 2**20
+#: Names of the three reconstructed fields, in the order they are computed.
+FIELD_NAMES = ("displacement", "velocity", "acceleration")
+
+#: An extra basis: (h5 file, dataset of shape (k, n, 3), g (nt, k), g_dot, g_ddot).
+ExtraBasis = tuple[str | os.PathLike, str, np.ndarray, np.ndarray, np.ndarray]
+
+
+def node_range(n: int, size: int, rank: int) -> slice:
+    """Contiguous, even split of ``n`` items over ``size`` ranks (first ranks get one more).
+
+    Parameters
+    ----------
+    n
+        Number of items (nodes, hexahedra).
+    size, rank
+        Communicator size and this rank.
+
+    Returns
+    -------
+    slice
+        ``slice(start, stop)`` of the items owned by ``rank``.
+    """
+    base, rest = divmod(n, size)
+    start = rank * base + min(rank, rest)
+    return slice(start, start + base + (1 if rank < rest else 0))
+
+
+def block_steps_for_budget(n_local_values: int, float32: bool,
+                           budget: int = OUTPUT_BUDGET_BYTES) -> int:
+    """Number of steps per block so that the output buffers stay below ``budget`` bytes.
+
+    Parameters
+    ----------
+    n_local_values
+        Values per step on this rank (3 x owned nodes).
+    float32
+        Output stored as float32 (an extra float32 copy of the buffer).
+    budget
+        Memory budget in bytes.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    per_step = max(n_local_values, 1) * (12 if float32 else 8)
+    return max(1, budget // per_step)
+
+
+# --------------------------------------------------------------------------- HDF5 helpers
+def _dxpl(collective: bool):
+    """Dataset transfer property list: collective MPI-IO, or the default."""
+    if not collective:
+        return None
+    from h5py import h5fd, h5p
+
+    dxpl = h5p.create(h5p.DATASET_XFER)
+    dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
+    return dxpl
+
+
+def _selection(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None):
+    """File and memory dataspaces for a hyperslab (an empty selection when ``count`` has a 0)."""
+    from h5py import h5s
+
+    fspace = ds.id.get_space()
+    if buf is None or 0 in tuple(count):
+        fspace.select_none()
+        mspace = h5s.create_simple((1,))
+        mspace.select_none()
+        return fspace, mspace, np.zeros(1, dtype=ds.dtype)
+    fspace.select_hyperslab(tuple(int(s) for s in start), tuple(int(c) for c in count))
+    return fspace, h5s.create_simple(tuple(int(c) for c in count)), buf
+
+
+def write_slab(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None,
+               collective: bool) -> None:
+    """Write ``buf`` (C-contiguous, shape ``count``) to the hyperslab at ``start``.
+
+    Unlike ``ds[...] = buf`` this takes part in a collective write even when this rank's
+    selection is empty (h5py skips empty selections, which would hang the other ranks).
+    """
+    if buf is not None:
+        buf = np.ascontiguousarray(buf)
+    fspace, mspace, data = _selection(ds, start, count, buf)
+    ds.id.write(mspace, fspace, data, dxpl=_dxpl(collective))
+
+
+def read_slab(ds, start: Sequence[int], count: Sequence[int], out: np.ndarray | None,
+              collective: bool) -> None:
+    """Read the hyperslab at ``start`` into ``out`` (C-contiguous, shape ``count``)."""
+    if out is not None and not out.flags.c_contiguous:
+        raise ValueError("read_slab needs a C-contiguous output array")
+    fspace, mspace, data = _selection(ds, start, count, out)
+    ds.id.read(mspace, fspace, data, dxpl=_dxpl(collective))
+
+
+def open_h5(path: str | os.PathLike, mode: str, comm, parallel: bool):
+    """Open an HDF5 file with the mpio driver on ``comm`` (``parallel``) or the plain driver."""
+    import h5py
+
+    if parallel:
+        return h5py.File(path, mode, driver="mpio", comm=comm)
+    return h5py.File(path, mode)
+
+
+def check_collective(comm, error: BaseException | None, what: str) -> None:
+    """Raise on every rank when any rank had an error (call before the next collective)."""
+    if comm.size == 1:
+        if error is not None:
+            raise error
+        return
+    errors = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
+    if error is not None:
+        raise error
+    bad = [(r, e) for r, e in enumerate(errors) if e]
+    if bad:
+        raise RuntimeError(f"{what} failed on rank {bad[0][0]}: {bad[0][1]}")
+
+
+# --------------------------------------------------------------------------- main routine
+def _read_basis(comm, parallel: bool, modes_path: Path, m: int, extra: Sequence[ExtraBasis],
+                nodes: slice, n: int) -> np.ndarray:
+    """This rank's rows of all bases as one C-contiguous (m + sum k, n_local, 3) array."""
+    ks = [np.asarray(e[2]).shape[1] for e in extra]
+    nl = nodes.stop - nodes.start
+    phi = np.empty((m + sum(ks), nl, 3))
+    sources = [(modes_path, "modes/translation", m)] + [(Path(e[0]), e[1], k)
+                                                         for e, k in zip(extra, ks)]
+    row = 0
+    for path, name, rows in sources:
+        with open_h5(path, "r", comm, parallel) as f:
+            if name not in f:
+                raise KeyError(f"{path}: no dataset '{name}'")
+            ds = f[name]
+            if ds.ndim != 3 or ds.shape[1:] != (n, 3) or ds.shape[0] < rows:
+                raise ValueError(f"{path}:{name} has shape {ds.shape}, expected "
+                                 f"(>= {rows}, {n}, 3)")
+            read_slab(ds, (0, nodes.start, 0), (rows, nl, 3),
+                      phi[row:row + rows] if nl and rows else None, parallel)
+        row += rows
+    return phi
+
+
+def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLike, comm,
+                       t: np.ndarray, q: np.ndarray, q_dot: np.ndarray, q_ddot: np.ndarray, *,
+                       steps: Sequence[int] | np.ndarray | None = None, float32: bool = False,
+                       block_steps: int | None = None, extra: Sequence[ExtraBasis] | None = None,
+                       rep: Reporter | None = None, attrs: dict | None = None,
+                       step_numbers: Sequence[int] | np.ndarray | None = None,
+                       before_complete: Callable[[Path], object] | None = None) -> dict:
+    """Write ``fields.h5`` and ``fields.xdmf`` from modal histories (collective).
+
+    Parameters
+    ----------
+    modes_path
+        A complete ``modes.h5``; its first ``m = q.shape[1]`` modes are used.
+    out_path
+        The ``fields.h5`` to write (``fields.xdmf`` goes next to it).
+    comm
+        MPI communicator; every rank calls with the same arguments.
+    t
+        (nt,) times [s].
+    q, q_dot, q_ddot
+        (nt, m) modal displacements, velocities and accelerations.
+    steps
+        Indices of the steps to store (all by default), in the order they are stored.
+    float32
+        Store the fields in single precision (computed in double precision, rounded once).
+    block_steps
+        Steps per block (default: from :data:`OUTPUT_BUDGET_BYTES`).
+    extra
+        Additional bases ``(h5 file, dataset, g, g_dot, g_ddot)``: dataset shape (k, n, 3),
+        ``g`` arrays (nt, k). Added like ``k`` extra modes (static correction).
+    rep
+        Progress reporter (rank 0 prints percent and ETA).
+    attrs
+        Extra root attributes of ``fields.h5`` (e.g. an input digest for reuse).
+    step_numbers
+        Values written to ``/steps`` (default: ``steps``), e.g. indices in a longer
+        history of which ``t``, ``q``, ... are an excerpt.
+    before_complete
+        Collective callback ``fn(temporary_path)`` run on every rank after the fields are
+        written and before the file is marked complete and renamed (e.g. to add
+        ``/stress``): if it raises, no ``fields.h5`` is produced.
+
+    Returns
+    -------
+    dict
+        ``n_nodes``, ``n_steps``, ``n_basis``, ``block_steps``, ``bytes_written``,
+        ``seconds_read`` / ``seconds_gemm`` / ``seconds_write`` (maximum over ranks),
+        ``seconds_total``, ``gemm_gflops`` (all ranks together, over the GEMM time),
+        ``write_gb_per_s`` (bytes written over the write time), ``ranks``, ``parallel_io``.
+
+    Raises
+    ------
+    ValueError
+        Inconsistent history shapes or mode counts (on every rank).
+    OSError, RuntimeError
+        When reading or writing fails on some rank (on every rank); no ``fields.h5`` is
+        left behind.
+    """
+    t_start = time.perf_counter()
+    modes_path, out_path = Path(modes_path), Path(out_path)
+    extra = list(extra or [])
+    t = np.asarray(t, dtype=float)
+    q, q_dot, q_ddot = (np.asarray(a, dtype=float) for a in (q, q_dot, q_ddot))
+    nt = len(t)
+    if q.ndim != 2 or q.shape[0] != nt or q_dot.shape != q.shape or q_ddot.shape != q.shape:
+        raise ValueError(f"modal histories must be (nt, m) = ({nt}, m), got q {q.shape}, "
+                         f"q_dot {q_dot.shape}, q_ddot {q_ddot.shape}")
+    for e in extra:
+        g = [np.asarray(a) for a in e[2:5]]
+        if g[0].ndim != 2 or g[0].shape[0] != nt or any(a.shape != g[0].shape for a in g):
+            raise ValueError(f"extra basis {e[0]}:{e[1]}: g, g_dot, g_ddot must be (nt, k) "
+                             f"with nt = {nt}, got {[a.shape for a in g]}")
+    steps = np.arange(nt) if steps is None else np.asarray(steps, dtype=np.int64)
+    if steps.ndim != 1 or len(steps) == 0 or steps.min() < 0 or steps.max() >= nt:
+        raise ValueError(f"steps must be a non-empty list of indices in [0, {nt})")
+    m, ns = q.shape[1], len(steps)
+    # coefficient histories of all bases, restricted to the stored steps (small: ns x M)
+    hist = [np.ascontiguousarray(np.hstack([a[steps]] + [np.asarray(e[2 + i], float)[steps]
+                                                         for e in extra]))
+            for i, a in enumerate((q, q_dot, q_ddot))]
+    parallel = h5py_parallel_ok(comm)
+
+    # ---- read this rank's slice of the mode shapes (and the extra bases)
+    t0 = time.perf_counter()
+
+    def shapes():
+        import h5py
+
+        with h5py.File(modes_path, "r") as f:
+            d = f["modes/translation"]
+            return (int(f.attrs.get("complete", 0)), d.shape, f["mesh/hexes"].shape,
+                    f["mesh/hexes"].dtype.str, f["mesh/hex_part"].dtype.str,
+                    str(f.attrs.get("inputs_sha256", "")))
+
+    complete, tshape, hshape, hdtype, pdtype, modes_key = on_root(shapes, comm)
+    if complete != 1:                       # the same decision on every rank
+        raise ValueError(f"{modes_path} is not a complete modes file")
+    n = tshape[1]
+    if m > tshape[0]:
+        raise ValueError(f"q has {m} modal coordinates but {modes_path} holds only "
+                         f"{tshape[0]} modes")
+    nodes = node_range(n, comm.size, comm.rank)
+    nl = nodes.stop - nodes.start
+    error = None
+    phi = None
+    try:
+        phi = _read_basis(comm, parallel, modes_path, m, extra, nodes, n)
+    except Exception as exc:       # re-raised on every rank below
+        error = exc
+    check_collective(comm, error, f"reading the mode shapes of {modes_path}")
+    phi2 = phi.reshape(phi.shape[0], 3 * nl)
+    n_basis = phi.shape[0]
+    t_read = time.perf_counter() - t0
+
+    # ---- blocks of steps
+    nb = int(block_steps) if block_steps else block_steps_for_budget(3 * nl, float32)
+    nb = comm.allreduce(nb, op=_mpi_min()) if comm.size > 1 else nb
+    nb = max(1, min(nb, ns))
+    dtype = np.float32 if float32 else np.float64
+    buf = np.empty((nb, 3 * nl))
+    buf32 = np.empty((nb, 3 * nl), dtype=np.float32) if float32 else None
+    gather = comm.size > 1 and not parallel
+    writes = parallel or comm.rank == 0
+
+    tmp = Path(comm.bcast(str(out_path.with_name(f".{out_path.name}.part-{os.getpid()}"))
+                          if comm.rank == 0 else None, root=0))
+    if comm.rank == 0:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+    stats = {"t_gemm": 0.0, "t_write": 0.0}
+    f = None
+    try:
+        try:
+            error = None
+            try:
+                dsets: dict = {}
+                if writes:
+                    f = open_h5(tmp, "w", comm, parallel)
+                    dsets = _create(f, ns, n, hshape, hdtype, pdtype, dtype)
+                    _set_attrs(f, m, n_basis - m, float32, nb, modes_path, modes_key, attrs)
+                if comm.rank == 0:
+                    _copy_mesh(modes_path, dsets, t[steps],
+                               steps if step_numbers is None else np.asarray(step_numbers))
+            except Exception as exc:   # re-raised on every rank
+                error = exc
+            check_collective(comm, error, f"creating {tmp}")
+            _stream(comm, dsets, hist, phi2, buf, buf32, nb, ns, nodes, parallel, gather,
+                    stats, rep)
+        finally:
+            if f is not None:
+                f.close()
+        if before_complete is not None:
+            before_complete(tmp)
+    except BaseException:
+        if comm.rank == 0 and tmp.exists():
+            tmp.unlink()
+        raise
+
+    def finish():
+        import h5py
+
+        try:
+            with h5py.File(tmp, "a") as f:
+                f.attrs["complete"] = 1
+            os.replace(tmp, out_path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+        write_text_atomic(out_path.with_suffix(".xdmf"),
+                          fields_xdmf(out_path.name, n, hshape[0], t[steps], float32,
+                                      hdtype, pdtype))
+
+    on_root(finish, comm)
+    t_gemm = comm.allreduce(stats["t_gemm"], op=_mpi_max()) if comm.size > 1 else stats["t_gemm"]
+    t_write = comm.allreduce(stats["t_write"], op=_mpi_max()) if comm.size > 1 \
+        else stats["t_write"]
+    t_read = comm.allreduce(t_read, op=_mpi_max()) if comm.size > 1 else t_read
+    t_total = time.perf_counter() - t_start
+    t_total = comm.allreduce(t_total, op=_mpi_max()) if comm.size > 1 else t_total
+    nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
+    flops = 2.0 * n_basis * 3 * n * ns * 3
+    return {"n_nodes": n, "n_steps": ns, "n_basis": n_basis, "n_modes": m,
+            "n_extra": n_basis - m, "block_steps": nb, "bytes_written": nbytes,
+            "seconds_read": t_read, "seconds_gemm": t_gemm, "seconds_write": t_write,
+            "seconds_total": t_total,
+            "gemm_gflops": flops / t_gemm / 1e9 if t_gemm > 0 else float("nan"),
+            "write_gb_per_s": nbytes / t_write / 1e9 if t_write > 0 else float("nan"),
+            "ranks": comm.size, "parallel_io": parallel, "float32": bool(float32)}
+
+
+def _mpi_min():
+    from mpi4py import MPI
+
+    return MPI.MIN
+
+
+def _mpi_max():
+    from mpi4py import MPI
+
+    return MPI.MAX
+
+
+def _create(f, ns: int, n: int, hshape, hdtype: str, pdtype: str, dtype) -> dict:
+    """Create every dataset at its global size (collective: identical on all ranks)."""
+    out = {"time": f.create_dataset("time", (ns,), "f8"),
+           "steps": f.create_dataset("steps", (ns,), "i8")}
+    g = f.create_group("fields")
+    for name in FIELD_NAMES:
+        out[name] = g.create_dataset(name, (ns, n, 3), dtype)     # contiguous layout
+    gm = f.create_group("mesh")
+    out["points"] = gm.create_dataset("points", (n, 3), "f8")
+    out["hexes"] = gm.create_dataset("hexes", tuple(hshape), np.dtype(hdtype))
+    out["hex_part"] = gm.create_dataset("hex_part", (hshape[0],), np.dtype(pdtype))
+    return out
+
+
+def _set_attrs(f, m: int, k: int, float32: bool, nb: int, modes_path: Path, modes_key: str,
+               attrs: dict | None) -> None:
+    f.attrs["complete"] = 0
+    f.attrs["n_modes"] = m
+    f.attrs["n_extra"] = k
+    f.attrs["float32"] = int(bool(float32))
+    f.attrs["block_steps"] = nb
+    f.attrs["modes_file"] = modes_path.name
+    f.attrs["modes_inputs_sha256"] = modes_key
+    f.attrs["railvib_version"] = __version__
+    for key, value in (attrs or {}).items():
+        f.attrs[key] = value
+
+
+def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarray) -> None:
+    """Rank 0: copy the mesh arrays from ``modes.h5`` and write the times."""
+    import h5py
+
+    with h5py.File(modes_path, "r") as src:
+        for key in ("points", "hexes", "hex_part"):
+            if dsets[key].size:
+                dsets[key][...] = src["mesh/" + key][()]
+    dsets["time"][...] = times
+    dsets["steps"][...] = steps
+
+
+def _stream(comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
+            buf32: np.ndarray | None, nb: int, ns: int, nodes: slice, parallel: bool,
+            gather: bool, stats: dict, rep: Reporter | None) -> None:
+    """GEMM + collective write of every block of steps and every field.
+
+    Errors are checked on all ranks after every GEMM and every write, so that a failure
+    on one rank makes every rank raise instead of waiting in the next collective call.
+    """
+    nl = nodes.stop - nodes.start
+    t_first = time.perf_counter()
+    last = -1e9
+    ranges = comm.allgather((nodes.start, nodes.stop)) if gather else None
+    for s0 in range(0, ns, nb):
+        s1 = min(ns, s0 + nb)
+        b = s1 - s0
+        for name, h in zip(FIELD_NAMES, hist):
+            error = None
+            t0 = time.perf_counter()
+            out = buf[:b]
+            try:
+                _gemm(h[s0:s1], phi2, out)
+                if buf32 is not None:
+                    np.copyto(buf32[:b], out, casting="same_kind")
+                    out = buf32[:b]
+            except Exception as exc:   # checked collectively
+                error = exc
+            stats["t_gemm"] += time.perf_counter() - t0
+            check_collective(comm, error, f"computing the {name} field")
+            t0 = time.perf_counter()
+            try:
+                block = out.reshape(b, nl, 3)
+                if gather:
+                    _gather_write(comm, dsets.get(name), block, s0, b, ranges)
+                else:
+                    write_slab(dsets[name], (s0, nodes.start, 0), (b, nl, 3), block, parallel)
+            except Exception as exc:   # checked collectively
+                error = exc
+            stats["t_write"] += time.perf_counter() - t0
+            check_collective(comm, error, f"writing the {name} field")
+        now = time.perf_counter()
+        if rep is not None and (now - last > 2.0 or s1 == ns):
+            last = now
+            rep.progress(f"fields: {s1}/{ns} steps", s1, ns, t_first)
+
+
+def _gemm(q_block: np.ndarray, phi2: np.ndarray, out: np.ndarray) -> None:
+    """``out = q_block @ phi2`` (BLAS GEMM on C-contiguous arrays, no temporary)."""
+    np.matmul(q_block, phi2, out=out)
+
+
+def _gather_write(comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
+    """Without parallel HDF5: rank 0 receives every rank's block and writes it.
+
+    Rank 0 keeps receiving after a failed write (the error is raised afterwards), so the
+    other ranks never wait forever in ``Send``.
+    """
+    if comm.rank != 0:
+        comm.Send(np.ascontiguousarray(block), dest=0, tag=77)
+        return
+    error = None
+    for r in range(comm.size):
+        a, z = ranges[r]
+        if r == 0:
+            data = block
+        else:
+            data = np.empty((b, z - a, 3), dtype=block.dtype)
+            comm.Recv(data, source=r, tag=77)
+        if z > a and error is None:
+            try:
+                ds[s0:s0 + b, a:z, :] = data
+            except Exception as exc:   # raised once everything is received
+                error = exc
+    if error is not None:
+        raise error
+
+
+# --------------------------------------------------------------------------- XDMF
+def _precision(dtype: str) -> tuple[str, int]:
+    dt = np.dtype(dtype)
+    return ("Float" if dt.kind == "f" else "Int"), dt.itemsize
+
+
+def mesh_xdmf_items(h5_name: str, n: int, ne: int, hex_dtype: str = "<i8",
+                    part_dtype: str = "<i4") -> tuple[str, str, str]:
+    """Topology, geometry and ``part_id`` cell attribute of the hexahedra (XDMF snippets)."""
+    _, hp = _precision(hex_dtype)
+    _, pp = _precision(part_dtype)
+    topo = (f'<Topology TopologyType="Hexahedron" NumberOfElements="{ne}"><DataItem '
+            f'Dimensions="{ne} 8" NumberType="Int" Precision="{hp}" Format="HDF">{h5_name}:'
+            f'/mesh/hexes</DataItem></Topology>')
+    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
+           f'Precision="8" Format="HDF">{h5_name}:/mesh/points</DataItem></Geometry>')
+    part = (f'<Attribute Name="part_id" AttributeType="Scalar" Center="Cell"><DataItem '
+            f'Dimensions="{ne}" NumberType="Int" Precision="{pp}" Format="HDF">{h5_name}:'
+            f'/mesh/hex_part</DataItem></Attribute>')
+    return topo, geo, part
+
+
+def hyperslab_item(h5_name: str, dataset: str, k: int, shape: tuple[int, ...],
+                   precision: int) -> str:
+    """XDMF HyperSlab DataItem selecting row ``k`` of a (ns, ...) HDF5 dataset."""
+    rest = shape[1:]
+    nd = len(shape)
+    start = " ".join([str(k)] + ["0"] * (nd - 1))
+    stride = " ".join(["1"] * nd)
+    count = " ".join(["1"] + [str(d) for d in rest])
+    dims = " ".join(str(d) for d in rest)
+    full = " ".join(str(d) for d in shape)
+    return (f'<DataItem ItemType="HyperSlab" Dimensions="{dims}" Type="HyperSlab">'
+            f'<DataItem Dimensions="3 {nd}" Format="XML">{start} {stride} {count}</DataItem>'
+            f'<DataItem Dimensions="{full}" NumberType="Float" Precision="{precision}" '
+            f'Format="HDF">{h5_name}:{dataset}</DataItem></DataItem>')
+
+
+def temporal_xdmf(name: str, grids: list[str]) -> str:
+    """Wrap uniform grids in an XDMF 3 temporal collection."""
+    body = "\n".join(grids)
+    return f"""<?xml version="1.0" ?>
+<Xdmf Version="3.0">
+  <Domain>
+    <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">
+{body}
+    </Grid>
+  </Domain>
+</Xdmf>
+"""
+
+
+def fields_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, float32: bool = False,
+                hex_dtype: str = "<i8", part_dtype: str = "<i4") -> str:
+    """XDMF temporal collection of ``fields.h5``: one grid per stored step.
+
+    Parameters
+    ----------
+    h5_name
+        File name of ``fields.h5`` as referenced from the XDMF file (same folder).
+    n, ne
+        Number of nodes and hexahedra.
+    times
+        (ns,) stored times.
+    float32
+        The field datasets are single precision.
+    hex_dtype, part_dtype
+        dtypes of ``/mesh/hexes`` and ``/mesh/hex_part``.
+    """
+    topo, geo, part = mesh_xdmf_items(h5_name, n, ne, hex_dtype, part_dtype)
+    ns = len(times)
+    prec = 4 if float32 else 8
+    grids = []
+    for k, tk in enumerate(times):
+        attrs = "\n".join(
+            f'        <Attribute Name="{name}" AttributeType="Vector" Center="Node">'
+            f'{hyperslab_item(h5_name, "/fields/" + name, k, (ns, n, 3), prec)}</Attribute>'
+            for name in FIELD_NAMES)
+        grids.append(f"""      <Grid Name="step_{k}" GridType="Uniform">
+        <Time Value="{float(tk)!r}"/>
+        {topo}
+        {geo}
+        {part}
+{attrs}
+      </Grid>""")
+    return temporal_xdmf("fields", grids)

@@ -1,0 +1,325 @@
+"""Probe histories straight from the modal basis (exact and cheap; rank 0, serial).
+
+Each probe point is located in the hexahedral mesh (:func:`railvib_hpc.mesh.search.locate`:
+containing element and reference coordinates ``xi``), the mode shapes of the element's 8
+nodes are interpolated with the trilinear shape functions to ``phi_probe`` (m, 3), and the
+histories follow as ``u(t) = q(t) @ phi_probe`` (likewise velocity and acceleration). This
+is exactly the interpolation of the reconstructed nodal field at that point (the
+superposition and the interpolation are both linear), at a cost of O(m) per step instead
+of O(m n).
+
+Probes are the named points of ``/mesh/probes`` in ``modes.h5`` plus user coordinates.
+Extra bases (static correction) are interpolated the same way and added like modes.
+
+Outputs
+-------
+``probes.h5`` (:func:`write_probes_h5`)::
+
+    /names (p,) S64, /coords (p, 3)          probe names and coordinates [m]
+    /probes/<name>/time (nt,)                [s]
+    /probes/<name>/displacement (nt, 3)      [m]      ux uy uz
+    /probes/<name>/velocity (nt, 3)          [m/s]
+    /probes/<name>/acceleration (nt, 3)      [m/s^2]
+        attrs: coords, element (containing hex), xi (reference coordinates)
+    /<group>/<dataset>                       optional extra groups (e.g. /rail)
+    attrs: complete = 1, plus the caller's attrs
+
+``probes/<name>.csv`` (:func:`write_probes_csv`): one file per probe, a header line
+``t,ux,uy,uz,vx,vy,vz,ax,ay,az`` (SI units: s, m, m/s, m/s^2) and one row per step.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import re
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import UserError
+from ..io.atomic import atomic_path, write_text_atomic
+from ..mesh.model import Mesh
+from ..mesh.search import hex_shape_values, locate
+from .fields import ExtraBasis
+
+#: Column names of the probe CSV files.
+CSV_HEADER = "t,ux,uy,uz,vx,vy,vz,ax,ay,az"
+
+#: User probes: ``{name: (x, y, z)}`` or a sequence of ``(x, y, z)`` (named ``user_1``, ...).
+UserProbes = Mapping[str, Sequence[float]] | Sequence[Sequence[float]]
+
+class ProbeError(UserError):
+    """A probe point that cannot be used (outside the meshed solids, bad coordinates)."""
+
+
+def _search_mesh(f) -> Mesh:
+    """The hexahedra of an open ``modes.h5`` as a :class:`Mesh` for point location."""
+    return Mesh(points=f["mesh/points"][()], hexes=f["mesh/hexes"][()],
+                hex_part=f["mesh/hex_part"][()], lines=np.zeros((0, 2), np.int64),
+                line_part=np.zeros(0, np.int32))
+
+
+def mesh_probes(modes_path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The named probe points stored in ``/mesh/probes`` of ``modes.h5`` (name -> (3,))."""
+    import h5py
+
+    with h5py.File(modes_path, "r") as f:
+        if "mesh/probes/names" not in f:
+            return {}
+        names = [n.decode() if isinstance(n, bytes) else str(n)
+                 for n in f["mesh/probes/names"][()]]
+        coords = f["mesh/probes/coords"][()].reshape(-1, 3)
+    return dict(zip(names, coords))
+
+
+def user_probe_dict(user_probes: UserProbes) -> dict[str, np.ndarray]:
+    """Normalise user probes to ``{name: (3,)}`` (unnamed ones become ``user_1``, ...)."""
+    if isinstance(user_probes, Mapping):
+        items = list(user_probes.items())
+    else:
+        items = [(f"user_{i + 1}", c) for i, c in enumerate(user_probes)]
+    out = {}
+    for name, c in items:
+        xyz = np.asarray(c, dtype=float).reshape(-1)
+        if xyz.shape != (3,) or not np.all(np.isfinite(xyz)):
+            raise ProbeError(f"probe '{name}': coordinates must be three finite numbers, "
+                             f"got {c!r}")
+        out[str(name)] = xyz
+    return out
+
+
+def locate_probes(modes_path: str | os.PathLike, coords: np.ndarray,
+                  names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Containing hexahedron and reference coordinates of each probe.
+
+    Parameters
+    ----------
+    modes_path
+        ``modes.h5`` (its ``/mesh``).
+    coords
+        (p, 3) probe coordinates [m].
+    names
+        Probe names for error messages.
+
+    Returns
+    -------
+    elem : ndarray (p,)
+    xi : ndarray (p, 3)
+
+    Raises
+    ------
+    ProbeError
+        When a point lies outside every hexahedron.
+    """
+    import h5py
+
+    coords = np.asarray(coords, dtype=float).reshape(-1, 3)
+    with h5py.File(modes_path, "r") as f:
+        mesh = _search_mesh(f)
+    if len(coords) == 0:
+        return np.zeros(0, np.int64), np.zeros((0, 3))
+    elem, xi = locate(coords, mesh)
+    bad = np.flatnonzero(elem < 0)
+    if bad.size:
+        names = list(names) if names is not None else [f"#{i}" for i in range(len(coords))]
+        where = ", ".join(f"'{names[i]}' at {tuple(float(v) for v in coords[i])}" for i in bad)
+        raise ProbeError(f"probe point(s) outside the hexahedral mesh of {modes_path}: {where}")
+    return elem, np.clip(xi, -1.0, 1.0)
+
+
+def interpolate_basis(path: str | os.PathLike, dataset: str, conn: np.ndarray,
+                      weights: np.ndarray, rows: int) -> np.ndarray:
+    """Interpolate the first ``rows`` shapes of a (r, n, 3) dataset at probe points.
+
+    Parameters
+    ----------
+    path, dataset
+        HDF5 file and dataset, e.g. ``modes.h5`` and ``modes/translation``.
+    conn
+        (p, 8) nodes of each probe's element.
+    weights
+        (p, 8) shape-function values at each probe.
+    rows
+        Number of leading shapes (modes) to use.
+
+    Returns
+    -------
+    ndarray, shape (p, rows, 3)
+    """
+    import h5py
+
+    nodes, inverse = np.unique(conn, return_inverse=True)   # h5py wants increasing indices
+    with h5py.File(path, "r") as f:
+        ds = f[dataset]
+        if ds.ndim != 3 or ds.shape[2] != 3 or ds.shape[0] < rows:
+            raise ValueError(f"{path}:{dataset} has shape {ds.shape}, need ({rows}+, n, 3)")
+        vals = ds[:rows, nodes, :] if len(nodes) else np.zeros((rows, 0, 3))
+    local = vals[:, inverse.reshape(conn.shape), :]            # (rows, p, 8, 3)
+    return np.einsum("rpai,pa->pri", local, weights)
+
+
+def probe_modes(modes_path: str | os.PathLike, coords: np.ndarray, m: int,
+                names: Sequence[str] | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mode shapes interpolated at probe points (rank 0, serial).
+
+    Parameters
+    ----------
+    modes_path
+        A complete ``modes.h5``.
+    coords
+        (p, 3) probe coordinates.
+    m
+        Number of leading modes.
+    names
+        Probe names (error messages).
+
+    Returns
+    -------
+    phi : ndarray, shape (p, m, 3)
+        ``phi[i]`` maps modal coordinates to the displacement of probe ``i``:
+        ``u_i(t) = q(t) @ phi[i]``.
+    elem : ndarray, shape (p,)
+        Containing hexahedra.
+    xi : ndarray, shape (p, 3)
+        Reference coordinates in them.
+    """
+    elem, xi = locate_probes(modes_path, coords, names)
+    import h5py
+
+    with h5py.File(modes_path, "r") as f:
+        conn = f["mesh/hexes"][()][elem] if len(elem) else np.zeros((0, 8), np.int64)
+    phi = interpolate_basis(modes_path, "modes/translation", conn, hex_shape_values(xi), m)
+    return phi, elem, xi
+
+
+def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
+                    q_dot: np.ndarray, q_ddot: np.ndarray, *, user_probes: UserProbes = (),
+                    mesh: bool = True, extra: Sequence[ExtraBasis] | None = None
+                    ) -> dict[str, dict[str, np.ndarray]]:
+    """Displacement, velocity and acceleration histories at the probe points.
+
+    Parameters
+    ----------
+    modes_path
+        A complete ``modes.h5``; the first ``m = q.shape[1]`` modes are used.
+    t
+        (nt,) times.
+    q, q_dot, q_ddot
+        (nt, m) modal histories.
+    user_probes
+        Extra probe points, ``{name: xyz}`` or a list of ``xyz``.
+    mesh
+        Include the named probes of ``/mesh/probes``.
+    extra
+        Additional bases ``(h5 file, dataset, g, g_dot, g_ddot)`` added like extra modes.
+
+    Returns
+    -------
+    dict
+        ``name -> {"t", "displacement", "velocity", "acceleration", "coords", "element",
+        "xi"}`` with (nt, 3) histories.
+    """
+    import h5py
+
+    probes = mesh_probes(modes_path) if mesh else {}
+    for name, xyz in user_probe_dict(user_probes).items():
+        if name in probes:
+            raise ProbeError(f"user probe '{name}' has the name of a probe of the mesh")
+        probes[name] = xyz
+    names = list(probes)
+    if not names:
+        return {}
+    coords = np.array([probes[k] for k in names])
+    t = np.asarray(t, dtype=float)
+    hist = [np.asarray(a, dtype=float) for a in (q, q_dot, q_ddot)]
+    m = hist[0].shape[1]
+    elem, xi = locate_probes(modes_path, coords, names)
+    with h5py.File(modes_path, "r") as f:
+        conn = f["mesh/hexes"][()][elem]
+    weights = hex_shape_values(xi)
+    phi = [interpolate_basis(modes_path, "modes/translation", conn, weights, m)]
+    for e in extra or []:
+        g = [np.asarray(a, dtype=float) for a in e[2:5]]
+        phi.append(interpolate_basis(e[0], e[1], conn, weights, g[0].shape[1]))
+        hist = [np.hstack([h, gi]) for h, gi in zip(hist, g)]
+    basis = np.concatenate(phi, axis=1)                           # (p, M, 3)
+    out = {}
+    for i, name in enumerate(names):
+        u, v, a = (h @ basis[i] for h in hist)
+        out[name] = {"t": t, "displacement": u, "velocity": v, "acceleration": a,
+                     "coords": coords[i], "element": np.int64(elem[i]), "xi": xi[i]}
+    return out
+
+
+def _file_name(name: str) -> str:
+    """A safe file / group name for a probe."""
+    return re.sub(r"[^A-Za-z0-9_.+-]", "_", name) or "probe"
+
+
+def write_probes_csv(directory: str | os.PathLike, histories: Mapping[str, Mapping]
+                     ) -> list[Path]:
+    """One CSV per probe (header ``t,ux,uy,uz,vx,vy,vz,ax,ay,az``), each written atomically.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, h in histories.items():
+        table = np.column_stack([h["t"], h["displacement"], h["velocity"], h["acceleration"]])
+        buf = io.StringIO()
+        np.savetxt(buf, table, delimiter=",", fmt="%.17g", header=CSV_HEADER, comments="")
+        path = directory / f"{_file_name(name)}.csv"
+        write_text_atomic(path, buf.getvalue())
+        paths.append(path)
+    return paths
+
+
+def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
+                    attrs: Mapping[str, object] | None = None,
+                    groups: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> None:
+    """Write ``probes.h5`` atomically (serial, rank 0); layout in the module docstring.
+
+    Parameters
+    ----------
+    path
+        Output file.
+    histories
+        From :func:`probe_histories`.
+    attrs
+        Root attributes (e.g. an input digest).
+    groups
+        Extra groups of datasets, e.g. ``{"rail": {"bending_moment": ..., "x": ...}}``.
+    """
+    import h5py
+
+    names = list(histories)
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        f.create_dataset("names", data=np.array(names, dtype="S64"))
+        f.create_dataset("coords", data=np.array([histories[k]["coords"] for k in names],
+                                                 dtype=float).reshape(-1, 3))
+        g = f.create_group("probes")
+        for name in names:
+            h = histories[name]
+            p = g.create_group(_file_name(name))
+            p.attrs["name"] = name
+            p.attrs["coords"] = np.asarray(h["coords"], dtype=float)
+            for key in ("element", "xi"):
+                if key in h:
+                    p.attrs[key] = h[key]
+            p.create_dataset("time", data=h["t"])
+            for key in ("displacement", "velocity", "acceleration"):
+                p.create_dataset(key, data=h[key])
+        for gname, data in (groups or {}).items():
+            grp = f.create_group(gname)
+            for key, value in data.items():
+                grp.create_dataset(key, data=value)
+        for key, value in (attrs or {}).items():
+            f.attrs[key] = value
+        f.attrs["complete"] = 1

@@ -1,0 +1,483 @@
+"""The ``reconstruct`` stage: modes.h5 + mbs.h5 -> fields, stresses, probes (collective).
+
+Inputs
+------
+``modes.h5`` (complete, see :mod:`railvib_hpc.io.modes_io`) and ``mbs.h5``::
+
+    /time                 (nt,)     strictly increasing [s]
+    /modal/q              (nt, m)   modal coordinates of the first m modes (m <= modes)
+    /modal/q_dot          (nt, m)
+    /modal/q_ddot         (nt, m)
+    /static               optional static correction, attrs basis_file (path relative to
+                          mbs.h5's folder) and basis (dataset name of a (k, n, 3) basis
+                          there), datasets g, g_dot, g_ddot (nt, k)
+    attrs: complete = 1, inputs_sha256 (digest of the simulation inputs; when missing the
+           file's SHA-256 is used)
+
+Everything is validated on rank 0 and a :class:`ReconstructInputError` naming the file,
+dataset and shape is raised on every rank together.
+
+Outputs (in ``out_dir``)
+------------------------
+* ``fields.h5`` + ``fields.xdmf``: displacement, velocity, acceleration of every node at
+  every ``stride``-th step of the time ``window`` (:mod:`.fields`);
+* ``/stress`` in ``fields.h5`` + ``stress.xdmf`` when ``stress_times`` are given
+  (:mod:`.stress`). With new fields the stresses are written into the temporary file
+  before it is renamed (fields and stresses are one atomic result); when only the stress
+  times changed they are rewritten in place in the reused ``fields.h5`` (attribute
+  ``stress_complete`` is 0 while that happens);
+* ``probes.h5`` + ``probes/<name>.csv``: histories of the mesh probes and the user probes
+  at every step of the window (full time resolution: probes are cheap), and in
+  ``probes.h5`` ``/rail``: the vertical bending moment of both rails (modal part only, the
+  static correction has no rotations), sagging positive (:func:`.stress.rail_bending_moment`):
+  ``time`` (nt,), ``x`` (2, k), ``y`` (2,), ``nodes`` (2, k), ``bending_moment``
+  (nt, 2, k) at the nodes (averaged where it jumps) and ``bending_moment_ends``
+  (nt, 2, k-1, 2) at both ends of every rail element (exact; the jump at a node is the
+  reaction moment where the rail rotations are fixed at the pads).
+
+Reuse
+-----
+Each product records the SHA-256 of what it depends on (``inputs_sha256`` of
+``modes.h5``, the digest of ``mbs.h5`` and of the static basis, and the options): a
+complete ``fields.h5`` (and ``/stress``, ``probes.h5``) with the same digest is reused and
+reported, anything else is recomputed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..errors import UserError
+from ..log import Reporter
+from ..parallel import on_root
+from .fields import reconstruct_fields
+from .probes import (
+    UserProbes,
+    locate_probes,
+    probe_histories,
+    user_probe_dict,
+    write_probes_csv,
+    write_probes_h5,
+)
+from .stress import hex_materials, rail_moment_history, rail_moment_modes, stress_from_fields
+
+#: Bumped when the output format changes (part of every reuse digest).
+FORMAT_VERSION = 1
+
+
+class ReconstructInputError(UserError):
+    """Missing, incomplete or inconsistent input of the reconstruct stage."""
+
+
+def _sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 22), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _digest(payload: dict) -> str:
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _attr(f, key: str, default=None):
+    v = f.attrs.get(key, default)
+    return v.decode() if isinstance(v, bytes) else v
+
+
+def _open(path: Path, what: str):
+    import h5py
+
+    if not path.is_file():
+        raise ReconstructInputError(f"{what} {path} not found")
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise ReconstructInputError(f"{what} {path} is not a readable HDF5 file ({exc})") \
+            from None
+
+
+def _dataset(f, path: Path, name: str):
+    if name not in f:
+        raise ReconstructInputError(f"{path}: dataset '{name}' is missing")
+    ds = f[name]
+    if not hasattr(ds, "shape"):
+        raise ReconstructInputError(f"{path}: '{name}' is a group, expected a dataset")
+    return ds
+
+
+def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
+                window: tuple[float, float] | None = None) -> dict:
+    """Validate ``modes.h5`` and ``mbs.h5`` and read the histories of the time window (serial).
+
+    Returns
+    -------
+    dict
+        ``t``, ``q``, ``q_dot``, ``q_ddot`` of the window (full resolution), ``first`` (index
+        of the window's first step in ``mbs.h5``), ``steps`` (stored steps, relative to
+        the window), ``extra`` (list of static bases with their ``g`` histories of the
+        window), ``m``, ``k``, ``n_nodes``, ``n_modes``, digests ``modes_key``, ``mbs_key``,
+        ``static_key``, and ``rails`` (True when the modes have flexible-rail nodes).
+
+    Raises
+    ------
+    ReconstructInputError
+        With the file, dataset and shape at fault.
+    """
+    if int(stride) != stride or stride < 1:
+        raise ReconstructInputError(f"stride must be a positive integer, got {stride!r}")
+    with _open(modes_path, "modes file") as f:
+        if int(_attr(f, "complete", 0)) != 1:
+            raise ReconstructInputError(f"{modes_path} is incomplete (attribute complete != 1);"
+                                        " rerun the modal stage")
+        trans = _dataset(f, modes_path, "modes/translation")
+        if trans.ndim != 3 or trans.shape[2] != 3:
+            raise ReconstructInputError(f"{modes_path}: modes/translation has shape "
+                                        f"{trans.shape}, expected (m, n, 3)")
+        n_modes, n = trans.shape[0], trans.shape[1]
+        for name in ("mesh/points", "mesh/hexes", "mesh/hex_part"):
+            _dataset(f, modes_path, name)
+        modes_key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(modes_path)
+        rails = "mesh/rail_nodes" in f and f["mesh/rail_nodes"].size > 0 \
+            and "case_toml" in f.attrs and "modes/rotation" in f
+    with _open(mbs_path, "multibody results file") as f:
+        if int(_attr(f, "complete", 0)) != 1:
+            raise ReconstructInputError(f"{mbs_path} is incomplete (attribute complete != 1);"
+                                        " rerun the multibody stage")
+        t = _dataset(f, mbs_path, "time")[()]
+        if t.ndim != 1 or len(t) == 0:
+            raise ReconstructInputError(f"{mbs_path}: dataset 'time' has shape {t.shape}, "
+                                        "expected (nt,) with nt >= 1")
+        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+            raise ReconstructInputError(f"{mbs_path}: 'time' must be finite and strictly "
+                                        "increasing")
+        nt = len(t)
+        if window is None:
+            i0, i1 = 0, nt
+        else:
+            t0, t1 = (float(v) for v in window)
+            if not t0 <= t1:
+                raise ReconstructInputError(f"time window {window!r}: start must not exceed "
+                                            "end")
+            i0, i1 = int(np.searchsorted(t, t0, "left")), int(np.searchsorted(t, t1, "right"))
+            if i1 <= i0:
+                raise ReconstructInputError(f"time window {window!r} contains no step of "
+                                            f"{mbs_path} (time {t[0]} .. {t[-1]} s)")
+        hist = []
+        for name in ("modal/q", "modal/q_dot", "modal/q_ddot"):
+            ds = _dataset(f, mbs_path, name)
+            if ds.ndim != 2 or ds.shape[0] != nt:
+                raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has shape "
+                                            f"{ds.shape}, expected (nt, m) with nt = {nt}")
+            hist.append(ds[i0:i1].astype(float))
+        m = hist[0].shape[1]
+        if any(h.shape[1] != m for h in hist):
+            raise ReconstructInputError(f"{mbs_path}: modal/q, q_dot, q_ddot have different "
+                                        f"shapes {[h.shape for h in hist]}")
+        if not 1 <= m <= n_modes:
+            raise ReconstructInputError(f"{mbs_path}: modal/q has {m} modal coordinates but "
+                                        f"{modes_path} holds {n_modes} modes (need 1 <= m <= "
+                                        f"{n_modes})")
+        for name, h in zip(("modal/q", "modal/q_dot", "modal/q_ddot"), hist):
+            if not np.all(np.isfinite(h)):
+                raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has non-finite "
+                                            "values")
+        mbs_key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(mbs_path)
+        extra, static_key, k = [], "", 0
+        if "static" in f:
+            extra, static_key, k = _read_static(f["static"], mbs_path, nt, n, i0, i1)
+            # mode-acceleration: the static basis holds K^-1 g, so the modes' own static
+            # part Phi Lambda^-1 Phi_r^T g is removed from the modal coordinates
+            for j, name in enumerate(("q_shift", "q_shift_dot", "q_shift_ddot")):
+                if f"static/{name}" in f:
+                    hist[j] = hist[j] + f[f"static/{name}"][i0:i1, :m]
+    steps = np.arange(0, i1 - i0, int(stride))
+    return {"t": t[i0:i1], "q": hist[0], "q_dot": hist[1], "q_ddot": hist[2], "first": i0,
+            "steps": steps, "extra": extra, "m": m, "k": k, "n_nodes": n, "n_modes": n_modes,
+            "modes_key": modes_key, "mbs_key": mbs_key, "static_key": static_key,
+            "rails": bool(rails)}
+
+
+def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[list, str, int]:
+    """The static-correction basis of ``mbs.h5``'s ``/static`` group (validated)."""
+    for key in ("basis_file", "basis"):
+        if key not in g.attrs:
+            raise ReconstructInputError(f"{mbs_path}: group 'static' has no attribute '{key}'")
+    basis_file = (mbs_path.parent / str(_attr(g, "basis_file"))).resolve()
+    basis = str(_attr(g, "basis"))
+    hist = []
+    for name in ("g", "g_dot", "g_ddot"):
+        if name not in g:
+            raise ReconstructInputError(f"{mbs_path}: dataset 'static/{name}' is missing")
+        ds = g[name]
+        if ds.ndim != 2 or ds.shape[0] != nt:
+            raise ReconstructInputError(f"{mbs_path}: dataset 'static/{name}' has shape "
+                                        f"{ds.shape}, expected (nt, k) with nt = {nt}")
+        hist.append(ds[i0:i1].astype(float))
+    k = hist[0].shape[1]
+    if any(h.shape[1] != k for h in hist):
+        raise ReconstructInputError(f"{mbs_path}: static/g, g_dot, g_ddot have different "
+                                    f"shapes {[h.shape for h in hist]}")
+    with _open(basis_file, "static-correction basis file") as f:
+        if "complete" in f.attrs and int(_attr(f, "complete")) != 1:
+            raise ReconstructInputError(f"{basis_file} is incomplete (attribute complete != 1)")
+        ds = _dataset(f, basis_file, basis)
+        if ds.shape != (k, n, 3):
+            raise ReconstructInputError(f"{basis_file}: dataset '{basis}' has shape {ds.shape},"
+                                        f" expected (k, n, 3) = ({k}, {n}, 3) to match "
+                                        f"{mbs_path}:static/g and the modes")
+        key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(basis_file)
+    return [(str(basis_file), basis, *hist)], _digest({"file": key, "dataset": basis}), k
+
+
+def _keys(info: dict, stride: int, window, float32: bool, stress_times, user_probes) -> dict:
+    base = {"modes": info["modes_key"], "mbs": info["mbs_key"], "static": info["static_key"],
+            "m": info["m"], "k": info["k"], "format": FORMAT_VERSION,
+            "window": None if window is None else [float(v) for v in window]}
+    fields = _digest({**base, "stride": int(stride), "float32": bool(float32)})
+    stress = _digest({"fields": fields, "times": [float(v) for v in stress_times]})
+    probes = _digest({**base, "probes": {k: v.tolist() for k, v in
+                                         user_probe_dict(user_probes).items()}})
+    return {"fields": fields, "stress": stress, "probes": probes}
+
+
+def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
+    """Which outputs in ``out_dir`` are complete and have the wanted digests (rank 0)."""
+    import h5py
+
+    fields, stress, probes = out_dir / "fields.h5", False, False
+    ok = {"fields": False, "stress": False, "probes": False}
+    try:
+        if fields.is_file() and (out_dir / "fields.xdmf").is_file():
+            with h5py.File(fields, "r") as f:
+                ok["fields"] = (int(_attr(f, "complete", 0)) == 1
+                                and _attr(f, "inputs_sha256") == keys["fields"])
+                if ok["fields"] and want_stress and "stress" in f:
+                    stress = (int(_attr(f, "stress_complete", 0)) == 1
+                              and _attr(f["stress"], "inputs_sha256") == keys["stress"]
+                              and (out_dir / "stress.xdmf").is_file())
+        ok["stress"] = bool(stress)
+    except (OSError, KeyError):
+        ok["fields"] = ok["stress"] = False
+    try:
+        if (out_dir / "probes.h5").is_file():
+            with h5py.File(out_dir / "probes.h5", "r") as f:
+                probes = (int(_attr(f, "complete", 0)) == 1
+                          and _attr(f, "inputs_sha256") == keys["probes"])
+        ok["probes"] = bool(probes)
+    except (OSError, KeyError):
+        ok["probes"] = False
+    return ok
+
+
+def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
+                          out_dir: str | os.PathLike, comm, rep: Reporter, *, stride: int = 1,
+                          window: tuple[float, float] | None = None, float32: bool = False,
+                          stress_times: Sequence[float] = (), user_probes: UserProbes = ()
+                          ) -> dict:
+    """Reconstruct fields, stresses and probe histories (collective; reuses what it can).
+
+    Parameters
+    ----------
+    modes_path
+        A complete ``modes.h5``.
+    mbs_path
+        A complete ``mbs.h5`` (layout in the module docstring).
+    out_dir
+        Output folder (created).
+    comm
+        MPI communicator.
+    rep
+        Reporter (stage timings, progress).
+    stride
+        Store every ``stride``-th step of the window in ``fields.h5``.
+    window
+        ``(t_start, t_end)`` [s], inclusive; all steps by default.
+    float32
+        Store the fields in single precision (half the size).
+    stress_times
+        Times [s] at which element stresses are computed (nearest stored steps).
+    user_probes
+        Extra probe points, ``{name: (x, y, z)}`` or a list of ``(x, y, z)``.
+
+    Returns
+    -------
+    dict
+        ``reused`` (per output), ``fields`` / ``stress`` / ``probes`` statistics, ``seconds``
+        (per part and total) and the flat keys ``gemm_gflops``, ``write_gb_per_s``,
+        ``bytes_written`` for a timing table.
+
+    Raises
+    ------
+    ReconstructInputError
+        Invalid inputs (on every rank).
+    """
+    t_start = time.perf_counter()
+    modes_path, mbs_path, out_dir = Path(modes_path), Path(mbs_path), Path(out_dir)
+    stress_times = [float(v) for v in np.atleast_1d(np.asarray(stress_times, dtype=float))]
+    full: dict = {}
+
+    def load():
+        info = read_inputs(modes_path, mbs_path, stride, window)
+        user = user_probe_dict(user_probes)     # validate the coordinates early
+        if user:
+            locate_probes(modes_path, np.array(list(user.values())), list(user))
+        full.update(info)
+        keys = _keys(info, stride, window, float32, stress_times, user_probes)
+        reuse = _reusable(out_dir, keys, bool(stress_times)) if out_dir.is_dir() else \
+            {"fields": False, "stress": False, "probes": False}
+        if stress_times:
+            t_sel = info["t"][info["steps"]]
+            tol = 1e-9 * max(1.0, float(np.abs(t_sel).max()))
+            bad = [v for v in stress_times if v < t_sel[0] - tol or v > t_sel[-1] + tol]
+            if bad:
+                raise ReconstructInputError(f"stress times {bad} are outside the stored time "
+                                            f"range [{t_sel[0]}, {t_sel[-1]}] s")
+        small = {k: v for k, v in info.items() if k not in ("t", "q", "q_dot", "q_ddot",
+                                                            "extra")}
+        if not reuse["fields"]:                 # every rank needs the stored rows
+            s = info["steps"]
+            small.update({"t": info["t"][s], "q": info["q"][s], "q_dot": info["q_dot"][s],
+                          "q_ddot": info["q_ddot"][s],
+                          "extra": [(e[0], e[1], e[2][s], e[3][s], e[4][s])
+                                    for e in info["extra"]]})
+        return small, keys, reuse
+
+    info, keys, reuse = on_root(load, comm)
+    if comm.rank == 0:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    comm.Barrier()
+    fields_path = out_dir / "fields.h5"
+    result: dict = {"reused": dict(reuse), "seconds": {}}
+
+    # ---- fields
+    if reuse["fields"]:
+        rep.info(f"reusing {fields_path} (same modes, histories and options)")
+        result["fields"] = on_root(lambda: _fields_summary(fields_path), comm)
+    else:
+        with rep.stage("reconstruct fields"):
+            t0 = time.perf_counter()
+            ns = len(info["steps"])
+            rep.info(f"  {info['n_nodes']} nodes x {ns} steps x {info['m']} modes"
+                     + (f" + {info['k']} static shapes" if info["k"] else "")
+                     + f" on {comm.size} rank(s)")
+            stress_stats: dict = {}
+
+            def add_stress(tmp: Path) -> None:
+                # stresses go into the temporary file: fields + stresses are one atomic result
+                t1 = time.perf_counter()
+                stress_stats.update(_stress(tmp, modes_path, comm, stress_times, rep, keys, True))
+                stress_stats["seconds"] = time.perf_counter() - t1
+
+            stats = reconstruct_fields(
+                modes_path, fields_path, comm, info["t"], info["q"], info["q_dot"],
+                info["q_ddot"], float32=float32, extra=info["extra"], rep=rep,
+                attrs={"inputs_sha256": keys["fields"], "mbs_file": mbs_path.name,
+                       "mbs_inputs_sha256": info["mbs_key"], "stride": int(stride),
+                       "window": json.dumps(None if window is None else list(window))},
+                step_numbers=info["first"] + info["steps"],
+                before_complete=add_stress if stress_times else None)
+            result["seconds"]["fields"] = time.perf_counter() - t0
+            result["fields"] = stats
+            rep.info(f"  wrote {stats['bytes_written'] / 1e9:.3f} GB: GEMM "
+                     f"{stats['seconds_gemm']:.2f} s ({stats['gemm_gflops']:.1f} GFlop/s), "
+                     f"write {stats['seconds_write']:.2f} s "
+                     f"({stats['write_gb_per_s']:.2f} GB/s), read modes "
+                     f"{stats['seconds_read']:.2f} s")
+        if stress_times:
+            result["stress"] = stress_stats
+            result["seconds"]["stress"] = stress_stats["seconds"]
+            result["seconds"]["fields"] -= stress_stats["seconds"]
+        elif comm.rank == 0:                     # a new fields.h5 has no /stress
+            (out_dir / "stress.xdmf").unlink(missing_ok=True)
+
+    # ---- stresses of reused fields: written into the existing fields.h5
+    if stress_times and reuse["fields"]:
+        if reuse["stress"]:
+            rep.info(f"reusing /stress of {fields_path}")
+        else:
+            with rep.stage("reconstruct stress"):
+                t0 = time.perf_counter()
+                result["stress"] = _stress(fields_path, modes_path, comm, stress_times, rep,
+                                           keys, False)
+                result["seconds"]["stress"] = time.perf_counter() - t0
+
+    # ---- probes and rail moments (rank 0)
+    if reuse["probes"]:
+        rep.info(f"reusing {out_dir / 'probes.h5'}")
+    else:
+        with rep.stage("reconstruct probes"):
+            t0 = time.perf_counter()
+            result["probes"] = on_root(lambda: _probes(modes_path, out_dir, full, user_probes,
+                                                       keys["probes"]), comm)
+            result["seconds"]["probes"] = time.perf_counter() - t0
+            rep.info(f"  {result['probes']['n_probes']} probes x {result['probes']['n_steps']}"
+                     f" steps -> {out_dir / 'probes.h5'}, {out_dir / 'probes'}/*.csv")
+    result["seconds"]["total"] = time.perf_counter() - t_start
+    fstats = result.get("fields") or {}
+    for key in ("gemm_gflops", "write_gb_per_s", "bytes_written"):
+        result[key] = fstats.get(key)
+    return result
+
+
+def _stress(path: Path, modes_path: Path, comm, stress_times, rep: Reporter, keys,
+            temporary: bool) -> dict:
+    materials = on_root(lambda: _materials(modes_path), comm)
+    stats = stress_from_fields(path, comm, stress_times, materials, rep=rep,
+                               attrs={"inputs_sha256": keys["stress"]},
+                               require_complete=not temporary)
+    rep.info(f"  stresses at {len(stress_times)} time(s), max von Mises "
+             f"{stats['max_von_mises'] / 1e3:.3f} kPa")
+    return stats
+
+
+def _fields_summary(path: Path) -> dict:
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        d = f["fields/displacement"]
+        return {"n_nodes": d.shape[1], "n_steps": d.shape[0], "n_modes": int(f.attrs["n_modes"]),
+                "n_extra": int(f.attrs["n_extra"]), "float32": bool(f.attrs["float32"]),
+                "bytes_written": 3 * d.size * d.dtype.itemsize}
+
+
+def _materials(modes_path: Path) -> dict:
+    import h5py
+
+    from .stress import case_from_modes
+
+    with h5py.File(modes_path, "r") as f:
+        if "case_toml" not in f.attrs:
+            raise ReconstructInputError(f"{modes_path} has no case_toml attribute: the "
+                                        "materials for the stresses are unknown")
+        return hex_materials(case_from_modes(f))
+
+
+def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, key: str) -> dict:
+    """Rank 0: probe histories (full resolution of the window) and rail moments."""
+    t = info["t"]
+    hist = probe_histories(modes_path, t, info["q"], info["q_dot"], info["q_ddot"],
+                           user_probes=user_probes, extra=info["extra"])
+    groups = {}
+    if info["rails"]:
+        rail = rail_moment_modes(modes_path, info["m"])
+        groups["rail"] = {"time": t, "x": rail["x"], "y": rail["y"], "nodes": rail["nodes"],
+                          "bending_moment": rail_moment_history(info["q"], rail["moment"]),
+                          "bending_moment_ends": rail_moment_history(info["q"],
+                                                                     rail["moment_ends"])}
+    attrs = {"inputs_sha256": key, "railvib_version": __version__,
+             "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
+             "rail_moment_static_correction_included": 0}
+    write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
+    write_probes_csv(out_dir / "probes", hist)
+    return {"n_probes": len(hist), "n_steps": len(t), "names": list(hist),
+            "rail_moment": bool(groups)}

@@ -52,7 +52,7 @@ def main() -> None:
     if not (src / "modes.h5").exists():
         raise SystemExit(f"{src}/modes.h5 missing: run the modal stage first")
     s = passage(src)
-    print(f"thesis passage (wheelset, {s['n_modes']} modes, 30 m/s, x = 1 -> 27.6 m): "
+    print(f"thesis passage (wheelset, {s['n_modes']} modes, 30 m/s, x = 0 -> 27.6 m): "
           f"dt = {s['dt']:.2e} s, {s['n_steps']} steps, integration {s['time_integration']:.2f}"
           f" s ({s['steps_per_second']:.0f} steps/s), stage wall {s['wall']:.2f} s")
     print(f"  contact force per wheel: static {s['static_wheel_load'][0]:.1f} N, mean on the "

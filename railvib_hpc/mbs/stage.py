@@ -6,7 +6,8 @@ name, renamed when complete, reused when its inputs are unchanged):
 
 * ``/time`` (nt,) [s];
 * ``/wheels/x``, ``contact_force`` (positive: wheel pushes the rail down),
-  ``penetration``, ``rail_displacement`` (under the wheel, up positive),
+  ``penetration``, ``rail_displacement`` (under the wheel along the contact
+  normal, ``w + lambda v`` for coned wheels, up positive),
   ``wheel_height`` (the wheel's contact point, ``B^T y``), ``rail_index``
   (n_wheels,), all (nt, n_wheels);
 * ``/vehicle/y``, ``y_dot``, ``y_ddot`` (nt, n_dof), attribute ``dof_names``;

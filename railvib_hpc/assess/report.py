@@ -23,7 +23,7 @@ import html
 import json
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -369,7 +369,9 @@ pre{background:#f6f6f6;padding:0.6em;overflow-x:auto}"""
 
 def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, Any]],
                  histories: Mapping[str, Mapping[str, Any]],
-                 contact: tuple[Any, Any] | None = None) -> dict[str, Path]:
+                 contact: tuple[Any, Any] | None = None,
+                 extra_figures: Sequence[Mapping[str, Any]] = (),
+                 extra_text: Sequence[tuple[str, str]] = ()) -> dict[str, Path]:
     """Write the assessment report (markdown, HTML, PNG figures, JSON).
 
     Parameters
@@ -385,6 +387,11 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
     contact
         Optional ``(x, force)``: wheel positions [m] and contact forces [N], (n,) or
         (n, wheels), for a contact-force figure.
+    extra_figures
+        Figures already written under ``out_dir``: mappings with ``id``, ``file``
+        (relative path), ``title`` and ``data`` (JSON-serialisable).
+    extra_text
+        ``(title, preformatted text)`` sections added after the summary.
 
     Returns
     -------
@@ -420,6 +427,9 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
         figures["contact"] = {"file": "figures/contact.png", "title": "Contact force",
                               "data": _fig_contact(contact, fig_dir / "contact.png")}
 
+    for f in extra_figures:
+        figures[str(f["id"])] = {k: f[k] for k in ("file", "title", "data")}
+
     head, rows = _summary(results)
     table_txt = format_table(results)
 
@@ -427,6 +437,8 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
     md = ["# Vibration assessment", "", "## Summary", "",
           "Verdict per probe and standard; in brackets the utilisation (largest "
           "value/limit over the directions, ≤ 1 passes).", "", _md_table(head, rows), ""]
+    for title, text in extra_text:
+        md += [f"## {title}", "", "```", text, "```", ""]
     for name, r in results.items():
         md += [f"## Probe {name}", ""]
         rec = r.get("record", {})
@@ -448,6 +460,8 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
              "<h1>Vibration assessment</h1>", "<h2>Summary</h2>",
              "<p>Verdict per probe and standard; in brackets the utilisation (largest "
              "value/limit over the directions, ≤ 1 passes).</p>", _html_table(head, rows)]
+    for title, text in extra_text:
+        parts.append(f"<h2>{html.escape(title)}</h2><pre>{html.escape(text)}</pre>")
     for name, r in results.items():
         parts.append(f"<h2>Probe {html.escape(str(name))}</h2>")
         parts.append(_html_table(_DETAIL_HEAD, _detail_rows(r)))

@@ -140,6 +140,70 @@ def _building_displacements(fields_path: Path) -> dict:
             "building_max_transverse_displacement": uy}
 
 
+def peak_map(fields_path: Path, z_ground: float, png: Path) -> dict | None:
+    """Peak velocity magnitude over time of the ground-surface and slab-top nodes: PNG + data.
+
+    Streams ``/fields/velocity`` of ``fields.h5`` over blocks of steps. Ground
+    nodes: ``z = z_ground`` (top of the subgrade); slab nodes: the top faces of
+    the slabs. None when there is no complete ``fields.h5``.
+    """
+    import h5py
+    import matplotlib
+
+    from ..schema import PART_ID
+
+    if not fields_path.exists():
+        return None
+    with h5py.File(fields_path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1:
+            return None
+        pts = f["mesh/points"][()]
+        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
+        slab_top = _slab_top_nodes(pts, hexes[part == PART_ID["slab"]])
+        ground = np.flatnonzero(np.isclose(pts[:, 2], z_ground))
+        nodes = np.unique(np.concatenate([ground, slab_top]))
+        vel = f["fields/velocity"]
+        peak = np.zeros(nodes.size)
+        lo, hi = int(nodes.min()), int(nodes.max()) + 1
+        for s0 in range(0, vel.shape[0], 32):
+            blk = vel[s0:s0 + 32, lo:hi, :][:, nodes - lo, :]
+            peak = np.maximum(peak, np.linalg.norm(blk, axis=2).max(axis=0))
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
+
+    fig, axes = plt.subplots(1, 2, figsize=(12, 5), gridspec_kw={"width_ratios": [2, 1]})
+    on_ground = np.isin(nodes, ground)
+    vmin = max(float(peak[peak > 0].min()) if (peak > 0).any() else 1e-12, 1e-3 * peak.max())
+    norm = LogNorm(vmin=vmin, vmax=max(float(peak.max()), vmin * 10))
+    for ax, sel, title in ((axes[0], on_ground, f"ground surface z = {z_ground:g} m"),
+                           (axes[1], ~on_ground, "slab tops")):
+        p = pts[nodes[sel]]
+        sc = ax.scatter(p[:, 0], p[:, 1], c=np.maximum(peak[sel], vmin), s=6, norm=norm,
+                        cmap="viridis")
+        ax.set_aspect("equal")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_title(title)
+    fig.colorbar(sc, ax=axes, label="peak velocity magnitude [m/s]")
+    png.parent.mkdir(parents=True, exist_ok=True)
+    from ..io.atomic import atomic_path
+
+    with atomic_path(png) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+    return {"x": pts[nodes, 0].tolist(), "y": pts[nodes, 1].tolist(),
+            "z": pts[nodes, 2].tolist(), "peak_velocity": peak.tolist()}
+
+
+def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
+    """Nodes on the top faces of the slabs (top of a slab hex, bottom of none)."""
+    z = pts[slab_hexes, 2]
+    top = slab_hexes[np.isclose(z, z.max(axis=1, keepdims=True))]
+    bottom = slab_hexes[np.isclose(z, z.min(axis=1, keepdims=True))]
+    return np.setdiff1d(np.unique(top), np.unique(bottom))
+
+
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary."""
     from .report import write_report
@@ -182,7 +246,15 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
             "thesis": THESIS["s_wave_arrival_basement_wall"], "railvib": None,
             "analytic": w["s_analytic"]}
     x, force = _contact(out_dir / "mbs.h5")
-    files = write_report(out_dir, results, hist, None if x is None else (x, force))
+    extra = []
+    pm = peak_map(out_dir / "fields.h5", case["geometry.z1"], out_dir / "figures" / "peak_map.png")
+    if pm is not None:
+        extra.append({"id": "peak_map", "file": "figures/peak_map.png",
+                      "title": "Peak velocity map: ground surface and slab tops", "data": pm})
+    text = [("Comparison with the thesis and wave arrivals",
+             format_comparison(comparison, arrivals, c_p, c_s))]
+    files = write_report(out_dir, results, hist, None if x is None else (x, force),
+                         extra_figures=extra, extra_text=text)
     summary = {"results": results, "wave_speeds": {"c_P": c_p, "c_S": c_s},
                "wave_arrivals": arrivals, "thesis_comparison": comparison,
                "verdict": {k: v["passed"] for k, v in results.items()},

@@ -30,7 +30,6 @@ shapes in ParaView: one time step per mode.
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -38,13 +37,7 @@ import numpy as np
 from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .atomic import write_text_atomic
-
-
-def h5py_parallel_ok(comm) -> bool:
-    """True when h5py can open files with the mpio driver on this communicator."""
-    import h5py
-
-    return comm.size > 1 and bool(h5py.get_config().mpi)
+from .parallel_h5 import h5py_parallel_ok, write_collective
 
 
 def rail_nodes(mesh: Mesh) -> np.ndarray:
@@ -81,11 +74,8 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
     pads
         ``nodes``, ``direction``, ``stiffness``, ``damping`` arrays of the rail pads.
     """
-    import h5py
 
     n, m = mesh.n_nodes, len(eigenvalues)
-    tmp = comm.bcast(str(path.with_name(f".{path.name}.part-{os.getpid()}"))
-                     if comm.rank == 0 else None, root=0)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather((node_range, translation, rot_range, rotation, nodal_mass), root=0)
@@ -94,26 +84,13 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
             rotation = np.concatenate([p[3] for p in parts], axis=1)
             nodal_mass = np.concatenate([p[4] for p in parts])
             node_range, rot_range = slice(0, n), slice(0, len(rotation_nodes))
-    writers = comm if parallel else None
-    error = None
-    if parallel or comm.rank == 0:
-        try:
-            kw = {"driver": "mpio", "comm": writers} if parallel else {}
-            with h5py.File(tmp, "w", **kw) as f:
-                _write(f, comm.rank == 0 or not parallel, mesh, m, n, eigenvalues, translation,
-                       rotation, rotation_nodes, node_range, rot_range, nodal_mass, dof_index,
-                       attrs, pads or {})
-        except Exception as exc:
-            error = f"{type(exc).__name__}: {exc}"
-    errors = comm.allgather(error)
-    if any(errors):
-        if comm.rank == 0 and os.path.exists(tmp):
-            os.unlink(tmp)
-        raise OSError(f"writing {path} failed: {next(e for e in errors if e)}")
+
+    def fill(f, par: bool) -> None:
+        _write(f, comm.rank == 0 or not par, mesh, m, n, eigenvalues, translation, rotation,
+               rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads or {})
+
+    write_collective(path, comm, fill)
     if comm.rank == 0:
-        with h5py.File(tmp, "a") as f:
-            f.attrs["complete"] = 1
-        os.replace(tmp, path)
         write_text_atomic(path.with_suffix(".xdmf"), modes_xdmf(path.name, mesh, eigenvalues))
     comm.Barrier()
 

@@ -387,41 +387,29 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
         plt.close(fig)
         paths.append(p)
 
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for j in show:
-        ax.plot(result.x[:, j], result.contact_force[:, j] / 1e3, lw=0.8, label=f"wheel {j}")
-    ax.set_xlabel("wheel position x [m]")
-    ax.set_ylabel("contact force [kN]")
-    ax.set_title("Wheel-rail contact force")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=4)
-    save(fig, "mbs_contact_force.png")
+    def curves(name, xs, ys, xlabel, ylabel, title, empty=""):
+        fig, ax = plt.subplots(figsize=(9, 4.5))
+        if ys is None:
+            ax.text(0.5, 0.5, empty, ha="center", transform=ax.transAxes)
+        else:
+            for j in show:
+                ax.plot(xs[:, j] if xs.ndim == 2 else xs, ys[:, j], lw=0.8, label=f"wheel {j}")
+            ax.legend(fontsize=7, ncol=4)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        save(fig, name)
 
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    if vehicle is not None:
-        heights = result.y @ vehicle.contact_matrix()
-        for j in show:
-            ax.plot(result.t, heights[:, j] * 1e3, lw=0.8, label=f"wheel {j}")
-        ax.set_ylabel("wheel vertical displacement [mm]")
-    else:
-        ax.text(0.5, 0.5, "moving forces: no vehicle", ha="center", transform=ax.transAxes)
-    ax.set_xlabel("time [s]")
-    ax.set_title("Wheel displacement at the contact points")
-    ax.grid(alpha=0.3)
-    if vehicle is not None:
-        ax.legend(fontsize=7, ncol=4)
-    save(fig, "mbs_wheel_displacement.png")
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    for j in show:
-        ax.plot(result.x[:, j], result.rail_displacement[:, j] * 1e3, lw=0.8,
-                label=f"wheel {j}")
-    ax.set_xlabel("wheel position x [m]")
-    ax.set_ylabel("rail displacement under the wheel [mm]")
-    ax.set_title("Rail deflection under the wheels")
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=4)
-    save(fig, "mbs_rail_deflection.png")
+    curves("mbs_contact_force.png", result.x, result.contact_force / 1e3,
+           "wheel position x [m]", "contact force [kN]", "Wheel-rail contact force")
+    heights = None if vehicle is None else result.y @ vehicle.contact_matrix() * 1e3
+    curves("mbs_wheel_displacement.png", result.t, heights, "time [s]",
+           "wheel vertical displacement [mm]", "Wheel displacement at the contact points",
+           "moving forces: no vehicle")
+    curves("mbs_rail_deflection.png", result.x, result.rail_displacement * 1e3,
+           "wheel position x [m]", "rail displacement under the wheel [mm]",
+           "Rail deflection under the wheels")
     return paths
 
 

@@ -56,6 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact import jenkins_hertz_constant
+from .vehicles import LinearVehicle
 
 _BODY_NAMES = ("body.z", "body.pitch", "body.roll")
 
@@ -71,7 +72,7 @@ def _block_diag(mats: Sequence[np.ndarray]) -> np.ndarray:
     return out
 
 
-class _LinearVehicle:
+class _LinearVehicle(LinearVehicle):
     """Shared methods of linear vehicles with Hertz wheel contacts."""
 
     def static_wheel_loads(self) -> np.ndarray:
@@ -85,23 +86,6 @@ class _LinearVehicle:
         nd, nw = b.shape
         a = np.block([[k, -b], [b.T, np.zeros((nw, nw))]])
         return np.linalg.solve(a, np.concatenate([f, np.zeros(nw)]))[nd:]
-
-    def energy(self, y: np.ndarray, y_dot: np.ndarray) -> np.ndarray:
-        """Kinetic + suspension + gravity potential energy.
-
-        Parameters
-        ----------
-        y, y_dot
-            (..., n_dof) displacements and velocities.
-
-        Returns
-        -------
-        numpy.ndarray
-            (...) energy [J] (zero at ``y = 0``, ``y_dot = 0``).
-        """
-        m, k = self.mass_matrix(), self.stiffness_matrix()
-        return (0.5 * np.einsum("...i,ij,...j->...", y_dot, m, y_dot)
-                + 0.5 * np.einsum("...i,ij,...j->...", y, k, y) - y @ self.external_force())
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,29 @@ import numpy as np
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
 
 
+class LinearVehicle:
+    """Shared methods of vehicles with constant mass, damping and stiffness matrices."""
+
+    def energy(self, y: np.ndarray, y_dot: np.ndarray) -> np.ndarray:
+        """Kinetic + suspension + gravity/preload potential energy.
+
+        Parameters
+        ----------
+        y, y_dot
+            (..., n_dof) displacements and velocities.
+
+        Returns
+        -------
+        numpy.ndarray
+            (...) energy [J] (zero at ``y = 0``, ``y_dot = 0``).
+        """
+        m, k = self.mass_matrix(), self.stiffness_matrix()
+        return (0.5 * np.einsum("...i,ij,...j->...", y_dot, m, y_dot)
+                + 0.5 * np.einsum("...i,ij,...j->...", y, k, y) - y @ self.external_force())
+
+
 @dataclass(frozen=True)
-class SuspendedWheelset:
+class SuspendedWheelset(LinearVehicle):
     """Rigid wheelset with bounce and roll on a primary suspension.
 
     Parameters
@@ -130,23 +151,6 @@ class SuspendedWheelset:
     def static_wheel_loads(self) -> np.ndarray:
         """(2,) wheel loads on a rigid, level rail [N]."""
         return np.full(2, 0.5 * (self.mass * self.gravity + 2.0 * self.preload))
-
-    def energy(self, y: np.ndarray, y_dot: np.ndarray) -> np.ndarray:
-        """Kinetic + suspension + gravity/preload potential energy.
-
-        Parameters
-        ----------
-        y, y_dot
-            (..., n_dof) displacements and velocities.
-
-        Returns
-        -------
-        numpy.ndarray
-            (...) energy [J] (zero at ``y = 0``, ``y_dot = 0``).
-        """
-        m, k = self.mass_matrix(), self.stiffness_matrix()
-        return (0.5 * np.einsum("...i,ij,...j->...", y_dot, m, y_dot)
-                + 0.5 * np.einsum("...i,ij,...j->...", y, k, y) - y @ self.external_force())
 
 
 def static_equilibrium(

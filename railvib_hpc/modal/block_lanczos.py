@@ -177,21 +177,7 @@ class BlockOperator:
 
     def apply(self, X: np.ndarray) -> np.ndarray:
         """``(K - sigma M)^-1 M X`` for a block X (n_local, b)."""
-        from petsc4py import PETSc
-
-        B = self._dense(self.mass(X))
-        Y = PETSc.Mat().createDense(size=((self.n_local, self.n_global), (None, X.shape[1])),
-                                    comm=self.comm)
-        Y.setUp()
-        Y.assemble()
-        t0 = time.perf_counter()
-        self.factor.matSolve(B, Y)
-        self.time_solves += time.perf_counter() - t0
-        self.n_solves += X.shape[1]
-        out = Y.getDenseArray().copy()
-        B.destroy()
-        Y.destroy()
-        return out
+        return self.solve(self.mass(X), chunk=max(X.shape[1], 1))
 
     def solve(self, B: np.ndarray, chunk: int = 64) -> np.ndarray:
         """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time."""

@@ -18,12 +18,12 @@ Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
-from ..io.modes_io import h5py_parallel_ok, rail_nodes
+from ..io.modes_io import rail_nodes
+from ..io.parallel_h5 import h5py_parallel_ok, write_collective
 
 
 def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
@@ -81,7 +81,6 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
 def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
                  dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
     """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
-    import h5py
 
     from .stage import node_arrays
 
@@ -91,43 +90,27 @@ def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.n
     cols = np.zeros((x_local.shape[0], n_r))
     cols[:, free] = x_local
     translation, _, _, _, nodes = node_arrays(cols, dofmap, comm.rank)
-    tmp = comm.bcast(str(path.with_name(f".{path.name}.part-{os.getpid()}"))
-                     if comm.rank == 0 else None, root=0)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather(translation, root=0)
         if comm.rank == 0:
             translation = np.concatenate(parts, axis=1)
             nodes = slice(0, mesh.n_nodes)
-    error = None
-    if parallel or comm.rank == 0:
-        try:
-            kw = {"driver": "mpio", "comm": comm} if parallel else {}
-            with h5py.File(tmp, "w", **kw) as f:
-                g = f.create_group("static")
-                d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
-                d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
-                d_l = g.create_dataset("load_dofs", table.shape, "i8")
-                f.attrs["modes_sha256"] = modes_sha
-                f.attrs["inputs_sha256"] = "static:" + modes_sha
-                f.attrs["complete"] = 0
-                if comm.rank == 0:
-                    d_f[...] = flex
-                    d_l[...] = table
-                if nodes.stop > nodes.start:
-                    d_t[:, nodes, :] = translation
-        except Exception as exc:
-            error = f"{type(exc).__name__}: {exc}"
-    errors = comm.allgather(error)
-    if any(errors):
-        if comm.rank == 0 and os.path.exists(tmp):
-            os.unlink(tmp)
-        raise OSError(f"writing {path} failed: {next(e for e in errors if e)}")
-    if comm.rank == 0:
-        with h5py.File(tmp, "a") as f:
-            f.attrs["complete"] = 1
-        os.replace(tmp, path)
-    comm.Barrier()
+
+    def fill(f, par: bool) -> None:
+        g = f.create_group("static")
+        d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
+        d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
+        d_l = g.create_dataset("load_dofs", table.shape, "i8")
+        f.attrs["modes_sha256"] = modes_sha
+        f.attrs["inputs_sha256"] = "static:" + modes_sha
+        if comm.rank == 0:
+            d_f[...] = flex
+            d_l[...] = table
+        if nodes.stop > nodes.start:
+            d_t[:, nodes, :] = translation
+
+    write_collective(path, comm, fill)
 
 
 def static_is_valid(path: Path, modes_sha: str) -> bool:

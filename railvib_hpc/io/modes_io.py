@@ -38,6 +38,7 @@ from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .atomic import write_text_atomic
 from .parallel_h5 import h5py_parallel_ok, write_collective
+from .xdmf import temporal_xdmf
 
 
 def rail_nodes(mesh: Mesh) -> np.ndarray:
@@ -174,16 +175,7 @@ def modes_xdmf(h5_name: str, mesh: Mesh, eigenvalues: np.ndarray) -> str:
           </DataItem>
         </Attribute>
       </Grid>""")  # noqa: E501
-    body = "\n".join(steps)
-    return f"""<?xml version="1.0" ?>
-<Xdmf Version="3.0">
-  <Domain>
-    <Grid Name="modes" GridType="Collection" CollectionType="Temporal">
-{body}
-    </Grid>
-  </Domain>
-</Xdmf>
-"""
+    return temporal_xdmf("modes", steps)
 
 
 def read_modes_summary(path: Path) -> dict | None:

@@ -59,7 +59,8 @@ import numpy as np
 
 from .. import __version__
 from ..io.atomic import write_text_atomic
-from ..io.modes_io import h5py_parallel_ok
+from ..io.parallel_h5 import h5py_parallel_ok
+from ..io.xdmf import temporal_xdmf
 from ..log import Reporter
 from ..parallel import on_root
 
@@ -562,20 +563,6 @@ def hyperslab_item(h5_name: str, dataset: str, k: int, shape: tuple[int, ...],
             f'<DataItem Dimensions="3 {nd}" Format="XML">{start} {stride} {count}</DataItem>'
             f'<DataItem Dimensions="{full}" NumberType="Float" Precision="{precision}" '
             f'Format="HDF">{h5_name}:{dataset}</DataItem></DataItem>')
-
-
-def temporal_xdmf(name: str, grids: list[str]) -> str:
-    """Wrap uniform grids in an XDMF 3 temporal collection."""
-    body = "\n".join(grids)
-    return f"""<?xml version="1.0" ?>
-<Xdmf Version="3.0">
-  <Domain>
-    <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">
-{body}
-    </Grid>
-  </Domain>
-</Xdmf>
-"""
 
 
 def fields_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, float32: bool = False,

@@ -57,7 +57,7 @@ from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
 from ..io.atomic import write_text_atomic
-from ..io.modes_io import h5py_parallel_ok
+from ..io.parallel_h5 import h5py_parallel_ok
 from ..log import Reporter
 from ..mesh.model import hex_shape_gradients
 from ..parallel import on_root

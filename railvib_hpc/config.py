@@ -37,10 +37,14 @@ class Case:
         Nested dict with every schema key filled in.
     path
         The case file (``None`` for the built-in defaults).
+    notes
+        Things the user should know that are not errors (e.g. preset values
+        overridden by the file).
     """
 
     data: dict[str, Any]
     path: Path | None = None
+    notes: tuple[str, ...] = ()
 
     def __getitem__(self, dotted: str) -> Any:
         node: Any = self.data
@@ -222,7 +226,14 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         _set(data, key, _check_value(key, ALL_KEYS[key], value, problems))
     if problems:
         raise CaseError(problems)
-    case = Case(data=data, path=path)
+    notes = []
+    if isinstance(preset, str) and PRESETS.get(preset):
+        shadowed = [k for k, v in PRESETS[preset].items() if k in flat and flat[k] != v]
+        if shadowed:
+            notes.append(f"case.preset = '{preset}' sets {len(PRESETS[preset])} keys, but the "
+                         f"file or --set gives other values for {len(shadowed)} of them, which "
+                         f"win: {', '.join(shadowed)}")
+    case = Case(data=data, path=path, notes=tuple(notes))
     problems.extend(check_consistency(case))
     if problems:
         raise CaseError(problems)

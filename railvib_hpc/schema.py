@@ -342,7 +342,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              choices=("1", "2", "3", "4", "5", "6",
                                       "A", "B", "C", "D", "E", "F", "G", "H")),
         "seed": Param(1, "int", "-", "random seed of the profile", "nonneg"),
-        "wavelength_min": Param(0.5, "float", "m", "shortest wavelength of the random profile",
+        "wavelength_min": Param(1.0, "float", "m",
+                                "shortest wavelength of the random profile (the FRA spectra are "
+                                "fitted to wavelengths above ~1.5 m)",
                                 "pos"),
         "wavelength_max": Param(30.0, "float", "m", "longest wavelength of the random profile",
                                 "pos"),

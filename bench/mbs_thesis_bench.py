@@ -64,7 +64,8 @@ def main() -> None:
         a = passage(src, f"mbs.static_correction={sc}")
         b = passage(src, f"mbs.static_correction={sc}", f"mbs.dt={a['dt'] / 2}")
         ch = abs(b["peak_contact_force"][0] / a["peak_contact_force"][0] - 1)
-        print(f"dt convergence (static correction {sc}): peak force {a['peak_contact_force'][0]:.1f}"
+        print(f"dt convergence (static correction {sc}): peak force "
+              f"{a['peak_contact_force'][0]:.1f}"
               f" N at dt = {a['dt']:.2e}, {b['peak_contact_force'][0]:.1f} N at dt/2: "
               f"change {100 * ch:.2f} %")
     print("modes | static corr. | max rail deflection [mm] | peak force [N] | min force [N]")

@@ -3,8 +3,8 @@
 Reconstructs displacement, velocity and acceleration of every node of the
 thesis model from random modal histories (300 modes), then, in the same run and
 to the same folder, writes the same number of bytes with one plain sequential
-``numpy.ndarray.tofile`` from rank 0. Both are timed until ``fsync`` returns. Target: reconstruction wall time within 2x
-of the plain write. Prints GB/s and the GEMM rate.
+``numpy.ndarray.tofile`` from rank 0. Both are timed until ``fsync`` returns.
+Target: reconstruction wall time within 2x of the plain write. Prints GB/s and the GEMM rate.
 
 Run: ``mpirun -n 2 .venv/bin/python bench/reconstruct_bench.py [modes.h5] [n_steps]``
 """
@@ -60,7 +60,8 @@ def main() -> None:
         plain = time.perf_counter() - t1
         print(f"{st['n_nodes']} nodes x {nt} steps x {m} modes on {comm.size} rank(s), "
               f"{nbytes / 1e9:.2f} GB (3 fields, float64)")
-        print(f"reconstruction (incl. fsync): wall {wall:.2f} s ({nbytes / wall / 1e9:.2f} GB/s), GEMM "
+        print(f"reconstruction (incl. fsync): wall {wall:.2f} s "
+              f"({nbytes / wall / 1e9:.2f} GB/s), GEMM "
               f"{st['seconds_gemm']:.2f} s ({st['gemm_gflops']:.1f} GFlop/s), HDF5 writes "
               f"{st['seconds_write']:.2f} s ({st['write_gb_per_s']:.2f} GB/s)")
         print(f"plain sequential write of the same bytes (tofile + fsync): {plain:.2f} s "

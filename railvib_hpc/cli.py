@@ -12,7 +12,7 @@ from pathlib import Path
 
 from . import __version__
 from .config import Case, load_case
-from .errors import NotImplementedStage, UserError
+from .errors import UserError
 from .log import Reporter
 from .parallel import on_root, world
 
@@ -43,6 +43,19 @@ def _parser() -> argparse.ArgumentParser:
         sp = sub.add_parser(name, help=text, description=text)
         if name == "study":
             sp.add_argument("kind", choices=STUDIES, help="which study")
+            sp.add_argument("--variant", action="append", default=[], metavar="NAME|INDEX",
+                            help="compute only this variant (repeatable; 0-based index in "
+                                 "--list order, e.g. an array-job task id); no report")
+            sp.add_argument("--merge", action="store_true",
+                            help="compute nothing: write the report from finished variants")
+            sp.add_argument("--prepare", action="store_true",
+                            help="compute only the shared model (modes, speed studies)")
+            sp.add_argument("--list", action="store_true",
+                            help="list the variants, their overrides and status")
+            sp.add_argument("--study-set", dest="study_set", action="append", default=[],
+                            metavar="KEY=VALUE",
+                            help="study setting, e.g. --study-set levels=[0.5,0.75,1] "
+                                 "(repeatable; see jobs/README.md)")
         sp.add_argument("case", help="case file (TOML)")
         sp.add_argument("--out", type=Path, default=None,
                         help="output folder (default: results/<case.name>)")
@@ -146,6 +159,8 @@ def run(argv: list[str] | None = None) -> int:
     rep = Reporter(comm.rank)
     try:
         case = on_root(lambda: load_case(args.case, args.overrides))
+        for note in case.notes:
+            rep.info(f"note: {note}")
         out = _out_dir(args, case)
         if args.command in ("modal", "run"):
             from .petsc_env import init_petsc
@@ -165,7 +180,12 @@ def run(argv: list[str] | None = None) -> int:
             rep.info("\n" + rep.timing_table())
             return 0
         if args.command == "study":
-            raise NotImplementedStage(f"study '{args.kind}' is not implemented yet")
+            from .studies import run_study
+
+            return run_study(args.kind, case, out, comm, rep, variants=args.variant,
+                             merge_only=args.merge, prepare=args.prepare,
+                             list_only=args.list, study_set=args.study_set,
+                             petsc_options=petsc_options)
         # run: every stage in order; report the ones that do not exist yet
         _cmd_check(case, rep)
         _cmd_mesh(case, out, rep)

@@ -152,9 +152,22 @@ def test_cli_user_error_exit_code_2_without_traceback(tmp_path, capsys):
     assert "Traceback" not in err
 
 
-def test_cli_studies_not_built_yet_exit_3(capsys):
-    assert run(["study", "modes", str(ROOT / "jobs" / "thesis_baseline.toml")]) == 3
-    assert "not implemented yet" in capsys.readouterr().err
+def test_cli_study_validates_settings_and_lists_variants(capsys, tmp_path):
+    case = str(ROOT / "jobs" / "thesis_baseline.toml")
+    assert run(["study", "modes", case, "--out", str(tmp_path),
+                "--study-set", "n_modes=[50, -1]", "--study-set", "tolerance=x"]) == 2
+    err = capsys.readouterr().err
+    assert "invalid settings of the 'modes' study (2 problems)" in err
+    assert "n_modes = -1: must be > 0" in err and "tolerance = 'x': expected a" in err
+    assert "Traceback" not in err
+    for kind, job in (("convergence", "mesh_convergence"), ("modes", "modal_truncation"),
+                      ("reflection", "boundary_reflection"), ("speed", "speed_sweep")):
+        assert run(["check", str(ROOT / "jobs" / f"{job}.toml")]) == 0
+        assert run(["study", kind, str(ROOT / "jobs" / f"{job}.toml"), "--list",
+                    "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    for name in ("r1.25", "n300_corrected", "larger", "v60"):
+        assert name in out
 
 
 def test_cli_check_ok_and_console_script():
@@ -170,3 +183,12 @@ def test_cli_check_ok_and_console_script():
 def test_every_key_documented():
     for key, p in ALL_KEYS.items():
         assert p.doc and p.unit, key
+
+
+def test_preset_values_overridden_by_the_file_are_noted():
+    case = load_case(ROOT / "jobs" / "thesis_baseline.toml", ["case.preset=table1"])
+    assert case["pads.kz"] == 70e8                       # the file's explicit value wins
+    assert len(case.notes) == 1 and "pads.kz" in case.notes[0]
+    short = load_case(ROOT / "jobs" / "thesis_table1.toml")
+    assert short["pads.kz"] == 26.5e7 and short["materials.ballast.rho"] == 1300.0
+    assert short.notes == ()

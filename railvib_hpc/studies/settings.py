@@ -13,12 +13,14 @@ Every problem is reported at once, each naming the key, the value and what is al
 from __future__ import annotations
 
 import difflib
+import json
 import math
 import re
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import tomllib
 
 from ..errors import UserError
 
@@ -113,7 +115,7 @@ SETTINGS: dict[str, dict[str, Setting]] = {
                              "than this many percent", "pos"),
         "band_hz": Setting(0.0, "float", "0: every domain uses modal.n_modes of the case; "
                            "> 0: every domain uses all its modes below this frequency "
-                           "(modal.f_max), the same band for all domains", "nonneg"),
+                           "(the same band for all domains)", "nonneg"),
         "probes": _PROBES,
     },
     "speed": {
@@ -195,7 +197,8 @@ def _check(key: str, s: Setting, value: Any, problems: list) -> Any:
 
 
 def parse_study_set(kind: str, text: str) -> tuple[str, Any]:
-    """Parse one ``--study-set key=value`` (value in TOML syntax; bare words are strings).
+    """Parse one ``--study-set key=value`` (value in TOML syntax; bare words are strings,
+    also in lists: ``probes=[slab1,slab2]``).
 
     Raises
     ------
@@ -206,11 +209,18 @@ def parse_study_set(kind: str, text: str) -> tuple[str, Any]:
         raise StudySettingsError(kind, [(text, None, "a study setting must look like "
                                          "key=value, e.g. --study-set levels=[0.5,1]")])
     key, raw = (x.strip() for x in text.split("=", 1))
+    return key, _toml_value(raw)
+
+
+def _toml_value(raw: str) -> Any:
+    """A TOML value; unquoted words are strings, also inside a flat list (``[a, b]``)."""
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        return tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
+        pass
+    if raw.startswith("[") and raw.endswith("]") and "[" not in raw[1:-1]:
+        return [_toml_value(x.strip()) for x in raw[1:-1].split(",") if x.strip()]
+    return raw
 
 
 def study_settings(kind: str, overrides: Sequence[str] = (),
@@ -290,5 +300,6 @@ def _cross_checks(kind: str, s: dict[str, Any], given: Mapping[str, Any]) -> lis
 
 def describe(kind: str) -> str:
     """Markdown table of a study's settings and defaults (for ``jobs/README.md``)."""
-    rows = [f"| `{k}` | `{s.default}` | {s.doc} |" for k, s in SETTINGS[kind].items()]
+    rows = [f"| `{k}` | `{json.dumps(s.default)}` | {s.doc} |"
+            for k, s in SETTINGS[kind].items()]
     return "\n".join(["| setting | default | meaning |", "|---|---|---|", *rows])

@@ -1,0 +1,451 @@
+"""What every study shares: variants, their folders and result files, and the responses.
+
+Folders (``<out>`` is the ``--out`` folder of the command)::
+
+    <out>/<study>/<variant>/          one folder per variant
+        mesh.h5, modes.h5, ...        own model (convergence, reflection), or
+        modes.h5 -> ../model/modes.h5 links to the shared model (modes, speed studies)
+        mbs.h5, mbs_*.png             the multibody run of the variant
+        probes.h5                     probe histories (from the modes, see below)
+        result.json                   the variant's result, written last and atomically
+        failed.json                   written instead when the variant failed (user error)
+    <out>/<study>/model/              shared model of the modes and speed studies
+
+Building responses come from :func:`railvib_hpc.reconstruct.probes.probe_histories`: the
+mode shapes interpolated at the probe points times the modal histories of ``mbs.h5`` (plus
+the static-correction basis when it is on). That is exactly what the reconstruct stage
+writes to ``probes.h5`` for these points, without the full fields (GBs per variant).
+
+``result.json`` (schema ``railvib_hpc.study/1``)::
+
+    study, variant, parameter {..}, overrides [..], inputs_sha256, complete = true,
+    model   {n_nodes, n_hexes, n_dofs, modes_in_file, modes_used, frequencies_hz [..],
+             f_max_hz, modal {factor_memory_gb, time_factorization, time_solve,
+             peak_rss_gb_total, ranks, ...}}
+    mbs     {peak_contact_force, static_wheel_load, dynamic_increment, dynamic_factor,
+             min_contact_force, max_rail_deflection, dt, n_steps, loss_of_contact_steps}
+    probes  {name: {coords, acc_x, acc_y, acc_vertical, acc_total, t_acc_total,
+                    vel_total, disp_total}}                      (every mesh probe)
+    assessment {name: {passed, max_utilisation, utilisation {standard: value}}}
+    spectra {name: {bands_hz, acc_rms {x, y, z, total}}}    (one-third octaves, 1-80 Hz)
+    timings {modal, mbs, response, total} [s], reused {modes, mbs}
+
+A variant is *finished* when its ``result.json`` is complete and its ``inputs_sha256``
+(the full variant case, the study and the result format) matches: reruns skip it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+from ..config import Case, build_case
+from ..errors import UserError
+from ..io.atomic import write_text_atomic
+from ..log import Reporter
+from ..parallel import on_root
+
+#: Bumped when the content of ``result.json`` changes (part of the variant digest).
+RESULT_FORMAT = "railvib_hpc.study/1"
+RESULT_NAME = "result.json"
+FAILED_NAME = "failed.json"
+SHARED_DIR = "model"
+#: Files of the shared model linked into each variant folder.
+SHARED_FILES = ("modes.h5", "static.h5")
+
+
+class StudyError(UserError):
+    """A study that cannot run (unknown variant, missing shared model, missing probe...)."""
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One run of a study.
+
+    Attributes
+    ----------
+    name
+        Folder name (unique in the study).
+    overrides
+        Case overrides (``key=value``, TOML values) applied to the study's case.
+    parameter
+        What distinguishes it, for tables (e.g. ``{"refinement": 0.5}``).
+    shared
+        True when the variant reuses the study's shared model (only MBS + probes run).
+    band_hz
+        > 0: the MBS uses exactly the modes below this frequency; the modal solve asks for
+        ``modal.n_modes`` modes and is repeated with more (scaled by Weyl's law,
+        N ~ f^3) while the highest mode is below the band.
+    """
+
+    name: str
+    overrides: tuple[str, ...]
+    parameter: dict[str, Any] = field(default_factory=dict)
+    shared: bool = False
+    band_hz: float = 0.0
+
+
+@dataclass(frozen=True)
+class StudyPlan:
+    """The variants of a study and, if any, the overrides of its shared model."""
+
+    kind: str
+    variants: tuple[Variant, ...]
+    shared_overrides: tuple[str, ...] | None = None
+
+
+def variant_case(case: Case, overrides: Sequence[str]) -> Case:
+    """The study's case with a variant's overrides (validated like ``--set``)."""
+    return build_case(json.loads(json.dumps(case.data)), list(overrides), case.path)
+
+
+def variant_digest(kind: str, vcase: Case, settings: dict[str, Any]) -> str:
+    """SHA-256 identifying a variant's result: its full case, the study, the format."""
+    text = json.dumps({"format": RESULT_FORMAT, "version": __version__, "study": kind,
+                       "case": vcase.digest(), "probes": settings.get("probes")},
+                      sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def jsonable(x: Any) -> Any:
+    """Numpy values to plain Python, non-finite floats to None (strict JSON)."""
+    if isinstance(x, dict):
+        return {str(k): jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def read_result(vdir: Path, digest: str | None = None) -> dict | None:
+    """The complete ``result.json`` of a variant (None if missing, incomplete or stale)."""
+    path = vdir / RESULT_NAME
+    try:
+        res = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    if res.get("complete") is not True or res.get("schema") != RESULT_FORMAT:
+        return None
+    if digest is not None and res.get("inputs_sha256") != digest:
+        return None
+    return res
+
+
+def read_failure(vdir: Path) -> dict | None:
+    """The ``failed.json`` of a variant, if any."""
+    try:
+        return json.loads((vdir / FAILED_NAME).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def write_result(vdir: Path, result: dict) -> None:
+    """Write ``result.json`` atomically (and drop an old ``failed.json``)."""
+    write_text_atomic(vdir / RESULT_NAME, json.dumps(jsonable(result), indent=1))
+    (vdir / FAILED_NAME).unlink(missing_ok=True)
+
+
+def link_shared(shared: Path, vdir: Path) -> list[str]:
+    """Link the shared model's files into a variant folder (relative symlinks; copies if
+    the file system has none). Returns the names linked."""
+    vdir.mkdir(parents=True, exist_ok=True)
+    done = []
+    for name in SHARED_FILES:
+        src = shared / name
+        dst = vdir / name
+        if not src.exists():
+            if dst.is_symlink():
+                dst.unlink()
+            continue
+        target = os.path.relpath(src, vdir)
+        if dst.is_symlink() and os.readlink(dst) == target:
+            done.append(name)
+            continue
+        if dst.is_symlink() or dst.exists():
+            dst.unlink()
+        try:
+            os.symlink(target, dst)
+        except OSError:
+            tmp = vdir / f".{name}.copy-{os.getpid()}"
+            shutil.copyfile(src, tmp)
+            os.replace(tmp, dst)
+        done.append(name)
+    return done
+
+
+def model_info(modes_path: Path, modes_used: int | None, n_frequencies: int = 10) -> dict:
+    """Size, frequencies and solver statistics of a ``modes.h5`` (rank 0)."""
+    import h5py
+
+    with h5py.File(modes_path, "r") as f:
+        freq = f["modes/frequency_hz"][()]
+        stats = json.loads(f.attrs.get("stats", "{}"))
+        info = {"n_nodes": int(f["mesh/points"].shape[0]),
+                "n_hexes": int(f["mesh/hexes"].shape[0]),
+                "n_dofs": int(f.attrs.get("n_dofs", stats.get("n_dofs", 0)))}
+    m = int(modes_used or len(freq))
+    keep = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
+            "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks", "time_assembly_total",
+            "time_block_solves", "time_orthogonalization", "max_relative_residual")
+    info.update({"modes_in_file": len(freq), "modes_used": m,
+                 "frequencies_hz": freq[:n_frequencies].tolist(),
+                 "f_max_hz": float(freq[m - 1]),
+                 "modal": {k: stats[k] for k in keep if k in stats}})
+    return info
+
+
+def mbs_metrics(summary: dict) -> dict:
+    """Contact-force and rail metrics of an MBS summary (``stats`` of ``mbs.h5``)."""
+    peak = np.asarray(summary["peak_contact_force"], dtype=float)
+    static = np.asarray(summary["static_wheel_load"], dtype=float)
+    ok = static > 0
+    return {
+        "peak_contact_force": float(peak.max()),
+        "static_wheel_load": float(static.max()),
+        "dynamic_increment": float((peak - static).max()),
+        "dynamic_factor": float((peak[ok] / static[ok]).max()) if ok.any() else None,
+        "min_contact_force": float(np.min(summary["min_contact_force"])),
+        "max_rail_deflection": float(summary["max_rail_deflection"]),
+        "dt": float(summary["dt"]), "n_steps": int(summary["n_steps"]),
+        "loss_of_contact_steps": int(summary.get("loss_of_contact_steps", 0)),
+        "peak_per_wheel": peak.tolist(),
+    }
+
+
+def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
+    """Probe histories from the modes and their metrics (rank 0); writes ``probes.h5``.
+
+    Parameters
+    ----------
+    vdir
+        Variant folder with ``modes.h5`` and ``mbs.h5`` (and ``static.h5`` when the
+        static correction is on).
+    case
+        The variant's case (``[assessment]`` settings).
+    probes
+        Probes whose assessment and spectra are kept (peaks are kept for every probe).
+
+    Returns
+    -------
+    dict
+        ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
+        ``duration``.
+    """
+    from ..assess.standards import assess_probe
+    from ..assess.weighting import third_octave_rms
+    from ..reconstruct.probes import probe_histories, write_probes_h5
+    from ..reconstruct.stage import read_inputs
+
+    modes, mbs = vdir / "modes.h5", vdir / "mbs.h5"
+    info = read_inputs(modes, mbs)
+    hist = probe_histories(modes, info["t"], info["q"], info["q_dot"], info["q_ddot"],
+                           extra=info["extra"])
+    missing = [p for p in probes if p not in hist]
+    if missing:
+        raise StudyError(f"study setting probes = {list(probes)}: {missing} are not probes "
+                         f"of the mesh; available: {', '.join(hist)}")
+    write_probes_h5(vdir / "probes.h5", hist,
+                    attrs={"railvib_version": __version__, "source": "study (from modes)"})
+    t = info["t"]
+    fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    peaks, assessment, spectra = {}, {}, {}
+    a_cfg = case["assessment"]
+    for name, h in hist.items():
+        a, v, u = h["acceleration"], h["velocity"], h["displacement"]
+        amag = np.linalg.norm(a, axis=1)
+        k = int(np.argmax(amag))
+        peaks[name] = {"coords": np.asarray(h["coords"]).tolist(),
+                       "acc_x": float(np.abs(a[:, 0]).max()),
+                       "acc_y": float(np.abs(a[:, 1]).max()),
+                       "acc_vertical": float(np.abs(a[:, 2]).max()),
+                       "acc_total": float(amag[k]), "t_acc_total": float(t[k]),
+                       "vel_total": float(np.linalg.norm(v, axis=1).max()),
+                       "disp_total": float(np.linalg.norm(u, axis=1).max())}
+        if name not in probes or t.size < 2:
+            continue
+        res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],
+                           period=a_cfg["period"], fta_events=a_cfg["fta_events"],
+                           din4150_3_location="floor" if "slab" in name else "foundation",
+                           din4150_2_events=a_cfg["din4150_2_events"] or None)
+        utils = {s: b.get("utilisation") for s, b in res["standards"].items()}
+        binding = [u for s, u in utils.items()
+                   if u is not None and not res["standards"][s]["comparison_only"]]
+        assessment[name] = {"passed": res["passed"], "utilisation": utils,
+                            "max_utilisation": max(binding) if binding else None}
+        spec = third_octave_rms(a, fs, fmin=1.0, fmax=80.0, axis=0)
+        ok = spec.n_bins > 0
+        rms = spec.rms[ok]
+        spectra[name] = {"bands_hz": spec.bands.nominal[ok].tolist(),
+                         "acc_rms": {"x": rms[:, 0].tolist(), "y": rms[:, 1].tolist(),
+                                     "z": rms[:, 2].tolist(),
+                                     "total": np.sqrt((rms**2).sum(axis=1)).tolist()}}
+    return {"probes": peaks, "assessment": assessment, "spectra": spectra,
+            "n_steps": int(t.size), "duration": float(t[-1] - t[0]) if t.size else 0.0}
+
+
+def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm, rep: Reporter) -> dict:
+    """Compute (or reuse) the shared model of a study in ``<root>/model`` (collective)."""
+    from ..modal.stage import run_modal_stage
+
+    if plan.shared_overrides is None:
+        return {}
+    mcase = on_root(lambda: variant_case(case, plan.shared_overrides), comm)
+    with rep.stage(f"{plan.kind}: shared model"):
+        return run_modal_stage(mcase, root / SHARED_DIR, comm, rep)
+
+
+def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm, rep: Reporter,
+                settings: dict[str, Any]) -> dict:
+    """Run one variant (collective) unless it is finished; returns its result.
+
+    Returns
+    -------
+    dict
+        The result (``reused_result`` True when it was finished already), or
+        ``{"failed": message}`` when a stage raised a user error (written to
+        ``failed.json``; the study goes on with the other variants).
+    """
+    from ..mbs.stage import run_mbs_stage
+    from ..modal.stage import run_modal_stage
+
+    vdir = root / v.name
+
+    def setup():
+        vcase = variant_case(case, v.overrides)
+        digest = variant_digest(plan.kind, vcase, settings)
+        return vcase, digest, read_result(vdir, digest)
+
+    vcase, digest, done = on_root(setup, comm)
+    if done is not None:
+        rep.info(f"[{plan.kind}/{v.name}] finished earlier: skipping ({vdir / RESULT_NAME})")
+        return {**done, "reused_result": True}
+    rep.info(f"[{plan.kind}/{v.name}] running: " + (", ".join(v.overrides) or "the case"))
+    t_start = time.perf_counter()
+    timings: dict[str, float] = {}
+    try:
+        t0 = time.perf_counter()
+        if v.shared:
+            if not on_root(lambda: (root / SHARED_DIR / "modes.h5").exists(), comm):
+                prepare_shared(plan, case, root, comm, rep)
+            on_root(lambda: link_shared(root / SHARED_DIR, vdir), comm)
+            modal = {"reused": True}
+        else:
+            if comm.rank == 0:
+                vdir.mkdir(parents=True, exist_ok=True)
+            if v.band_hz > 0:
+                modal, vcase = _modes_for_band(vcase, vdir, v.band_hz, comm, rep)
+            else:
+                modal = run_modal_stage(vcase, vdir, comm, rep)
+        timings["modal"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        mbs = run_mbs_stage(vcase, vdir, comm, rep)
+        timings["mbs"] = time.perf_counter() - t0
+
+        def finish() -> dict:
+            t1 = time.perf_counter()
+            resp = probe_response(vdir, vcase, settings["probes"])
+            timings["response"] = time.perf_counter() - t1
+            timings["total"] = time.perf_counter() - t_start
+            result = {
+                "schema": RESULT_FORMAT, "study": plan.kind, "variant": v.name,
+                "parameter": v.parameter, "overrides": list(v.overrides),
+                "inputs_sha256": digest, "railvib_version": __version__,
+                "ranks": comm.size,
+                "model": model_info(vdir / "modes.h5", vcase["mbs.n_modes"] or None),
+                "mbs": mbs_metrics(mbs), **resp, "timings": timings,
+                "reused": {"modes": bool(modal.get("reused")), "mbs": bool(mbs.get("reused"))},
+                "complete": True,
+            }
+            write_result(vdir, result)
+            return result
+
+        with rep.stage(f"{plan.kind}/{v.name}: probes + metrics"):
+            result = on_root(finish, comm)
+    except UserError as exc:
+        msg = str(exc)
+
+        def record() -> None:
+            vdir.mkdir(parents=True, exist_ok=True)
+            write_text_atomic(vdir / FAILED_NAME, json.dumps(
+                {"study": plan.kind, "variant": v.name, "parameter": v.parameter,
+                 "overrides": list(v.overrides), "inputs_sha256": digest, "error": msg},
+                indent=1))
+
+        on_root(record, comm)
+        rep.info(f"[{plan.kind}/{v.name}] FAILED: {msg}")
+        return {"failed": msg, "variant": v.name}
+    return {**result, "reused_result": False}
+
+
+def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm, rep: Reporter,
+                    attempts: int = 4) -> tuple[dict, Case]:
+    """Modal solve(s) until the modes reach ``band_hz``; the MBS case uses those below it.
+
+    Returns
+    -------
+    tuple
+        The modal summary and the case with ``mbs.n_modes`` = the number of modes below
+        the band (and the final ``modal.n_modes``).
+    """
+    import h5py
+
+    from ..modal.stage import run_modal_stage
+
+    case = vcase
+    for _ in range(attempts):
+        modal = run_modal_stage(case, vdir, comm, rep)
+
+        def top(path: Path = vdir / "modes.h5") -> list[float]:
+            with h5py.File(path, "r") as f:
+                return f["modes/frequency_hz"][()].tolist()
+
+        freq = on_root(top, comm)
+        if freq[-1] >= band_hz:
+            k = int(sum(f <= band_hz for f in freq))
+            rep.info(f"  {k} of {len(freq)} modes lie below the band limit {band_hz:g} Hz")
+            return modal, on_root(lambda c=case, k=k: variant_case(c, [f"mbs.n_modes={k}"]),
+                                  comm)
+        n = len(freq)
+        more = int(math.ceil(n * (band_hz / freq[-1]) ** 3 * 1.15)) + 8
+        rep.info(f"  {n} modes end at {freq[-1]:.2f} Hz < {band_hz:g} Hz: solving again "
+                 f"with {more} modes")
+        case = on_root(lambda c=case, m=more: variant_case(c, [f"modal.n_modes={m}"]), comm)
+    raise StudyError(f"the modes did not reach {band_hz:g} Hz after {attempts} solves")
+
+
+def relative(a: float | None, b: float | None) -> float | None:
+    """``|a - b| / |b|`` or None."""
+    if a is None or b is None or not math.isfinite(a) or not math.isfinite(b) or b == 0:
+        return None
+    return abs(a - b) / abs(b)
+
+
+def response_quantities(result: dict, probes: Sequence[str]) -> dict[str, float]:
+    """The compared response quantities of a result: building peaks and contact force.
+
+    Keys: ``<probe> a_z`` and ``<probe> |a|`` (peak vertical and total acceleration [m/s²])
+    for each probe, ``peak contact force`` [N].
+    """
+    out: dict[str, float] = {}
+    for p in probes:
+        pk = result["probes"][p]
+        out[f"{p} a_z"] = pk["acc_vertical"]
+        out[f"{p} |a|"] = pk["acc_total"]
+    out["peak contact force"] = result["mbs"]["peak_contact_force"]
+    return out

@@ -1,0 +1,231 @@
+"""``railvib study KIND CASE``: run the variants of a study, then merge them into a report.
+
+Modes of the command (see ``jobs/README.md``):
+
+* default: compute every variant that is not finished (shared model first), then merge;
+* ``--variant NAME|INDEX`` (repeatable): compute only these (e.g. one SLURM/PBS array task
+  each; the index is 0-based in ``--list`` order), no report;
+* ``--prepare``: only the shared model of the ``modes``/``speed`` studies (run it once
+  before an array of variants, so the tasks do not all compute it);
+* ``--merge``: no computation, the report from the finished variants;
+* ``--list``: the variants, their overrides and status.
+
+Every variant's result is a ``result.json`` written atomically at its end: an interrupted
+study resumes where it stopped (finished variants are skipped, the stages reuse their
+files). Exit code 0, or 2 when a selected variant failed with a user error (e.g. the
+modal stage's memory check); the report is written either way.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from ..config import Case
+from ..log import Reporter
+from ..parallel import on_root
+from . import convergence, modes, reflection, speed
+from .common import (
+    FAILED_NAME,
+    SHARED_DIR,
+    StudyError,
+    StudyPlan,
+    prepare_shared,
+    read_failure,
+    read_result,
+    run_variant,
+    variant_case,
+    variant_digest,
+)
+from .report import text_table, write_report
+from .settings import StudySettingsError, study_settings
+
+#: The study modules by command name.
+STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
+                 "speed": speed}
+
+
+def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
+    """The study's variants; every variant case is validated (rank 0)."""
+    from ..mesh.layout import build_layout
+
+    known = list(build_layout(case).probes)
+    bad = [p for p in settings["probes"] if p not in known]
+    if bad:
+        raise StudySettingsError(kind, [("probes", settings["probes"],
+                                         f"unknown probes {bad}; the mesh has: "
+                                         + ", ".join(known))])
+    plan = STUDY_MODULES[kind].plan(case, settings)
+    for v in plan.variants:
+        variant_case(case, v.overrides)
+    if plan.shared_overrides is not None:
+        variant_case(case, plan.shared_overrides)
+    return plan
+
+
+def select(plan: StudyPlan, wanted: Sequence[str]) -> list:
+    """Variants named (or 0-based indices) in ``wanted``.
+
+    Raises
+    ------
+    StudyError
+        Naming the unknown entry and the allowed names.
+    """
+    names = [v.name for v in plan.variants]
+    out = []
+    for w in wanted:
+        for part in str(w).split(","):
+            part = part.strip()
+            if not part:
+                continue
+            if part.isdigit() and part not in names:
+                k = int(part)
+                if k >= len(names):
+                    raise StudyError(f"--variant {part}: index out of range; the "
+                                     f"{plan.kind} study has variants 0..{len(names) - 1} "
+                                     f"({', '.join(names)})")
+                part = names[k]
+            if part not in names:
+                raise StudyError(f"--variant {part!r}: unknown variant of the {plan.kind} "
+                                 f"study; allowed: {', '.join(names)} (or 0..{len(names) - 1})")
+            v = plan.variants[names.index(part)]
+            if v not in out:
+                out.append(v)
+    return out
+
+
+def status(plan: StudyPlan, case: Case, root: Path, settings: dict) -> tuple[list, dict]:
+    """Status of every variant and the finished results (rank 0)."""
+    entries, results = [], {}
+    for v in plan.variants:
+        vdir = root / v.name
+        digest = variant_digest(plan.kind, variant_case(case, v.overrides), settings)
+        res = read_result(vdir, digest)
+        entry = {"name": v.name, "parameter": v.parameter, "overrides": list(v.overrides),
+                 "folder": str(vdir)}
+        if res is not None:
+            results[v.name] = res
+            entry.update(status="finished", wall_s=res["timings"]["total"],
+                         ranks=res.get("ranks"))
+        elif read_result(vdir) is not None:
+            entry.update(status="stale", error="result of other inputs (case changed)")
+        else:
+            fail = read_failure(vdir)
+            if fail is not None and fail.get("inputs_sha256") == digest:
+                entry.update(status="failed", error=fail.get("error"))
+            else:
+                entry["status"] = "pending"
+        entries.append(entry)
+    return entries, results
+
+
+def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
+          rep: Reporter) -> dict:
+    """Analyse the finished variants and write the report (rank 0)."""
+    mod = STUDY_MODULES[kind]
+    entries, results = status(plan, case, root, settings)
+    analysis = mod.analyse(plan, results, settings)
+    fig_dir = root / "figures"
+    if kind == "reflection":
+        figs = mod.figures(analysis, results, settings, fig_dir)
+    else:
+        figs = mod.figures(analysis, settings, fig_dir)
+    files = write_report(root, kind, {"name": case["case.name"],
+                                      "file": str(case.path or "<defaults>")},
+                         settings, entries, analysis, figs)
+    for t in analysis.get("tables", []):
+        if t["rows"]:
+            rep.info(f"{t['title']}:\n" + text_table(t["head"], t["rows"]))
+    rep.info(f"{kind} study: {sum(e['status'] == 'finished' for e in entries)} of "
+             f"{len(entries)} variants finished")
+    rep.info(f"VERDICT: {analysis['verdict']['text']}")
+    rep.info(f"wrote {files['markdown']}, {files['json']}"
+             + "".join(f", {p}" for p in figs))
+    return {"verdict": analysis["verdict"], "files": {k: str(p) for k, p in files.items()},
+            "variants": entries}
+
+
+def run_study(kind: str, case: Case, out: Path, comm, rep: Reporter, *,
+              variants: Sequence[str] = (), merge_only: bool = False, prepare: bool = False,
+              list_only: bool = False, study_set: Sequence[str] = (),
+              settings: dict[str, Any] | None = None,
+              petsc_options: list[str] | None = None) -> int:
+    """Run a study (collective); returns the exit code.
+
+    Parameters
+    ----------
+    kind
+        ``convergence``, ``modes``, ``reflection`` or ``speed``.
+    case
+        The validated case (broadcast to every rank).
+    out
+        Output folder; the study writes into ``out/<kind>/``.
+    comm
+        MPI communicator.
+    rep
+        Reporter (rank 0 prints).
+    variants
+        Names or 0-based indices of the variants to compute (empty: all); with names given
+        no report is written.
+    merge_only
+        Only write the report from the finished variants.
+    prepare
+        Only compute the shared model (``modes`` and ``speed`` studies).
+    list_only
+        Only print the variants and their status.
+    study_set
+        ``key=value`` study settings (``--study-set``).
+    settings
+        Study settings given programmatically (merged before ``study_set``).
+    petsc_options
+        PETSc/SLEPc options (after ``--``); the list is emptied once they are passed to
+        PETSc, so the command line does not report them as ignored.
+
+    Returns
+    -------
+    int
+        0, or 2 when a selected variant failed (its ``failed.json`` says why).
+    """
+    t0 = time.perf_counter()
+    cfg = on_root(lambda: study_settings(kind, study_set, settings), comm)
+    plan = on_root(lambda: make_plan(kind, case, cfg), comm)
+    root = Path(out) / kind
+    chosen = on_root(lambda: select(plan, variants), comm) if variants else []
+    if list_only:
+        def show() -> None:
+            entries, _ = status(plan, case, root, cfg)
+            rows = [[str(i), e["name"], " ".join(e["overrides"]), e["status"]]
+                    for i, e in enumerate(entries)]
+            rep.info(f"{kind} study, folder {root}"
+                     + (f" (shared model in {root / SHARED_DIR})"
+                        if plan.shared_overrides is not None else ""))
+            rep.info(text_table(["index", "variant", "overrides", "status"], rows))
+
+        on_root(show, comm)
+        return 0
+    failed: list[str] = []
+    if not merge_only:
+        from ..petsc_env import init_petsc
+
+        init_petsc(list(petsc_options or []))
+        if petsc_options:
+            petsc_options.clear()
+        todo = chosen or ([] if prepare else list(plan.variants))
+        if prepare and plan.shared_overrides is None:
+            rep.info(f"the {kind} study has no shared model: every variant builds its own "
+                     "(nothing to prepare)")
+        elif prepare or any(v.shared for v in todo):
+            prepare_shared(plan, case, root, comm, rep)
+        for v in todo:
+            with rep.stage(f"{kind}/{v.name}"):
+                res = run_variant(plan, v, case, root, comm, rep, cfg)
+            if "failed" in res:
+                failed.append(v.name)
+    if merge_only or not (chosen or prepare):
+        on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
+    rep.info(f"{kind} study command finished in {time.perf_counter() - t0:.1f} s"
+             + (f"; failed variants: {', '.join(failed)} (see their {FAILED_NAME})"
+                if failed else ""))
+    return 2 if failed else 0

@@ -1,0 +1,42 @@
+"""A tiny boundary reflection study on 2 ranks: two domains, peaks and spectra compared."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from mpi4py import MPI
+from studies_tiny import BASELINE, TINY
+
+from railvib_hpc.cli import run
+
+comm = MPI.COMM_WORLD
+
+
+@pytest.mark.mpi
+def test_reflection_study_compares_domains_and_resumes(shared_tmp, capsys):
+    args = ["study", "reflection", str(BASELINE), *TINY, "--out", str(shared_tmp),
+            "--study-set", "domains=[[0, 0, 0], [1.2, 1.2, 3]]",
+            "--study-set", "names=[small, big]", "--study-set", "threshold=10"]
+    assert run(args) == 0
+    first = capsys.readouterr().out
+    assert run(args) == 0
+    second = capsys.readouterr().out
+    if comm.rank == 0:
+        root = shared_tmp / "reflection"
+        assert "VERDICT: boundary reflections" in first
+        assert "for the small domain" in first and "reference domain big" in first
+        assert second.count("finished earlier: skipping") == 2
+        report = json.loads((root / "report.json").read_text())
+        rows = {r["variant"]: r for r in report["analysis"]["rows"]}
+        assert rows["big"]["n_dofs"] > rows["small"]["n_dofs"]
+        assert rows["big"]["extra_width"] == 3.0
+        dev = rows["small"]["max_deviation"]
+        assert report["verdict"]["reflections_matter"] is (dev > 0.10)
+        assert set(rows["small"]["spectrum_db"]) == {"footing", "basement_wall", "slab1",
+                                                      "slab2"}
+        res = json.loads((root / "big" / "result.json").read_text())
+        assert res["spectra"]["slab1"]["bands_hz"][0] >= 1.0
+        for png in ("reflection_peaks.png", "reflection_spectra.png"):
+            assert (root / "figures" / png).exists()
+    comm.Barrier()

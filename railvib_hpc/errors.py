@@ -40,9 +40,3 @@ class CaseError(UserError):
 
 class MeshError(UserError):
     """A mesh that cannot be used (inverted elements, missing physical groups, ...)."""
-
-
-class NotImplementedStage(UserError):
-    """A pipeline stage that does not exist yet; reported, never faked."""
-
-    exit_code = 3

@@ -222,6 +222,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "damping_ratio": Param(0.03, "float", "-", "modal damping ratio for all modes",
                                "fraction"),
         "lumped_mass": Param(False, "bool", "-", "use lumped instead of consistent mass"),
+        "hex_formulation": Param("bbar", "str", "-",
+                                 "stiffness of the 8-node hexahedra: B-bar (ANSYS SOLID185 "
+                                 "default, the thesis; too soft in bending when a slab or wall "
+                                 "is one element thick), incompatible modes (SOLID185 "
+                                 "KEYOPT(2)=3; bends correctly one element thick) or plain full "
+                                 "integration", choices=("bbar", "incompatible", "full")),
         "method": Param("block_lanczos", "str", "-",
                         "eigensolver: block shift-invert Lanczos (fast, many right-hand sides "
                         "per MUMPS solve) or SLEPc Krylov-Schur; f_max always uses SLEPc "

@@ -6,11 +6,25 @@ Node order is gmsh/VTK: reference corners (-1,-1,-1), (1,-1,-1), (1,1,-1), (-1,1
 batches of elements, ``x`` of shape (nel, 8, 3), without Python loops over elements
 (the stiffness only walks over blocks of 8192 elements to bound temporary memory).
 
-The stiffness uses 2x2x2 Gauss integration, optionally with Hughes' B-bar
-treatment of the volumetric strain (ANSYS SOLID185 KEYOPT(2)=0, "selective reduced
-integration"): the dilatational part of the strain-displacement matrix is replaced
-by its volume average over the element, which removes volumetric locking for
-nearly incompressible materials while keeping full rank.
+The stiffness uses 2x2x2 Gauss integration in one of three formulations:
+
+``"bbar"`` (default)
+    Hughes' B-bar treatment of the volumetric strain (ANSYS SOLID185 KEYOPT(2)=0,
+    "selective reduced integration"): the dilatational part of the strain-displacement
+    matrix is replaced by its volume average over the element, which removes volumetric
+    locking for nearly incompressible materials while keeping full rank. Like every
+    trilinear element it locks in bending (parasitic shear): a slab one element thick
+    is too stiff.
+``"incompatible"``
+    Wilson's incompatible modes with Taylor's correction (Taylor, Beresford & Wilson
+    1976; ANSYS SOLID185 KEYOPT(2)=3, "simplified enhanced strain"): nine internal
+    bubble displacements ``(1 - xi_k^2) alpha_ki`` enrich the strain and are condensed
+    out per element. Represents pure bending of rectangular elements exactly, so one
+    element through a slab's thickness bends correctly; passes the patch test on
+    distorted meshes (the bubble gradients use the centre Jacobian, scaled by
+    ``det J_0 / det J``, so they integrate to zero).
+``"full"``
+    Plain full integration (locks in bending and for ``nu -> 0.5``; for tests).
 """
 
 from __future__ import annotations
@@ -25,6 +39,7 @@ from .material import isotropic_elasticity, isotropic_elasticity_batch, lame_par
 from .quadrature import gauss_hex
 
 __all__ = [
+    "FORMULATIONS",
     "hex8_jacobians",
     "hex8_lumped_mass_diagonal",
     "hex8_mass",
@@ -41,6 +56,9 @@ _DN_T = np.ascontiguousarray(_DN.transpose(0, 2, 1))
 _N = hex_shape_values(_XI)          # (8 points, 8 nodes)
 #: Elements per block in :func:`hex8_stiffness` (bounds temporary memory to ~100 MB).
 _BLOCK = 8192
+#: Stiffness formulations of :func:`hex8_stiffness`.
+FORMULATIONS = ("bbar", "incompatible", "full")
+_DN0_T = np.ascontiguousarray(hex_shape_gradients(np.zeros((1, 3)))[0].T)   # (3, 8) at xi = 0
 
 
 def _as_coords(x: ArrayLike) -> np.ndarray:
@@ -104,8 +122,8 @@ def hex8_volume(x: ArrayLike) -> np.ndarray:
 
 
 def _strain_matrix(grad: np.ndarray) -> np.ndarray:
-    """Voigt strain-displacement matrices from gradients (..., 8, 3) -> (..., 6, 8, 3)."""
-    B = np.zeros(grad.shape[:-2] + (6, 8, 3))
+    """Voigt strain-displacement matrices from gradients (..., n, 3) -> (..., 6, n, 3)."""
+    B = np.zeros(grad.shape[:-2] + (6,) + grad.shape[-2:])
     gx, gy, gz = grad[..., 0], grad[..., 1], grad[..., 2]
     B[..., 0, :, 0] = gx
     B[..., 1, :, 1] = gy
@@ -146,7 +164,41 @@ def hex8_strain_displacement(x: ArrayLike, bbar: bool = True) -> tuple[np.ndarra
     return B.reshape(B.shape[:3] + (24,)), wdet
 
 
-def hex8_stiffness(x: ArrayLike, E: ArrayLike, nu: ArrayLike, bbar: bool = True) -> np.ndarray:
+def _incompatible_gradients(x: np.ndarray) -> np.ndarray:
+    """Taylor-corrected physical gradients of the three bubble modes ``1 - xi_k^2``.
+
+    ``g[e, q, k, j] = det J_0 / det J_q * (J_0^-1)_{jk} * (-2 xi_qk)``: the reference
+    gradient is mapped with the centre Jacobian ``J_0`` and scaled so that every
+    gradient integrates to zero over the element (patch test).
+
+    Returns
+    -------
+    ndarray, shape (nel, 8, 3, 3)
+    """
+    J = np.matmul(_DN_T[None], x[:, None])
+    det = np.linalg.det(J)                                    # (nel, 8)
+    J0 = np.matmul(_DN0_T[None], x)                           # (nel, 3, 3), J0[i, j] = dx_j/dxi_i
+    inv0 = np.linalg.inv(J0)                                  # inv0[j, i]: d xi_i / d x_j
+    det0 = np.linalg.det(J0)
+    # g[e, q, k, j] = det0/det_q * inv0[e, j, k] * (-2 xi_qk)
+    return ((det0[:, None] / det)[:, :, None, None]
+            * inv0.transpose(0, 2, 1)[:, None, :, :] * (-2.0 * _XI)[None, :, :, None])
+
+
+def _condense_incompatible(x: np.ndarray, grad: np.ndarray, wdet: np.ndarray,
+                           D: np.ndarray) -> np.ndarray:
+    """``K_ua K_aa^-1 K_au``: what the condensed bubble modes remove from ``K_uu``."""
+    n = x.shape[0]
+    B = _strain_matrix(grad).reshape(n, 8, 6, 24)
+    G = _strain_matrix(_incompatible_gradients(x)).reshape(n, 8, 6, 9)
+    DG = np.einsum("eij,eqjk->eqik", D, G) * wdet[:, :, None, None]
+    Kua = np.einsum("eqiu,eqik->euk", B, DG)
+    Kaa = np.einsum("eqil,eqik->elk", G, DG)
+    return np.matmul(Kua, np.linalg.solve(Kaa, Kua.transpose(0, 2, 1)))
+
+
+def hex8_stiffness(x: ArrayLike, E: ArrayLike, nu: ArrayLike, bbar: bool = True,
+                   formulation: str | None = None) -> np.ndarray:
     """Element stiffness matrices of isotropic linear-elastic hexahedra.
 
     Equivalent to ``sum_q w_q det J_q B_q^T D B_q`` with the (B-bar) strain-displacement
@@ -159,7 +211,9 @@ def hex8_stiffness(x: ArrayLike, E: ArrayLike, nu: ArrayLike, bbar: bool = True)
                + kappa V gbar_ai gbar_bj
 
     (deviatoric part from ``B``, dilatation from the volume-averaged gradients ``gbar``;
-    ``kappa = lambda + 2 mu / 3`` is the bulk modulus).
+    ``kappa = lambda + 2 mu / 3`` is the bulk modulus). The incompatible-modes
+    formulation subtracts ``K_ua K_aa^-1 K_au`` from the full-integration matrix
+    (static condensation of the nine bubble DOFs, see the module docstring).
 
     Parameters
     ----------
@@ -170,17 +224,30 @@ def hex8_stiffness(x: ArrayLike, E: ArrayLike, nu: ArrayLike, bbar: bool = True)
     nu
         Poisson's ratios, shape (nel,) or scalar.
     bbar
-        Use the B-bar method (default, ANSYS SOLID185 default); ``False`` gives plain
-        2x2x2 full integration (locks for ``nu -> 0.5``).
+        Shorthand kept for the two classical cases: ``True`` is ``"bbar"``, ``False``
+        ``"full"``; ignored when ``formulation`` is given.
+    formulation
+        ``"bbar"``, ``"incompatible"`` or ``"full"`` (see the module docstring).
 
     Returns
     -------
     ndarray, shape (nel, 24, 24)
         Symmetric stiffness matrices, node-major DOF order.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``formulation``.
     """
+    if formulation is None:
+        formulation = "bbar" if bbar else "full"
+    if formulation not in FORMULATIONS:
+        raise ValueError(f"hex8 formulation must be one of {FORMULATIONS}, got {formulation!r}")
+    bbar = formulation == "bbar"
     x = _as_coords(x)
     nel = x.shape[0]
-    lam, mu = lame_parameters(_per_element(E, nel), _per_element(nu, nel))
+    E, nu = _per_element(E, nel), _per_element(nu, nel)
+    lam, mu = lame_parameters(E, nu)
     K = np.empty((nel, 24, 24))
     # blocks of elements bound the temporary memory
     for s in range(0, nel, _BLOCK):
@@ -205,6 +272,9 @@ def hex8_stiffness(x: ArrayLike, E: ArrayLike, nu: ArrayLike, bbar: bool = True)
         else:
             Ke += lam[e, None, None, None, None] * gg
             Ke = Ke.reshape(n, 24, 24)
+            if formulation == "incompatible":
+                D = isotropic_elasticity_batch(E[e], nu[e])
+                Ke -= _condense_incompatible(x[e], grad, wdet, D)
         K[e] = 0.5 * (Ke + Ke.transpose(0, 2, 1))
     return K
 

@@ -97,7 +97,8 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
             x = mesh.points[conn]
             first, shape_of = unique_shapes(x)
             xs = x[first]
-            Ks = hex8_stiffness(xs, mat["E"], mat["nu"], bbar=True)
+            Ks = hex8_stiffness(xs, mat["E"], mat["nu"],
+                                formulation=case["modal.hex_formulation"])
             Ms = hex8_mass(xs, mat["rho"], lumped=lumped)
             yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms[shape_of])
 

@@ -35,12 +35,13 @@ def box_mesh(nx: int, ny: int, nz: int, lx: float = 1.0, ly: float = 1.0, lz: fl
     return points, node(c[..., 0], c[..., 1], c[..., 2])
 
 
-def solid_matrices(points, hexes, E, nu, rho, bbar=True, lumped=False):
-    """Assembled (K, M) of a hex mesh with 3 DOFs per node."""
+def solid_matrices(points, hexes, E, nu, rho, bbar=True, lumped=False, formulation=None):
+    """Assembled (K, M) of a hex mesh with 3 DOFs per node (``formulation`` overrides
+    ``bbar``, see :func:`railvib_hpc.fem.hex8.hex8_stiffness`)."""
     x = points[hexes]
     dofs = element_dofs(hexes, 3)
     n = 3 * len(points)
-    K = assemble_matrix(dofs, hex8_stiffness(x, E, nu, bbar=bbar), n)
+    K = assemble_matrix(dofs, hex8_stiffness(x, E, nu, bbar=bbar, formulation=formulation), n)
     M = assemble_matrix(dofs, hex8_mass(x, rho, lumped=lumped), n)
     return K, M
 

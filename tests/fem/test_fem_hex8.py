@@ -21,6 +21,7 @@ from railvib_hpc.fem import (
     isotropic_elasticity,
     isotropic_elasticity_batch,
 )
+from railvib_hpc.fem.hex8 import FORMULATIONS
 
 EPS = np.finfo(float).eps
 
@@ -53,9 +54,11 @@ def test_isotropic_elasticity_inverse_is_compliance():
         isotropic_elasticity(E, 0.5)
 
 
-@pytest.mark.parametrize("bbar", [True, False])
-def test_patch_test_distorted(bbar):
-    """A linear displacement field gives constant strain and zero interior residual."""
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_patch_test_distorted(formulation):
+    """A linear displacement field gives constant strain and zero interior residual (for
+    incompatible modes: the bubbles stay unloaded, thanks to Taylor's correction)."""
+    bbar = formulation == "bbar"
     pts, hexes = distorted_box(3, amp=0.3)
     x = pts[hexes]
     # the patch is genuinely distorted: element Jacobians vary over the element
@@ -72,7 +75,7 @@ def test_patch_test_distorted(bbar):
     assert np.allclose(strain, eps, rtol=0, atol=100 * EPS * np.abs(u).max() * 3 * 3)
 
     E, nu = 2.0e8, 0.3
-    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, bbar=bbar)
+    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, formulation=formulation)
     r = K @ u
     interior = np.flatnonzero(np.all((pts > 1e-12) & (pts < 1 - 1e-12), axis=1))
     assert interior.size == 8
@@ -87,10 +90,10 @@ def test_patch_test_distorted(bbar):
     assert energy == pytest.approx(exact, rel=1e-10)
 
 
-@pytest.mark.parametrize("bbar", [True, False])
-def test_free_block_has_six_rigid_body_modes(bbar):
+@pytest.mark.parametrize("formulation", FORMULATIONS)
+def test_free_block_has_six_rigid_body_modes(formulation):
     pts, hexes = distorted_box(2, amp=0.2, seed=3)
-    K, _ = solid_matrices(pts, hexes, 2.0e8, 0.3, 1850.0, bbar=bbar)
+    K, _ = solid_matrices(pts, hexes, 2.0e8, 0.3, 1850.0, formulation=formulation)
     Kd = K.toarray()
     # element matrices are exactly symmetric; assembly sums up to 8 of them per entry
     assert np.abs(Kd - Kd.T).max() <= 8 * EPS * abs(Kd).max()
@@ -113,14 +116,14 @@ def test_element_stiffness_symmetric_psd_and_batched():
     x = pts[hexes]
     E = np.linspace(1e8, 3e8, len(x))
     nu = np.linspace(0.1, 0.45, len(x))
-    for bbar in (True, False):
-        Ke = hex8_stiffness(x, E, nu, bbar=bbar)
+    for form in FORMULATIONS:
+        Ke = hex8_stiffness(x, E, nu, formulation=form)
         assert Ke.shape == (8, 24, 24)
         assert np.array_equal(Ke, Ke.transpose(0, 2, 1))
         lam = np.linalg.eigvalsh(Ke)
         assert np.all(lam[:, :6] > -24 * EPS * lam[:, -1:])
         assert np.all(lam[:, 6] > 1e-6 * lam[:, -1])           # rank 18, no hourglass modes
-        single = hex8_stiffness(x[3:4], E[3], nu[3], bbar=bbar)[0]
+        single = hex8_stiffness(x[3:4], E[3], nu[3], formulation=form)[0]
         assert np.allclose(single, Ke[3], rtol=0, atol=1e-12 * abs(single).max())
 
 
@@ -188,14 +191,14 @@ def test_inverted_element_raises():
         hex8_stiffness(pts[hexes[:, [4, 5, 6, 7, 0, 1, 2, 3]]], 1e8, 0.3)
 
 
-def _cantilever_tip_ratio(nu: float, bbar: bool, shape=(20, 2, 2)) -> float:
+def _cantilever_tip_ratio(nu: float, formulation: str, shape=(20, 2, 2)) -> float:
     """Clamped hex cantilever (10 x 1 x 1) with a uniform tip shear traction: tip
     deflection divided by Timoshenko beam theory PL^3/(3EI) + PL/(kGA), k = 5/6."""
     L, b, h = 10.0, 1.0, 1.0
     nx, ny, nz = shape
     pts, hexes = box_mesh(nx, ny, nz, L, b, h)
     E, P = 1.0e9, 1.0e3
-    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, bbar=bbar)
+    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, formulation=formulation)
     root = np.flatnonzero(np.isclose(pts[:, 0], 0.0))
     tip = np.flatnonzero(np.isclose(pts[:, 0], L))
     # consistent nodal forces of a uniform traction on a bilinear face = tributary area
@@ -211,7 +214,7 @@ def _cantilever_tip_ratio(nu: float, bbar: bool, shape=(20, 2, 2)) -> float:
     return u[3 * tip + 2].mean() / (P * L**3 / (3 * E * I) + P * L / (5 / 6 * G * b * h))
 
 
-def _pure_bending_ratio(nu: float, bbar: bool, shape=(20, 2, 2)) -> float:
+def _pure_bending_ratio(nu: float, formulation: str, shape=(20, 2, 2)) -> float:
     """Hex beam (10 x 1 x 1) under a tip couple, root face a symmetry plane: tip
     deflection over the exact 3D (Saint-Venant) value M L^2 / (2 E I), independent of nu."""
     L, b, h = 10.0, 1.0, 1.0
@@ -219,7 +222,7 @@ def _pure_bending_ratio(nu: float, bbar: bool, shape=(20, 2, 2)) -> float:
     pts, hexes = box_mesh(nx, ny, nz, L, b, h)
     E, Mo = 1.0e9, 1.0e3
     I = b * h**3 / 12
-    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, bbar=bbar)
+    K, _ = solid_matrices(pts, hexes, E, nu, 1.0, formulation=formulation)
     root = np.flatnonzero(np.isclose(pts[:, 0], 0.0))
     tip = np.flatnonzero(np.isclose(pts[:, 0], L))
     mid = root[np.isclose(pts[root, 2], h / 2)]
@@ -248,11 +251,11 @@ def test_bbar_removes_volumetric_locking_pure_bending():
     """The exact pure-bending deflection does not depend on nu, so a locking-free element
     must give (nearly) the same answer at nu = 0.4999 as at nu = 0 on the same mesh:
     the change may not exceed the mesh's own discretisation error at nu = 0."""
-    r0 = _pure_bending_ratio(0.0, True)
-    r5 = _pure_bending_ratio(0.4999, True)
+    r0 = _pure_bending_ratio(0.0, "bbar")
+    r5 = _pure_bending_ratio(0.4999, "bbar")
     assert abs(r5 - r0) <= abs(1 - r0)
-    f0 = _pure_bending_ratio(0.0, False)
-    f5 = _pure_bending_ratio(0.4999, False)
+    f0 = _pure_bending_ratio(0.0, "full")
+    f5 = _pure_bending_ratio(0.4999, "full")
     assert abs(f5 - f0) > abs(1 - f0)      # full integration fails the same criterion
 
 
@@ -264,8 +267,39 @@ def test_bbar_cantilever_nearly_incompressible():
     clamped root, whose restraint of the Poisson contraction beam theory ignores (an
     order-of-magnitude estimate, not a bound). Full integration must be stiffer by more
     than a factor 4 (its volumetric penalty scales with lambda / mu ~ 5000)."""
-    rb = _cantilever_tip_ratio(0.4999, True)
-    rf = _cantilever_tip_ratio(0.4999, False)
-    r3 = _cantilever_tip_ratio(0.3, True)
+    rb = _cantilever_tip_ratio(0.4999, "bbar")
+    rf = _cantilever_tip_ratio(0.4999, "full")
+    r3 = _cantilever_tip_ratio(0.3, "bbar")
     assert 1 - rb <= (1 - r3) + 0.4999 * 1.0 / 10.0
     assert rf < rb / 4
+
+
+@pytest.mark.parametrize("nu", [0.0, 0.25, 0.4999])
+def test_incompatible_modes_bend_exactly(nu):
+    """Pure bending of rectangular hexes is represented exactly by the incompatible-modes
+    element (Wilson's bubbles carry the quadratic part of the deflection), so the tip
+    deflection does not depend on the mesh: 5 and 20 elements along the beam agree to
+    round-off. The remaining difference from M L^2 / (2 E I) (zero at nu = 0, 4e-4 at
+    nu = 0.4999) is the Poisson (anticlastic) restraint of the symmetry-plane supports,
+    the same for every mesh. Round-off grows with the conditioning lambda / mu."""
+    coarse = _pure_bending_ratio(nu, "incompatible", shape=(5, 2, 2))
+    fine = _pure_bending_ratio(nu, "incompatible", shape=(20, 2, 2))
+    assert coarse == pytest.approx(fine, rel=1e-11 * (1 + 2 * nu / (1 - 2 * nu)))
+    assert fine == pytest.approx(1.0, abs=1e-12 if nu == 0.0 else 1e-3)
+    # B-bar needs the fine mesh and is still 2-3 % off (the coarse one 60 %)
+    assert abs(1 - _pure_bending_ratio(nu, "bbar", shape=(5, 2, 2))) > 0.5
+
+
+@pytest.mark.parametrize("n_along", [10, 20, 40])
+def test_one_element_thick_cantilever(n_along):
+    """A slab modelled one hexahedron thick (a 10 x 1 x 1 cantilever, 1 x 1 elements in
+    the section): the incompatible-modes element stays within the shear-deflection
+    discretisation error of Timoshenko theory (the tip load is a uniform traction, the
+    root fully clamped: 1.5 %); B-bar, which averages the bending strain's dilatational
+    part away, is far too soft (x1.2 - x2.1) and gets worse with finer meshes along the
+    beam; full integration locks (x0.6 - x0.85)."""
+    shape = (n_along, 1, 1)
+    inc = _cantilever_tip_ratio(0.3, "incompatible", shape)
+    assert abs(1 - inc) < 0.015
+    assert _cantilever_tip_ratio(0.3, "bbar", shape) > 1.15
+    assert _cantilever_tip_ratio(0.3, "full", shape) < 0.9

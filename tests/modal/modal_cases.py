@@ -53,3 +53,15 @@ def solve(mesh: Mesh, case, rules, n_modes: int, comm=None, method="block_lanczo
     result = solve_modes(K, M, comm, n_modes=n_modes, f_max=f_max, method=method,
                          block_size=block_size, tol=1e-10)
     return result, K, M, dofmap
+
+
+def strip_mesh(nx: int, length: float, width: float, thickness: float,
+               part: str = "slab") -> Mesh:
+    """A concrete strip of nx x 1 x 1 hexahedra (one element across and through the
+    thickness) along x; node sets 'root' (x = 0) and 'all'."""
+    from fem_tools import box_mesh
+
+    pts, hexes = box_mesh(nx, 1, 1, length, width, thickness)
+    return Mesh(points=pts, hexes=hexes, hex_part=np.full(nx, PART_ID[part], np.int32),
+                lines=np.zeros((0, 2), np.int64), line_part=np.zeros(0, np.int32),
+                node_sets={"root": np.flatnonzero(np.isclose(pts[:, 0], 0.0))})

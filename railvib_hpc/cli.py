@@ -134,6 +134,7 @@ def _reconstruct_options(case: Case, out: Path) -> dict:
     probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
     return {"stride": stride, "window": tuple(w) if w else None,
             "float32": case["output.float32"], "stress_times": case["output.stress_times"],
+            "correction_rates": case["output.static_correction_rates"],
             "user_probes": {f"user_{i + 1}": p for i, p in enumerate(probes)}}
 
 

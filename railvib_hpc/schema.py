@@ -387,6 +387,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "times of the element stress/strain fields (thesis: 0.54, 0.61 s)"),
         "probes": Param([], "floats", "m",
                         "extra probe points as a flat list x1, y1, z1, x2, y2, z2, ..."),
+        "static_correction_rates": Param(False, "bool", "-",
+                                         "with mbs.static_correction: add the correction also "
+                                         "to velocities and accelerations (R g', R g''); off: "
+                                         "the classical mode-acceleration method, displacements "
+                                         "and stresses corrected, velocities and accelerations "
+                                         "from the modes (R g'' carries the node-to-node "
+                                         "stepping of the moving load far above the modal band)"),
     },
     "assessment": {
         "standards": Param(["iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis"],

@@ -582,20 +582,30 @@ def fields_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, float32: bool 
     hex_dtype, part_dtype
         dtypes of ``/mesh/hexes`` and ``/mesh/hex_part``.
     """
+    return mesh_series_xdmf(h5_name, n, ne, times, "fields", FIELD_NAMES, "Vector", "Node",
+                             (len(times), n, 3), 4 if float32 else 8, hex_dtype, part_dtype)
+
+
+def mesh_series_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, group: str,
+                     names: Sequence[str], attribute_type: str, center: str,
+                     shape: tuple[int, ...], precision: int, hex_dtype: str = "<i8",
+                     part_dtype: str = "<i4") -> str:
+    """XDMF temporal collection over the mesh of ``h5_name``: one grid per time ``k``
+    whose attributes ``names`` are the hyperslabs ``/<group>/<name>[k]`` of ``shape``
+    (``(ns, n, 3)`` node vectors, ``(ns, ne)`` cell scalars, ...)."""
     topo, geo, part = mesh_xdmf_items(h5_name, n, ne, hex_dtype, part_dtype)
-    ns = len(times)
-    prec = 4 if float32 else 8
     grids = []
     for k, tk in enumerate(times):
         attrs = "\n".join(
-            f'        <Attribute Name="{name}" AttributeType="Vector" Center="Node">'
-            f'{hyperslab_item(h5_name, "/fields/" + name, k, (ns, n, 3), prec)}</Attribute>'
-            for name in FIELD_NAMES)
-        grids.append(f"""      <Grid Name="step_{k}" GridType="Uniform">
+            f'        <Attribute Name="{name}" AttributeType="{attribute_type}" '
+            f'Center="{center}">'
+            f'{hyperslab_item(h5_name, f"/{group}/{name}", k, shape, precision)}</Attribute>'
+            for name in names)
+        grids.append(f"""      <Grid Name="{group}_{k}" GridType="Uniform">
         <Time Value="{float(tk)!r}"/>
         {topo}
         {geo}
         {part}
 {attrs}
       </Grid>""")
-    return temporal_xdmf("fields", grids)
+    return temporal_xdmf(group, grids)

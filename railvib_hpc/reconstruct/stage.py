@@ -116,8 +116,15 @@ def _dataset(f, path: Path, name: str):
 
 
 def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
-                window: tuple[float, float] | None = None) -> dict:
+                window: tuple[float, float] | None = None,
+                correction_rates: bool = False) -> dict:
     """Validate ``modes.h5`` and ``mbs.h5`` and read the histories of the time window (serial).
+
+    With a static correction in ``mbs.h5`` the displacement coordinates are always
+    corrected (``q + q_shift`` and the static basis with ``g``); the velocity and
+    acceleration coordinates only when ``correction_rates`` (otherwise they are the
+    modes' own ``q_dot``, ``q_ddot`` and the static basis gets ``g_dot = g_ddot = 0``:
+    the classical mode-acceleration method).
 
     Returns
     -------
@@ -172,17 +179,9 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
             if i1 <= i0:
                 raise ReconstructInputError(f"time window {window!r} contains no step of "
                                             f"{mbs_path} (time {t[0]} .. {t[-1]} s)")
-        hist = []
-        for name in ("modal/q", "modal/q_dot", "modal/q_ddot"):
-            ds = _dataset(f, mbs_path, name)
-            if ds.ndim != 2 or ds.shape[0] != nt:
-                raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has shape "
-                                            f"{ds.shape}, expected (nt, m) with nt = {nt}")
-            hist.append(ds[i0:i1].astype(float))
+        hist = _read_histories(f, mbs_path, ("modal/q", "modal/q_dot", "modal/q_ddot"), nt,
+                               i0, i1)
         m = hist[0].shape[1]
-        if any(h.shape[1] != m for h in hist):
-            raise ReconstructInputError(f"{mbs_path}: modal/q, q_dot, q_ddot have different "
-                                        f"shapes {[h.shape for h in hist]}")
         if not 1 <= m <= n_modes:
             raise ReconstructInputError(f"{mbs_path}: modal/q has {m} modal coordinates but "
                                         f"{modes_path} holds {n_modes} modes (need 1 <= m <= "
@@ -197,14 +196,36 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
             extra, static_key, k = _read_static(f["static"], mbs_path, nt, n, i0, i1)
             # mode-acceleration: the static basis holds K^-1 g, so the modes' own static
             # part Phi Lambda^-1 Phi_r^T g is removed from the modal coordinates
-            for j, name in enumerate(("q_shift", "q_shift_dot", "q_shift_ddot")):
+            shifts = ("q_shift", "q_shift_dot", "q_shift_ddot")
+            for j, name in enumerate(shifts if correction_rates else shifts[:1]):
                 if f"static/{name}" in f:
                     hist[j] = hist[j] + f[f"static/{name}"][i0:i1, :m]
+            if not correction_rates:
+                file, basis, g, g_dot, g_ddot = extra[0]
+                extra = [(file, basis, g, np.zeros_like(g_dot), np.zeros_like(g_ddot))]
+            static_key = _digest({"basis": static_key, "rates": bool(correction_rates)})
     steps = np.arange(0, i1 - i0, int(stride))
     return {"t": t[i0:i1], "q": hist[0], "q_dot": hist[1], "q_ddot": hist[2], "first": i0,
             "steps": steps, "extra": extra, "m": m, "k": k, "n_nodes": n, "n_modes": n_modes,
             "modes_key": modes_key, "mbs_key": mbs_key, "static_key": static_key,
             "rails": bool(rails)}
+
+
+def _read_histories(f, mbs_path: Path, names: tuple[str, ...], nt: int, i0: int,
+                    i1: int) -> list[np.ndarray]:
+    """Rows ``i0:i1`` of the (nt, m) datasets ``names`` of ``mbs.h5`` (validated: present,
+    2-D with nt rows, the same number of columns)."""
+    hist = []
+    for name in names:
+        ds = _dataset(f, mbs_path, name)
+        if ds.ndim != 2 or ds.shape[0] != nt:
+            raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has shape "
+                                        f"{ds.shape}, expected (nt, columns) with nt = {nt}")
+        hist.append(ds[i0:i1].astype(float))
+    if any(h.shape[1] != hist[0].shape[1] for h in hist):
+        raise ReconstructInputError(f"{mbs_path}: {', '.join(names)} have different shapes "
+                                    f"{[h.shape for h in hist]}")
+    return hist
 
 
 def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[list, str, int]:
@@ -214,19 +235,9 @@ def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[
             raise ReconstructInputError(f"{mbs_path}: group 'static' has no attribute '{key}'")
     basis_file = (mbs_path.parent / str(_attr(g, "basis_file"))).resolve()
     basis = str(_attr(g, "basis"))
-    hist = []
-    for name in ("g", "g_dot", "g_ddot"):
-        if name not in g:
-            raise ReconstructInputError(f"{mbs_path}: dataset 'static/{name}' is missing")
-        ds = g[name]
-        if ds.ndim != 2 or ds.shape[0] != nt:
-            raise ReconstructInputError(f"{mbs_path}: dataset 'static/{name}' has shape "
-                                        f"{ds.shape}, expected (nt, k) with nt = {nt}")
-        hist.append(ds[i0:i1].astype(float))
+    hist = _read_histories(g.file, mbs_path, ("static/g", "static/g_dot", "static/g_ddot"), nt,
+                           i0, i1)
     k = hist[0].shape[1]
-    if any(h.shape[1] != k for h in hist):
-        raise ReconstructInputError(f"{mbs_path}: static/g, g_dot, g_ddot have different "
-                                    f"shapes {[h.shape for h in hist]}")
     with _open(basis_file, "static-correction basis file") as f:
         if "complete" in f.attrs and int(_attr(f, "complete")) != 1:
             raise ReconstructInputError(f"{basis_file} is incomplete (attribute complete != 1)")
@@ -282,8 +293,8 @@ def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
 def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
                           out_dir: str | os.PathLike, comm, rep: Reporter, *, stride: int = 1,
                           window: tuple[float, float] | None = None, float32: bool = False,
-                          stress_times: Sequence[float] = (), user_probes: UserProbes = ()
-                          ) -> dict:
+                          stress_times: Sequence[float] = (), user_probes: UserProbes = (),
+                          correction_rates: bool = False) -> dict:
     """Reconstruct fields, stresses and probe histories (collective; reuses what it can).
 
     Parameters
@@ -308,6 +319,9 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         Times [s] at which element stresses are computed (nearest stored steps).
     user_probes
         Extra probe points, ``{name: (x, y, z)}`` or a list of ``(x, y, z)``.
+    correction_rates
+        Add a static correction also to velocities and accelerations (see
+        :func:`read_inputs`).
 
     Returns
     -------
@@ -327,7 +341,7 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     full: dict = {}
 
     def load():
-        info = read_inputs(modes_path, mbs_path, stride, window)
+        info = read_inputs(modes_path, mbs_path, stride, window, correction_rates)
         user = user_probe_dict(user_probes)     # validate the coordinates early
         if user:
             locate_probes(modes_path, np.array(list(user.values())), list(user))

@@ -64,11 +64,9 @@ from ..parallel import on_root
 from ..schema import PART_ID
 from .fields import (
     check_collective,
-    mesh_xdmf_items,
     node_range,
     open_h5,
     read_slab,
-    temporal_xdmf,
     write_slab,
 )
 
@@ -531,21 +529,7 @@ def _write_stress(path: Path, comm, parallel: bool, vm: np.ndarray, eq: np.ndarr
 def stress_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, hex_dtype: str = "<i8",
                 part_dtype: str = "<i4") -> str:
     """XDMF temporal collection of ``/stress`` (cell data), one grid per selected time."""
-    from .fields import hyperslab_item
+    from .fields import mesh_series_xdmf
 
-    topo, geo, part = mesh_xdmf_items(h5_name, n, ne, hex_dtype, part_dtype)
-    ns = len(times)
-    grids = []
-    for k, tk in enumerate(times):
-        attrs = "\n".join(
-            f'        <Attribute Name="{name}" AttributeType="Scalar" Center="Cell">'
-            f'{hyperslab_item(h5_name, "/stress/" + name, k, (ns, ne), 8)}</Attribute>'
-            for name in ("von_mises", "strain_eq"))
-        grids.append(f"""      <Grid Name="stress_{k}" GridType="Uniform">
-        <Time Value="{float(tk)!r}"/>
-        {topo}
-        {geo}
-        {part}
-{attrs}
-      </Grid>""")
-    return temporal_xdmf("stress", grids)
+    return mesh_series_xdmf(h5_name, n, ne, times, "stress", ("von_mises", "strain_eq"),
+                            "Scalar", "Cell", (len(times), ne), 8, hex_dtype, part_dtype)

@@ -253,7 +253,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
     from ..reconstruct.stage import read_inputs
 
     modes, mbs = vdir / "modes.h5", vdir / "mbs.h5"
-    info = read_inputs(modes, mbs)
+    info = read_inputs(modes, mbs, correction_rates=case["output.static_correction_rates"])
     hist = probe_histories(modes, info["t"], info["q"], info["q_dot"], info["q_ddot"],
                            extra=info["extra"])
     missing = [p for p in probes if p not in hist]

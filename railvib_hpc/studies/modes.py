@@ -10,7 +10,9 @@ Reference: the most modes, corrected if corrected runs were asked for. For each 
 deviation of every quantity (building peak accelerations, peak contact force, max rail
 deflection) from the reference; "modes needed for tolerance %": the smallest mode count
 from which on (for it and every larger count) all quantities stay within the tolerance,
-separately without and with the correction. The reference itself is truncated: the change
+separately without and with the correction, and the same per quantity (building
+accelerations, contact force and rail deflection usually need very different counts).
+The reference itself is truncated: the change
 between the two largest corrected counts is reported as its own convergence indicator.
 """
 
@@ -82,24 +84,20 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
              *(fmt(d["quantities"][k]) for k in names), pct(d["max_deviation"])]
             for d in data]
     drows = [[d["variant"], *(pct(d["deviation"][k]) for k in names)] for d in data]
-    needed = {}
+    needed, per_quantity = {}, {}
     for c in sorted({d["static_correction"] for d in data}):
         seq = sorted((d for d in data if d["static_correction"] == c),
                      key=lambda d: d["n_modes"])
-        n_ok = None
-        for i, d in enumerate(seq):
-            if all(e["max_deviation"] is not None and e["max_deviation"] <= tol
-                   for e in seq[i:]):
-                n_ok = d["n_modes"]
-                break
-        needed[_tag(c)] = n_ok
+        needed[_tag(c)] = _first_within(seq, lambda e: e["max_deviation"], tol)
+        per_quantity[_tag(c)] = {k: _first_within(seq, lambda e, k=k: e["deviation"][k], tol)
+                                 for k in names}
     indicator = None
     cr = sorted((d for d in data if d["static_correction"] == ref.parameter[
         "static_correction"]), key=lambda d: d["n_modes"])
     if len(cr) >= 2:
         indicator = {"from": cr[-2]["variant"], "to": cr[-1]["variant"],
                      "max_change": cr[-2]["max_deviation"], "quantity": cr[-2]["governing"]}
-    verdict = _verdict(needed, ref, settings, indicator, data)
+    verdict = _verdict(needed, ref, settings, indicator, data, per_quantity)
     tables = [
         {"title": "Responses", **dict(zip(("head", "rows"), transpose(head, rows))),
          "note": "Accelerations in m/s² (a_z vertical, |a| total peak), contact force in N, "
@@ -110,13 +108,44 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                             f"modes for {settings['tolerance']:g} %"],
          "rows": [[k, fmt(v) if v is not None else "not reached"]
                   for k, v in needed.items()]},
+        {"title": f"Modes needed per quantity (within {settings['tolerance']:g} % of "
+                  f"{ref.name} from this count on)",
+         "head": ["quantity", *(f"{tag}" for tag in per_quantity)],
+         "rows": [[k, *(fmt(per_quantity[tag][k]) if per_quantity[tag][k] is not None
+                        else "not reached" for tag in per_quantity)] for k in names]},
     ]
     return {"title": TITLE, "verdict": verdict, "tables": tables, "rows": data,
-            "reference": ref.name, "modes_needed": needed, "reference_change": indicator}
+            "reference": ref.name, "modes_needed": needed,
+            "modes_needed_per_quantity": per_quantity, "reference_change": indicator}
+
+
+def _first_within(seq: list[dict], deviation, tol: float) -> int | None:
+    """Smallest mode count of ``seq`` (sorted by count) from which on every deviation
+    stays within ``tol``; None when even the largest count does not."""
+    for i, d in enumerate(seq):
+        if all(deviation(e) is not None and deviation(e) <= tol for e in seq[i:]):
+            return d["n_modes"]
+    return None
+
+
+def _group_summary(per_quantity: dict[str, int | None]) -> str:
+    """'building accelerations 600, contact force 1000, rail deflection 50' (the largest
+    count needed within each group; 'not reached' when any member is not reached)."""
+    groups = {"building accelerations": [k for k in per_quantity
+                                         if k not in ("peak contact force",
+                                                      "max rail deflection")],
+              "contact force": ["peak contact force"], "rail deflection": ["max rail deflection"]}
+    parts = []
+    for label, keys in groups.items():
+        vals = [per_quantity[k] for k in keys if k in per_quantity]
+        if not vals:
+            continue
+        parts.append(f"{label} {'not reached' if None in vals else max(vals)}")
+    return ", ".join(parts)
 
 
 def _verdict(needed: dict, ref: Variant, settings: dict, indicator: dict | None,
-             data: list) -> dict:
+             data: list, per_quantity: dict | None = None) -> dict:
     tol = settings["tolerance"]
     parts = []
     n_ref = ref.parameter["n_modes"]
@@ -132,6 +161,10 @@ def _verdict(needed: dict, ref: Variant, settings: dict, indicator: dict | None,
             parts.append(f"{label}: {n} modes")
     text = (f"modes needed to stay within {tol:g} % of the reference ({ref.name}): "
             + "; ".join(parts))
+    if per_quantity:
+        text += ". Per quantity: " + "; ".join(
+            f"{'with the static correction' if tag == 'corrected' else 'modes only'}: "
+            f"{_group_summary(pq)}" for tag, pq in per_quantity.items())
     if indicator and indicator["max_change"] is not None:
         text += (f". Reference check: {indicator['from']} differs from it by "
                  f"{100 * indicator['max_change']:.2f} % ({indicator['quantity']})")

@@ -55,7 +55,8 @@ def test_stage_outputs_equal_serial_superposition(coarse_modes, shared_tmp):
     out = shared_tmp / "res"
     window = (t[5], t[50])
     res, rep = _run(coarse_modes, mbs, out, stride=4, window=window,
-                    stress_times=[t[9], t[29]], user_probes={"p1": (14.0, -9.0, 4.0)})
+                    stress_times=[t[9], t[29]], user_probes={"p1": (14.0, -9.0, 4.0)},
+                    correction_rates=True)
     comm.Barrier()
     steps = np.arange(5, 51, 4)
     phi, mesh = read_modes(coarse_modes, M)
@@ -89,6 +90,37 @@ def test_stage_outputs_equal_serial_superposition(coarse_modes, shared_tmp):
     # the stresses are computed inside the fields stage (into the temporary file)
     assert [n for n, _ in rep.timings] == ["reconstruct fields", "reconstruct probes"]
     assert res["stress"]["n_times"] == 2
+
+
+@pytest.mark.mpi
+def test_static_correction_rates_off_is_the_mode_acceleration_method(coarse_modes, shared_tmp):
+    """Default: the static correction enters the displacements only; velocities and
+    accelerations are the modes' own (``Phi q_dot``, ``Phi q_ddot``)."""
+    mbs, (_, q, qd, qdd, g) = _inputs(shared_tmp, coarse_modes)
+    out = shared_tmp / "mam"
+    _run(coarse_modes, mbs, out, stride=3)
+    comm.Barrier()
+    steps = np.arange(0, NT, 3)
+    phi, _ = read_modes(coarse_modes, M)
+    with h5py.File(shared_tmp / "static.h5", "r") as f:
+        basis = f["basis"][()]
+    with h5py.File(out / "fields.h5", "r") as f:
+        ref = superpose(phi, q[steps]) + superpose(basis, g[0][steps])
+        assert relative_error(f["fields/displacement"][()], ref) < 1e-12
+        for name, h in (("velocity", qd), ("acceleration", qdd)):
+            assert relative_error(f["fields/" + name][()], superpose(phi, h[steps])) < 1e-12
+    # the probes follow the same rule: with the rates the accelerations change, the
+    # displacements do not
+    _run(coarse_modes, mbs, shared_tmp / "rates", stride=3, correction_rates=True)
+    comm.Barrier()
+    with h5py.File(out / "probes.h5", "r") as f, \
+            h5py.File(shared_tmp / "rates" / "probes.h5", "r") as r:
+        for name in ("slab1", "footing"):
+            d, dr = f[f"probes/{name}/displacement"][()], r[f"probes/{name}/displacement"][()]
+            a, ar = f[f"probes/{name}/acceleration"][()], r[f"probes/{name}/acceleration"][()]
+            assert relative_error(d, dr) < 1e-12
+            assert relative_error(a, ar) > 1e-3
+    comm.Barrier()
 
 
 @pytest.mark.mpi
@@ -190,8 +222,8 @@ def _bad_inputs(folder, coarse_modes, kind):
 @pytest.mark.mpi
 @pytest.mark.parametrize("kind, message", [
     ("too_many_modes", r"mbs.h5: modal/q has 9 modal coordinates but .*modes.h5 holds 8"),
-    ("shape", r"mbs.h5: modal/q, q_dot, q_ddot have different shapes"),
-    ("nt", r"mbs.h5: dataset 'modal/q_ddot' has shape \(59, 5\), expected \(nt, m\) "
+    ("shape", r"mbs.h5: modal/q, modal/q_dot, modal/q_ddot have different shapes"),
+    ("nt", r"mbs.h5: dataset 'modal/q_ddot' has shape \(59, 5\), expected \(nt, columns\) "
            r"with nt = 60"),
     ("incomplete", r"mbs.h5 is incomplete"),
     ("static_missing", r"static-correction basis file .*static.h5 not found"),

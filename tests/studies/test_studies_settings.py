@@ -155,6 +155,23 @@ def test_modes_verdict(case):
     a = STUDY_MODULES["modes"].analyse(plan, res, s)
     assert a["modes_needed"]["corrected"] == 100
     assert "with the static correction: 100 modes" in a["verdict"]["text"]
+    # per quantity: the building accelerations are within 5 % from 100 modes on (50 % off
+    # at 50) in both families; the rail deflection never is without the correction (30 %
+    # off), with it from 50 modes on (2 % off)
+    for v in plan.variants:
+        n, c = v.parameter["n_modes"], v.parameter["static_correction"]
+        acc = 1.0 + (0.5 if n == 50 else 0.01)
+        defl = 1e-5 * (1.0 if c else 0.7) * (1.0 + (0.02 if n < 300 else 0.0))
+        res[v.name] = _fake(v.parameter, acc=acc, defl=defl)
+    a = STUDY_MODULES["modes"].analyse(plan, res, s)
+    pq = a["modes_needed_per_quantity"]
+    assert pq["modal"]["slab1 a_z"] == 100 and pq["modal"]["max rail deflection"] is None
+    assert pq["corrected"]["slab1 a_z"] == 100 and pq["corrected"]["max rail deflection"] == 50
+    assert pq["corrected"]["peak contact force"] == 50
+    assert ("with the static correction: building accelerations 100, contact force 50, "
+            "rail deflection 50") in a["verdict"]["text"]
+    assert "modes only: building accelerations 100, contact force 50, rail deflection not "\
+           "reached" in a["verdict"]["text"]
 
 
 def test_reflection_and_speed_verdicts(case):

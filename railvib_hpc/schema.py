@@ -58,6 +58,9 @@ def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
         "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos"),
         "nu": Param(nu, "float", "-", f"Poisson's ratio of the {what}", "poisson"),
         "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos"),
+        "damping_ratio": Param(0.03, "float", "-",
+                               f"damping ratio of the {what}, used when modal.damping = "
+                               "'strain_energy'", "fraction"),
     }
 
 
@@ -219,8 +222,14 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "f_max": Param(0.0, "float", "Hz",
                        "if > 0: extract all modes below this frequency instead of n_modes",
                        "nonneg"),
-        "damping_ratio": Param(0.03, "float", "-", "modal damping ratio for all modes",
-                               "fraction"),
+        "damping_ratio": Param(0.03, "float", "-",
+                               "modal damping ratio for all modes (modal.damping = 'uniform'; "
+                               "with 'strain_energy': the rail pads' share)", "fraction"),
+        "damping": Param("uniform", "str", "-",
+                         "modal damping: the same ratio for every mode (the thesis), or per "
+                         "material from each mode's strain-energy shares, zeta_i = sum_g "
+                         "zeta_g E_ig / sum_g E_ig (ANSYS MP,DMPR; materials.*.damping_ratio)",
+                         choices=("uniform", "strain_energy")),
         "lumped_mass": Param(False, "bool", "-", "use lumped instead of consistent mass"),
         "hex_formulation": Param("bbar", "str", "-",
                                  "stiffness of the 8-node hexahedra: B-bar (ANSYS SOLID185 "

@@ -58,7 +58,8 @@ def rail_nodes(mesh: Mesh) -> np.ndarray:
 def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
-                attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None) -> None:
+                attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
+                energies: dict[str, np.ndarray] | None = None) -> None:
     """Write ``modes.h5`` (collective: every rank calls it with its own slices).
 
     Parameters
@@ -74,6 +75,9 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
         Masses of the owned nodes.
     pads
         ``nodes``, ``direction``, ``stiffness``, ``damping`` arrays of the rail pads.
+    energies
+        Strain energy of every mode per material group, (m,) each, identical on every rank
+        (``/modes/strain_energy`` (m, groups), attribute ``groups``).
     """
 
     n, m = mesh.n_nodes, len(eigenvalues)
@@ -88,7 +92,8 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
 
     def fill(f, par: bool) -> None:
         _write(f, comm.rank == 0 or not par, mesh, m, n, eigenvalues, translation, rotation,
-               rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads or {})
+               rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads or {},
+               energies or {})
 
     write_collective(path, comm, fill)
     if comm.rank == 0:
@@ -97,10 +102,14 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
 
 
 def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, rotation,
-           rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads) -> None:
+           rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads,
+           energies) -> None:
     # dataset creation is collective: identical calls on every rank
     g = f.create_group("modes")
     d_f = g.create_dataset("frequency_hz", (m,), "f8")
+    if energies:
+        d_e = g.create_dataset("strain_energy", (m, len(energies)), "f8")
+        d_e.attrs["groups"] = json.dumps(list(energies))
     d_l = g.create_dataset("eigenvalue", (m,), "f8")
     d_t = g.create_dataset("translation", (m, n, 3), "f8")
     d_r = g.create_dataset("rotation", (m, len(rotation_nodes), 3), "f8")
@@ -131,6 +140,8 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     f.attrs["complete"] = 0
     # data: shared arrays from rank 0, slices from their owners
     if root:
+        if energies:
+            d_e[...] = np.stack([np.asarray(v, dtype=float) for v in energies.values()], axis=1)
         d_f[:] = np.sqrt(np.maximum(eigenvalues, 0.0)) / (2 * np.pi)
         d_l[:] = eigenvalues
         for k, v in mesh_data.items():
@@ -191,3 +202,17 @@ def read_modes_summary(path: Path) -> dict | None:
             return out
     except (OSError, KeyError):
         return None
+
+
+def read_strain_energies(path: Path) -> dict[str, np.ndarray] | None:
+    """``/modes/strain_energy`` of ``modes.h5`` as {group: (m,)}; None when the file has none
+    (written before the per-material energies existed)."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        if "modes/strain_energy" not in f:
+            return None
+        d = f["modes/strain_energy"]
+        groups = json.loads(d.attrs["groups"])
+        e = d[()]
+    return {g: e[:, j] for j, g in enumerate(groups)}

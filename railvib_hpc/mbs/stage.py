@@ -56,14 +56,43 @@ def mbs_digest(case: Case, modes_sha: str) -> str:
         extra = _file_digest(case.resolve(case["irregularity.file"]))
     text = json.dumps({"modes": modes_sha, "vehicle": case.digest("vehicle"),
                        "irregularity": case.digest("irregularity"), "profile": extra,
-                       "mbs": case.digest("mbs"), "zeta": case["modal.damping_ratio"]},
+                       "mbs": case.digest("mbs"), "zeta": _damping_inputs(case)},
                       sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def modal_damping(case: Case, m: int) -> np.ndarray:
-    """(m,) damping ratios: ``modal.damping_ratio`` with the ``mbs.damping_*`` overrides."""
-    zeta = np.full(m, case["modal.damping_ratio"])
+def _damping_inputs(case: Case):
+    """What the modal damping ratios depend on (for the reuse key)."""
+    if case["modal.damping"] == "uniform":
+        return case["modal.damping_ratio"]
+    return {"ratio": case["modal.damping_ratio"], "damping": case["modal.damping"],
+            "materials": {k: v["damping_ratio"] for k, v in case["materials"].items()}}
+
+
+def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
+    """(m,) damping ratios with the ``mbs.damping_*`` overrides applied.
+
+    ``modal.damping = 'uniform'``: ``modal.damping_ratio`` for every mode;
+    ``'strain_energy'``: per material from the strain energies stored in ``modes_path``
+    (:func:`railvib_hpc.modal.energy.damping_from_energies`).
+
+    Raises
+    ------
+    MBSInputError
+        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies.
+    """
+    if case["modal.damping"] == "strain_energy":
+        from ..io.modes_io import read_strain_energies
+        from ..modal.energy import damping_from_energies
+
+        energies = read_strain_energies(modes_path) if modes_path is not None else None
+        if energies is None:
+            raise MBSInputError(f"modal.damping = 'strain_energy': {modes_path} holds no "
+                                "per-material strain energies (written by an older version); "
+                                "rerun 'railvib modal' to recompute it")
+        zeta = damping_from_energies(energies, case)[:m].copy()
+    else:
+        zeta = np.full(m, case["modal.damping_ratio"])
     for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
         if int(k) <= m:
             zeta[int(k) - 1] = r
@@ -203,7 +232,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 
     t0 = time.perf_counter()
     rm = read_rail_modes(modes_path, m)
-    zeta = modal_damping(case, m)
+    zeta = modal_damping(case, m, modes_path)
     vehicle = build_vehicle(case)
     x_rigid_end = float(max(r.x_nodes[-1] for r in rm.rails)) + case["track.rigid_length"]
     x_end = case["vehicle.x_end"] or x_rigid_end

@@ -12,12 +12,14 @@ are passed as -1 and ignored, so no entries travel between ranks.
 from __future__ import annotations
 
 import time
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import Case
 from ..mesh.model import Mesh
+from ..schema import PART_ID
 from .dofmap import DofMap
 from .elements import element_batches
 
@@ -73,12 +75,22 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int) -> LocalPattern:
     return LocalPattern(indptr, indices.astype(np.int64), hex_mask, line_mask)
 
 
-def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm):
-    """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts."""
+def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str] | None = None,
+             pattern: LocalPattern | None = None):
+    """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
+
+    ``parts`` restricts the elements to those parts (the matrices keep the full pattern),
+    e.g. for the stiffness of one material; ``pattern`` reuses a :func:`local_pattern`.
+    """
     from petsc4py import PETSc
 
     t0 = time.perf_counter()
-    pat = local_pattern(mesh, dofmap, comm.rank)
+    pat = pattern or local_pattern(mesh, dofmap, comm.rank)
+    hex_mask, line_mask = pat.hex_mask, pat.line_mask
+    if parts is not None:
+        ids = [PART_ID[p] for p in parts]
+        hex_mask = hex_mask & np.isin(mesh.hex_part, ids)
+        line_mask = line_mask & np.isin(mesh.line_part, ids)
     r0, r1 = dofmap.owned_dofs(comm.rank)
     n_local, n_global = r1 - r0, dofmap.n_dofs
     ip = pat.indptr.astype(PETSc.IntType)
@@ -94,7 +106,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm):
     t_kernels = t_insert = 0.0
     add = PETSc.InsertMode.ADD_VALUES
     t_k = time.perf_counter()
-    for batch in element_batches(mesh, case, pat.hex_mask, pat.line_mask):
+    for batch in element_batches(mesh, case, hex_mask, line_mask):
         t_b = time.perf_counter()
         t_kernels += t_b - t_k
         cols = batch.dofs(dofmap.index)
@@ -114,6 +126,6 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm):
     t3 = time.perf_counter()
     info = {"pattern": t1 - t0, "element_kernels": t_kernels, "insert": t_insert,
             "final_assembly": t3 - t2, "total": t3 - t0,
-            "local_elements": int(pat.hex_mask.sum() + pat.line_mask.sum()),
-            "local_hexes": int(pat.hex_mask.sum()), "local_nnz": int(len(ix))}
+            "local_elements": int(hex_mask.sum() + line_mask.sum()),
+            "local_hexes": int(hex_mask.sum()), "local_nnz": int(len(ix))}
     return K, M, info

@@ -11,27 +11,35 @@ import numpy as np
 
 from .. import __version__
 from ..config import Case
-from ..io.modes_io import read_modes_summary, write_modes
+from ..io.modes_io import read_modes_summary, read_strain_energies, write_modes
 from ..log import Reporter
 from ..mesh.stage import MESH_INPUTS, run_mesh_stage
 from ..parallel import on_root
 from .dofmap import build_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
+from .energy import group_strain_energies
 from .petsc import assemble
 from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
 
-#: Keys of [modal] that do not change the modes (excluded from the reuse key).
-_NOT_MODAL_INPUTS = ("damping_ratio",)
+#: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
+_NOT_MODAL_INPUTS = ("damping_ratio", "damping")
 
 
 def modal_digest(case: Case) -> str:
-    """Hash of everything the modes depend on."""
+    """Hash of everything the modes depend on (damping settings excluded, so changing them
+    reuses the modes)."""
     import hashlib
 
+    def sha(payload) -> str:        # as Case.digest
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()
+                              ).hexdigest()
+
     modal = {k: v for k, v in case["modal"].items() if k not in _NOT_MODAL_INPUTS}
-    text = json.dumps({"mesh": case.digest(*MESH_INPUTS),
-                       "physics": case.digest("materials", "sections", "pads"),
+    materials = {name: {k: v for k, v in mat.items() if k not in _NOT_MODAL_INPUTS}
+                 for name, mat in case["materials"].items()}
+    physics = sha({"materials": materials, "sections": case["sections"], "pads": case["pads"]})
+    text = json.dumps({"mesh": case.digest(*MESH_INPUTS), "physics": physics,
                        "modal": modal}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -72,7 +80,13 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         if summary is None:
             rep.info(f"ignoring incomplete or unreadable {path}; recomputing")
             return None
-        return summary if summary.get("inputs_sha256") == key else None
+        if summary.get("inputs_sha256") != key:
+            return None
+        if case["modal.damping"] == "strain_energy" and read_strain_energies(path) is None:
+            rep.info(f"{path} has no per-material strain energies (modal.damping = "
+                     "'strain_energy' needs them); recomputing")
+            return None
+        return summary
 
     old = on_root(previous, comm)
     want_static = bool(case["mbs.static_correction"])
@@ -108,6 +122,8 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
             static_rhs=static_rhs)
+    with rep.stage("strain energies"):
+        energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
     x_static = result.static
     if want_static and x_static is None:
         with rep.stage("static solves"):
@@ -132,7 +148,8 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
                  "petsc_version": _versions()[0], "slepc_version": _versions()[1],
                  "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}
         write_modes(path, comm, mesh, nodes, result.eigenvalues, translation, rotation,
-                    rot_nodes, rot_range, masses, dofmap.index, attrs, pad_table(mesh, case))
+                    rot_nodes, rot_range, masses, dofmap.index, attrs, pad_table(mesh, case),
+                    energies)
     f = result.frequencies_hz
     summary = {"reused": False, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                **stats}

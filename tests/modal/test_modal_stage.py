@@ -129,3 +129,40 @@ def test_eigensolver_failure_is_reported(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "converged" in err and "modes" in err
     assert not (tmp_path / "modes.h5").exists()
+
+
+def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path, capsys):
+    """modes.h5 holds the strain energy of every mode per material, summing to omega^2;
+    the MBS turns them into damping ratios; an older modes.h5 without them is recomputed
+    by the modal stage and refused by the MBS with a clear message."""
+    from railvib_hpc.io.modes_io import read_strain_energies
+    from railvib_hpc.mbs.stage import MBSInputError, modal_damping
+
+    energies = read_strain_energies(modal_run / "modes.h5")
+    with h5py.File(modal_run / "modes.h5", "r") as f:
+        lam = f["modes/eigenvalue"][()]
+    assert set(energies) == {"ballast", "subballast", "subgrade", "concrete", "rail",
+                             "sleeper", "pads"}
+    assert sum(energies.values()) == pytest.approx(lam, rel=1e-8)
+    assert all(np.all(e >= -1e-9 * lam) for e in energies.values())
+    soft = ["materials.subgrade.damping_ratio=0.05", "materials.concrete.damping_ratio=0.01",
+            "modal.damping=strain_energy"]
+    case = load_case(BASELINE, [*(a for a in ARGS[1::2]), *soft])
+    zeta = modal_damping(case, 12, modal_run / "modes.h5")
+    share = energies["subgrade"] / lam
+    assert np.all((zeta > 0.0) & (zeta < 0.05))
+    assert np.argmax(zeta) == np.argmax(share)          # the most soil-dominated mode
+    # a modes.h5 without energies (older version): the MBS refuses, the modal stage redoes it
+    old = tmp_path / "old"
+    assert run(["modal", str(BASELINE), *ARGS, "--out", str(old)]) == 0
+    with h5py.File(old / "modes.h5", "a") as f:
+        del f["modes/strain_energy"]
+    # with uniform damping such a file is simply reused
+    assert run(["modal", str(BASELINE), *ARGS, "--out", str(old)]) == 0
+    assert "reusing" in capsys.readouterr().out
+    with pytest.raises(MBSInputError, match="holds no per-material strain energies"):
+        modal_damping(case, 12, old / "modes.h5")
+    args = [*ARGS, *(x for s_ in soft for x in ("--set", s_))]
+    assert run(["modal", str(BASELINE), *args, "--out", str(old)]) == 0
+    assert "has no per-material strain energies" in capsys.readouterr().out
+    assert read_strain_energies(old / "modes.h5") is not None

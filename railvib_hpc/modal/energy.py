@@ -67,8 +67,7 @@ def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm,
                                     array=np.asfortranarray(phi, dtype=float), comm=comm)
     energies = {}
     for group, parts in material_groups(mesh).items():
-        K, M, _ = assemble(mesh, case, dofmap, comm, parts=parts, pattern=pattern)
-        M.destroy()
+        K, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, pattern=pattern, mass=False)
         product = K.matMult(basis)
         local = np.einsum("ij,ij->j", phi, product.getDenseArray())
         energies[group] = comm.allreduce(local)

@@ -76,11 +76,12 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int) -> LocalPattern:
 
 
 def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str] | None = None,
-             pattern: LocalPattern | None = None):
+             pattern: LocalPattern | None = None, mass: bool = True):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements to those parts (the matrices keep the full pattern),
-    e.g. for the stiffness of one material; ``pattern`` reuses a :func:`local_pattern`.
+    e.g. for the stiffness of one material; ``pattern`` reuses a :func:`local_pattern`;
+    ``mass=False`` assembles K only (M is returned as None).
     """
     from petsc4py import PETSc
 
@@ -96,12 +97,12 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
     ip = pat.indptr.astype(PETSc.IntType)
     ix = pat.indices.astype(PETSc.IntType)
     mats = []
-    for _ in range(2):
+    for _ in range(2 if mass else 1):
         A = PETSc.Mat().createAIJ(size=((n_local, n_global), (n_local, n_global)),
                                   csr=(ip, ix, np.zeros(len(ix))), comm=comm)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
         mats.append(A)
-    K, M = mats
+    K, M = mats if mass else (mats[0], None)
     t1 = time.perf_counter()
     t_kernels = t_insert = 0.0
     add = PETSc.InsertMode.ADD_VALUES
@@ -114,12 +115,12 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
         rows = np.ascontiguousarray(rows, dtype=PETSc.IntType)
         cols = np.ascontiguousarray(cols, dtype=PETSc.IntType)
         K.setValuesRCV(rows, cols, np.ascontiguousarray(batch.K), addv=add)
-        if batch.M is not None:
+        if M is not None and batch.M is not None:
             M.setValuesRCV(rows, cols, np.ascontiguousarray(batch.M), addv=add)
         t_k = time.perf_counter()
         t_insert += t_k - t_b
     t2 = time.perf_counter()
-    for A in (K, M):
+    for A in mats:
         A.assemble()
         A.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         A.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)

@@ -191,9 +191,10 @@ def _condense_incompatible(x: np.ndarray, grad: np.ndarray, wdet: np.ndarray,
     n = x.shape[0]
     B = _strain_matrix(grad).reshape(n, 8, 6, 24)
     G = _strain_matrix(_incompatible_gradients(x)).reshape(n, 8, 6, 9)
-    DG = np.einsum("eij,eqjk->eqik", D, G) * wdet[:, :, None, None]
-    Kua = np.einsum("eqiu,eqik->euk", B, DG)
-    Kaa = np.einsum("eqil,eqik->elk", G, DG)
+    DG = np.matmul(D[:, None], G) * wdet[:, :, None, None]          # (n, 8, 6, 9)
+    DG = DG.reshape(n, 48, 9)
+    Kua = np.matmul(B.reshape(n, 48, 24).transpose(0, 2, 1), DG)      # sum over q and i
+    Kaa = np.matmul(G.reshape(n, 48, 9).transpose(0, 2, 1), DG)
     return np.matmul(Kua, np.linalg.solve(Kaa, Kua.transpose(0, 2, 1)))
 
 

@@ -160,6 +160,7 @@ def test_cli_study_validates_settings_and_lists_variants(capsys, tmp_path):
     assert "invalid settings of the 'modes' study (2 problems)" in err
     assert "n_modes = -1: must be > 0" in err and "tolerance = 'x': expected a" in err
     assert "Traceback" not in err
+    assert run(["check", str(ROOT / "jobs" / "engineering.toml")]) == 0
     for kind, job in (("convergence", "mesh_convergence"), ("modes", "modal_truncation"),
                       ("reflection", "boundary_reflection"), ("speed", "speed_sweep")):
         assert run(["check", str(ROOT / "jobs" / f"{job}.toml")]) == 0

@@ -242,6 +242,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "per MUMPS solve) or SLEPc Krylov-Schur; f_max always uses SLEPc "
                         "spectrum slicing", choices=("block_lanczos", "krylovschur")),
         "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos"),
+        "out_of_core": Param("auto", "str", "-",
+                             "MUMPS factor on disk (ICNTL(22)): auto = only when the in-core "
+                             "factor would not fit in the available memory but the out-of-core "
+                             "one does (block Lanczos); always; never (then a model too large "
+                             "stops with a clear message)", choices=("auto", "always", "never")),
         "max_basis": Param(0, "int", "-",
                            "block Lanczos: basis size before a thick restart (0: 3 n_modes, "
                            "capped at 4 GB of basis vectors)", "nonneg"),

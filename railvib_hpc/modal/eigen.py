@@ -82,7 +82,8 @@ def _configure(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: flo
 def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
                 tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
-                monitor=None, static_rhs: np.ndarray | None = None) -> ModalResult:
+                monitor=None, static_rhs: np.ndarray | None = None,
+                out_of_core: str = "auto") -> ModalResult:
     """Extract mass-normalised modes.
 
     Parameters
@@ -112,6 +113,10 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
         (n_local_dofs, k) right-hand sides solved with the factorization of K
         when the block solver factors K itself (shift 0); the solutions are
         returned in ``ModalResult.static`` (None otherwise: factor K separately).
+    out_of_core
+        MUMPS out-of-core factorization: ``"auto"`` (block Lanczos: when the in-core
+        factor would not fit in memory but the out-of-core one does), ``"always"`` or
+        ``"never"``; an explicit ``-railvib_eig_st_mat_mumps_icntl_22`` option wins.
 
     Raises
     ------
@@ -126,7 +131,23 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
                               f"free DOFs ({n_global})")
     if method == "block_lanczos" and f_max <= 0:
         return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
-                            monitor, static_rhs)
+                            monitor, static_rhs, out_of_core)
+    ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
+    set_ooc = out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
+    if set_ooc:
+        PETSc.Options().setValue(ooc_name, 1)
+    try:
+        return _solve_slepc(K, M, comm, n_modes, f_max, shift_hz, tol, max_it, mpd, monitor)
+    finally:
+        if set_ooc:
+            PETSc.Options().delValue(ooc_name)
+
+
+def _solve_slepc(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
+                 max_it: int, mpd: int, monitor) -> ModalResult:
+    """SLEPc Krylov-Schur (or spectrum slicing when ``f_max > 0``)."""
+    from petsc4py import PETSc
+
     eps = _configure(K, M, comm, n_modes, f_max, shift_hz, tol, max_it,
                      mpd if mpd > 0 else PETSc.DECIDE)
     if monitor is not None:
@@ -178,7 +199,7 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
 
 def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
-                 static_rhs: np.ndarray | None = None) -> ModalResult:
+                 static_rhs: np.ndarray | None = None, out_of_core: str = "auto") -> ModalResult:
     from petsc4py import PETSc
 
     from .block_lanczos import (
@@ -201,7 +222,8 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
     extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
     try:
-        op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb)
+        op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
+                           out_of_core=out_of_core)
     except (InsufficientMemory, FactorizationError) as exc:
         raise EigenSolveError(str(exc)) from None
     r0 = K.getOwnershipRange()[0]
@@ -226,7 +248,8 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     order = np.argsort(lam, kind="stable")
     stats = dict(st, nconv=int(n_modes), eps_type="block_lanczos", st_type="sinvert",
                  factor_solver="mumps", tol=tol, time_factorization=op.time_factorization,
-                 factor_memory_gb=op.factor_memory_gb,
+                 factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
+                 factor_memory_in_core_gb=op.in_core_memory_gb,
                  time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
     result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats, static)
     normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order])

@@ -23,7 +23,7 @@ from .petsc import assemble
 from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
 
 #: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
-_NOT_MODAL_INPUTS = ("damping_ratio", "damping")
+_NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core")
 
 
 def modal_digest(case: Case) -> str:
@@ -121,7 +121,12 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             max_it=case["modal.max_restarts"], method=case["modal.method"],
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
-            static_rhs=static_rhs)
+            static_rhs=static_rhs, out_of_core=case["modal.out_of_core"])
+    if result.stats.get("out_of_core"):
+        rep.info(f"  MUMPS out of core (factor on disk): in-core estimate "
+                 f"{result.stats['factor_memory_in_core_gb']:.1f} GB, out of core "
+                 f"{result.stats['factor_memory_gb']:.1f} GB (modal.out_of_core = "
+                 f"'{case['modal.out_of_core']}')")
     with rep.stage("strain energies"):
         energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
     x_static = result.static

@@ -279,9 +279,10 @@ def test_incompatible_modes_bend_exactly(nu):
     """Pure bending of rectangular hexes is represented exactly by the incompatible-modes
     element (Wilson's bubbles carry the quadratic part of the deflection), so the tip
     deflection does not depend on the mesh: 5 and 20 elements along the beam agree to
-    round-off, and at nu = 0 it is the exact M L^2 / (2 E I). The remaining difference from M L^2 / (2 E I) (zero at nu = 0, 4e-4 at
-    nu = 0.4999) is the Poisson (anticlastic) restraint of the symmetry-plane supports,
-    the same for every mesh. Round-off grows with the conditioning lambda / mu."""
+    round-off, and at nu = 0 it is the exact M L^2 / (2 E I). The difference from it at
+    nu > 0 (4e-4 at nu = 0.4999) is the Poisson (anticlastic) restraint of the
+    symmetry-plane supports, the same for every mesh. Round-off grows with the
+    conditioning lambda / mu."""
     coarse = _pure_bending_ratio(nu, "incompatible", shape=(5, 2, 2))
     fine = _pure_bending_ratio(nu, "incompatible", shape=(20, 2, 2))
     assert coarse == pytest.approx(fine, rel=1e-11 * (1 + 2 * nu / (1 - 2 * nu)))

@@ -36,7 +36,7 @@ def soil_case(**extra):
 
 
 def solve(mesh: Mesh, case, rules, n_modes: int, comm=None, method="block_lanczos",
-          f_max: float = 0.0, block_size: int = 8):
+          f_max: float = 0.0, block_size: int = 8, out_of_core: str = "auto"):
     """Assemble with PETSc on ``comm`` and extract modes; returns (result, K, M, dofmap)."""
     from mpi4py import MPI
 
@@ -51,7 +51,7 @@ def solve(mesh: Mesh, case, rules, n_modes: int, comm=None, method="block_lanczo
     dofmap = build_dofmap(mesh, comm.size, rules=rules)
     K, M, _ = assemble(mesh, case, dofmap, comm)
     result = solve_modes(K, M, comm, n_modes=n_modes, f_max=f_max, method=method,
-                         block_size=block_size, tol=1e-10)
+                         block_size=block_size, tol=1e-10, out_of_core=out_of_core)
     return result, K, M, dofmap
 
 

@@ -158,3 +158,56 @@ def test_slab_one_element_thick_bends_correctly_with_incompatible_modes():
         found[form] = res.frequencies_hz[:2]
     assert found["incompatible"] == pytest.approx(exact, rel=0.015)
     assert np.all(found["bbar"] < 0.95 * exact)
+
+
+@pytest.mark.parametrize("setting", ["auto", "never", "always"])
+def test_out_of_core_factorization(monkeypatch, setting):
+    """A model whose in-core factor does not fit: 'auto' switches MUMPS to out of core (the
+    factor really goes to disk here) and gives the in-core eigenvalues; 'never' stops with a
+    clear message; 'always' uses it regardless. The PETSc option is removed afterwards.
+
+    The memory situation is simulated: 1 GB available, 100 GB in core, 0.001 GB out of core."""
+    from petsc4py import PETSc
+
+    from railvib_hpc.modal import block_lanczos
+
+    name = "railvib_eig_st_mat_mumps_icntl_22"
+    reference, *_ = solve(column_mesh(32), soil_case(), {"bottom": ("ux", "uy", "uz"),
+                                                         "all": ("uy", "uz")}, 3)
+    seen = []
+
+    def estimate(self, prefix):
+        ooc = PETSc.Options().getInt(name, 0) == 1
+        seen.append(ooc)
+        return 0.001 if ooc else 100.0
+
+    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda comm: 1.0)
+    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory", estimate)
+    case = soil_case(**{"modal.out_of_core": setting})
+    rules = {"bottom": ("ux", "uy", "uz"), "all": ("uy", "uz")}
+    if setting == "never":
+        with pytest.raises(EigenSolveError, match=r"modal\.out_of_core = 'never'"):
+            solve(column_mesh(32), case, rules, 3, out_of_core=setting)
+        assert seen == [False]
+    else:
+        res, *_ = solve(column_mesh(32), case, rules, 3, out_of_core=setting)
+        assert res.stats["out_of_core"] is True
+        assert res.stats["factor_memory_gb"] == 0.001
+        assert res.eigenvalues == pytest.approx(reference.eigenvalues, rel=1e-10)
+        assert seen == ([False, True] if setting == "auto" else [True])
+    assert not PETSc.Options().hasName(name)
+
+
+def test_out_of_core_that_does_not_fit_either_is_a_clear_error(monkeypatch):
+    from petsc4py import PETSc
+
+    from railvib_hpc.modal import block_lanczos
+
+    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda comm: 1.0)
+    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory",
+                        lambda self, prefix: 100.0)
+    with pytest.raises(EigenSolveError, match=r"out of core: ~100\.0 GB factor, .* does not "
+                                              r"fit either, but 1\.0 GB are available"):
+        solve(column_mesh(8), soil_case(), {"bottom": ("ux", "uy", "uz"),
+                                            "all": ("uy", "uz")}, 3)
+    assert not PETSc.Options().hasName("railvib_eig_st_mat_mumps_icntl_22")

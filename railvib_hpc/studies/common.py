@@ -13,7 +13,8 @@ Folders (``<out>`` is the ``--out`` folder of the command)::
 
 Building responses come from :func:`railvib_hpc.reconstruct.probes.probe_histories`: the
 mode shapes interpolated at the probe points times the modal histories of ``mbs.h5`` (plus
-the static-correction basis when it is on). That is exactly what the reconstruct stage
+the static-correction basis when it is on, for displacements only unless
+``output.static_correction_rates``). That is exactly what the reconstruct stage
 writes to ``probes.h5`` for these points, without the full fields (GBs per variant).
 
 ``result.json`` (schema ``railvib_hpc.study/1``)::

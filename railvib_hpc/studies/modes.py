@@ -4,7 +4,8 @@ correction.
 One modal solve with the largest mode count (and ``static.h5`` when a corrected run is
 asked for) in ``<out>/modes/model``; each variant ``n<m>_modal`` / ``n<m>_corrected`` links
 to it and runs only the MBS with ``mbs.n_modes = m`` and ``mbs.static_correction`` off/on,
-then the probe histories (which include the static-correction basis when it is on).
+then the probe histories (with the static-correction basis in the displacements when it is
+on).
 
 Reference: the most modes, corrected if corrected runs were asked for. For each variant the
 deviation of every quantity (building peak accelerations, peak contact force, max rail

@@ -42,6 +42,13 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
                  "stress.xdmf", "probes.h5", "assessment.json", "report.html", "report.md",
                  "mbs_contact_force.png", "probes/slab1.csv"):
         assert (out / name).exists(), name
+    report = (out / "report.md").read_text()
+    assert "## Model and settings" in report
+    for line in ("mesh                 refinement 0.5, hexahedra: bbar",
+                 "modes                12 computed", "damping              uniform 3 %",
+                 "modal damping used   3.00 - 3.00 % over 12 modes",
+                 "static correction on"):
+        assert line in report, line
     summary = json.loads((out / "assessment.json").read_text())
     assert set(summary["verdict"]) == {"footing", "basement_wall", "slab1", "slab2",
                                        "ground_toe", "ground_mid", "ground_building",

@@ -251,7 +251,8 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     if pm is not None:
         extra.append({"id": "peak_map", "file": "figures/peak_map.png",
                       "title": "Peak velocity map: ground surface and slab tops", "data": pm})
-    text = [("Comparison with the thesis and wave arrivals",
+    text = [("Model and settings", model_summary(case, out_dir)),
+            ("Comparison with the thesis and wave arrivals",
              format_comparison(comparison, arrivals, c_p, c_s))]
     files = write_report(out_dir, results, hist, None if x is None else (x, force),
                          extra_figures=extra, extra_text=text)
@@ -282,6 +283,52 @@ def format_comparison(comparison: dict, arrivals: dict, c_p: float, c_s: float) 
     for name, w in arrivals.items():
         lines.append(f"  {name:16s} {w['distance']:7.2f} {w['after_entry']:13.4f} "
                      f"{w['p_analytic']:10.4f} {w['s_analytic']:10.4f}")
+    return "\n".join(lines)
+
+
+def model_summary(case: Case, out_dir: Path) -> str:
+    """What an assessment rests on, for the report: model size, element and damping
+    formulation, modes and band, MBS settings, versions and input hashes (rank 0)."""
+    import h5py
+
+    lines = [f"case                 {case['case.name']} (preset {case['case.preset']})",
+             f"mesh                 refinement {case['mesh.refinement']}, hexahedra: "
+             f"{case['modal.hex_formulation']}"]
+    modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
+    if modes_path.exists():
+        with h5py.File(modes_path, "r") as f:
+            freq = f["modes/frequency_hz"][()]
+            n_nodes = f["mesh/points"].shape[0]
+            stats = json.loads(f.attrs.get("stats", "{}"))
+            lines.append(f"model                {n_nodes:,} nodes, {stats.get('n_dofs', 0):,} free "
+                         f"DOFs, solved on {stats.get('ranks', '?')} rank(s)"
+                         + (", MUMPS out of core" if stats.get("out_of_core") else ""))
+            lines.append(f"modes                {len(freq)} computed, {freq[0]:.3f} - "
+                         f"{freq[-1]:.3f} Hz")
+            lines.append(f"software             railvib {f.attrs.get('railvib_version', '?')}, "
+                         f"PETSc {f.attrs.get('petsc_version', '?')}, SLEPc "
+                         f"{f.attrs.get('slepc_version', '?')}")
+            lines.append(f"modes.h5 inputs      sha256 {f.attrs.get('inputs_sha256', '?')}")
+    if case["modal.damping"] == "uniform":
+        damping = f"uniform {100 * case['modal.damping_ratio']:g} %"
+    else:
+        ratios = ", ".join(f"{k} {100 * v['damping_ratio']:g} %"
+                           for k, v in case["materials"].items() if k != "rigid_rail")
+        damping = (f"per material (strain energy): {ratios}; pads "
+                   f"{100 * case['modal.damping_ratio']:g} %")
+    lines.append(f"damping              {damping}")
+    if mbs_path.exists():
+        with h5py.File(mbs_path, "r") as f:
+            m = f["modal/omega"].shape[0]
+            zeta = f["modal/zeta"][()]
+            dt = float(f["time"][1] - f["time"][0]) if f["time"].shape[0] > 1 else 0.0
+            lines.append(f"modal damping used   {100 * zeta.min():.2f} - {100 * zeta.max():.2f} "
+                         f"% over {m} modes")
+            lines.append(f"mbs.h5 inputs        sha256 {f.attrs.get('inputs_sha256', '?')}")
+        lines.append(f"multibody            {case['vehicle.type']} at {case['vehicle.speed']:g} "
+                     f"m/s, {m} modes, static correction "
+                     f"{'on' if case['mbs.static_correction'] else 'off'}, dt {dt:.2e} s, "
+                     f"irregularity {case['irregularity.type']}")
     return "\n".join(lines)
 
 

@@ -34,11 +34,14 @@ class LocalPattern:
     line_mask: np.ndarray
 
 
-def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int) -> LocalPattern:
+def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
+                  parts: Collection[str] | None = None) -> LocalPattern:
     """Sparsity pattern of the rows owned by ``rank`` (pure numpy).
 
     Built on the node graph (8 x 8 pairs per hexahedron instead of 24 x 24 entries): all DOF
     rows of a node share the node's column list, the free DOFs of its neighbours in order.
+    ``parts`` restricts it to the elements of those parts (every owned row keeps its
+    diagonal).
     """
     nodes = dofmap.owned_nodes(rank)
     n0, n1 = nodes.start, nodes.stop
@@ -51,6 +54,10 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int) -> LocalPattern:
     node_mask[nodes] = True
     hex_mask = node_mask[mesh.hexes].any(axis=1)
     line_mask = node_mask[mesh.lines].any(axis=1)
+    if parts is not None:
+        ids = [PART_ID[p] for p in parts]
+        hex_mask &= np.isin(mesh.hex_part, ids)
+        line_mask &= np.isin(mesh.line_part, ids)
     # every owned node pairs with itself, so each owned row has its diagonal
     keys = [np.arange(n0, n1, dtype=np.int64) * (n_nodes + 1) - n0 * n_nodes]
     for conn in (mesh.hexes[hex_mask], mesh.lines[line_mask]):
@@ -86,7 +93,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
     from petsc4py import PETSc
 
     t0 = time.perf_counter()
-    pat = pattern or local_pattern(mesh, dofmap, comm.rank)
+    pat = pattern or local_pattern(mesh, dofmap, comm.rank, parts)
     hex_mask, line_mask = pat.hex_mask, pat.line_mask
     if parts is not None:
         ids = [PART_ID[p] for p in parts]

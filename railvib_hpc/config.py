@@ -14,6 +14,7 @@ import difflib
 import hashlib
 import json
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,10 +57,20 @@ class Case:
         """Return a copy of one section, e.g. ``case.section("geometry")``."""
         return copy.deepcopy(self[name])
 
-    def digest(self, *sections: str) -> str:
-        """SHA-256 of the given sections (all if none), for result reuse keys."""
+    def digest(self, *sections: str, exclude: Collection[str] = ()) -> str:
+        """SHA-256 of the given sections (all if none), for result reuse keys.
+
+        Keys named in ``exclude`` are left out at every depth (e.g. damping ratios, which
+        do not change the modes).
+        """
         names = sections or tuple(sorted(self.data))
-        payload = {n: self[n] for n in names}
+
+        def drop(node: Any) -> Any:
+            if not isinstance(node, dict):
+                return node
+            return {k: drop(v) for k, v in node.items() if k not in exclude}
+
+        payload = {n: drop(self[n]) for n in names}
         if "mesh" in names and self["mesh.file"]:
             mesh_file = self.resolve(self["mesh.file"])
             payload["mesh_file_sha256"] = hashlib.sha256(mesh_file.read_bytes()).hexdigest()

@@ -124,6 +124,7 @@ class BlockOperator:
         avail_gb = available_memory_gb(comm)
         self.factor_memory_gb = self._estimate_factor_memory(prefix)
         self.in_core_memory_gb = self.factor_memory_gb
+
         def peak(factor_gb: float) -> float:
             return PEAK_RATIO * (factor_gb + extra_gb)
 

@@ -72,8 +72,8 @@ def beam_up_vectors(x: np.ndarray) -> np.ndarray:
 
 
 def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
-                    line_mask: np.ndarray | None = None, chunk: int = 20_000
-                    ) -> Iterator[Batch]:
+                    line_mask: np.ndarray | None = None, chunk: int = 20_000,
+                    with_mass: bool = True) -> Iterator[Batch]:
     """Yield element batches of the selected elements (all if masks are None).
 
     Parameters
@@ -84,6 +84,8 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
         Boolean masks selecting the hexahedra / line elements to compute.
     chunk
         Maximum number of hexahedra per batch (bounds memory).
+    with_mass
+        Compute the mass matrices too (``Batch.M`` is None otherwise).
     """
     lumped = case["modal.lumped_mass"]
     hex_sel = np.ones(len(mesh.hexes), bool) if hex_mask is None else hex_mask
@@ -99,8 +101,8 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
             xs = x[first]
             Ks = hex8_stiffness(xs, mat["E"], mat["nu"],
                                 formulation=case["modal.hex_formulation"])
-            Ms = hex8_mass(xs, mat["rho"], lumped=lumped)
-            yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms[shape_of])
+            Ms = hex8_mass(xs, mat["rho"], lumped=lumped)[shape_of] if with_mass else None
+            yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms)
 
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
         sel = line_sel & (mesh.line_part == PART_ID[part])
@@ -116,10 +118,12 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
                            up)
         phi_y, phi_z = shear_deformation_factors(x, mat["E"], G, sec["area"], sec["iyy"],
                                                  sec["izz"], ky, kz)
-        M = beam_mass(x, mat["rho"], sec["area"], sec["iyy"], sec["izz"], up,
-                      rotary_inertia=True, phi_y=phi_y, phi_z=phi_z)
-        if lumped:
-            M = _lump_beam(M)
+        M = None
+        if with_mass:
+            M = beam_mass(x, mat["rho"], sec["area"], sec["iyy"], sec["izz"], up,
+                          rotary_inertia=True, phi_y=phi_y, phi_z=phi_z)
+            if lumped:
+                M = _lump_beam(M)
         yield Batch(conn, _BEAM_SLOT, _BEAM_COMP, K, M)
 
     for part, (key, direction) in PAD_DIRECTION.items():

@@ -83,22 +83,17 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
 
 
 def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str] | None = None,
-             pattern: LocalPattern | None = None, mass: bool = True):
+             mass: bool = True):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
-    ``parts`` restricts the elements to those parts (the matrices keep the full pattern),
-    e.g. for the stiffness of one material; ``pattern`` reuses a :func:`local_pattern`;
-    ``mass=False`` assembles K only (M is returned as None).
+    ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
+    the stiffness of one material; ``mass=False`` assembles K only (M is returned as None).
     """
     from petsc4py import PETSc
 
     t0 = time.perf_counter()
-    pat = pattern or local_pattern(mesh, dofmap, comm.rank, parts)
+    pat = local_pattern(mesh, dofmap, comm.rank, parts)
     hex_mask, line_mask = pat.hex_mask, pat.line_mask
-    if parts is not None:
-        ids = [PART_ID[p] for p in parts]
-        hex_mask = hex_mask & np.isin(mesh.hex_part, ids)
-        line_mask = line_mask & np.isin(mesh.line_part, ids)
     r0, r1 = dofmap.owned_dofs(comm.rank)
     n_local, n_global = r1 - r0, dofmap.n_dofs
     ip = pat.indptr.astype(PETSc.IntType)
@@ -114,7 +109,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
     t_kernels = t_insert = 0.0
     add = PETSc.InsertMode.ADD_VALUES
     t_k = time.perf_counter()
-    for batch in element_batches(mesh, case, hex_mask, line_mask):
+    for batch in element_batches(mesh, case, hex_mask, line_mask, with_mass=mass):
         t_b = time.perf_counter()
         t_kernels += t_b - t_k
         cols = batch.dofs(dofmap.index)

@@ -31,14 +31,8 @@ def modal_digest(case: Case) -> str:
     reuses the modes)."""
     import hashlib
 
-    def sha(payload) -> str:        # as Case.digest
-        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()
-                              ).hexdigest()
-
     modal = {k: v for k, v in case["modal"].items() if k not in _NOT_MODAL_INPUTS}
-    materials = {name: {k: v for k, v in mat.items() if k not in _NOT_MODAL_INPUTS}
-                 for name, mat in case["materials"].items()}
-    physics = sha({"materials": materials, "sections": case["sections"], "pads": case["pads"]})
+    physics = case.digest("materials", "sections", "pads", exclude=_NOT_MODAL_INPUTS)
     text = json.dumps({"mesh": case.digest(*MESH_INPUTS), "physics": physics,
                        "modal": modal}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()

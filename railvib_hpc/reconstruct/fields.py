@@ -290,6 +290,9 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     hist = [np.ascontiguousarray(np.hstack([a[steps]] + [np.asarray(e[2 + i], float)[steps]
                                                          for e in extra]))
             for i, a in enumerate((q, q_dot, q_ddot))]
+    # a field whose trailing coefficients are all zero (e.g. a static correction applied to
+    # the displacements only) multiplies only its leading basis rows
+    hist = [np.ascontiguousarray(h[:, :_leading_columns(h)]) for h in hist]
     parallel = h5py_parallel_ok(comm)
 
     # ---- read this rank's slice of the mode shapes (and the extra bases)
@@ -389,7 +392,7 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     t_total = time.perf_counter() - t_start
     t_total = comm.allreduce(t_total, op=_mpi_max()) if comm.size > 1 else t_total
     nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
-    flops = 2.0 * n_basis * 3 * n * ns * 3
+    flops = 2.0 * sum(h.shape[1] for h in hist) * 3 * n * ns
     return {"n_nodes": n, "n_steps": ns, "n_basis": n_basis, "n_modes": m,
             "n_extra": n_basis - m, "block_steps": nb, "bytes_written": nbytes,
             "seconds_read": t_read, "seconds_gemm": t_gemm, "seconds_write": t_write,
@@ -471,7 +474,7 @@ def _stream(comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np
             t0 = time.perf_counter()
             out = buf[:b]
             try:
-                _gemm(h[s0:s1], phi2, out)
+                _gemm(h[s0:s1], phi2[:h.shape[1]], out)
                 if buf32 is not None:
                     np.copyto(buf32[:b], out, casting="same_kind")
                     out = buf32[:b]
@@ -494,6 +497,12 @@ def _stream(comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np
         if rep is not None and (now - last > 2.0 or s1 == ns):
             last = now
             rep.progress(f"fields: {s1}/{ns} steps", s1, ns, t_first)
+
+
+def _leading_columns(h: np.ndarray) -> int:
+    """Number of leading columns of ``h`` up to its last column with a nonzero entry."""
+    nonzero = np.flatnonzero(np.any(h != 0.0, axis=0))
+    return int(nonzero[-1]) + 1 if nonzero.size else 1
 
 
 def _gemm(q_block: np.ndarray, phi2: np.ndarray, out: np.ndarray) -> None:

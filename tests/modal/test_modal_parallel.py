@@ -104,3 +104,41 @@ def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coar
             repeated = any(abs(freq[k] - freq[j]) < 1e-6 * freq[k] for j in range(20) if j != k)
             assert repeated or abs(abs(c) - 1) < 1e-6
     comm.Barrier()
+
+
+@pytest.mark.mpi
+def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
+    """Incompatible-modes hexahedra assembled on N ranks give the serial matrices and
+    eigenvalues; with too little memory for the in-core factor (simulated), 'auto' factors
+    out of core on every rank and still finds the serial eigenvalues."""
+    init_petsc([])
+    from petsc4py import PETSc
+
+    from railvib_hpc.config import load_case
+    from railvib_hpc.modal import block_lanczos
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.eigen import solve_modes
+    from railvib_hpc.modal.petsc import assemble
+
+    _, mesh = coarse
+    case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.hex_formulation=incompatible"])
+    K1, M1, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
+    KN, MN, _ = assemble(mesh, case, build_dofmap(mesh, comm.size), comm)
+    # each rank condenses the bubbles of its own representative element per shape (a
+    # different element on 1 and N ranks): round-off eps * cond(K_aa) (<= 192 on this mesh)
+    # per entry, accumulated over a row's 243 entries in the worst case: 2.2e-16 * 192 *
+    # 243 = 1e-11
+    for norm in (PETSc.NormType.FROBENIUS, PETSc.NormType.INFINITY):
+        assert KN.norm(norm) == pytest.approx(K1.norm(norm), rel=1e-11)
+    serial = solve_modes(K1, M1, MPI.COMM_SELF, n_modes=10, tol=1e-10)
+
+    def estimate(self, prefix):
+        ooc = PETSc.Options().getInt("railvib_eig_st_mat_mumps_icntl_22", 0) == 1
+        return 0.001 if ooc else 100.0
+
+    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda c: 1.0)
+    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory", estimate)
+    parallel = solve_modes(KN, MN, comm, n_modes=10, tol=1e-10, out_of_core="auto")
+    assert parallel.stats["out_of_core"] is True
+    assert parallel.eigenvalues == pytest.approx(serial.eigenvalues, rel=1e-9)
+    assert not PETSc.Options().hasName("railvib_eig_st_mat_mumps_icntl_22")

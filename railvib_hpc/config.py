@@ -25,6 +25,8 @@ from .errors import CaseError
 from .schema import PRESETS, SCHEMA, Param, iter_params
 
 ALL_KEYS: dict[str, Param] = dict(iter_params())
+#: Shortest wavelength of the FRA spectra's fitted range (5 ft; Hamid et al., FRA 1980) [m].
+FRA_FITTED_WAVELENGTH_MIN = 1.524
 _SECTION_KEYS = {k.rsplit(".", 1)[0] for k in ALL_KEYS}
 
 
@@ -244,6 +246,11 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
             notes.append(f"case.preset = '{preset}' sets {len(PRESETS[preset])} keys, but the "
                          f"file or --set gives other values for {len(shadowed)} of them, which "
                          f"win: {', '.join(shadowed)}")
+    irr = data["irregularity"]
+    if irr["type"] == "fra" and irr["wavelength_min"] < FRA_FITTED_WAVELENGTH_MIN:
+        notes.append(f"irregularity.wavelength_min = {irr['wavelength_min']:g} m lies below the "
+                     f"range the FRA spectra were fitted to (>= {FRA_FITTED_WAVELENGTH_MIN} m = "
+                     "5 ft): the shorter wavelengths are an extrapolation")
     case = Case(data=data, path=path, notes=tuple(notes))
     problems.extend(check_consistency(case))
     if problems:
@@ -395,6 +402,14 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("mesh.file", m["file"], f"file not found (looked for {f})"))
         elif f.suffix != ".msh":
             out.append(("mesh.file", m["file"], "must be a gmsh .msh file"))
+    if m["layout"] == "thesis" and not m["file"]:
+        for leaf in ("size_far", "size_deep", "layer_elements"):
+            default = ALL_KEYS[f"mesh.{leaf}"].default
+            if m[leaf] != default:
+                out.append((f"mesh.{leaf}", m[leaf],
+                            f"applies to mesh.layout = 'refined' only; the 'thesis' layout "
+                            f"uses the APDL script's divisions (leave it at {default!r} or set "
+                            "mesh.layout = 'refined')"))
     if m["refinement"] > 6:
         out.append(("mesh.refinement", m["refinement"],
                     "must be <= 6 (refinement 3 is already ~1.5M nodes)"))
@@ -421,6 +436,10 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("vehicle.car_length", v["car_length"],
                     "must exceed bogie_spacing + wheelbase (the wheels of successive cars "
                     "must not overlap)"))
+    if v["drop_height"] > 0 and v["type"] == "moving_force":
+        out.append(("vehicle.drop_height", v["drop_height"],
+                    "a drop needs a vehicle with masses: vehicle.type = 'wheelset' or "
+                    "'vehicle' (moving forces have no initial condition)"))
     if v["x_end"] and v["x_end"] <= v["x_start"]:
         out.append(("vehicle.x_end", v["x_end"],
                     f"must be 0 (end of the rigid exit rail) or > vehicle.x_start = "

@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from .sections import APDL_RAIL, APDL_SLEEPER
+
 
 @dataclass(frozen=True)
 class Param:
@@ -143,27 +145,27 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
     "sections": {
         "rail": {
-            "area": Param(64.5e-4, "float", "m^2", "rail cross-section area", "pos"),
-            "iyy": Param(2010e-8, "float", "m^4", "rail second moment, vertical bending", "pos"),
-            "izz": Param(326e-8, "float", "m^4", "rail second moment, lateral bending", "pos"),
-            "j": Param(2.59e-6, "float", "m^4",
-                       "rail torsion constant (thin-walled estimate of the APDL I-section)", "pos"),
-            "shear_coefficient_y": Param(0.34, "float", "-",
+            "area": Param(APDL_RAIL.area, "float", "m^2", "rail cross-section area", "pos"),
+            "iyy": Param(APDL_RAIL.iyy, "float", "m^4", "rail second moment, vertical bending",
+                         "pos"),
+            "izz": Param(APDL_RAIL.izz, "float", "m^4", "rail second moment, lateral bending",
+                         "pos"),
+            "j": Param(APDL_RAIL.j, "float", "m^4", "rail torsion constant", "pos"),
+            "shear_coefficient_y": Param(APDL_RAIL.shear_coefficient_y, "float", "-",
                                          "Timoshenko shear coefficient, vertical bending", "pos"),
-            "shear_coefficient_z": Param(0.34, "float", "-",
+            "shear_coefficient_z": Param(APDL_RAIL.shear_coefficient_z, "float", "-",
                                          "Timoshenko shear coefficient, lateral bending", "pos"),
         },
         "sleeper": {
-            "area": Param(513.8e-4, "float", "m^2", "sleeper cross-section area", "pos"),
-            "iyy": Param(18907e-8, "float", "m^4", "sleeper second moment, vertical bending",
-                         "pos"),
-            "izz": Param(2.17e-4, "float", "m^4",
-                         "sleeper second moment, horizontal bending (APDL trapezoid section)",
-                         "pos"),
-            "j": Param(3.38e-4, "float", "m^4", "sleeper torsion constant (APDL section)", "pos"),
-            "shear_coefficient_y": Param(0.83, "float", "-",
+            "area": Param(APDL_SLEEPER.area, "float", "m^2", "sleeper cross-section area", "pos"),
+            "iyy": Param(APDL_SLEEPER.iyy, "float", "m^4",
+                         "sleeper second moment, vertical bending", "pos"),
+            "izz": Param(APDL_SLEEPER.izz, "float", "m^4",
+                         "sleeper second moment, horizontal bending", "pos"),
+            "j": Param(APDL_SLEEPER.j, "float", "m^4", "sleeper torsion constant", "pos"),
+            "shear_coefficient_y": Param(APDL_SLEEPER.shear_coefficient_y, "float", "-",
                                          "Timoshenko shear coefficient, vertical bending", "pos"),
-            "shear_coefficient_z": Param(0.83, "float", "-",
+            "shear_coefficient_z": Param(APDL_SLEEPER.shear_coefficient_z, "float", "-",
                                          "Timoshenko shear coefficient, horizontal bending",
                                          "pos"),
         },
@@ -177,9 +179,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "cz": Param(5e5, "float", "N s/m", "rail pad damping, vertical", "nonneg"),
     },
     "mesh": {
+        "layout": Param("thesis", "str", "-",
+                        "element divisions: 'thesis' reproduces the APDL script's divisions "
+                        "(Appendix A/B: 41,880 hexahedra, coarse soil across the track; the "
+                        "size_far, size_deep and layer_elements keys do not apply), 'refined' "
+                        "uses the mesh.size_* keys (finer far field, for engineering runs)",
+                        choices=("thesis", "refined")),
         "refinement": Param(1.0, "float", "-",
-                            "multiplies every element count (1: thesis size, ~56k nodes; "
-                            "2: ~8x the nodes)", "pos"),
+                            "multiplies every element count (1: the layout's own size; "
+                            "2: ~8x the elements)", "pos"),
         "file": Param("", "str", "-",
                       "use this gmsh .msh (same physical-group names) instead of generating; "
                       "relative to the case file"),
@@ -197,17 +205,18 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                          "pos"),
         "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos"),
         "size_far": Param(0.6, "float", "m",
-                          "element size across the track in the far field and vertically in the "
-                          "upper soil", "pos"),
-        "size_deep": Param(0.8, "float", "m", "vertical element size below the building base",
+                          "layout 'refined': element size across the track in the far field",
+                          "pos"),
+        "size_deep": Param(0.8, "float", "m",
+                           "layout 'refined': vertical element size below the building base",
                            "pos"),
         "size_building_y": Param(0.3, "float", "m",
                                  "building and soil element size across the track in line with "
                                  "the building", "pos"),
         "size_building_z": Param(0.6, "float", "m", "building element size vertically", "pos"),
         "layer_elements": Param(1, "int", "-",
-                                "elements through each of the ballast and subballast layers",
-                                "pos"),
+                                "layout 'refined': elements through each of the ballast and "
+                                "subballast layers", "pos"),
     },
     "domain": {
         "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),
@@ -311,8 +320,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "k_hertz": Param(0.0, "float", "N/m^1.5",
                          "Hertz constant K_H (0: Jenkins' formula from wheel_radius)", "nonneg"),
         "contact_damping": Param(0.0, "float", "N s/m^2",
-                                 "Hertz contact damping C in F = K_H d^1.5 - C d' |d|",
-                                 "nonneg"),
+                                 "Hertz contact damping C in F = K_H d^1.5 - C d' |d| (the "
+                                 "thesis's formula; it gives no value)", "nonneg"),
+        "drop_height": Param(0.0, "float", "m",
+                             "initial condition: 0 starts the vehicle at rest in static "
+                             "equilibrium; > 0 drops it: at t = 0 the track is at rest and "
+                             "every body hangs rigidly lifted from its static equilibrium so "
+                             "that the wheels are this far above the rail (the thesis's "
+                             "wheelset is 'dropped from a small distance', unspecified)",
+                             "nonneg"),
         "n_cars": Param(1, "int", "-", "vehicle: number of coupled cars in the train", "pos"),
         "car_mass": Param(32_000.0, "float", "kg", "vehicle: car body mass (defaults: Manchester "
                           "Benchmark passenger coach, Iwnicki 1998)", "pos"),
@@ -336,6 +352,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "vehicle: secondary suspension stiffness per side", "nonneg"),
         "c_secondary": Param(2.0e4, "float", "N s/m",
                              "vehicle: secondary suspension damping per side", "nonneg"),
+        "k_antiroll": Param(940e3, "float", "N m/rad",
+                            "vehicle: anti-roll bar stiffness per bogie (roll moment between "
+                            "car body and bogie frame per radian of relative roll)", "nonneg"),
         "primary_span": Param(2.0, "float", "m",
                               "vehicle: lateral distance of the primary springs", "pos"),
         "secondary_span": Param(2.0, "float", "m",
@@ -362,10 +381,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              choices=("1", "2", "3", "4", "5", "6",
                                       "A", "B", "C", "D", "E", "F", "G", "H")),
         "seed": Param(1, "int", "-", "random seed of the profile", "nonneg"),
-        "wavelength_min": Param(1.0, "float", "m",
+        "wavelength_min": Param(1.524, "float", "m",
                                 "shortest wavelength of the random profile (the FRA spectra are "
-                                "fitted to wavelengths above ~1.5 m)",
-                                "pos"),
+                                "fitted to 1.524-304.8 m, i.e. 5-1000 ft)", "pos"),
         "wavelength_max": Param(30.0, "float", "m", "longest wavelength of the random profile",
                                 "pos"),
         "flat_depth": Param(0.0, "float", "m", "wheel flat depth (0: no flat)", "nonneg"),
@@ -434,7 +452,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
 #: Values of the thesis's Table I where it differs from the APDL script
 #: (../shared/reference/benchmarks.md section 3). Layer depths are the same in
 #: both presets: Table I's "ballast 4.8 m" contradicts the APDL z-levels and
-#: the thesis's own wave speeds.
+#: the thesis's own wave speeds. Table I gives neither torsion constants nor the
+#: sleeper's lateral second moment: those keep the APDL section's values.
 PRESETS: dict[str, dict[str, Any]] = {
     "apdl": {},
     "table1": {
@@ -445,8 +464,158 @@ PRESETS: dict[str, dict[str, Any]] = {
         "materials.sleeper.rho": 2750.0,
         "pads.kx": 26.5e7, "pads.ky": 26.5e7, "pads.kz": 26.5e7,
         "pads.cx": 4.6e4, "pads.cy": 4.6e4, "pads.cz": 4.6e4,
+        "sections.rail.area": 64.5e-4,
+        "sections.rail.iyy": 2010e-8,
+        "sections.rail.izz": 326e-8,
+        "sections.rail.shear_coefficient_y": 0.34,
+        "sections.rail.shear_coefficient_z": 0.34,
+        "sections.sleeper.area": 513.8e-4,
+        "sections.sleeper.iyy": 18907e-8,
+        "sections.sleeper.shear_coefficient_y": 0.83,
+        "sections.sleeper.shear_coefficient_z": 0.83,
     },
 }
+
+_APDL = "thesis App. A (APDL)"
+_T1 = "thesis Table I"
+_T2 = "thesis Table II"
+_RAIL_SEC = "App. A SECTYPE,1,BEAM,I / SECDATA,0.1524,0.07,0.19,0.0165,0.045,0.0175"
+_SLP_SEC = "App. A SECTYPE,2,BEAM,QUAD / SECDATA,-0.135,-0.11,.135,-.11,.090,.11,-.090,.11"
+_MANCHESTER = "Manchester Benchmark vehicle 1 (Iwnicki, Veh. Syst. Dyn. 30 (1998) 295-313)"
+
+#: Where the value of every thesis- or literature-derived key comes from, per preset:
+#: ``SOURCES[preset][key]`` (the ``apdl`` entries are the schema defaults). Keys that are
+#: numerical settings of this program (solver tolerances, output steps...) have none.
+SOURCES: dict[str, dict[str, str]] = {
+    "apdl": {
+        **{f"geometry.{k}": f"{_APDL}: {k.upper()}=" for k in (
+            "x0", "x1", "x2", "x3", "x4", "ys1", "ys2", "ys3", "ys4", "z0", "z1", "z2", "z3",
+            "z4", "xbb", "ybb", "zbb")},
+        "geometry.ys0": f"{_APDL}: YSO=8.25",
+        "geometry.ballast_top_half_width": f"{_APDL}: K,KP_SLP_END+9,X1,3.25,Z3",
+        "geometry.ballast_bottom_half_width": f"{_APDL}: K,KP_SLP_END+10,X1,3.75,Z2",
+        "track.rigid_length": f"{_APDL}: Rigid=3; {_T1}",
+        "track.rail_length": f"{_APDL}: Rail_length=21.6; {_T1}",
+        "track.gauge": f"{_APDL}: R_Gage=2*0.75565; {_T1}",
+        "track.sleeper_spacing": f"{_APDL}: Distance_betw_sleepers=0.6; {_T1}",
+        "track.n_sleepers": f"{_APDL}: No_sleeper_div_total=36 (+1)",
+        "track.sleeper_length": f"{_APDL}: K,...,Rigid,+-1.25,Z3; {_T1}",
+        "building.footing_size": f"{_APDL}: FX1=2.4, FX4=3.6 (local system 11)",
+        "building.footing_height": f"{_APDL}: HSF=0.6 (the text's 1.2 m is not used)",
+        "building.column_size": f"{_APDL}: CX1=2.7, CX2=3.3",
+        "building.beam_width": f"{_APDL}: BEAM_WIDTH=0.6",
+        "building.beam_depth": f"{_APDL}: VEXT,A_BEAM1+1,...,0.6",
+        "building.slab_thickness": f"{_APDL}: VEXT,A_SLAB1+1,,0,,,0.2",
+        "building.wall_thickness": f"{_APDL}: WALL_WIDTH=0.3",
+        "building.z_slab1_base": f"{_APDL}: Z_SLAB1_BASE=4.2",
+        "building.z_slab2_base": f"{_APDL}: Z_SLAB2_BASE=8",
+        **{f"materials.{m}.{k}": f"{_APDL}: MP,{cmd},{n},{v}"
+           for m, n, vals in (("rail", 1, ("210e9", "0.30", "7700")),
+                              ("rigid_rail", 2, ("210e10", "0.30", "7700")),
+                              ("sleeper", 3, ("64e9", "0.25", "2570")),
+                              ("ballast", 4, ("260e6", "0.25", "1800")),
+                              ("subballast", 5, ("200e06", "0.2", "1850")),
+                              ("subgrade", 6, ("200e6", "0.2", "1850")),
+                              ("concrete", 10, ("31e9", "0.25", "2500")))
+           for k, cmd, v in zip(("E", "nu", "rho"), ("EX", "PRXY", "DENS"), vals)},
+        **{f"materials.{m}.damping_ratio": "thesis §2.1: 3 % modal damping"
+           for m in ("rail", "rigid_rail", "sleeper", "ballast", "subballast", "subgrade",
+                     "concrete")},
+        **{f"sections.rail.{k}": f"{_RAIL_SEC} (railvib_hpc.sections)" for k in (
+            "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
+        **{f"sections.sleeper.{k}": f"{_SLP_SEC} (railvib_hpc.sections)" for k in (
+            "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
+        **{f"pads.k{d}": f"{_APDL}: R,{r},70e8,5e5 (COMBIN14 KEYOPT(2)={o})"
+           for d, r, o in (("x", 7, 1), ("y", 8, 2), ("z", 9, 3))},
+        **{f"pads.c{d}": f"{_APDL}: R,{r},70e8,5e5 (COMBIN14 KEYOPT(2)={o})"
+           for d, r, o in (("x", 7, 1), ("y", 8, 2), ("z", 9, 3))},
+        "mesh.layout": "thesis App. A/B: divisions of the APDL script, 41,880 hexahedra "
+                       "(App. B element ranges)",
+        "mesh.rail_elements_per_bay": f"{_APDL}: No_rail_ele_betwn_sleeper=5",
+        "mesh.soil_elements_per_bay": f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2",
+        "mesh.soil_elements_per_bay_building": f"{_APDL}: No_soil_ele_betwn_sleeper_B=4",
+        "mesh.sleeper_outer_elements": f"{_APDL}: SLP_OUT_ELE=2",
+        "mesh.sleeper_middle_elements": f"{_APDL}: SLP_MID_ELE=4",
+        "mesh.shoulder_elements": f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)",
+        "mesh.size_building_y": f"{_APDL}: LESIZE,ALL,0.3 (building and soil across)",
+        "mesh.size_building_z": f"{_APDL}: EXTOPT,ESIZE,6 over 3.6 m (columns), walls 0.6 m",
+        "modal.n_modes": f"{_APDL}: MODOPT,LANB,300; thesis §3",
+        "modal.damping_ratio": "thesis §2.1: 3 % modal damping",
+        "modal.hex_formulation": f"{_APDL}: ET,2,SOLID185 (default KEYOPT(2)=0: B-bar)",
+        "modal.method": f"{_APDL}: MODOPT,LANB (block Lanczos)",
+        "modal.fix_sleeper_rotations": f"{_APDL}: ESEL,S,MAT,,3 / D,ALL,ROTX..ROTZ,0",
+        "modal.fix_rail_rotations_at_pads": f"{_APDL}: NSEL,S,NODE,,7,177,5 / D,ALL,ROT*,0",
+        "vehicle.type": "thesis §4.4: suspended wheelset (SAMS)",
+        "vehicle.speed": "thesis §4.4: 30 m/s (67 mph)",
+        "vehicle.x_start": "thesis §2.2 and §6.6: wheel starts at x = 0 on the rigid rail",
+        "vehicle.wheelset_mass": f"{_T2}: mass 1568 kg",
+        "vehicle.wheelset_roll_inertia": f"{_T2}: Ixx 656 kg m^2",
+        "vehicle.k_suspension": f"{_T2}: K_l1 = k_l2 = 25000 (read as vertical, per side)",
+        "vehicle.c_suspension": f"{_T2}: K_t1 = k_t2 = 1000 N.s/m (read as damping, per "
+                                "side; see docs/thesis.md for the other reading)",
+        "vehicle.wheel_radius": "Jenkins et al. (1974) / benchmarks.md: R = 0.46 m",
+        "vehicle.contact_damping": "thesis §4.2 formula F = K_H d^1.5 + C d' |d|; C not given",
+        "vehicle.drop_height": "thesis §2.2: 'dropped from a small distance'; not given",
+        "vehicle.conicity": "UIC 1:40 tread inclination",
+        "vehicle.car_mass": _MANCHESTER,
+        "vehicle.car_pitch_inertia": _MANCHESTER,
+        "vehicle.car_roll_inertia": _MANCHESTER,
+        "vehicle.bogie_mass": _MANCHESTER,
+        "vehicle.bogie_pitch_inertia": _MANCHESTER,
+        "vehicle.bogie_roll_inertia": _MANCHESTER,
+        "vehicle.car_wheelset_mass": _MANCHESTER,
+        "vehicle.car_wheelset_roll_inertia": _MANCHESTER,
+        "vehicle.k_primary": f"{_MANCHESTER}: 1.22 MN/m per axle box (TTB-2D, "
+                             "github.com/DanielCanteroNTNU/TTB-2D "
+                             "TrainProp_Manchester_BenchMark.m, uses 1.20 MN/m)",
+        "vehicle.c_primary": _MANCHESTER,
+        "vehicle.k_secondary": _MANCHESTER,
+        "vehicle.c_secondary": _MANCHESTER,
+        "vehicle.k_antiroll": f"{_MANCHESTER}: anti-roll bar 940 kN m/rad per bogie",
+        "vehicle.bogie_spacing": _MANCHESTER,
+        "vehicle.wheelbase": _MANCHESTER,
+        "vehicle.primary_span": _MANCHESTER,
+        "vehicle.secondary_span": _MANCHESTER,
+        "vehicle.car_length": "UIC-Z coach length over couplers (not in the benchmark)",
+        "irregularity.wavelength_min": "FRA spectra fitted to 5-1000 ft (Hamid et al., "
+                                       "FRA/ORD-80/28, 1980; 1.524 m = 5 ft)",
+        "output.stress_times": "thesis Figs. 21-26: t = 0.54 s and 0.61 s",
+    },
+    "table1": {
+        "materials.ballast.nu": f"{_T1}: Poisson's ratio of the ballast 0.3",
+        "materials.ballast.rho": f"{_T1}: density of the ballast 1300",
+        "materials.subballast.nu": f"{_T1}: Poisson's ratio of the subballast 0.35",
+        "materials.subgrade.nu": f"{_T1}: Poisson's ratio of the subgrade 0.35",
+        "materials.sleeper.rho": f"{_T1}: density of a sleeper 2750",
+        **{f"pads.k{d}": f"{_T1}: stiffness coefficient of a pad 26.5e7" for d in "xyz"},
+        **{f"pads.c{d}": f"{_T1}: damping coefficient of a pad 4.6e4" for d in "xyz"},
+        "sections.rail.area": f"{_T1}: cross-sectional area of the rail 64.5e-4",
+        "sections.rail.iyy": f"{_T1}: second moment of the rail Iyy 2010e-8",
+        "sections.rail.izz": f"{_T1}: second moment of the rail Izz 326e-8",
+        "sections.rail.shear_coefficient_y": f"{_T1}: Timoshenko shear coefficient 0.34",
+        "sections.rail.shear_coefficient_z": f"{_T1}: Timoshenko shear coefficient 0.34 "
+                                             "(one value given, used for both planes)",
+        "sections.sleeper.area": f"{_T1}: cross-sectional area of a sleeper 513.8e-4",
+        "sections.sleeper.iyy": f"{_T1}: second moment of a sleeper 18907e-8",
+        "sections.sleeper.shear_coefficient_y": f"{_T1}: Timoshenko shear coefficient 0.83",
+        "sections.sleeper.shear_coefficient_z": f"{_T1}: Timoshenko shear coefficient 0.83 "
+                                                "(one value given, used for both planes)",
+    },
+}
+# the geometry entries name the APDL variable; add its value
+for _key, _text in list(SOURCES["apdl"].items()):
+    if _key.startswith("geometry.") and _text.endswith("="):
+        _leaf = _key.split(".")[1]
+        _node = SCHEMA["geometry"][_leaf]
+        SOURCES["apdl"][_key] = f"{_text}{_node.default:g}"
+
+
+def source(key: str, preset: str = "apdl") -> str:
+    """Where the value of ``key`` comes from in ``preset`` ('' for program settings).
+
+    A key the preset does not set takes the ``apdl`` (default) source.
+    """
+    return SOURCES.get(preset, {}).get(key) or SOURCES["apdl"].get(key, "")
 
 
 def iter_params(tree: dict[str, Any] | None = None, prefix: str = ""):

@@ -36,16 +36,22 @@ THESIS_APDL = {
     "materials.subballast.rho": 1850.0, "materials.subgrade.E": 200e6,
     "materials.subgrade.nu": 0.2, "materials.subgrade.rho": 1850.0,
     "materials.concrete.E": 31e9, "materials.concrete.nu": 0.25, "materials.concrete.rho": 2500.0,
-    "sections.rail.area": 64.5e-4, "sections.rail.iyy": 2010e-8, "sections.rail.izz": 326e-8,
-    "sections.rail.shear_coefficient_y": 0.34, "sections.sleeper.area": 513.8e-4,
-    "sections.sleeper.iyy": 18907e-8, "sections.sleeper.shear_coefficient_y": 0.83,
     "pads.kx": 70e8, "pads.ky": 70e8, "pads.kz": 70e8, "pads.cx": 5e5, "pads.cy": 5e5,
     "pads.cz": 5e5, "modal.n_modes": 300, "modal.damping_ratio": 0.03, "vehicle.speed": 30.0,
+}
+# The APDL's BEAM188 sections from SECDATA (benchmarks.md section 3, 4 digits there).
+APDL_SECTIONS = {
+    "sections.rail.area": 79.1e-4, "sections.rail.iyy": 3956e-8, "sections.rail.izz": 621e-8,
+    "sections.sleeper.area": 495e-4, "sections.sleeper.iyy": 19700e-8,
 }
 TABLE1 = {
     "materials.ballast.nu": 0.3, "materials.ballast.rho": 1300.0,
     "materials.subballast.nu": 0.35, "materials.subgrade.nu": 0.35,
     "materials.sleeper.rho": 2750.0, "pads.kz": 26.5e7, "pads.cz": 4.6e4,
+    "sections.rail.area": 64.5e-4, "sections.rail.iyy": 2010e-8, "sections.rail.izz": 326e-8,
+    "sections.rail.shear_coefficient_y": 0.34, "sections.rail.shear_coefficient_z": 0.34,
+    "sections.sleeper.area": 513.8e-4, "sections.sleeper.iyy": 18907e-8,
+    "sections.sleeper.shear_coefficient_y": 0.83,
 }
 
 
@@ -53,6 +59,31 @@ def test_defaults_equal_thesis_apdl():
     case = load_case(None)
     for key, value in THESIS_APDL.items():
         assert case[key] == pytest.approx(value, rel=1e-12), key
+    for key, value in APDL_SECTIONS.items():
+        assert case[key] == pytest.approx(value, rel=1.5e-3), key
+    assert case["mesh.layout"] == "thesis"
+
+
+def test_every_preset_value_cites_its_source():
+    from railvib_hpc.schema import PRESETS, SOURCES, source
+
+    for preset, values in PRESETS.items():
+        for key in values:
+            assert SOURCES[preset].get(key), (preset, key)
+    for preset, sources in SOURCES.items():
+        unknown = [k for k in sources if k not in ALL_KEYS]
+        assert not unknown, (preset, unknown)
+    # every default that comes from the thesis's model or data names where it comes from
+    for key in ALL_KEYS:
+        section = key.split(".")[0]
+        if section in ("geometry", "track", "building", "materials", "sections", "pads"):
+            assert source(key), key
+    for key in ("vehicle.wheelset_mass", "vehicle.k_suspension", "vehicle.k_primary",
+                "vehicle.k_antiroll", "modal.n_modes", "mesh.layout",
+                "irregularity.wavelength_min"):
+        assert source(key), key
+    assert "SECDATA" in source("sections.rail.j")
+    assert "Table I" in source("sections.rail.area", "table1")
 
 
 def test_baseline_job_file_is_the_defaults():

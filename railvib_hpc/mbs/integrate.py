@@ -281,6 +281,7 @@ def simulate_vehicle(
     initial_state: tuple[np.ndarray, ...] | None = None, store_every: int = 1,
     points_per_period: int = 20, newton_tol: float = 1e-10, max_iter: int = 50,
     residual: np.ndarray | None = None, progress: Callable[[int, int], None] | None = None,
+    drop_height: float = 0.0,
 ) -> MBSResult:
     """A vehicle (wheelset, car, train) rolling at constant speed over the modal rail(s).
 
@@ -314,7 +315,8 @@ def simulate_vehicle(
         included); None for smooth rails.
     initial_state
         ``(q, q_dot, y, y_dot)``; default: static equilibrium at ``x0``
-        (vehicle at rest on the statically deflected rail, no drop impact).
+        (vehicle at rest on the statically deflected rail, no drop impact), or the
+        drop of ``drop_height``.
     store_every
         Keep every ``store_every``-th step (the last step is always kept).
     points_per_period
@@ -329,12 +331,19 @@ def simulate_vehicle(
         ``vehicle.wheel_rail``; None for a pure modal rail.
     progress
         Called as ``progress(step, n_steps)`` about every 2 % of the run.
+    drop_height
+        > 0 (and no ``initial_state``): the vehicle is dropped. At t = 0 the track is
+        at rest and undeformed and the vehicle at rest in the position of
+        :func:`drop_state`: its static equilibrium on a rigid rail lifted rigidly so that
+        every wheel is at least ``drop_height`` above the rail top [m].
 
     Returns
     -------
     MBSResult
         Histories (``rail_loads`` holds the rail-DOF loads when ``residual`` is given).
     """
+    if drop_height < 0.0:
+        raise ValueError(f"drop_height must be >= 0, got {drop_height!r}")
     rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
     if dt is None:
@@ -365,6 +374,9 @@ def simulate_vehicle(
     psi = rows.rows(0)
     c_res = res.matrix(0) if res is not None else 0.0
     r = np.asarray(irr(x[0]), dtype=float)
+    if initial_state is None and drop_height > 0.0:
+        initial_state = (np.zeros(om.size), np.zeros(om.size),
+                         drop_state(vehicle, drop_height, r), np.zeros(vehicle.n_dof))
     if initial_state is None:
         if np.any(om <= 0.0):
             raise ValueError("static initial state needs omega > 0; pass initial_state")
@@ -427,6 +439,42 @@ def simulate_vehicle(
     return out.result(t, x, vehicle.dof_names, dt, nt, lost)
 
 
+def rigid_lift(vehicle) -> np.ndarray:
+    """(n_dof,) displacement that translates every body of ``vehicle`` 1 m upwards.
+
+    The vertical DOFs are those named ``z`` or ``*.z`` (:attr:`dof_names`); the wheel
+    heights ``B^T u`` of the result are all 1 (checked).
+    """
+    names = vehicle.dof_names
+    u = np.array([1.0 if (n == "z" or n.endswith(".z")) else 0.0 for n in names])
+    heights = vehicle.contact_matrix().T @ u
+    if not np.allclose(heights, 1.0, rtol=0.0, atol=1e-12):
+        raise ValueError("the vehicle's vertical DOFs do not translate all its wheels")
+    return u
+
+
+def drop_state(vehicle, drop_height: float, rail_height: np.ndarray | None = None
+               ) -> np.ndarray:
+    """Vehicle position of a drop from ``drop_height`` [m] (at rest, track undeformed).
+
+    The static equilibrium on a rigid rail (``rail_height`` under the wheels, zeros by
+    default) lifted rigidly by ``drop_height`` plus the largest static Hertz
+    penetration: the suspension keeps its static deflection, the most loaded wheel
+    hangs ``drop_height`` above the rail and no wheel touches it. The vehicle then
+    falls freely until the first contact (the thesis's "dropped from a small distance").
+
+    Returns
+    -------
+    numpy.ndarray
+        (n_dof,) displacements.
+    """
+    nw = vehicle.n_wheels
+    r = np.zeros(nw) if rail_height is None else np.asarray(rail_height, dtype=float)
+    y, _ = static_equilibrium(vehicle, np.zeros((nw, nw)), r)
+    gap = vehicle.contact_matrix().T @ y - r                   # -penetration (<= 0)
+    return y + (drop_height - float(np.min(gap))) * rigid_lift(vehicle)
+
+
 def simulate_wheelset(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
     vehicle: SuspendedWheelset, x0: float, speed: float, t_end: float, **kwargs,
@@ -467,6 +515,8 @@ __all__ = [
     "MBSResult",
     "auto_time_step",
     "coupled_energy",
+    "drop_state",
+    "rigid_lift",
     "simulate_moving_force",
     "simulate_vehicle",
     "simulate_wheelset",

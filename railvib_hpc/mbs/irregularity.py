@@ -14,19 +14,29 @@ Random profiles (:meth:`RailProfile.from_psd`)
 All spectra are *one-sided* displacement PSDs: the variance of the profile
 is the integral of the PSD over positive spatial frequencies only.
 
-``"fra"``: US FRA track classes 1-6, vertical profile, in the form used in
-vehicle-track dynamics (Garg & Dukkipati 1984; Zhai, *Vehicle-Track Coupled
-Dynamics*, 2020, ch. 3)::
+``"fra"``: US FRA track classes 1-6, vertical profile. Two different spectra circulate
+under the name "FRA"; the one implemented is the six-class rational form fitted by the
+FRA's track-geometry programme (Hamid, Rasmussen, Baluja & Yang, "Analytical descriptions
+of track geometry variations", FRA/ORD-83/03, 1983) in the angular-frequency notation of
+Lei & Noda (J. Sound Vib. 258 (2002) 147-165) and Zhai (*Vehicle-Track Coupled Dynamics*,
+Springer 2020, ch. 3)::
 
     S(Omega) = k A_v Omega_c^2 / (Omega^2 (Omega^2 + Omega_c^2))
 
 with ``Omega`` the angular spatial frequency [rad/m], ``A_v`` the roughness
 coefficient [cm^2 rad/m], ``Omega_c = 0.8245`` rad/m the cut-off and
-``k = 0.25``; ``S`` is then in cm^2/(rad/m). Internally ``A_v`` is converted
+``k = 0.25``; ``S`` is then in cm^2/(rad/m). It is a *one-sided* spectrum: the
+variance is ``int_0^inf S dOmega`` (tested with the periodogram of generated
+profiles). Internally ``A_v`` is converted
 to m^2 rad/m (factor 1e-4), so :func:`psd` returns m^2/(rad/m) and profiles
 are in metres. Table (class: ``A_v``): 1: 1.2107, 2: 1.0181, 3: 0.6816,
-4: 0.5376, 5: 0.2095, 6: 0.0339 (class 6 is the best track). With
-wavelengths 1-50 m the RMS is 5.7 mm for class 5 and 2.3 mm for class 6.
+4: 0.5376, 5: 0.2095, 6: 0.0339 (class 6 is the best track). The other
+spectrum, ``S(phi) = A phi_2^2 (phi^2 + phi_1^2) / (phi^4 (phi^2 + phi_2^2))`` in
+in^2/(cycle/ft) with two break frequencies (Fries & Coffey; Garg & Dukkipati,
+*Dynamics of Railway Vehicle Systems*, 1984), is not implemented. Both were fitted to
+wavelengths of 5-1000 ft (1.524-304.8 m): the default ``wavelength_min`` is 1.524 m
+(a shorter one gives a note). With wavelengths 1-50 m the RMS is 5.7 mm for class 5
+and 2.3 mm for class 6.
 
 ``"iso8608"``: ISO 8608 (road) style spectrum with fixed waviness ``w = 2``::
 

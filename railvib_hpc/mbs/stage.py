@@ -128,7 +128,7 @@ def build_vehicle(case: Case):
         contact_span=v["contact_span"], primary_span=v["primary_span"],
         secondary_span=v["secondary_span"], k_primary=v["k_primary"], c_primary=v["c_primary"],
         k_secondary=v["k_secondary"], c_secondary=v["c_secondary"],
-        contact_damping=v["contact_damping"], k_hertz=kh)
+        k_antiroll=v["k_antiroll"], contact_damping=v["contact_damping"], k_hertz=kh)
     if v["n_cars"] == 1:
         return car
     return Train([car] * v["n_cars"], k_coupler=v["coupler_stiffness"])
@@ -276,7 +276,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
             rm.omega, zeta, rails, vehicle, x_start, speed, t_end, dt=dt,
             irregularity=irregularity, store_every=case["mbs.store_every"],
             points_per_period=case["mbs.points_per_period"], residual=residual,
-            progress=progress)
+            progress=progress, drop_height=case["vehicle.drop_height"])
     wall = time.perf_counter() - t_run
     stats = _summary(result, rm.rails, vehicle, wall, t_read, m)
     stats["static_correction"] = residual is not None

@@ -29,9 +29,10 @@ Suspension: per axle box side a primary spring + damper at lateral
 ``+-primary_span/2`` between the wheelset and the bogie frame at the axle
 position (``+-semi_wheelbase`` from the bogie centre); per bogie side a
 secondary spring + damper at ``+-secondary_span/2`` between the bogie centre
-and the car body at ``+-bogie_semi_spacing`` from the car centre. Each spring
-of stiffness ``k`` adds ``k g g^T`` to K where ``g . y`` is the relative
-vertical displacement of its two ends.
+and the car body at ``+-bogie_semi_spacing`` from the car centre; per bogie an
+anti-roll bar, a torsion spring ``k_antiroll`` on the relative roll of car body
+and bogie frame. Each spring of stiffness ``k`` adds ``k g g^T`` to K where
+``g . y`` is the relative displacement (or rotation) of its two ends.
 
 Default data: the Manchester Benchmark passenger vehicle ("vehicle 1";
 S. Iwnicki, "Manchester benchmarks for rail vehicle simulation", Vehicle
@@ -40,9 +41,13 @@ Railway Vehicle Dynamics*, CRC 2006): car body 32,000 kg, Iyy 1.97e6 kg m^2,
 Ixx 5.68e4 kg m^2; bogie frame 2,615 kg, Iyy 1,476 kg m^2, Ixx 1,722 kg m^2;
 wheelset 1,813 kg, Ixx 1,120 kg m^2; primary vertical stiffness 1.22 MN/m and
 damping 4 kN s/m per axle box; secondary vertical stiffness 0.43 MN/m and
-damping 20 kN s/m per side; bogie centre spacing 19 m, wheelbase 2.56 m,
-wheel radius 0.46 m, contact span 1.5 m; lateral spacing of the primary and
-of the secondary springs 2.0 m. The car length over couplers (26.4 m) is not
+damping 20 kN s/m per side; anti-roll bar 940 kN m/rad per bogie; bogie centre
+spacing 19 m, wheelbase 2.56 m, wheel radius 0.46 m, contact span 1.5 m;
+lateral spacing of the primary and of the secondary springs 2.0 m. The primary
+vertical stiffness is 1.22 MN/m in Iwnicki's table; the open TTB-2D toolbox
+(github.com/DanielCanteroNTNU/TTB-2D, ``TrainProp_Manchester_BenchMark.m``)
+uses 1.20 MN/m: 1.6 % softer, 0.8 % lower bogie bounce frequency. The car
+length over couplers (26.4 m) is not
 part of the benchmark: it is the length of a UIC-Z type coach with the same
 19 m bogie spacing, and only sets the wheel offsets in a :class:`Train` and
 the coupler positions.
@@ -121,6 +126,9 @@ class RailVehicle(_LinearVehicle):
         Primary vertical stiffness [N/m] and damping [N s/m] per axle box.
     k_secondary, c_secondary
         Secondary vertical stiffness [N/m] and damping [N s/m] per bogie side.
+    k_antiroll
+        Anti-roll bar stiffness per bogie [N m/rad]: roll moment between the car body
+        and the bogie frame per radian of relative roll.
     contact_damping
         Hertz contact damping ``C`` [N s/m^2] (see :mod:`.contact`).
     gravity
@@ -148,6 +156,7 @@ class RailVehicle(_LinearVehicle):
     c_primary: float = 4.0e3
     k_secondary: float = 0.43e6
     c_secondary: float = 2.0e4
+    k_antiroll: float = 940e3
     contact_damping: float = 0.0
     gravity: float = 9.81
     k_hertz: float | None = None
@@ -166,7 +175,7 @@ class RailVehicle(_LinearVehicle):
         for name in positive:
             if not getattr(self, name) > 0.0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)!r}")
-        for name in ("c_primary", "c_secondary", "contact_damping"):
+        for name in ("c_primary", "c_secondary", "k_antiroll", "contact_damping"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if not self.bogie_semi_spacing > self.semi_wheelbase:
@@ -231,9 +240,19 @@ class RailVehicle(_LinearVehicle):
                 g[0], g[1], g[2] = -1.0, -xi, -y  # car body z, pitch, roll
         return gp, gs
 
-    def _suspension_matrix(self, kp: float, ks: float) -> np.ndarray:
+    def _antiroll_rows(self) -> np.ndarray:
+        """Relative-roll rows of the (2,) anti-roll bars: bogie roll minus car body roll."""
+        g = np.zeros((2, 17))
+        for b in range(2):
+            g[b, 5 + 3 * b], g[b, 2] = 1.0, -1.0
+        return g
+
+    def _suspension_matrix(self, kp: float, ks: float, k_roll: float = 0.0) -> np.ndarray:
         gp, gs = self._spring_rows()
         a = kp * gp.T @ gp + ks * gs.T @ gs
+        if k_roll:
+            gr = self._antiroll_rows()
+            a = a + k_roll * gr.T @ gr
         return 0.5 * (a + a.T)  # exactly symmetric
 
     def mass_matrix(self) -> np.ndarray:
@@ -251,7 +270,18 @@ class RailVehicle(_LinearVehicle):
         its two wheelsets moving up/down with the axle boxes (the secondary
         springs act at the bogie centre).
         """
-        return self._suspension_matrix(self.k_primary, self.k_secondary)
+        return self._suspension_matrix(self.k_primary, self.k_secondary, self.k_antiroll)
+
+    def roll_stiffness(self) -> float:
+        """Static roll stiffness of the car body on rigid wheelsets [N m/rad].
+
+        Per bogie the secondary springs (``k_s (s_s/2)^2`` per side) and the anti-roll bar
+        act in parallel, in series with the primary springs of both axles
+        (``k_p (s_p/2)^2`` per axle box); the two bogies act in parallel.
+        """
+        secondary = 2.0 * self.k_secondary * (0.5 * self.secondary_span) ** 2 + self.k_antiroll
+        primary = 4.0 * self.k_primary * (0.5 * self.primary_span) ** 2
+        return 2.0 / (1.0 / secondary + 1.0 / primary)
 
     def damping_matrix(self) -> np.ndarray:
         """(17, 17) suspension damping matrix."""

@@ -6,6 +6,27 @@ volume meshed as a structured (transfinite) grid. The number of divisions of
 an interval depends only on the interval, so neighbouring blocks always share
 their face grids: the mesh is conformal by construction. The embankment
 shoulders are blocks whose outer vertices are moved onto the 1:1 slopes.
+
+Two sets of divisions (``mesh.layout``):
+
+``"thesis"``
+    The divisions of the APDL script (Appendix A), which reproduce the element
+    ranges of Appendix B exactly: ballast 2,688, subballast 2,688, track-zone
+    subgrade 12,288, concrete 4,248 and building-side subgrade 19,968, i.e.
+    41,880 hexahedra (see :data:`THESIS_DIVISIONS` and ``docs/thesis.md``). Along
+    x: 2 elements per 0.6 m bay, 4 in line with the building (96 in all); across
+    the track: 4 between the rails, 2 to each sleeper end, 3 over each shoulder,
+    2 over the 4 m beyond the embankment on the far side, 5 over the 5.65 m
+    between the embankment toe and the building, 0.3 m in line with the
+    building, 3 over the 12 m beyond it; vertically 0.6 m in the subgrade (8 over
+    its 4.8 m) and 2 elements through each embankment layer. Extensions of the
+    domain (``domain.extra_*``) take the same sizes as the zone they extend.
+``"refined"``
+    The sizes of the ``mesh`` keys (``size_far`` across the track in the far
+    field, ``size_deep`` below the building base, ``layer_elements`` through
+    the embankment layers): a finer far field for engineering runs.
+
+``mesh.refinement`` multiplies every element count of either layout.
 """
 
 from __future__ import annotations
@@ -88,6 +109,22 @@ def _ndiv(length: float, size: float, refinement: float) -> int:
     return max(1, int(round(length * refinement / size - 1e-9)))
 
 
+#: Divisions of the APDL script (Appendix A) that differ from the ``mesh`` keys' defaults,
+#: as element sizes [m] so that extended domains keep them. Each cites its APDL line.
+THESIS_DIVISIONS: dict[str, float] = {
+    # LSEL,S,LINE,,Line_SLP_END+40,Line_SLP_END+41,1 / LESIZE,ALL,,,2: YS1..YS0 = 4 m
+    "far_track_side": 2.0,
+    # LSEL,S,LINE,,LINE_SOIL+10,LINE_SOIL+11,1 / LESIZE,ALL,,,5: YS2..YS1 = 5.65 m
+    "toe_to_building": 5.65 / 5,
+    # LSEL,S,LINE,,LINE_SOIL+2,LINE_SOIL+4,2 / LESIZE,ALL,,,3: YS4..YS3 = 12 m
+    "beyond_building": 12.0 / 3,
+    # LSEL,...,LENG,,Z1-Z0 / LESIZE,ALL,,,8 and the building-side verticals LESIZE,ALL,0.6
+    "vertical_soil": 0.6,
+    # LESIZE,ALL,,,2 on the vertical lines of the ballast and subballast at X1
+    "layer_elements": 2,
+}
+
+
 def build_layout(case: Case) -> Layout:
     """Compute the block decomposition for a validated case."""
     g, t, b, m, d = (case[s] for s in ("geometry", "track", "building", "mesh", "domain"))
@@ -131,7 +168,20 @@ def build_layout(case: Case) -> Layout:
             return _ndiv(y1 - y0, m["size_building_y"], r)
         return _ndiv(y1 - y0, m["size_far"], r)
 
-    ny = np.array([ydiv(y0, y1) for y0, y1 in zip(yb[:-1], yb[1:])])
+    def ydiv_thesis(y0: float, y1: float) -> int:
+        if y0 >= -toe - _TOL:
+            if y1 <= toe + _TOL:
+                return ydiv(y0, y1)
+            return _ndiv(y1 - y0, THESIS_DIVISIONS["far_track_side"], r)
+        if y0 >= g["ys2"] - _TOL:
+            return _ndiv(y1 - y0, THESIS_DIVISIONS["toe_to_building"], r)
+        if y0 >= g["ys3"] - _TOL:
+            return ydiv(y0, y1)
+        return _ndiv(y1 - y0, THESIS_DIVISIONS["beyond_building"], r)
+
+    thesis = m["layout"] == "thesis"
+    ny = np.array([(ydiv_thesis if thesis else ydiv)(y0, y1)
+                   for y0, y1 in zip(yb[:-1], yb[1:])])
 
     # --- z levels
     zbot = g["z0"] - d["extra_depth"]
@@ -151,10 +201,14 @@ def build_layout(case: Case) -> Layout:
         return round(z0, 9), round(z1, 9)
 
     for z0, z1 in zip(below[:-1], below[1:]):
-        size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
+        if thesis:
+            size = THESIS_DIVISIONS["vertical_soil"]
+        else:
+            size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, size, r)
+    layers = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
     for z0, z1 in zip(embank[:-1], embank[1:]):
-        zdiv[zkey(z0, z1)] = max(1, round(m["layer_elements"] * r))
+        zdiv[zkey(z0, z1)] = max(1, round(layers * r))
     for z0, z1 in zip(above[:-1], above[1:]):
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
 
@@ -227,6 +281,9 @@ def build_layout(case: Case) -> Layout:
         "footing": (g["xbb"] - (half - fs / 2), g["ybb"] + (half - fs / 2), zs + fh),
         # outer face of the basement wall facing the track, mid-length, mid-height
         "basement_wall": (g["xbb"], g["ys2"], zs + 0.5 * (g["z1"] - zs)),
+        # the same wall's far end (x = X3), mid-height: the thesis's 20.2 m wave-arrival
+        # point (20.2 m from the far rail at the entry of the flexible track, section 6.6)
+        "basement_wall_far": (g["x3"], g["ys2"], zs + 0.5 * (g["z1"] - zs)),
         "slab1": (g["xbb"], g["ybb"], zs + levels["s1t"]),
         "slab2": (g["xbb"], g["ybb"], zs + levels["s2t"]),
         "ground_toe": (g["xbb"], -toe, g["z1"]),

@@ -268,3 +268,20 @@ def test_irregularity_flat_phase_per_wheel():
     assert h[0] == pytest.approx(-1e-3) and h[1] == 0.0
     h = irr(np.array([1.025, 1.025]))
     assert h[0] == 0.0 and h[1] == pytest.approx(-1e-3)
+
+
+def test_fra_spectrum_form_value_and_fitted_range():
+    """The FRA form k A_v Omega_c^2 / (Omega^2 (Omega^2 + Omega_c^2)), one-sided, in m^2/(rad/m):
+    hand-computed value at Omega = 1 rad/m for class 5, and the default wavelength range."""
+    from railvib_hpc.config import load_case
+
+    # 0.25 * 0.2095e-4 m^2 rad/m * 0.6798 / 1.6798 = 5.2375e-6 * 0.40469 = 2.1196e-6
+    assert psd("fra", 5, 1.0) == pytest.approx(2.11957e-6, rel=1e-5)
+    case = load_case(None, ["irregularity.type=fra"])
+    assert case["irregularity.wavelength_min"] == 1.524  # 5 ft, the spectra's fitted range
+    assert not case.notes
+    note = load_case(None, ["irregularity.type=fra", "irregularity.wavelength_min=1.0"]).notes
+    assert len(note) == 1 and "1.524" in note[0] and "irregularity.wavelength_min" in note[0]
+    # the default band's variance (class 6, 1.524-30 m) against the closed form above
+    assert band_variance("fra", 6, (1.524, 30.0)) == pytest.approx(
+        fra_variance(6, 1.524, 30.0), rel=1e-13)

@@ -142,10 +142,11 @@ def test_suspension_frequencies_with_wheelsets_fixed():
     mb = 2 * v.bogie_mass
     bounce = _pair(v.car_mass, mb, 4 * ks, -4 * ks, 4 * ks + 8 * kp)
     pitch = _pair(v.car_pitch_inertia, mb, 4 * ks * lc**2, -4 * ks * lc, 4 * ks + 8 * kp)
-    roll = _pair(v.car_roll_inertia, 2 * v.bogie_roll_inertia, 4 * ks * ys**2, -4 * ks * ys**2,
-                 4 * ks * ys**2 + 8 * kp * yp**2)
+    kr = 2 * ks * ys**2 + v.k_antiroll  # secondary roll stiffness per bogie, with the bar
+    roll = _pair(v.car_roll_inertia, 2 * v.bogie_roll_inertia, 2 * kr, -2 * kr,
+                 2 * kr + 8 * kp * yp**2)
     bogie_pitch = 4 * kp * lt**2 / v.bogie_pitch_inertia
-    bogie_roll_anti = (2 * ks * ys**2 + 4 * kp * yp**2) / v.bogie_roll_inertia
+    bogie_roll_anti = (kr + 4 * kp * yp**2) / v.bogie_roll_inertia
     expected = np.sort(np.concatenate([bounce, pitch, roll, [bogie_pitch] * 2,
                                        [bogie_roll_anti]]))
     np.testing.assert_allclose(w2, expected, rtol=1e-10)
@@ -220,3 +221,31 @@ def test_irregularity_with_vehicle_layout():
     expected = np.tile([0.0, 1e-3], 4)
     expected[4] += flat.profile(30.0 + VEH.wheel_offsets[4])
     np.testing.assert_allclose(h, expected, atol=1e-18)
+
+
+def test_anti_roll_bar_static_roll_stiffness():
+    """Manchester Benchmark anti-roll bar (940 kN m/rad per bogie): a roll moment on the
+    car body, wheelsets held, turns it by M / K with K the series/parallel combination of
+    secondary springs + bar (per bogie) and primary springs."""
+    moment = 10e3
+    for k_bar in (0.0, 940e3):
+        v = RailVehicle(k_antiroll=k_bar)
+        free = np.arange(9)  # body and bogies; the wheelsets are held
+        k = v.stiffness_matrix()[np.ix_(free, free)]
+        f = np.zeros(9)
+        f[2] = moment
+        theta = np.linalg.solve(k, f)[2]
+        ks_roll = 2 * v.k_secondary * (0.5 * v.secondary_span) ** 2 + k_bar
+        kp_roll = 4 * v.k_primary * (0.5 * v.primary_span) ** 2
+        expected = 2.0 / (1.0 / ks_roll + 1.0 / kp_roll)
+        assert moment / theta == pytest.approx(expected, rel=1e-12)
+        assert v.roll_stiffness() == pytest.approx(expected, rel=1e-12)
+    # the bar stiffens the body roll: 0.86 -> 1.75 MN m/rad (the secondary springs alone
+    # give 2 x 0.43 MN/m x 1 m^2 = 0.86 MN m/rad per bogie)
+    assert RailVehicle().roll_stiffness() == pytest.approx(
+        2 / (1 / (0.86e6 + 0.94e6) + 1 / 4.88e6), rel=1e-12)
+    assert RailVehicle().k_antiroll == 940e3
+    # it acts on relative roll only: bounce and pitch are unchanged
+    a, b = RailVehicle(k_antiroll=0.0).stiffness_matrix(), RailVehicle().stiffness_matrix()
+    diff = np.abs(b - a)
+    assert set(np.flatnonzero(diff.sum(axis=0))) == {2, 5, 8}

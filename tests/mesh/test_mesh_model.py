@@ -189,3 +189,71 @@ def test_domain_extensions_change_volumes_exactly():
         assert report["volume_per_part"][part] == pytest.approx(vol, rel=1e-12), part
     assert report["quality"]["nonconformal_faces"] == 0
     assert report["quality"]["n_inverted"] == 0
+
+
+def test_thesis_layout_reproduces_appendix_b_element_counts(baseline_mesh, baseline_layout):
+    """Appendix B's element ranges: ballast 661-3348 (2,688), subballast 3349-6036 (2,688),
+    subgrade 6037-18324 (12,288, the track zone), concrete 18547-22794 (4,248), subgrade
+    22795-42762 (19,968, the building side): 41,880 hexahedra; rails 1-364, sleepers
+    365-660, springs 18325-18546."""
+    mesh, report = baseline_mesh
+    case = load_case(BASELINE)
+    assert case["mesh.layout"] == "thesis"
+    counts = report["elements_per_part"]
+    assert counts["ballast"] == 2688 and counts["subballast"] == 2688
+    concrete = sum(counts[p] for p in ("footing", "column", "beam", "slab", "wall"))
+    assert concrete == 4248
+    sub = mesh.hex_part == PART_ID["subgrade"]
+    yc = mesh.points[mesh.hexes[sub]][:, :, 1].mean(axis=1)
+    ys1 = case["geometry.ys1"]
+    assert np.sum(yc > ys1) == 12288 and np.sum(yc < ys1) == 19968
+    assert len(mesh.hexes) == 41880
+    assert counts["rail"] + counts["rigid_rail"] == 364 and counts["sleeper"] == 296
+    assert counts["pad_x"] + counts["pad_y"] + counts["pad_z"] == 222
+    # the divisions behind them (docs/thesis.md): 96 along x, 8 x 0.6 m in the subgrade,
+    # 2 per embankment layer, 16 across the track zone, 3 + 24 + 5 on the building side
+    lay = baseline_layout
+    assert lay.nx.sum() == 32 + 48 + 16
+    yb, ny = lay.yb, lay.ny
+    track = (yb[:-1] >= ys1 - 1e-9)
+    assert ny[track].sum() == 3 + 2 + 4 + 2 + 3 + 2
+    beyond = yb[1:] <= case["geometry.ys3"] + 1e-9
+    gap = (yb[:-1] >= case["geometry.ys2"] - 1e-9) & (yb[1:] <= ys1 + 1e-9)
+    plan = ~track & ~beyond & ~gap
+    assert (ny[beyond].sum(), ny[plan].sum(), ny[gap].sum()) == (3, 24, 5)
+    below = [n for (z0, z1), n in lay.zdiv.items() if z1 <= case["geometry.z1"] + 1e-9]
+    assert sum(below) == 8
+    assert lay.zdiv[(4.8, 5.3)] == 2 and lay.zdiv[(5.3, 5.8)] == 2
+    # clean: no inverted, duplicate, unused or non-conformal element
+    q = report["quality"]
+    assert q["n_inverted"] == 0 and q["nonconformal_faces"] == 0
+    assert q["duplicate_nodes"] == 0 and q["unused_nodes"] == 0
+    assert q["min_scaled_jacobian"] > 0.7
+
+
+def test_refined_layout_keeps_its_counts():
+    """The engineering layout (mesh.layout = 'refined') is unchanged: 52,056 hexahedra."""
+    mesh, _ = generate(build_layout(load_case(BASELINE, ["mesh.layout=refined"])))
+    c = mesh.counts_per_part()
+    assert len(mesh.hexes) == 52056 and mesh.n_nodes == 63872
+    assert (c["ballast"], c["subballast"], c["subgrade"]) == (1344, 1344, 45120)
+    assert mesh.quality()["n_inverted"] == 0
+
+
+def test_thesis_layout_rejects_refined_only_keys():
+    from railvib_hpc.errors import CaseError
+
+    with pytest.raises(CaseError, match="mesh.size_far.*applies to mesh.layout = 'refined'"):
+        load_case(BASELINE, ["mesh.size_far=0.3"])
+    assert load_case(BASELINE, ["mesh.layout=refined", "mesh.size_far=0.3"])
+
+
+def test_far_wall_probe_is_20_m_from_the_entry():
+    """basement_wall_far: the far end (x = X3) of the track-side wall, the thesis's 20.2 m."""
+    case = load_case(BASELINE)
+    lay = build_layout(case)
+    x, y, z = lay.probes["basement_wall_far"]
+    g = case["geometry"]
+    assert (x, y) == (g["x3"], g["ys2"])
+    far_rail = np.array([g["x1"], 0.5 * case["track.gauge"], g["z4"]])
+    assert np.linalg.norm(np.array([x, y, g["zbb"]]) - far_rail) == pytest.approx(20.2, abs=0.02)

@@ -17,7 +17,7 @@ from .log import Reporter
 from .parallel import on_root, world
 
 STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
-STUDIES = ("convergence", "modes", "reflection", "speed")
+STUDIES = ("convergence", "modes", "reflection", "speed", "thesis")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -37,7 +37,7 @@ def _parser() -> argparse.ArgumentParser:
         "reconstruct": "rebuild displacement/velocity/acceleration fields of every node",
         "assess": "evaluate the building response against vibration standards",
         "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
-        "study": "convergence / modes / reflection / speed studies",
+        "study": "convergence / modes / reflection / speed / thesis-comparison studies",
     }
     for name, text in helps.items():
         sp = sub.add_parser(name, help=text, description=text)

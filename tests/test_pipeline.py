@@ -35,7 +35,7 @@ def test_run_goes_end_to_end(shared_tmp, capsys):
 
 
 def _check_outputs(out: Path, text: str, rerun: str) -> None:
-    assert "pipeline complete: 9 probes assessed" in text
+    assert "pipeline complete: 10 probes assessed" in text
     assert "iso2631" in text and "slab1" in text and "comparison with the thesis" in text
     assert "reusing" in rerun
     for name in ("mesh.h5", "modes.h5", "static.h5", "mbs.h5", "fields.h5", "fields.xdmf",
@@ -50,7 +50,7 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
                  "static correction on"):
         assert line in report, line
     summary = json.loads((out / "assessment.json").read_text())
-    assert set(summary["verdict"]) == {"footing", "basement_wall", "slab1", "slab2",
+    assert set(summary["verdict"]) == {"footing", "basement_wall", "basement_wall_far", "slab1", "slab2",
                                        "ground_toe", "ground_mid", "ground_building",
                                        "ground_far", "ground_opposite"}
     assert summary["wave_speeds"]["c_P"] == pytest.approx(346.58, abs=0.01)

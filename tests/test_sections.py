@@ -31,7 +31,6 @@ def rectangle_torsion_series(a: float, b: float, terms: int = 50) -> float:
 
 def test_rail_i_section_hand_values():
     """SECDATA,0.1524,0.07,0.19,0.0165,0.045,0.0175 = W1, W2, W3, t1, t2, t3."""
-    w1, w2, w3, t1, t2, t3 = RAIL_SECDATA
     s = i_section(*RAIL_SECDATA, cells=2)
     # by hand: foot 0.1524 x 0.0165, web 0.0175 x 0.1285, head 0.07 x 0.045
     assert s.area == pytest.approx(0.0025146 + 0.00224875 + 0.00315, rel=1e-14)

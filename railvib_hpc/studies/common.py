@@ -25,8 +25,9 @@ writes to ``probes.h5`` for these points, without the full fields (GBs per varia
              peak_rss_gb_total, ranks, ...}}
     mbs     {peak_contact_force, static_wheel_load, dynamic_increment, dynamic_factor,
              min_contact_force, max_rail_deflection, dt, n_steps, loss_of_contact_steps}
-    probes  {name: {coords, acc_x, acc_y, acc_vertical, acc_total, t_acc_total,
-                    vel_total, disp_total}}                      (every mesh probe)
+    probes  {name: {coords, t_onset, acc_x, acc_y, acc_vertical, acc_total, t_acc_total,
+                    vel_total, disp_total}}                      (every mesh probe; t_onset:
+                    first time |a| reaches assessment.wave_threshold of its peak)
     assessment {name: {passed, max_utilisation, utilisation {standard: value}}}
     spectra {name: {bands_hz, acc_rms {x, y, z, total}}}    (one-third octaves, 1-80 Hz)
     timings {modal, mbs, response, total} [s], reused {modes, mbs}
@@ -271,7 +272,9 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         a, v, u = h["acceleration"], h["velocity"], h["displacement"]
         amag = np.linalg.norm(a, axis=1)
         k = int(np.argmax(amag))
+        onset = np.flatnonzero(amag >= a_cfg["wave_threshold"] * amag[k])
         peaks[name] = {"coords": np.asarray(h["coords"]).tolist(),
+                       "t_onset": float(t[onset[0]]) if onset.size else None,
                        "acc_x": float(np.abs(a[:, 0]).max()),
                        "acc_y": float(np.abs(a[:, 1]).max()),
                        "acc_vertical": float(np.abs(a[:, 2]).max()),

@@ -26,7 +26,7 @@ from typing import Any
 from ..config import Case
 from ..log import Reporter
 from ..parallel import on_root
-from . import convergence, modes, reflection, speed
+from . import convergence, modes, reflection, speed, thesis
 from .common import (
     FAILED_NAME,
     SHARED_DIR,
@@ -44,7 +44,7 @@ from .settings import StudySettingsError, study_settings
 
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
-                 "speed": speed}
+                 "speed": speed, "thesis": thesis}
 
 
 def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:

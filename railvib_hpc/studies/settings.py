@@ -104,10 +104,14 @@ SETTINGS: dict[str, dict[str, Setting]] = {
         "probes": _PROBES,
     },
     "reflection": {
-        "domains": Setting([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, 6.0],
+        "domains": Setting([[-1.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 2.0, 6.0],
                             [4.0, 4.0, 12.0]], "triples",
-                           "[extra_depth, extra_length, extra_width] in m of each domain "
-                           "(domain.extra_*), smallest first; the last is the reference", "nonneg"),
+                           "[depth, length, width] change in m of each domain: depth > 0 "
+                           "deepens the subgrade (domain.extra_depth), < 0 raises the base "
+                           "(geometry.z0); length (each end) and width (beyond the building) "
+                           ">= 0 (domain.extra_*); smallest first, the last is the reference; "
+                           "defaults: the thesis's Models 1-3 (3 m, the APDL's 4.8 m = '5 m', "
+                           "+2 m length and +6 m width) and a larger reference", "domains"),
         "names": Setting(["model1", "model2", "model3", "larger"], "strs",
                          "variant names, one per domain"),
         "threshold": Setting(10.0, "float", "verdict: reflections matter when a building "
@@ -122,6 +126,22 @@ SETTINGS: dict[str, dict[str, Setting]] = {
         "speeds": Setting([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats",
                           "vehicle speeds in m/s (one MBS run each on the same modes)", "pos"),
         "probes": _PROBES,
+    },
+    "thesis": {
+        "n_modes": Setting(300, "int", "the thesis's mode count (mbs.n_modes of the "
+                           "count variants; the band must hold at least this many)", "pos"),
+        "band_hz": Setting(57.87, "float", "the thesis's band: the shared model has every "
+                           "mode below it (modal.f_max), the band variants use them all",
+                           "pos"),
+        "drop_heights": Setting([0.0, 1e-5, 1e-4], "floats",
+                                "wheelset drop heights in m (vehicle.drop_height; 0: start "
+                                "at rest): the thesis's unspecified start", "nonneg"),
+        "contact_damping": Setting([0.0], "floats",
+                                   "Hertz contact damping C in N s/m^2 of the drops "
+                                   "(vehicle.contact_damping; the thesis gives none)",
+                                   "nonneg"),
+        "probes": Setting([*BUILDING_PROBES, "basement_wall_far"], "strs",
+                          "mesh probes whose responses are compared"),
     },
 }
 
@@ -193,6 +213,9 @@ def _check(key: str, s: Setting, value: Any, problems: list) -> Any:
     out = [[float(x) for x in t] for t in value]
     if s.check == "nonneg" and any(x < 0 for t in out for x in t):
         problems.append((key, value, f"entries must be >= 0 ({s.doc})"))
+    if s.check == "domains" and any(x < 0 for t in out for x in t[1:]):
+        problems.append((key, value, "length and width changes must be >= 0 (only the depth "
+                         "change may be negative: it raises the fixed base)"))
     return out
 
 
@@ -230,7 +253,7 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
     Parameters
     ----------
     kind
-        ``convergence``, ``modes``, ``reflection`` or ``speed``.
+        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
     overrides
         ``key=value`` strings (``--study-set``).
     values
@@ -295,6 +318,9 @@ def _cross_checks(kind: str, s: dict[str, Any], given: Mapping[str, Any]) -> lis
             out.append(("domains", s["domains"], "domains must be distinct"))
     elif kind == "speed":
         s["speeds"] = sorted(s["speeds"])
+    elif kind == "thesis":
+        s["drop_heights"] = sorted(s["drop_heights"])
+        s["contact_damping"] = sorted(s["contact_damping"])
     return out
 
 

@@ -243,7 +243,7 @@ def test_refined_layout_keeps_its_counts():
 def test_thesis_layout_rejects_refined_only_keys():
     from railvib_hpc.errors import CaseError
 
-    with pytest.raises(CaseError, match="mesh.size_far.*applies to mesh.layout = 'refined'"):
+    with pytest.raises(CaseError, match=r"mesh\.size_far.*applies to mesh.layout = 'refined'"):
         load_case(BASELINE, ["mesh.size_far=0.3"])
     assert load_case(BASELINE, ["mesh.layout=refined", "mesh.size_far=0.3"])
 
@@ -252,7 +252,7 @@ def test_far_wall_probe_is_20_m_from_the_entry():
     """basement_wall_far: the far end (x = X3) of the track-side wall, the thesis's 20.2 m."""
     case = load_case(BASELINE)
     lay = build_layout(case)
-    x, y, z = lay.probes["basement_wall_far"]
+    x, y, _ = lay.probes["basement_wall_far"]
     g = case["geometry"]
     assert (x, y) == (g["x3"], g["ys2"])
     far_rail = np.array([g["x1"], 0.5 * case["track.gauge"], g["z4"]])

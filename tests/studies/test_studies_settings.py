@@ -76,9 +76,17 @@ def test_plans(case):
     big = variant_case(case, r.variants[-1].overrides)
     assert (big["domain.extra_depth"], big["domain.extra_length"],
             big["domain.extra_width"]) == (4.0, 4.0, 12.0)
+    # the thesis's labels (section 6.7): Model 1 has a 3 m deep subgrade, Model 2 is the
+    # APDL domain (4.8 m, the thesis's "5 m"), Model 3 adds length and 6 m of width
+    m1, m2, m3 = (variant_case(case, v.overrides) for v in r.variants[:3])
+    assert m1["geometry.z1"] - m1["geometry.z0"] == pytest.approx(3.0)
+    assert m2.data == variant_case(case, ()).data
+    assert (m3["domain.extra_length"], m3["domain.extra_width"]) == (2.0, 6.0)
     rb = make_plan("reflection", case, study_settings("reflection", ["band_hz=30"]))
     n = [variant_case(case, v.overrides)["modal.n_modes"] for v in rb.variants]
-    assert n == sorted(n) and 118 < n[0] < 200 and rb.variants[0].band_hz == 30.0
+    assert n == sorted(n) and 118 < n[1] < 200 and rb.variants[0].band_hz == 30.0
+    with pytest.raises(StudySettingsError, match="only the depth change may be negative"):
+        study_settings("reflection", ["domains=[[0,0,0],[0,-1,0]]"])
     sp = make_plan("speed", case, study_settings("speed"))
     assert sp.shared_overrides == () and [v.parameter["speed"] for v in sp.variants] == \
         [10.0, 20.0, 30.0, 40.0, 50.0, 60.0]
@@ -177,13 +185,15 @@ def test_modes_verdict(case):
 def test_reflection_and_speed_verdicts(case):
     s = study_settings("reflection", ["threshold=10"])
     plan = make_plan("reflection", case, s)
-    accs = [1.3, 1.08, 1.02, 1.0]
+    accs = [1.3, 1.2, 1.02, 1.0]
     res = {v.name: _fake(v.parameter, acc=a) for v, a in zip(plan.variants, accs)}
     a = STUDY_MODULES["reflection"].analyse(plan, res, s)
+    # the verdict is about the case's own domain: model2 (the thesis's Model 2)
     assert a["verdict"]["reflections_matter"] is True
-    assert a["verdict"]["max_deviation"] == pytest.approx(0.3)
-    assert a["verdict"]["within_threshold_from"] == "model2"
-    res["model1"] = _fake({}, acc=1.05)
+    assert a["verdict"]["max_deviation"] == pytest.approx(0.2)
+    assert "for the model2 domain" in a["verdict"]["text"]
+    assert a["verdict"]["within_threshold_from"] == "model3"
+    res["model2"] = _fake({}, acc=1.05)
     assert STUDY_MODULES["reflection"].analyse(plan, res, s)["verdict"]["ok"] is True
     sp = study_settings("speed", ["speeds=[10, 20, 30]"])
     splan = make_plan("speed", case, sp)
@@ -206,3 +216,35 @@ def test_cli_study_errors_and_list(capsys, tmp_path):
     assert run(["study", "modes", str(BASELINE), "--list", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "n300_corrected" in out and "pending" in out and "shared model" in out
+
+
+def test_thesis_study_plan_and_table(case):
+    s = study_settings("thesis")
+    assert s["band_hz"] == 57.87 and s["n_modes"] == 300
+    assert s["drop_heights"] == [0.0, 1e-5, 1e-4]
+    plan = make_plan("thesis", case, s)
+    assert plan.shared_overrides == ("modal.f_max=57.87",)
+    assert [v.name for v in plan.variants] == [
+        "n300_drop0mm", "n300_drop0.01mm", "n300_drop0.1mm",
+        "band_drop0mm", "band_drop0.01mm", "band_drop0.1mm"]
+    v = variant_case(case, plan.variants[2].overrides)
+    assert (v["mbs.n_modes"], v["vehicle.drop_height"], v["modal.f_max"]) == (300, 1e-4, 57.87)
+    assert variant_case(case, plan.variants[3].overrides)["mbs.n_modes"] == 0
+    res = {}
+    for var, acc in zip(plan.variants, (0.008, 0.03, 0.07, 0.01, 0.04, 0.09)):
+        r = _fake(var.parameter, acc=acc)
+        r["probes"]["basement_wall_far"] = {"acc_vertical": acc, "acc_total": acc,
+                                            "t_onset": 0.06}
+        res[var.name] = r
+    a = STUDY_MODULES["thesis"].analyse(plan, res, s)
+    head, rows = a["tables"][0]["head"], a["tables"][0]["rows"]
+    assert head[:2] == ["quantity", "thesis"]
+    slab1 = next(r for r in rows if r[0] == "slab 1 a_z [m/s²]")
+    assert slab1[1] == "0.06" and slab1[2] == "0.008"
+    onset = next(r for r in rows if r[0].startswith("basement_wall_far onset"))
+    assert onset[1] == "0.16" and onset[2] == "0.06"      # x_start = 0: the thesis's clock
+    # 0.008..0.07 brackets the thesis's 0.060 (count), 0.01..0.09 too (band)
+    assert a["verdict"]["brackets_thesis"] == {"count": True, "band": True}
+    assert "not a fitted value" in a["verdict"]["text"]
+    with pytest.raises(StudySettingsError, match="drop_heights"):
+        study_settings("thesis", ["drop_heights=[-1e-5]"])

@@ -50,9 +50,9 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
                  "static correction on"):
         assert line in report, line
     summary = json.loads((out / "assessment.json").read_text())
-    assert set(summary["verdict"]) == {"footing", "basement_wall", "basement_wall_far", "slab1", "slab2",
-                                       "ground_toe", "ground_mid", "ground_building",
-                                       "ground_far", "ground_opposite"}
+    assert set(summary["verdict"]) == {"footing", "basement_wall", "basement_wall_far",
+                                       "slab1", "slab2", "ground_toe", "ground_mid",
+                                       "ground_building", "ground_far", "ground_opposite"}
     assert summary["wave_speeds"]["c_P"] == pytest.approx(346.58, abs=0.01)
     assert summary["wave_speeds"]["c_S"] == pytest.approx(212.24, abs=0.01)
     # the fields hold every 40th MBS step (output.dt = 4 ms, MBS dt = 0.1 ms)

@@ -49,7 +49,17 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
                  "modal damping used   3.00 - 3.00 % over 12 modes",
                  "static correction on"):
         assert line in report, line
+    # the thesis comparison: every row explained, arrivals on the thesis's clock
+    assert "## Comparison with the thesis" in report
+    for row in ("hexahedra (App. B element ranges)", "modes: count and band",
+                "first natural frequency", "slab 1 vertical peak",
+                "P-wave arrival, far end of the basement wall", "reflection study",
+                "Table II (wheelset)"):
+        assert row in report, row
     summary = json.loads((out / "assessment.json").read_text())
+    assert all(r["explanation"] for r in summary["thesis_table"])
+    assert summary["thesis_comparison"]["p_wave_arrival_basement_wall"]["analytic"] == \
+        pytest.approx(0.1 + 19.28 / 346.58, abs=1e-3)
     assert set(summary["verdict"]) == {"footing", "basement_wall", "basement_wall_far",
                                        "slab1", "slab2", "ground_toe", "ground_mid",
                                        "ground_building", "ground_far", "ground_opposite"}

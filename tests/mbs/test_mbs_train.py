@@ -240,8 +240,8 @@ def test_anti_roll_bar_static_roll_stiffness():
         expected = 2.0 / (1.0 / ks_roll + 1.0 / kp_roll)
         assert moment / theta == pytest.approx(expected, rel=1e-12)
         assert v.roll_stiffness() == pytest.approx(expected, rel=1e-12)
-    # the bar stiffens the body roll: 0.86 -> 1.75 MN m/rad (the secondary springs alone
-    # give 2 x 0.43 MN/m x 1 m^2 = 0.86 MN m/rad per bogie)
+    # the bar stiffens the body roll from 1.46 to 2.63 MN m/rad (per bogie the secondary
+    # springs give 2 x 0.43 MN/m x 1 m^2 = 0.86 MN m/rad, the primary 4 x 1.22 = 4.88)
     assert RailVehicle().roll_stiffness() == pytest.approx(
         2 / (1 / (0.86e6 + 0.94e6) + 1 / 4.88e6), rel=1e-12)
     assert RailVehicle().k_antiroll == 940e3

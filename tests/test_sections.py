@@ -84,6 +84,13 @@ def test_shear_coefficient_rectangle_and_i_section():
     thin = i_section(0.2, 0.2, 0.4, 0.002, 0.002, 0.002, cells=1)
     web = 0.002 * 0.396
     assert thin.shear_coefficient_y == pytest.approx(web / thin.area, rel=0.05)
+    # and within 5 % of Cowper's (1966) thin-walled I formula at nu = 0.3
+    nu, b, h, tf, tw = 0.3, 0.2, 0.398, 0.002, 0.002
+    m, n = 2 * b * tf / (h * tw), b / h
+    cowper = 10 * (1 + nu) * (1 + 3 * m) ** 2 / (
+        (12 + 72 * m + 150 * m**2 + 90 * m**3) + nu * (11 + 66 * m + 135 * m**2 + 90 * m**3)
+        + 10 * n**2 * ((3 + nu) * m + 3 * m**2))
+    assert thin.shear_coefficient_y == pytest.approx(cowper, rel=0.05)
 
 
 def test_torsion_solver_against_exact_rectangle():

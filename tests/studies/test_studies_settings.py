@@ -243,8 +243,11 @@ def test_thesis_study_plan_and_table(case):
     assert slab1[1] == "0.06" and slab1[2] == "0.008"
     onset = next(r for r in rows if r[0].startswith("basement_wall_far onset"))
     assert onset[1] == "0.16" and onset[2] == "0.06"      # x_start = 0: the thesis's clock
-    # 0.008..0.07 brackets the thesis's 0.060 (count), 0.01..0.09 too (band)
-    assert a["verdict"]["brackets_thesis"] == {"count": True, "band": True}
+    # 0.008..0.07 (count) and 0.01..0.09 (band) bracket 0.060, 0.045 and 0.041 (the fake
+    # floor totals are twice the vertical: 0.016..0.14, 0.02..0.18 bracket 0.041 and 0.052)
+    assert a["verdict"]["brackets_thesis"]["count"] == [
+        "slab 1 a_z", "slab 2 a_z", "floor 1 |a|", "floor 2 |a|"]
+    assert "brackets 4 of 4 thesis values" in a["verdict"]["text"]
     assert "not a fitted value" in a["verdict"]["text"]
     with pytest.raises(StudySettingsError, match="drop_heights"):
         study_settings("thesis", ["drop_heights=[-1e-5]"])

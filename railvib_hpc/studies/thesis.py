@@ -150,8 +150,9 @@ def _verdict(data: list[dict], settings: dict[str, Any]) -> dict:
                      + "; ".join(ranges) + f" m/s² -> brackets {len(inside)} of "
                      f"{len(ranges)} thesis values" + (f" ({', '.join(inside)})"
                                                        if inside else ""))
-    text = (". ".join(p[:1].upper() + p[1:] for p in parts) + ". The drop height is the thesis's unspecified start, a "
-            "sensitivity band, not a fitted value.")
+    text = (". ".join(p[:1].upper() + p[1:] for p in parts)
+            + ". The drop height is the thesis's unspecified start, a sensitivity band, not a "
+            "fitted value.")
     return {"text": text, "ok": None, "brackets_thesis": bracket}
 
 

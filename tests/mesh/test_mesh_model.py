@@ -208,6 +208,9 @@ def test_thesis_layout_reproduces_appendix_b_element_counts(baseline_mesh, basel
     ys1 = case["geometry.ys1"]
     assert np.sum(yc > ys1) == 12288 and np.sum(yc < ys1) == 19968
     assert len(mesh.hexes) == 41880
+    from railvib_hpc.assess.thesis import THESIS_LAYOUT_NODES
+
+    assert mesh.n_nodes == THESIS_LAYOUT_NODES == 51359
     assert counts["rail"] + counts["rigid_rail"] == 364 and counts["sleeper"] == 296
     assert counts["pad_x"] + counts["pad_y"] + counts["pad_z"] == 222
     # the divisions behind them (docs/thesis.md): 96 along x, 8 x 0.6 m in the subgrade,

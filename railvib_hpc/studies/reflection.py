@@ -70,8 +70,18 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     """One variant per domain (own mesh and modes)."""
     from .common import variant_case
 
+    from .settings import StudySettingsError
+
     variants = []
     band = settings["band_hz"]
+    lowest = -(case["geometry.zbb"] - case["geometry.z0"]) - case["domain.extra_depth"]
+    bad = [dom for dom in settings["domains"] if dom[0] <= lowest]
+    if bad:
+        raise StudySettingsError("reflection", [(
+            "domains", settings["domains"],
+            f"the depth changes {[dom[0] for dom in bad]} m raise the fixed base to or above "
+            f"the building base (z = {case['geometry.zbb']:g} m): a depth change must be "
+            f"> {lowest:g} m")])
     for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
         ov = domain_overrides(case, (d, ln, w))
         if band > 0:

@@ -87,6 +87,9 @@ def test_plans(case):
     assert n == sorted(n) and 118 < n[1] < 200 and rb.variants[0].band_hz == 30.0
     with pytest.raises(StudySettingsError, match="only the depth change may be negative"):
         study_settings("reflection", ["domains=[[0,0,0],[0,-1,0]]"])
+    with pytest.raises(StudySettingsError, match=r"depth change must be > -2\.4 m"):
+        make_plan("reflection", case, study_settings("reflection",
+                                                     ["domains=[[-2.4,0,0],[0,0,0]]"]))
     sp = make_plan("speed", case, study_settings("speed"))
     assert sp.shared_overrides == () and [v.parameter["speed"] for v in sp.variants] == \
         [10.0, 20.0, 30.0, 40.0, 50.0, 60.0]

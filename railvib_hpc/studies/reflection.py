@@ -69,7 +69,6 @@ def domain_overrides(case: Case, change: tuple[float, float, float]) -> list[str
 def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     """One variant per domain (own mesh and modes)."""
     from .common import variant_case
-
     from .settings import StudySettingsError
 
     variants = []

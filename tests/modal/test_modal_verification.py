@@ -62,13 +62,19 @@ def test_soil_column_converges_at_rate_two():
 
 RAIL = dict(E=210e9, nu=0.3, rho=7700.0, A=64.5e-4, Iyy=2010e-8, Izz=326e-8, k=0.34)
 G_RAIL = RAIL["E"] / (2 * (1 + RAIL["nu"]))
+
+
+def rail_case(**extra):
+    """The benchmark rail of benchmarks.md: Table I's section (preset ``table1``)."""
+    return soil_case(**{"case.preset": "table1", **extra})
+
 VERTICAL_ONLY = ("uy", "rx", "rz")           # keep ux, uz, ry: axial + vertical bending
 
 
 def test_short_simply_supported_rail_is_timoshenko_not_euler_bernoulli():
     L, n = 0.6, 32
     rules = {"all": VERTICAL_ONLY, "start": ("ux", "uz"), "end": ("uz",)}
-    res, *_ = solve(beam_mesh(n, L), soil_case(), rules, 2)
+    res, *_ = solve(beam_mesh(n, L), rail_case(), rules, 2)
     f1 = res.frequencies_hz[0]
     eb = 1272.0                                              # benchmarks.md, Euler-Bernoulli
     timo = timoshenko_pinned_frequency(1, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"],
@@ -80,7 +86,7 @@ def test_short_simply_supported_rail_is_timoshenko_not_euler_bernoulli():
 def test_long_simply_supported_rail_matches_euler_bernoulli():
     L, n = 20.0, 40
     rules = {"all": VERTICAL_ONLY, "start": ("ux", "uz"), "end": ("uz",)}
-    res, *_ = solve(beam_mesh(n, L), soil_case(), rules, 3)
+    res, *_ = solve(beam_mesh(n, L), rail_case(), rules, 3)
     for mode in (1, 2, 3):
         eb = (mode * np.pi / L) ** 2 / (2 * np.pi) * np.sqrt(RAIL["E"] * RAIL["Iyy"] /
                                                             (RAIL["rho"] * RAIL["A"]))
@@ -90,13 +96,13 @@ def test_long_simply_supported_rail_matches_euler_bernoulli():
 
 def test_cantilever_rail_both_planes():
     L, n = 2.0, 32
-    res_v, *_ = solve(beam_mesh(n, L), soil_case(), {"all": VERTICAL_ONLY, "start":
+    res_v, *_ = solve(beam_mesh(n, L), rail_case(), {"all": VERTICAL_ONLY, "start":
                                                      ("ux", "uz", "ry")}, 3)
     exact_v = timoshenko_frequencies(3, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"], RAIL["Iyy"],
                                      RAIL["rho"])
     assert res_v.frequencies_hz[:3] == pytest.approx(exact_v, rel=1e-3)
     assert exact_v[0] == pytest.approx(40.16, abs=0.01)       # EB: 40.78 Hz
-    res_h, *_ = solve(beam_mesh(n, L), soil_case(), {"all": ("uz", "rx", "ry"),
+    res_h, *_ = solve(beam_mesh(n, L), rail_case(), {"all": ("uz", "rx", "ry"),
                                                      "start": ("ux", "uy", "rz")}, 3)
     exact_h = timoshenko_frequencies(3, L, RAIL["E"], G_RAIL, RAIL["k"], RAIL["A"], RAIL["Izz"],
                                      RAIL["rho"])
@@ -105,7 +111,7 @@ def test_cantilever_rail_both_planes():
 
 def test_mass_normalised_with_repeated_eigenvalues():
     # square section (Iyy = Izz, ky = kz): every bending frequency is a double eigenvalue
-    case = soil_case(**{"sections.rail.izz": 2010e-8, "sections.rail.shear_coefficient_z": 0.34})
+    case = rail_case(**{"sections.rail.izz": 2010e-8, "sections.rail.shear_coefficient_z": 0.34})
     clamped = ("ux", "uy", "uz", "rx", "ry", "rz")
     res, K, M, _ = solve(beam_mesh(24, 2.0), case, {"start": clamped, "all": ("ux", "rx")}, 6)
     lam = res.eigenvalues

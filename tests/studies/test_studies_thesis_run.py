@@ -24,7 +24,7 @@ def test_thesis_study_count_band_and_drop(shared_tmp, capsys):
     out = capsys.readouterr().out
     if comm.rank == 0:
         root = shared_tmp / "thesis"
-        assert "VERDICT: The first 4 modes" in out and "the 16 Hz band" in out
+        assert "VERDICT: The first 4 modes" in out and "The 16 Hz band" in out
         report = json.loads((root / "report.json").read_text())
         rows = {r["variant"]: r for r in report["analysis"]["rows"]}
         assert set(rows) == {"n4_drop0mm", "n4_drop0.1mm", "band_drop0mm", "band_drop0.1mm"}

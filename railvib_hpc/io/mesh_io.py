@@ -13,8 +13,9 @@ Layout of ``mesh.h5``::
     /mesh/probes/nearest_node (p,) int64
     attrs: part_names (JSON {id: name}), inputs_sha256, railvib_version, case_toml
 
-The XDMF file holds two grids sharing the points: ``solids`` (Hexahedron) and
-``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell data.
+The XDMF file (:mod:`railvib_hpc.io.xdmf`) holds two grids sharing the points: ``solids``
+(Hexahedron) and ``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell
+data.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ import numpy as np
 from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .atomic import atomic_path, write_text_atomic
+from .xdmf import CellBlock, H5Array, mesh_document
 
 
 def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
@@ -72,38 +74,19 @@ def read_mesh_h5(path: Path) -> tuple[Mesh, dict]:
 
 
 def mesh_xdmf(h5_name: str, mesh: Mesh) -> str:
-    """XDMF text describing ``mesh.h5`` (relative path ``h5_name``)."""
-    n, ne, nl = mesh.n_nodes, len(mesh.hexes), len(mesh.lines)
-    h5 = f'Format="HDF">{h5_name}:/mesh'
+    """XDMF text describing ``mesh.h5`` (relative path ``h5_name``).
 
-    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
-           f'Precision="8" {h5}/points</DataItem></Geometry>')
-    return f"""<?xml version="1.0" ?>
-<Xdmf Version="3.0">
-  <Domain>
-    <Grid Name="railvib_model" GridType="Collection" CollectionType="Spatial">
-      <Grid Name="solids" GridType="Uniform">
-        <Topology TopologyType="Hexahedron" NumberOfElements="{ne}">
-          <DataItem Dimensions="{ne} 8" NumberType="Int" Precision="8" {h5}/hexes</DataItem>
-        </Topology>
-        {geo}
-        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
-          <DataItem Dimensions="{ne}" NumberType="Int" Precision="4" {h5}/hex_part</DataItem>
-        </Attribute>
-      </Grid>
-      <Grid Name="beams_and_pads" GridType="Uniform">
-        <Topology TopologyType="Polyline" NodesPerElement="2" NumberOfElements="{nl}">
-          <DataItem Dimensions="{nl} 2" NumberType="Int" Precision="8" {h5}/lines</DataItem>
-        </Topology>
-        {geo}
-        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
-          <DataItem Dimensions="{nl}" NumberType="Int" Precision="4" {h5}/line_part</DataItem>
-        </Attribute>
-      </Grid>
-    </Grid>
-  </Domain>
-</Xdmf>
-"""
+    Two grids share the points: ``solids`` (Hexahedron) and ``beams_and_pads``
+    (Polyline; left out when the mesh has no line elements), each with ``part_id``.
+    """
+    def arr(name: str, a: np.ndarray) -> H5Array:
+        return H5Array(h5_name, f"/mesh/{name}", a.shape, a.dtype.str)
+
+    return mesh_document(arr("points", mesh.points), [
+        CellBlock("solids", "Hexahedron", arr("hexes", mesh.hexes),
+                  arr("hex_part", mesh.hex_part)),
+        CellBlock("beams_and_pads", "Polyline", arr("lines", mesh.lines),
+                  arr("line_part", mesh.line_part))])
 
 
 def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> dict[str, Path]:

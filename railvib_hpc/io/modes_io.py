@@ -23,8 +23,9 @@ With more than one rank and an MPI-enabled h5py, every rank writes its own
 node slice collectively (``driver="mpio"``); otherwise slices are gathered to
 rank 0. The file is written under a temporary name, ``complete`` is set last
 and rank 0 renames it: an interrupted run never leaves a file that looks
-complete. ``modes.xdmf`` (rank 0, written after the rename) animates the mode
-shapes in ParaView: one time step per mode.
+complete. ``modes.xdmf`` (rank 0, written after the rename, with its sidecar of per-step
+views ``modes_views.h5``, see :mod:`railvib_hpc.io.xdmf`) animates the mode shapes in
+ParaView: one time step per mode.
 """
 
 from __future__ import annotations
@@ -36,9 +37,8 @@ import numpy as np
 
 from ..mesh.model import Mesh
 from ..schema import PART_ID
-from .atomic import write_text_atomic
 from .parallel_h5 import h5py_parallel_ok, write_collective
-from .xdmf import temporal_xdmf
+from .xdmf import H5Array, Series, hex_mesh, write_series
 
 
 def rail_nodes(mesh: Mesh) -> np.ndarray:
@@ -97,7 +97,7 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
 
     write_collective(path, comm, fill)
     if comm.rank == 0:
-        write_text_atomic(path.with_suffix(".xdmf"), modes_xdmf(path.name, mesh, eigenvalues))
+        write_modes_xdmf(path)
     comm.Barrier()
 
 
@@ -160,33 +160,25 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
         d_r[:, rot_range, :] = rotation
 
 
-def modes_xdmf(h5_name: str, mesh: Mesh, eigenvalues: np.ndarray) -> str:
-    """XDMF temporal collection: time step k shows mode k (its frequency in the grid name)."""
-    n, ne, m = mesh.n_nodes, len(mesh.hexes), len(eigenvalues)
-    freq = np.sqrt(np.maximum(eigenvalues, 0.0)) / (2 * np.pi)
-    topo = (f'<Topology TopologyType="Hexahedron" NumberOfElements="{ne}"><DataItem '
-            f'Dimensions="{ne} 8" NumberType="Int" Precision="8" Format="HDF">{h5_name}:'
-            f'/mesh/hexes</DataItem></Topology>')
-    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
-           f'Precision="8" Format="HDF">{h5_name}:/mesh/points</DataItem></Geometry>')
-    part = (f'<Attribute Name="part_id" AttributeType="Scalar" Center="Cell"><DataItem '
-            f'Dimensions="{ne}" NumberType="Int" Precision="4" Format="HDF">{h5_name}:'
-            f'/mesh/hex_part</DataItem></Attribute>')
-    steps = []
-    for k in range(m):
-        steps.append(f"""      <Grid Name="mode_{k + 1}_{freq[k]:.4f}Hz" GridType="Uniform">
-        <Time Value="{k + 1}"/>
-        {topo}
-        {geo}
-        {part}
-        <Attribute Name="mode_shape" AttributeType="Vector" Center="Node">
-          <DataItem ItemType="HyperSlab" Dimensions="{n} 3" Type="HyperSlab">
-            <DataItem Dimensions="3 3" Format="XML">{k} 0 0 1 1 1 1 {n} 3</DataItem>
-            <DataItem Dimensions="{m} {n} 3" NumberType="Float" Precision="8" Format="HDF">{h5_name}:/modes/translation</DataItem>
-          </DataItem>
-        </Attribute>
-      </Grid>""")  # noqa: E501
-    return temporal_xdmf("modes", steps)
+def write_modes_xdmf(path: Path) -> Path:
+    """Write ``modes.xdmf`` (+ ``modes_views.h5``) for the modes file ``path``: time step k
+    shows mode k (serial; returns the XDMF path).
+
+    The grid of mode k is named ``mode_<k>_<frequency>Hz``; its node vector
+    ``mode_shape`` is row k - 1 of ``/modes/translation`` (:mod:`railvib_hpc.io.xdmf`).
+    """
+    import h5py
+
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        points, block = hex_mesh(f)
+        shapes = H5Array.of(f, "/modes/translation")
+        freq = f["modes/frequency_hz"][()]
+    xdmf = path.with_suffix(".xdmf")
+    write_series(xdmf, points, block, np.arange(1, len(freq) + 1),
+                 [Series("mode_shape", shapes, "Node")],
+                 [f"mode_{k + 1}_{fk:.4f}Hz" for k, fk in enumerate(freq)])
+    return xdmf
 
 
 def read_modes_summary(path: Path) -> dict | None:

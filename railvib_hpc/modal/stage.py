@@ -11,7 +11,13 @@ import numpy as np
 
 from .. import __version__
 from ..config import Case
-from ..io.modes_io import read_modes_summary, read_strain_energies, write_modes
+from ..io.modes_io import (
+    read_modes_summary,
+    read_strain_energies,
+    write_modes,
+    write_modes_xdmf,
+)
+from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import MESH_INPUTS, run_mesh_stage
 from ..parallel import on_root
@@ -89,6 +95,9 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         f = old["frequency_hz"]
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
                  f"{f[0]:.3f} - {f[-1]:.3f} Hz")
+        xdmf = path.with_suffix(".xdmf")
+        if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
+            rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
         if want_static and not on_root(lambda: static_is_valid(static_path, key), comm):
             _static_only(case, out_dir, comm, rep, key)
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),

@@ -19,13 +19,14 @@ dataset and shape is raised on every rank together.
 
 Outputs (in ``out_dir``)
 ------------------------
-* ``fields.h5`` + ``fields.xdmf``: displacement, velocity, acceleration of every node at
-  every ``stride``-th step of the time ``window`` (:mod:`.fields`);
-* ``/stress`` in ``fields.h5`` + ``stress.xdmf`` when ``stress_times`` are given
-  (:mod:`.stress`). With new fields the stresses are written into the temporary file
-  before it is renamed (fields and stresses are one atomic result); when only the stress
-  times changed they are rewritten in place in the reused ``fields.h5`` (attribute
-  ``stress_complete`` is 0 while that happens);
+* ``fields.h5`` + ``fields.xdmf`` (+ its views ``fields_views.h5``): displacement,
+  velocity, acceleration of every node at every ``stride``-th step of the time ``window``
+  (:mod:`.fields`);
+* ``/stress`` in ``fields.h5`` + ``stress.xdmf`` (+ ``stress_views.h5``) when
+  ``stress_times`` are given (:mod:`.stress`). With new fields the stresses are written
+  into the temporary file before it is renamed (fields and stresses are one atomic
+  result); when only the stress times changed they are rewritten in place in the reused
+  ``fields.h5`` (attribute ``stress_complete`` is 0 while that happens);
 * ``probes.h5`` + ``probes/<name>.csv``: histories of the mesh probes and the user probes
   at every step of the window (full time resolution: probes are cheap), and in
   ``probes.h5`` ``/rail``: the vertical bending moment of both rails (modal part only, the
@@ -56,9 +57,10 @@ import numpy as np
 
 from .. import __version__
 from ..errors import UserError
+from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
-from .fields import reconstruct_fields
+from .fields import reconstruct_fields, write_fields_xdmf
 from .probes import (
     UserProbes,
     locate_probes,
@@ -67,7 +69,13 @@ from .probes import (
     write_probes_csv,
     write_probes_h5,
 )
-from .stress import hex_materials, rail_moment_history, rail_moment_modes, stress_from_fields
+from .stress import (
+    hex_materials,
+    rail_moment_history,
+    rail_moment_modes,
+    stress_from_fields,
+    write_stress_xdmf,
+)
 
 #: Bumped when the output format changes (part of every reuse digest).
 FORMAT_VERSION = 1
@@ -261,6 +269,12 @@ def _keys(info: dict, stride: int, window, float32: bool, stress_times, user_pro
     return {"fields": fields, "stress": stress, "probes": probes}
 
 
+def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
+    """Rewrite the XDMF file of a reused data file when it has the earlier form."""
+    if on_root(lambda: ensure_views(xdmf, write), comm):
+        rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
+
+
 def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
     """Which outputs in ``out_dir`` are complete and have the wanted digests (rank 0)."""
     import h5py
@@ -377,6 +391,8 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     if reuse["fields"]:
         rep.info(f"reusing {fields_path} (same modes, histories and options)")
         result["fields"] = on_root(lambda: _fields_summary(fields_path), comm)
+        _refresh_xdmf(out_dir / "fields.xdmf", lambda: write_fields_xdmf(fields_path), comm,
+                      rep)
     else:
         with rep.stage("reconstruct fields"):
             t0 = time.perf_counter()
@@ -412,12 +428,14 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
             result["seconds"]["stress"] = stress_stats["seconds"]
             result["seconds"]["fields"] -= stress_stats["seconds"]
         elif comm.rank == 0:                     # a new fields.h5 has no /stress
-            (out_dir / "stress.xdmf").unlink(missing_ok=True)
+            remove_xdmf(out_dir / "stress.xdmf")
 
     # ---- stresses of reused fields: written into the existing fields.h5
     if stress_times and reuse["fields"]:
         if reuse["stress"]:
             rep.info(f"reusing /stress of {fields_path}")
+            _refresh_xdmf(out_dir / "stress.xdmf", lambda: write_stress_xdmf(fields_path),
+                          comm, rep)
         else:
             with rep.stage("reconstruct stress"):
                 t0 = time.perf_counter()

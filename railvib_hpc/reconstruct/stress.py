@@ -56,7 +56,6 @@ import numpy as np
 from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
-from ..io.atomic import write_text_atomic
 from ..io.parallel_h5 import h5py_parallel_ok
 from ..log import Reporter
 from ..mesh.model import hex_shape_gradients
@@ -418,9 +417,9 @@ def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[flo
 
         with h5py.File(fields_path, "r") as f:
             return (int(f.attrs.get("complete", 0)), f["time"][()], f["fields/displacement"].shape,
-                    f["mesh/hexes"].shape, f["mesh/hexes"].dtype.str, f["mesh/hex_part"].dtype.str)
+                    f["mesh/hexes"].shape)
 
-    complete, stored, ushape, hshape, hdtype, pdtype = on_root(header, comm)
+    complete, stored, ushape, hshape = on_root(header, comm)
     if require_complete and complete != 1:  # the same decision on every rank
         raise ValueError(f"{fields_path} is not complete")
     sel = select_steps(stored, times)
@@ -473,8 +472,7 @@ def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[flo
         name = fields_path.name
         if name.startswith(".") and ".part-" in name:
             name = name[1:name.rindex(".part-")]
-        write_text_atomic(fields_path.with_name("stress.xdmf"),
-                          stress_xdmf(name, n, ne, t_sel, hdtype, pdtype))
+        write_stress_xdmf(fields_path, name)
 
     on_root(xdmf, comm)
     return {"n_times": n_sel, "n_hexes": ne, "seconds": time.perf_counter() - t_start,
@@ -526,10 +524,33 @@ def _write_stress(path: Path, comm, parallel: bool, vm: np.ndarray, eq: np.ndarr
     check_collective(comm, error, f"writing /stress into {path}")
 
 
-def stress_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, hex_dtype: str = "<i8",
-                part_dtype: str = "<i4") -> str:
-    """XDMF temporal collection of ``/stress`` (cell data), one grid per selected time."""
-    from .fields import mesh_series_xdmf
+def write_stress_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Path:
+    """Write ``stress.xdmf`` (+ ``stress_views.h5``) next to ``h5_path``: ``/stress`` as
+    cell data, one grid per selected time (serial).
 
-    return mesh_series_xdmf(h5_name, n, ne, times, "stress", ("von_mises", "strain_eq"),
-                            "Scalar", "Cell", (len(times), ne), 8, hex_dtype, part_dtype)
+    Parameters
+    ----------
+    h5_path
+        A ``fields.h5`` with ``/stress`` (or the temporary file that becomes it).
+    name
+        File name the XDMF refers to (default: ``h5_path``'s name).
+
+    Returns
+    -------
+    Path
+        The XDMF file.
+    """
+    import h5py
+
+    from ..io.xdmf import H5Array, Series, hex_mesh, write_series
+
+    h5_path = Path(h5_path)
+    name = name or h5_path.name
+    with h5py.File(h5_path, "r") as f:
+        points, block = hex_mesh(f, name)
+        times = f["stress/time"][()]
+        series = [Series(k, H5Array.of(f, f"/stress/{k}", name), "Cell")
+                  for k in ("von_mises", "strain_eq")]
+    xdmf = h5_path.with_name("stress.xdmf")
+    write_series(xdmf, points, block, times, series)
+    return xdmf

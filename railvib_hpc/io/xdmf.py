@@ -351,10 +351,11 @@ def has_views(xdmf_path: str | os.PathLike) -> bool:
 
 
 def ensure_views(xdmf_path: str | os.PathLike, write: Callable[[], object]) -> bool:
-    """Call ``write()`` when ``xdmf_path`` or its sidecar of views is missing (an XDMF file
-    of the earlier HyperSlab form, which ParaView's XDMF 3 reader shows without data, has
-    no sidecar). Returns True when it was (re)written. For reused data files."""
-    if has_views(xdmf_path):
+    """Call ``write()`` when ``xdmf_path`` exists without its sidecar of views: an XDMF file
+    of the earlier HyperSlab form, which ParaView's XDMF 3 reader shows without data. For
+    reused data files; where there is no XDMF file (e.g. a study variant's linked
+    ``modes.h5``) none is created. Returns True when it was rewritten."""
+    if not Path(xdmf_path).is_file() or views_path(xdmf_path).is_file():
         return False
     write()
     return True

@@ -132,3 +132,4 @@ def test_earlier_form_without_views_is_rewritten_once(tmp_path):
     assert ensure_views(xdmf, lambda: calls.append(1)) and calls == [1]
     remove_xdmf(xdmf)
     assert not xdmf.exists() and not views_path(xdmf).exists()
+    assert not ensure_views(xdmf, lambda: calls.append(1)) and calls == [1]   # none: none

@@ -62,6 +62,7 @@ from typing import Any
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from ..errors import UserError
 from . import metrics
 from .weighting import BandSpectrum, third_octave_rms, weight_wm
@@ -153,7 +154,7 @@ VC_CURVES: dict[str, float] = {
 VC_FMIN, VC_FMAX, VC_CORNER = 1.0, 80.0, 8.0
 
 #: Thesis criterion 0.005 g [m/s², peak].
-THESIS_LIMIT = 0.005 * 9.80665
+THESIS_LIMIT = 0.005 * STANDARD_GRAVITY
 
 #: What each building use selects in each standard (each overridable by keyword).
 BUILDING_USES: dict[str, dict[str, str]] = {

@@ -35,6 +35,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import Case
+from ..constants import STANDARD_GRAVITY
 from ..errors import UserError
 from ..io.atomic import atomic_path
 from ..log import Reporter
@@ -163,7 +164,7 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
 def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
     v = case["vehicle"]
-    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * 9.81
+    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
     offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
     rails = np.tile([0, 1], len(v["axle_offsets"]))
     return np.full(offs.size, force), offs, rails

@@ -55,6 +55,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from .contact import jenkins_hertz_constant
 from .vehicles import LinearVehicle
 
@@ -124,7 +125,7 @@ class RailVehicle(_LinearVehicle):
     contact_damping
         Hertz contact damping ``C`` [N s/m^2] (see :mod:`.contact`).
     gravity
-        Gravitational acceleration [m/s^2].
+        Gravitational acceleration [m/s^2] (standard gravity by default).
     k_hertz
         Hertz constant [N/m^1.5]; None for Jenkins' formula.
     """
@@ -149,7 +150,7 @@ class RailVehicle(_LinearVehicle):
     k_secondary: float = 0.43e6
     c_secondary: float = 2.0e4
     contact_damping: float = 0.0
-    gravity: float = 9.81
+    gravity: float = STANDARD_GRAVITY
     k_hertz: float | None = None
 
     n_dof = 17

@@ -10,7 +10,7 @@ Wheel 0 runs on rail 0 (the rail at negative global y) at lateral position
 and damper) connects it to a frame that moves at constant height, lateral
 position and speed; the frame may push down with a static ``preload`` per side
 (the share of car body weight; 0 in the thesis, whose wheel load 7.69 kN is
-half the wheelset weight 1568 kg * 9.81 m/s^2).
+half the wheelset weight 1568 kg * 9.80665 m/s^2, standard gravity).
 
 Lateral motion couples through the coned treads (linearised contact
 geometry, conicity ``lambda``): the contact normal of each wheel leans towards
@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
 
 
@@ -84,7 +85,7 @@ class SuspendedWheelset(LinearVehicle):
     contact_damping
         Hertz contact damping ``C`` [N s/m^2] (see :mod:`.contact`).
     gravity
-        Gravitational acceleration [m/s^2].
+        Gravitational acceleration [m/s^2] (standard gravity by default).
     k_hertz
         Hertz constant [N/m^1.5]; None for Jenkins' formula.
     k_lateral, c_lateral
@@ -102,7 +103,7 @@ class SuspendedWheelset(LinearVehicle):
     c_suspension: float = 1_000.0
     preload: float = 0.0
     contact_damping: float = 0.0
-    gravity: float = 9.81
+    gravity: float = STANDARD_GRAVITY
     k_hertz: float | None = None
     k_lateral: float = 25_000.0
     c_lateral: float = 1_000.0

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..fem.reference import hex_volumes
 from ..schema import PART_ID, PARTS
 
 #: For each hex corner, its three edge neighbours in right-handed order.
@@ -17,28 +18,6 @@ _CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
                                [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
 _EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
                    [0, 4], [1, 5], [2, 6], [3, 7]])
-_REF = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                 [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
-
-
-def hex_shape_gradients(xi: np.ndarray) -> np.ndarray:
-    """Reference gradients of the 8 trilinear shape functions at points ``xi`` (q, 3).
-
-    Returns
-    -------
-    ndarray, shape (q, 8, 3)
-    """
-    xi = np.atleast_2d(xi)
-    f = 1.0 + xi[:, None, :] * _REF[None, :, :]          # (q, 8, 3)
-    d = np.empty_like(f)
-    d[..., 0] = _REF[:, 0] * f[..., 1] * f[..., 2]
-    d[..., 1] = _REF[:, 1] * f[..., 0] * f[..., 2]
-    d[..., 2] = _REF[:, 2] * f[..., 0] * f[..., 1]
-    return d / 8.0
-
-
-_GAUSS2 = np.array([[a, b, c] for c in (-1, 1) for b in (-1, 1) for a in (-1, 1)]) / np.sqrt(3.0)
-
 
 @dataclass
 class Mesh:
@@ -87,11 +66,8 @@ class Mesh:
         return out
 
     def hex_volumes(self) -> np.ndarray:
-        """Element volumes by 2x2x2 Gauss quadrature (exact for trilinear hexes)."""
-        x = self.points[self.hexes]                              # (ne, 8, 3)
-        dn = hex_shape_gradients(_GAUSS2)                        # (8q, 8, 3)
-        jac = np.einsum("eai,qaj->eqij", x, dn)                  # (ne, q, 3, 3)
-        return np.linalg.det(jac).sum(axis=1)
+        """Signed element volumes (:func:`railvib_hpc.fem.reference.hex_volumes`, exact)."""
+        return hex_volumes(self.points[self.hexes])
 
     def volume_per_part(self) -> dict[str, float]:
         vol = self.hex_volumes()
@@ -122,12 +98,6 @@ class Mesh:
         used[self.hexes.ravel()] = True
         used[self.lines.ravel()] = True
         return int((~used).sum())
-
-    def nonconformal_faces(self) -> int:
-        """Unshared hex faces inside the meshed volume (0 for a conformal mesh)."""
-        from .search import nonconformal_faces
-
-        return nonconformal_faces(self)
 
     def quality(self) -> dict[str, float]:
         """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count."""

@@ -10,16 +10,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .model import _REF, Mesh, hex_shape_gradients
+from ..fem.reference import hex_shape_gradients, hex_shape_values
+from .model import Mesh
 
 #: Outward faces of a VTK-ordered hexahedron.
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4],
                       [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
-
-
-def hex_shape_values(xi: np.ndarray) -> np.ndarray:
-    """Trilinear shape functions at reference points ``xi`` (..., 3) -> (..., 8)."""
-    return np.prod(1.0 + xi[..., None, :] * _REF, axis=-1) / 8.0
 
 
 def locate(points: np.ndarray, mesh: Mesh, k: int = 12, tol: float = 1e-6

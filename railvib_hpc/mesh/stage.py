@@ -16,6 +16,7 @@ from ..schema import PARTS
 from .gmsh_model import generate, read_msh
 from .layout import build_layout
 from .model import Mesh
+from .search import nonconformal_faces
 
 #: Case sections that determine the mesh (its reuse key).
 MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
@@ -43,7 +44,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     quality = mesh.quality()
     quality["duplicate_nodes"] = mesh.duplicate_nodes()
     quality["unused_nodes"] = mesh.unused_nodes()
-    quality["nonconformal_faces"] = mesh.nonconformal_faces()
+    quality["nonconformal_faces"] = nonconformal_faces(mesh)
     timings["quality"] = time.perf_counter() - t0
     if quality["n_inverted"]:
         raise MeshError(f"mesh has {quality['n_inverted']} inverted hexahedra (non-positive "

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import UserError
 
 PREFIX = "railvib_eig_"
@@ -220,7 +221,9 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
     basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
-    extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
+    # dense blocks: the Lanczos basis, three work blocks and the eigenvectors
+    extra_gb = (BYTES_PER_DOUBLE * n_global * (basis + 3 * block_size + n_modes)
+                / BYTES_PER_GB)
     try:
         op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
                            out_of_core=out_of_core)

@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..io.modes_io import rail_nodes
 from ..io.parallel_h5 import h5py_parallel_ok, write_collective
 
@@ -132,7 +133,9 @@ def solve_static(K, M, comm, rhs: np.ndarray) -> np.ndarray:
     from .block_lanczos import BlockOperator
     from .eigen import PREFIX
 
-    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=16.0 * rhs.size / 1e9)
+    # dense blocks held besides the factor: the right-hand sides and the solutions
+    extra_gb = 2 * BYTES_PER_DOUBLE * rhs.size / BYTES_PER_GB
+    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
     try:
         return op.solve(rhs)
     finally:

@@ -39,9 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from ..fem.reference import hex_shape_values
 from ..io.atomic import atomic_path, write_text_atomic
 from ..mesh.model import Mesh
-from ..mesh.search import hex_shape_values, locate
+from ..mesh.search import locate
 from .fields import ExtraBasis
 
 #: Column names of the probe CSV files.

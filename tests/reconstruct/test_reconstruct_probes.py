@@ -16,7 +16,7 @@ from reconstruct_cases import (
 )
 
 from railvib_hpc.errors import UserError
-from railvib_hpc.mesh.search import hex_shape_values
+from railvib_hpc.fem.reference import hex_shape_values
 from railvib_hpc.reconstruct import (
     ProbeError,
     mesh_probes,

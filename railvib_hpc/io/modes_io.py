@@ -31,31 +31,22 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .atomic import write_text_atomic
 from .parallel_h5 import h5py_parallel_ok, write_collective
 from .xdmf import temporal_xdmf
 
+if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here
+    from mpi4py import MPI
 
-def rail_nodes(mesh: Mesh) -> np.ndarray:
-    """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x."""
-    nodes = np.unique(mesh.lines[mesh.line_part == PART_ID["rail"]])
-    y = mesh.points[nodes, 1]
-    out = []
-    for side in (y < 0, y >= 0):
-        n = nodes[side]
-        out.append(n[np.argsort(mesh.points[n, 0], kind="stable")])
-    if len(out[0]) != len(out[1]):
-        width = max(len(out[0]), len(out[1]))
-        out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
-    return np.array(out, dtype=np.int64)
+    from ..mesh.model import Mesh
 
 
-def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
+def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
                 attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
@@ -114,7 +105,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     d_t = g.create_dataset("translation", (m, n, 3), "f8")
     d_r = g.create_dataset("rotation", (m, len(rotation_nodes), 3), "f8")
     gm = f.create_group("mesh")
-    rails = rail_nodes(mesh)
+    rails = mesh.rail_nodes()
     names = list(mesh.probes)
     coords = np.array([mesh.probes[k] for k in names], dtype=float).reshape(-1, 3)
     mesh_data = {

@@ -112,5 +112,19 @@ class Mesh:
             "n_inverted": int((sj <= 0).sum()),
         }
 
+    def rail_nodes(self) -> np.ndarray:
+        """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x
+        (padded with -1 when the rails have different node counts)."""
+        nodes = np.unique(self.lines[self.line_part == PART_ID["rail"]])
+        y = self.points[nodes, 1]
+        out = []
+        for side in (y < 0, y >= 0):
+            n = nodes[side]
+            out.append(n[np.argsort(self.points[n, 0], kind="stable")])
+        if len(out[0]) != len(out[1]):
+            width = max(len(out[0]), len(out[1]))
+            out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
+        return np.array(out, dtype=np.int64)
+
     def nearest_node(self, xyz: tuple[float, float, float]) -> int:
         return int(np.argmin(np.linalg.norm(self.points - np.asarray(xyz), axis=1)))

@@ -10,11 +10,11 @@ from .. import __version__
 from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text_atomic
-from ..io.mesh_io import read_mesh_h5, write_mesh_files
 from ..log import Reporter
 from ..schema import PARTS
 from .gmsh_model import generate, read_msh
 from .layout import build_layout
+from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
 from .search import nonconformal_faces
 

@@ -130,8 +130,8 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     K.destroy()
     M.destroy()
     with rep.stage("write modes"):
-        translation, rotation, rot_nodes, rot_range, nodes = node_arrays(result.phi, dofmap,
-                                                                          comm.rank)
+        translation, rotation, rot_nodes, rot_range, nodes = dofmap.node_arrays(result.phi,
+                                                                                 comm.rank)
         mask = np.zeros(mesh.n_nodes, dtype=bool)
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
@@ -209,28 +209,3 @@ def _versions() -> tuple[str, str]:
 
     return (".".join(map(str, PETSc.Sys.getVersion())),
             ".".join(map(str, SLEPc.Sys.getVersion())))
-
-
-def node_arrays(phi: np.ndarray, dofmap, rank: int):
-    """Reshape this rank's DOF rows of the modes into per-node translation/rotation arrays.
-
-    Returns
-    -------
-    translation : (m, owned nodes, 3)
-    rotation : (m, owned rotation nodes, 3)
-    rotation_nodes : all rotation nodes (global)
-    rot_range : slice of ``rotation_nodes`` owned here
-    nodes : slice of owned nodes
-    """
-    nodes = dofmap.owned_nodes(rank)
-    r0, _ = dofmap.owned_dofs(rank)
-    idx = dofmap.index[nodes]
-    m = phi.shape[1]
-    full = np.zeros((m, idx.shape[0], 6))
-    ok = idx >= 0
-    full[:, ok] = phi[idx[ok] - r0].T
-    rotation_nodes = np.flatnonzero(dofmap.has_rotations)
-    lo, hi = np.searchsorted(rotation_nodes, [nodes.start, nodes.stop])
-    owned_rot = rotation_nodes[lo:hi] - nodes.start
-    return (full[:, :, :3], full[:, owned_rot, 3:], rotation_nodes, slice(int(lo), int(hi)),
-            nodes)

@@ -23,7 +23,6 @@ from pathlib import Path
 import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from ..io.modes_io import rail_nodes
 from ..io.parallel_h5 import h5py_parallel_ok, write_collective
 
 
@@ -37,7 +36,7 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     table
         (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
     """
-    rails = rail_nodes(mesh)
+    rails = mesh.rail_nodes()
     if np.any(rails < 0):
         raise ValueError("the two rails must have the same number of nodes")
     comp = np.array([2, 4])                        # uz, ry in the node's 6 components
@@ -82,15 +81,12 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
 def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
                  dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
     """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
-
-    from .stage import node_arrays
-
     n_r = dofs.size
     r0 = dofmap.owned_dofs(comm.rank)[0]
     flex = rail_flexibility(x_local, dofs, free, r0, comm)
     cols = np.zeros((x_local.shape[0], n_r))
     cols[:, free] = x_local
-    translation, _, _, _, nodes = node_arrays(cols, dofmap, comm.rank)
+    translation, _, _, _, nodes = dofmap.node_arrays(cols, comm.rank)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather(translation, root=0)

@@ -54,7 +54,7 @@ def test_modes_file_contents(modal_run):
         assert f["pads/nodes"].shape == (3 * 74, 2)
         assert np.bincount(f["pads/direction"][()]).tolist() == [74, 74, 74]
         assert np.all(f["pads/damping"][()] == case["pads.cz"])
-    from railvib_hpc.io.mesh_io import read_mesh_h5
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
 
     mesh, _ = read_mesh_h5(modal_run / "mesh.h5")
     vol = mesh.hex_volumes()

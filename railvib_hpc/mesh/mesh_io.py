@@ -24,9 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh.model import Mesh
+from ..io.atomic import atomic_path, write_text_atomic
 from ..schema import PART_ID
-from .atomic import atomic_path, write_text_atomic
+from .model import Mesh
 
 
 def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:

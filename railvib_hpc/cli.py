@@ -9,12 +9,16 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .config import Case, load_case
 from .errors import UserError
 from .log import Reporter
 from .parallel import on_root, world
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed")
@@ -106,13 +110,13 @@ def _cmd_mesh(case: Case, out: Path, rep: Reporter) -> int:
     return 0
 
 
-def _cmd_modal(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_modal(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .modal.stage import run_modal_stage
 
     return run_modal_stage(case, out, comm, rep)
 
 
-def _cmd_mbs(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_mbs(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .mbs.stage import run_mbs_stage
 
     return run_mbs_stage(case, out, comm, rep)
@@ -138,14 +142,14 @@ def _reconstruct_options(case: Case, out: Path) -> dict:
             "user_probes": {f"user_{i + 1}": p for i, p in enumerate(probes)}}
 
 
-def _cmd_reconstruct(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_reconstruct(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .reconstruct import run_reconstruct_stage
 
     opts = on_root(lambda: _reconstruct_options(case, out), comm)
     return run_reconstruct_stage(out / "modes.h5", out / "mbs.h5", out, comm, rep, **opts)
 
 
-def _cmd_assess(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_assess(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .assess.stage import run_assess_stage
 
     return run_assess_stage(case, out, comm, rep)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +35,9 @@ from ..errors import UserError
 from ..io.atomic import write_text_atomic
 from ..log import Reporter
 from ..parallel import on_root
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: What the thesis reports (../shared/reference/benchmarks.md section 2).
 THESIS = {
@@ -332,7 +336,7 @@ def model_summary(case: Case, out_dir: Path) -> str:
     return "\n".join(lines)
 
 
-def run_assess_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Collective: rank 0 assesses (:func:`assess_case`), every rank gets the summary."""
     with rep.stage("assess"):
         return on_root(lambda: assess_case(case, out_dir, rep), comm)

@@ -155,6 +155,8 @@ class RailVehicle(_LinearVehicle):
 
     n_dof = 17
     n_wheels = 8
+    #: Vertical model: the contact normals are vertical (no tread conicity).
+    conicity = 0.0
     dof_names = (_BODY_NAMES
                  + tuple(f"bogie{i}.{d}" for i in range(2) for d in ("z", "pitch", "roll"))
                  + tuple(f"wheelset{i}.{d}" for i in range(4) for d in ("z", "roll")))
@@ -302,6 +304,9 @@ class Train(_LinearVehicle):
     k_coupler, c_coupler
         Vertical coupler stiffness [N/m] and damping [N s/m].
     """
+
+    #: Vertical model: the contact normals are vertical (no tread conicity).
+    conicity = 0.0
 
     def __init__(self, vehicles: Sequence[RailVehicle], gaps: float | Sequence[float] = 0.0,
                  k_coupler: float = 0.0, c_coupler: float = 0.0):

@@ -27,12 +27,16 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.linalg import eigh
 
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
-def dense_block(arr: np.ndarray, n_global: int, comm):
+
+def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
     """A PETSc dense matrix holding this rank's rows ``arr`` (n_local, b) of a block."""
     from petsc4py import PETSc
 
@@ -44,7 +48,7 @@ def dense_block(arr: np.ndarray, n_global: int, comm):
     return D
 
 
-def sparse_times_block(A, X: np.ndarray, comm) -> np.ndarray:
+def sparse_times_block(A, X: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     """This rank's rows of ``A X`` for a distributed block X (n_local, b)."""
     D = dense_block(X, A.getSize()[0], comm)
     R = A.matMult(D)
@@ -77,7 +81,7 @@ class NotConverged(RuntimeError):
     """Fewer than the wanted eigenpairs converged within the allowed restarts."""
 
 
-def available_memory_gb(comm) -> float:
+def available_memory_gb(comm: MPI.Comm) -> float:
     """MemAvailable summed over the distinct nodes of ``comm`` (Linux), in GB."""
     from mpi4py import MPI
 
@@ -98,7 +102,7 @@ def available_memory_gb(comm) -> float:
 class BlockOperator:
     """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
 
-    def __init__(self, K, M, sigma: float, comm, prefix: str, extra_gb: float = 0.0,
+    def __init__(self, K, M, sigma: float, comm: MPI.Comm, prefix: str, extra_gb: float = 0.0,
                  out_of_core: str = "auto"):
         """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
 

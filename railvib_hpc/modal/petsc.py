@@ -14,6 +14,7 @@ from __future__ import annotations
 import time
 from collections.abc import Collection
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .dofmap import DofMap
 from .elements import element_batches
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 @dataclass
@@ -84,8 +88,8 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
     return LocalPattern(indptr, indices.astype(np.int64), hex_mask, line_mask)
 
 
-def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str] | None = None,
-             mass: bool = True):
+def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
+             parts: Collection[str] | None = None, mass: bool = True):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for

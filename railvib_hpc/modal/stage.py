@@ -6,6 +6,7 @@ import json
 import resource
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +22,9 @@ from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
 from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
 _NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core")
@@ -62,7 +66,7 @@ def _progress(rep: Reporter):
     return monitor
 
 
-def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Compute (or reuse) ``modes.h5`` in ``out_dir``; collective. Returns a summary dict."""
     key = modal_digest(case)
     path = out_dir / "modes.h5"
@@ -165,7 +169,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     return summary
 
 
-def _static_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> None:
+def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str) -> None:
     """static.h5 for reused modes: assemble K again and factor it once."""
     with rep.stage("static correction: mesh + assembly"):
         mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)

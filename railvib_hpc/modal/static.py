@@ -19,11 +19,15 @@ Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +69,7 @@ def unit_loads(dofs: np.ndarray, r0: int, r1: int) -> tuple[np.ndarray, np.ndarr
 
 
 def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0: int,
-                     comm) -> np.ndarray:
+                     comm: MPI.Comm) -> np.ndarray:
     """``K^-1`` restricted to the rail DOFs (n_r, n_r), from the distributed solutions."""
     n_r = dofs.size
     part = np.zeros((n_r, n_r))
@@ -78,7 +82,7 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
     return 0.5 * (out + out.T)
 
 
-def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
+def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
                  dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
     """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
     n_r = dofs.size
@@ -124,7 +128,7 @@ def static_is_valid(path: Path, modes_sha: str) -> bool:
         return False
 
 
-def solve_static(K, M, comm, rhs: np.ndarray) -> np.ndarray:
+def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:
     """``K^-1 rhs`` with its own MUMPS Cholesky factorization (options prefix railvib_eig_)."""
     from .block_lanczos import BlockOperator
     from .eigen import PREFIX

@@ -51,6 +51,7 @@ import os
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -68,6 +69,9 @@ from .probes import (
     write_probes_h5,
 )
 from .stress import hex_materials, rail_moment_history, rail_moment_modes, stress_from_fields
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Bumped when the output format changes (part of every reuse digest).
 FORMAT_VERSION = 1
@@ -291,8 +295,9 @@ def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
 
 
 def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
-                          out_dir: str | os.PathLike, comm, rep: Reporter, *, stride: int = 1,
-                          window: tuple[float, float] | None = None, float32: bool = False,
+                          out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter, *,
+                          stride: int = 1, window: tuple[float, float] | None = None,
+                          float32: bool = False,
                           stress_times: Sequence[float] = (), user_probes: UserProbes = (),
                           correction_rates: bool = False) -> dict:
     """Reconstruct fields, stresses and probe histories (collective; reuses what it can).
@@ -443,7 +448,7 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     return result
 
 
-def _stress(path: Path, modes_path: Path, comm, stress_times, rep: Reporter, keys,
+def _stress(path: Path, modes_path: Path, comm: MPI.Comm, stress_times, rep: Reporter, keys,
             temporary: bool) -> dict:
     materials = on_root(lambda: _materials(modes_path), comm)
     stats = stress_from_fields(path, comm, stress_times, materials, rep=rep,

@@ -50,6 +50,7 @@ import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -69,6 +70,9 @@ from .fields import (
     read_slab,
     write_slab,
 )
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Elements per block in :func:`element_stress` (bounds temporary memory).
 _BLOCK = 65536
@@ -354,7 +358,7 @@ def select_steps(times: np.ndarray, wanted: Sequence[float]) -> np.ndarray:
     return pos.astype(np.int64)
 
 
-def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[float],
+def stress_from_fields(fields_path: str | os.PathLike, comm: MPI.Comm, times: Sequence[float],
                        materials: Mapping[int, tuple[float, float]], *,
                        rep: Reporter | None = None, attrs: Mapping[str, object] | None = None,
                        require_complete: bool = True) -> dict:
@@ -468,7 +472,7 @@ def _max_op():
     return MPI.MAX
 
 
-def _write_stress(path: Path, comm, parallel: bool, vm: np.ndarray, eq: np.ndarray,
+def _write_stress(path: Path, comm: MPI.Comm, parallel: bool, vm: np.ndarray, eq: np.ndarray,
                   sel: np.ndarray, t_sel: np.ndarray, elems: slice, ne: int,
                   attrs: Mapping[str, object] | None = None) -> None:
     """Write ``/stress`` into ``fields.h5`` (parallel, or gathered to rank 0)."""

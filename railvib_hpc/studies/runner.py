@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..config import Case
 from ..log import Reporter
@@ -41,6 +41,9 @@ from .common import (
 )
 from .report import text_table, write_report
 from .settings import StudySettingsError, study_settings
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
@@ -147,7 +150,7 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
             "variants": entries}
 
 
-def run_study(kind: str, case: Case, out: Path, comm, rep: Reporter, *,
+def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
               variants: Sequence[str] = (), merge_only: bool = False, prepare: bool = False,
               list_only: bool = False, study_set: Sequence[str] = (),
               settings: dict[str, Any] | None = None,

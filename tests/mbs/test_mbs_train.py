@@ -220,3 +220,13 @@ def test_irregularity_with_vehicle_layout():
     expected = np.tile([0.0, 1e-3], 4)
     expected[4] += flat.profile(30.0 + VEH.wheel_offsets[4])
     np.testing.assert_allclose(h, expected, atol=1e-18)
+
+
+def test_every_vehicle_satisfies_the_vehicle_protocol():
+    from railvib_hpc.mbs import SuspendedWheelset, Vehicle
+
+    for veh in (SuspendedWheelset(), RailVehicle(), Train([RailVehicle(), RailVehicle()])):
+        assert isinstance(veh, Vehicle), type(veh).__name__
+        assert len(veh.wheel_rail) == len(veh.wheel_offsets) == veh.n_wheels
+        assert veh.contact_matrix().shape == (veh.n_dof, veh.n_wheels)
+    assert not isinstance(object(), Vehicle)

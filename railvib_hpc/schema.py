@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
+
 
 @dataclass(frozen=True)
 class Param:
@@ -410,17 +412,16 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                          "stepping of the moving load far above the modal band)"),
     },
     "assessment": {
-        "standards": Param(["iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis"],
-                           "strs", "-", "vibration criteria to evaluate",
-                           choices=("iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis")),
+        "standards": Param(list(STANDARDS), "strs", "-",
+                           "vibration criteria to evaluate: " + "; ".join(
+                               f"{s.name} = {s.title}" for s in STANDARDS.values()),
+                           choices=tuple(STANDARDS)),
         "building_use": Param("residential", "str", "-",
                               "use of the building: ISO multiplier, FTA category, VC curve, "
-                              "DIN 4150-3 line",
-                              choices=("critical", "residential", "office", "workshop")),
+                              "DIN 4150-3 line", choices=tuple(BUILDING_USES)),
         "period": Param("day", "str", "-", "assessment period (ISO 10137, DIN 4150-2)",
-                        choices=("day", "night")),
-        "fta_events": Param("frequent", "str", "-", "FTA event frequency",
-                            choices=("frequent", "occasional", "infrequent")),
+                        choices=PERIODS),
+        "fta_events": Param("frequent", "str", "-", "FTA event frequency", choices=FTA_EVENTS),
         "din4150_2_events": Param(0, "int", "-",
                                   "train passages per assessment period for DIN 4150-2 KB_FTr "
                                   "(0: not given; the middle band stays undetermined)",

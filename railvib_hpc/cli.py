@@ -136,10 +136,12 @@ def _reconstruct_options(case: Case, out: Path) -> dict:
             stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
     w = case["output.window"]
     probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    names = [f"user_{i + 1}" for i in range(len(probes))]
     return {"stride": stride, "window": tuple(w) if w else None,
             "float32": case["output.float32"], "stress_times": case["output.stress_times"],
             "correction_rates": case["output.static_correction_rates"],
-            "user_probes": {f"user_{i + 1}": p for i, p in enumerate(probes)}}
+            "user_probes": dict(zip(names, probes)),
+            "user_probe_roles": dict(zip(names, case["output.probe_roles"]))}
 
 
 def _cmd_reconstruct(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:

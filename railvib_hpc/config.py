@@ -136,19 +136,26 @@ def _did_you_mean(key: str) -> str:
 def parse_override(text: str) -> tuple[str, Any]:
     """Parse one ``--set key=value``; the value is read as a TOML value.
 
-    Unquoted text that is not valid TOML is taken as a string, so
-    ``--set vehicle.type=wheelset`` works without quotes.
+    Unquoted text that is not valid TOML is taken as a string, also inside a flat list,
+    so ``--set vehicle.type=wheelset`` and ``--set output.probe_roles=[floor,wall]`` work
+    without quotes.
     """
     if "=" not in text:
         raise CaseError([(text, None, "an override must look like key=value, "
                           "e.g. --set mesh.refinement=2")])
     key, raw = text.split("=", 1)
-    key, raw = key.strip(), raw.strip()
+    return key.strip(), toml_value(raw.strip())
+
+
+def toml_value(raw: str) -> Any:
+    """A TOML value; unquoted words are strings, also inside a flat list (``[a, b]``)."""
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        return tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
+        pass
+    if raw.startswith("[") and raw.endswith("]") and "[" not in raw[1:-1]:
+        return [toml_value(x.strip()) for x in raw[1:-1].split(",") if x.strip()]
+    return raw
 
 
 def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
@@ -448,6 +455,10 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     if len(o["probes"]) % 3:
         out.append(("output.probes", o["probes"],
                     "must be a flat list of x, y, z triples (length a multiple of 3)"))
+    elif o["probe_roles"] and len(o["probe_roles"]) != len(o["probes"]) // 3:
+        out.append(("output.probe_roles", o["probe_roles"],
+                    f"must be empty or give one role per point of output.probes "
+                    f"({len(o['probes']) // 3})"))
     if any(t < 0 for t in o["stress_times"]):
         out.append(("output.stress_times", o["stress_times"], "times must be >= 0"))
     modes, ratios = mbs["damping_modes"], mbs["damping_ratios"]

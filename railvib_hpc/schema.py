@@ -76,6 +76,13 @@ BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
 PAD_PARTS = ("pad_x", "pad_y", "pad_z")
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
+#: Roles of probe points, carried as metadata from where a probe is defined (the mesh
+#: layout's named probes, ``output.probe_roles`` for the user's): ``floor`` a floor slab
+#: (DIN 4150-3 floor limit), ``wall`` a building wall, ``foundation`` a footing or
+#: foundation, ``ground`` the ground surface.
+PROBE_ROLES = ("floor", "wall", "foundation", "ground")
+#: Role of a user probe without one.
+DEFAULT_PROBE_ROLE = "ground"
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "case": {
@@ -403,6 +410,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "times of the element stress/strain fields (thesis: 0.54, 0.61 s)"),
         "probes": Param([], "floats", "m",
                         "extra probe points as a flat list x1, y1, z1, x2, y2, z2, ..."),
+        "probe_roles": Param([], "strs", "-",
+                             "role of each extra probe point, in the order of output.probes "
+                             "(empty: every point is 'ground'); 'floor' points are assessed "
+                             "with the DIN 4150-3 floor limit, the others as foundations",
+                             choices=PROBE_ROLES),
         "static_correction_rates": Param(False, "bool", "-",
                                          "with mbs.static_correction: add the correction also "
                                          "to velocities and accelerations (R g', R g''); off: "

@@ -193,3 +193,16 @@ def test_preset_values_overridden_by_the_file_are_noted():
     short = load_case(ROOT / "jobs" / "thesis_table1.toml")
     assert short["pads.kz"] == 26.5e7 and short["materials.ballast.rho"] == 1300.0
     assert short.notes == ()
+
+
+def test_user_probe_roles_are_validated():
+    from railvib_hpc.config import load_case
+
+    case = load_case(None, ["output.probes=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]",
+                            "output.probe_roles=[floor, ground]"])
+    assert case["output.probe_roles"] == ["floor", "ground"]
+    with pytest.raises(CaseError, match=r"output.probe_roles = \['roof'\]: unknown entries"):
+        load_case(None, ["output.probes=[1.0, 2.0, 3.0]", "output.probe_roles=[roof]"])
+    with pytest.raises(CaseError, match=r"one role per point of output\.probes"):
+        load_case(None, ["output.probes=[1.0, 2.0, 3.0]",
+                         "output.probe_roles=[floor, wall]"])

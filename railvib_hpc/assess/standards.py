@@ -78,6 +78,7 @@ __all__ = [
     "DIN4150_2_RESIDENTIAL",
     "DIN4150_3_FLOOR_VERTICAL",
     "DIN4150_3_LINES",
+    "DIN4150_3_LOCATION_OF_ROLE",
     "DIN4150_3_TOP_FLOOR",
     "FTA_CRITERIA",
     "ISO_BASE_CURVE",
@@ -164,6 +165,10 @@ BUILDING_USES: dict[str, dict[str, str]] = {
 PERIODS = ("day", "night")
 FTA_EVENTS = ("frequent", "occasional", "infrequent")
 DIN4150_3_LOCATIONS = ("foundation", "floor", "top_floor")
+#: DIN 4150-3 location of a probe by its role (railvib_hpc.schema.PROBE_ROLES): floor slabs
+#: get the vertical floor limit; footings, walls and ground points the foundation limits.
+DIN4150_3_LOCATION_OF_ROLE = {"floor": "floor", "wall": "foundation",
+                              "foundation": "foundation", "ground": "foundation"}
 VC_LOW_FREQUENCY = ("constant_acceleration", "flat")
 
 

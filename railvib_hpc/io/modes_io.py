@@ -7,7 +7,7 @@ Layout of ``modes.h5``::
     /modes/translation     (m, n, 3)       ux uy uz of every node (0 where constrained)
     /modes/rotation        (m, nr, 3)      rx ry rz of the beam nodes /mesh/rotation_nodes
     /mesh/points (n, 3), /mesh/node_ids (n,), /mesh/hexes, /mesh/hex_part, /mesh/lines,
-    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5
+    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5 (probes/roles too)
     /mesh/rotation_nodes   (nr,)           nodes that carry rotations (rails, sleepers)
     /mesh/rail_nodes       (2, k)          flexible-rail nodes of each rail, sorted along x
     /mesh/nodal_mass       (n,)            lumped translational mass per node [kg]
@@ -121,6 +121,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     # fixed-length ASCII: parallel HDF5 cannot write variable-length strings
     d_pn = pr.create_dataset("names", (len(names),), "S64")
     d_pc = pr.create_dataset("coords", coords.shape, "f8")
+    d_pr = pr.create_dataset("roles", (len(names),), "S16")
     d_dof = f.create_group("dofs").create_dataset("index", dof_index.shape, dof_index.dtype)
     gp = f.create_group("pads")
     d_pads = {k: gp.create_dataset(k, v.shape, v.dtype) for k, v in pads.items()}
@@ -141,6 +142,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
             ns_sets[k][...] = v
         d_pn[:] = np.array(names, dtype="S64")
         d_pc[...] = coords
+        d_pr[:] = np.array([mesh.probe_roles.get(k, "") for k in names], dtype="S16")
         d_dof[...] = dof_index
         for k, v in pads.items():
             d_pads[k][...] = v
@@ -193,6 +195,15 @@ def read_modes_summary(path: Path) -> dict | None:
             return out
     except (OSError, KeyError):
         return None
+
+
+def has_probe_roles(path: Path) -> bool:
+    """True when ``modes.h5`` stores the roles of its named probes (written since roles
+    exist); the modal stage recomputes older files."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return "mesh/probes/roles" in f or "mesh/probes/names" not in f
 
 
 def read_strain_energies(path: Path) -> dict[str, np.ndarray] | None:

@@ -35,6 +35,8 @@ class Mesh:
         Boundary node indices: ``bottom``, ``x_faces``, ``y_faces``.
     probes
         Named points: ``name -> (x, y, z)``.
+    probe_roles
+        ``name -> role`` of the named points (:data:`railvib_hpc.schema.PROBE_ROLES`).
     """
 
     points: np.ndarray
@@ -44,6 +46,7 @@ class Mesh:
     line_part: np.ndarray
     node_sets: dict[str, np.ndarray] = field(default_factory=dict)
     probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    probe_roles: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_nodes(self) -> int:

@@ -12,7 +12,12 @@ import numpy as np
 
 from .. import __version__
 from ..config import Case
-from ..io.modes_io import read_modes_summary, read_strain_energies, write_modes
+from ..io.modes_io import (
+    has_probe_roles,
+    read_modes_summary,
+    read_strain_energies,
+    write_modes,
+)
 from ..log import Reporter
 from ..mesh.stage import MESH_INPUTS, run_mesh_stage
 from ..parallel import on_root
@@ -83,6 +88,9 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         if case["modal.damping"] == "strain_energy" and read_strain_energies(path) is None:
             rep.info(f"{path} has no per-material strain energies (modal.damping = "
                      "'strain_energy' needs them); recomputing")
+            return None
+        if not has_probe_roles(path):
+            rep.info(f"{path} has no probe roles (written by an older version); recomputing")
             return None
         return summary
 

@@ -251,7 +251,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
         ``duration``.
     """
-    from ..assess.standards import assess_probe
+    from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
     from ..assess.weighting import third_octave_rms
     from ..reconstruct.probes import probe_histories, write_probes_h5
     from ..reconstruct.stage import read_inputs
@@ -285,7 +285,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
             continue
         res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],
                            period=a_cfg["period"], fta_events=a_cfg["fta_events"],
-                           din4150_3_location="floor" if "slab" in name else "foundation",
+                           din4150_3_location=DIN4150_3_LOCATION_OF_ROLE[h["role"]],
                            din4150_2_events=a_cfg["din4150_2_events"] or None)
         utils = {s: b.get("utilisation") for s, b in res["standards"].items()}
         binding = [u for s, u in utils.items()

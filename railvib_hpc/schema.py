@@ -35,16 +35,20 @@ class Param:
         Default value (the thesis's APDL value where one exists).
     kind
         ``"float"``, ``"int"``, ``"str"``, ``"bool"``, ``"floats"`` (list of
-        numbers) or ``"strs"`` (list of strings).
+        numbers), ``"ints"`` (list of integers), ``"bools"`` (list of true/false),
+        ``"strs"`` (list of strings) or ``"triples"`` (list of ``[a, b, c]`` numbers).
     unit
         SI unit, ``"-"`` for dimensionless.
     doc
         One-line meaning (shown in the README reference and in errors).
     check
         ``"pos"`` (> 0), ``"nonneg"`` (>= 0), ``"poisson"`` (0 <= nu < 0.5),
-        ``"fraction"`` (0 <= x < 1) or ``None``.
+        ``"fraction"`` (0 <= x < 1), ``"refinement"`` (0 < x <= 6), ``"name"`` (letters,
+        digits and ``_.+-``) or ``None``; applied to every entry of a list.
     choices
         Allowed values for strings (or list items).
+    unique
+        Lists only: at least one entry, all distinct.
     """
 
     default: Any
@@ -53,6 +57,17 @@ class Param:
     doc: str
     check: str | None = None
     choices: tuple[str, ...] = field(default_factory=tuple)
+    unique: bool = False
+
+
+#: Probes of the building whose responses the studies compare (names of the mesh probes).
+BUILDING_PROBES = ("footing", "basement_wall", "slab1", "slab2")
+
+
+def _study_probes() -> Param:
+    return Param(list(BUILDING_PROBES), "strs", "-",
+                 "mesh probes whose responses are compared (the building probes)", "name",
+                 unique=True)
 
 
 def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
@@ -441,6 +456,57 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "wave_threshold": Param(0.1, "float", "-",
                                 "wave arrival: first time the acceleration magnitude exceeds "
                                 "this fraction of its peak", "fraction"),
+    },
+    # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
+    # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.
+    "study": {
+        "convergence": {
+            "levels": Param([0.5, 0.75, 1.0, 1.25], "floats", "-",
+                            "mesh.refinement of each level (at least 2, coarse to fine)",
+                            "refinement", unique=True),
+            "tolerance": Param(5.0, "float", "%", "verdict: converged when the estimated "
+                               "error of the finest level is at most this many percent", "pos"),
+            "n_frequencies": Param(5, "int", "-", "lowest natural frequencies compared", "pos"),
+            "formal_order": Param(2.0, "float", "-", "order assumed with two levels or when "
+                                  "the observed order is unreliable (trilinear hexahedra: 2)",
+                                  "pos"),
+            "probes": _study_probes(),
+        },
+        "modes": {
+            "n_modes": Param([50, 100, 200, 300], "ints", "-",
+                             "numbers of modes used by the MBS (mbs.n_modes), from one modal "
+                             "solve with the largest", "pos", unique=True),
+            "static_correction": Param([False, True], "bools", "-",
+                                       "run every mode count without and/or with the static "
+                                       "correction", unique=True),
+            "tolerance": Param(5.0, "float", "%", "accuracy asked for: modes needed to stay "
+                               "within this many percent of the reference (most modes, "
+                               "corrected if run)", "pos"),
+            "probes": _study_probes(),
+        },
+        "reflection": {
+            "domains": Param([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 2.0, 6.0],
+                              [4.0, 4.0, 12.0]], "triples", "m",
+                             "[extra_depth, extra_length, extra_width] of each domain "
+                             "(domain.extra_*), smallest first; the last is the reference",
+                             "nonneg", unique=True),
+            "names": Param(["model1", "model2", "model3", "larger"], "strs", "-",
+                           "variant names, one per domain (default with other domains: "
+                           "domain1, domain2, ...)", "name", unique=True),
+            "threshold": Param(10.0, "float", "%", "verdict: reflections matter when a "
+                               "building peak acceleration differs from the reference domain "
+                               "by more than this many percent", "pos"),
+            "band_hz": Param(0.0, "float", "Hz", "0: every domain uses modal.n_modes of the "
+                             "case; > 0: every domain uses all its modes below this frequency "
+                             "(the same band for all domains)", "nonneg"),
+            "probes": _study_probes(),
+        },
+        "speed": {
+            "speeds": Param([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats", "m/s",
+                            "vehicle speeds (one MBS run each on the same modes)", "pos",
+                            unique=True),
+            "probes": _study_probes(),
+        },
     },
 }
 

@@ -57,7 +57,7 @@ def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
     known = list(build_layout(case).probes)
     bad = [p for p in settings["probes"] if p not in known]
     if bad:
-        raise StudySettingsError(kind, [("probes", settings["probes"],
+        raise StudySettingsError(kind, [(f"study.{kind}.probes", settings["probes"],
                                          f"unknown probes {bad}; the mesh has: "
                                          + ", ".join(known))])
     plan = STUDY_MODULES[kind].plan(case, settings)
@@ -192,7 +192,7 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
         0, or 2 when a selected variant failed (its ``failed.json`` says why).
     """
     t0 = time.perf_counter()
-    cfg = on_root(lambda: study_settings(kind, study_set, settings), comm)
+    cfg = on_root(lambda: study_settings(kind, study_set, settings, case), comm)
     plan = on_root(lambda: make_plan(kind, case, cfg), comm)
     root = Path(out) / kind
     chosen = on_root(lambda: select(plan, variants), comm) if variants else []

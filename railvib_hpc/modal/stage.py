@@ -12,6 +12,7 @@ import numpy as np
 
 from .. import __version__
 from ..config import Case
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..io.modes_io import (
     has_probe_roles,
     read_modes_summary,
@@ -47,11 +48,21 @@ def modal_digest(case: Case) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Memory budget of the automatic Lanczos basis (all ranks together) [GB]: the basis holds
+#: ``3 n_modes`` vectors unless that exceeds this (the thesis model's 300 modes: 1.2 GB).
+AUTO_BASIS_BUDGET_GB = 4.0
+#: Seconds between two progress lines of the eigensolve.
+PROGRESS_INTERVAL_S = 2.0
+#: ``ru_maxrss`` is in kB on Linux: kB per GB.
+KB_PER_GB = 1e6
+
+
 def _max_basis(case: Case, n_dofs: int) -> int:
-    """``modal.max_basis``, or 3 n_modes capped at ~4 GB of basis vectors (all ranks)."""
+    """``modal.max_basis``, or 3 n_modes capped at :data:`AUTO_BASIS_BUDGET_GB` of basis
+    vectors (all ranks)."""
     if case["modal.max_basis"] > 0:
         return case["modal.max_basis"]
-    cap = int(4e9 / (8.0 * n_dofs))
+    cap = int(AUTO_BASIS_BUDGET_GB * BYTES_PER_GB / (BYTES_PER_DOUBLE * n_dofs))
     return max(min(3 * case["modal.n_modes"], cap),
                case["modal.n_modes"] + 3 * case["modal.block_size"])
 
@@ -62,7 +73,7 @@ def _progress(rep: Reporter):
 
     def monitor(nconv: int, nev: int, basis: int) -> None:
         now = time.perf_counter()
-        if now - state["last"] < 2.0 and nconv < nev:
+        if now - state["last"] < PROGRESS_INTERVAL_S and nconv < nev:
             return
         state["last"] = now
         rep.progress(f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
@@ -150,7 +161,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         stats = dict(result.stats)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
-        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KB_PER_GB)
         stats["peak_rss_gb_per_rank"] = rss
         stats["peak_rss_gb_total"] = float(sum(rss))
         stats["n_dofs"] = dofmap.n_dofs

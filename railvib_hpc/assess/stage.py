@@ -96,7 +96,8 @@ def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
             role = g.attrs.get("role")
             if role is None:
                 raise AssessStageError(f"{path}: probe '{name}' has no role (file written by "
-                                       "an older version): rerun 'railvib reconstruct'")
+                                       "an older version): rerun 'railvib run' (modal and "
+                                       "reconstruct recompute their files)")
             out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
                          "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
                          "coords": np.asarray(xyz, dtype=float),

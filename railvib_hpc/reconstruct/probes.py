@@ -77,18 +77,22 @@ def mesh_probes(modes_path: str | os.PathLike) -> dict[str, np.ndarray]:
     return dict(zip(names, coords))
 
 
-def mesh_probe_roles(modes_path: str | os.PathLike) -> dict[str, str]:
-    """Roles of the named probes in ``/mesh/probes/roles`` of ``modes.h5`` (name -> role)."""
+def mesh_probe_roles(modes_path: str | os.PathLike) -> dict[str, str] | None:
+    """Roles of the named probes in ``/mesh/probes/roles`` of ``modes.h5`` (name -> role;
+    a probe stored without one gets ``"ground"``); None when the file has no roles (written
+    by a version before probes had roles)."""
     import h5py
 
     with h5py.File(modes_path, "r") as f:
-        if "mesh/probes/roles" not in f:
+        if "mesh/probes/names" not in f:
             return {}
+        if "mesh/probes/roles" not in f:
+            return None
         names = [n.decode() if isinstance(n, bytes) else str(n)
                  for n in f["mesh/probes/names"][()]]
         roles = [r.decode() if isinstance(r, bytes) else str(r)
                  for r in f["mesh/probes/roles"][()]]
-    return {n: r for n, r in zip(names, roles) if r}
+    return {n: r or DEFAULT_PROBE_ROLE for n, r in zip(names, roles)}
 
 
 def user_probe_dict(user_probes: UserProbes) -> dict[str, np.ndarray]:
@@ -241,20 +245,24 @@ def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
     -------
     dict
         ``name -> {"t", "displacement", "velocity", "acceleration", "coords", "element",
-        "xi", "role"}`` with (nt, 3) histories (``role`` None for a mesh probe of a
-        ``modes.h5`` written before probes had roles).
+        "xi", "role"}`` with (nt, 3) histories.
 
     Raises
     ------
     ProbeError
-        For a user probe named like a mesh probe, or with an unknown role.
+        For a user probe named like a mesh probe or with an unknown role, and for a
+        ``modes.h5`` written before probes had roles.
     """
     import h5py
 
     probes = mesh_probes(modes_path) if mesh else {}
-    roles: dict[str, str | None] = dict.fromkeys(probes)
-    if mesh:
-        roles.update(mesh_probe_roles(modes_path))
+    roles: dict[str, str] = {}
+    if probes:
+        stored = mesh_probe_roles(modes_path)
+        if stored is None:
+            raise ProbeError(f"{modes_path} stores no probe roles (written by an older "
+                             "version): rerun 'railvib modal' (it recomputes the file)")
+        roles.update(stored)
     user_roles = dict(user_roles or {})
     for name, xyz in user_probe_dict(user_probes).items():
         if name in probes:

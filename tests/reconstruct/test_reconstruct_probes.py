@@ -181,3 +181,19 @@ def test_layout_probes_carry_their_roles():
     assert layout.probe_roles["slab1"] == layout.probe_roles["slab2"] == "floor"
     assert layout.probe_roles["footing"] == "foundation"
     assert layout.probe_roles["basement_wall"] == "wall"
+
+
+def test_modes_without_probe_roles_are_named(linear_modes, tmp_path):
+    """A modes.h5 of a version before probe roles: one clear error, not a silent default."""
+    import shutil
+
+    path, _, _, _ = linear_modes
+    old = tmp_path / "modes.h5"
+    shutil.copy(path, old)
+    with h5py.File(old, "a") as f:
+        del f["mesh/probes/roles"]
+    t, q, qd, qdd = histories(4, 3)
+    with pytest.raises(ProbeError, match="stores no probe roles.*rerun 'railvib modal'"):
+        probe_histories(old, t, q, qd, qdd)
+    assert list(probe_histories(old, t, q, qd, qdd, mesh=False,
+                                user_probes={"u": (1.0, 1.0, 1.0)})) == ["u"]

@@ -193,7 +193,7 @@ def test_modes_without_probe_roles_are_named(linear_modes, tmp_path):
     with h5py.File(old, "a") as f:
         del f["mesh/probes/roles"]
     t, q, qd, qdd = histories(4, 3)
-    with pytest.raises(ProbeError, match="stores no probe roles.*rerun 'railvib modal'"):
+    with pytest.raises(ProbeError, match=r"stores no probe roles.*rerun 'railvib modal'"):
         probe_histories(old, t, q, qd, qdd)
     assert list(probe_histories(old, t, q, qd, qdd, mesh=False,
                                 user_probes={"u": (1.0, 1.0, 1.0)})) == ["u"]

@@ -50,7 +50,7 @@ from .coupling import RailCoupling
 from .propagator import modal_propagator
 from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
 from .static_correction import ContactResidual
-from .vehicles import Vehicle, static_equilibrium
+from .vehicles import Vehicle, missing_members, static_equilibrium
 
 Irregularity = Callable[[np.ndarray], np.ndarray]
 
@@ -335,6 +335,9 @@ def simulate_vehicle(
     MBSResult
         Histories (``rail_loads`` holds the rail-DOF loads when ``residual`` is given).
     """
+    if not isinstance(vehicle, Vehicle):
+        raise TypeError(f"{type(vehicle).__name__} is not a railvib_hpc.mbs.Vehicle: it lacks "
+                        + ", ".join(missing_members(vehicle)))
     rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
     if dt is None:

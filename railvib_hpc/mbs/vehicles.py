@@ -106,6 +106,14 @@ class Vehicle(Protocol):
         """Kinetic + suspension + potential energy [J] of states (..., n_dof)."""
 
 
+def missing_members(obj: object) -> list[str]:
+    """The members of the :class:`Vehicle` protocol that ``obj`` lacks (sorted)."""
+    members = set(Vehicle.__annotations__) | {
+        n for n, v in vars(Vehicle).items() if not n.startswith("_")
+        and (callable(v) or isinstance(v, property))}
+    return sorted(m for m in members if not hasattr(obj, m))
+
+
 class LinearVehicle:
     """Shared methods of vehicles with constant mass, damping and stiffness matrices."""
 

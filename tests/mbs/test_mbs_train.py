@@ -231,9 +231,7 @@ def test_every_vehicle_satisfies_the_vehicle_protocol():
         assert veh.contact_matrix().shape == (veh.n_dof, veh.n_wheels)
     assert not isinstance(object(), Vehicle)
     # the integrators name what a non-vehicle lacks
-    import numpy as np
-
     from railvib_hpc.mbs import simulate_vehicle
 
-    with pytest.raises(TypeError, match="not a railvib_hpc.mbs.Vehicle: it lacks conicity"):
+    with pytest.raises(TypeError, match=r"not a railvib_hpc\.mbs\.Vehicle: it lacks conicity"):
         simulate_vehicle(np.ones(2), 0.0, None, object(), 0.0, 1.0, 1.0)

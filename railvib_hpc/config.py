@@ -225,7 +225,7 @@ def _check_list(key: str, param: Param, value: Any, problems: list) -> Any:
     return out
 
 
-def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
+def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
     """Type-check and convert one value; append problems; return the converted value."""
     unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
     kind = param.kind
@@ -288,7 +288,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         for key, value in PRESETS[preset].items():
             _set(data, key, value)
     for key, value in flat.items():
-        _set(data, key, _check_value(key, ALL_KEYS[key], value, problems))
+        _set(data, key, check_value(key, ALL_KEYS[key], value, problems))
     if problems:
         raise CaseError(problems)
     notes = []

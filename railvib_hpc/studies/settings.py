@@ -17,7 +17,7 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..config import ALL_KEYS, Case, _check_value, check_studies, toml_value
+from ..config import ALL_KEYS, Case, check_value, check_studies, toml_value
 from ..errors import CaseError
 from ..schema import BUILDING_PROBES, SCHEMA, Param
 
@@ -115,7 +115,7 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
             problems.append((prefix + key, value, f"unknown setting of the '{kind}' study; "
                              "allowed: " + ", ".join(spec) + hint))
             continue
-        out[key] = _check_value(prefix + key, ALL_KEYS[prefix + key], value, problems)
+        out[key] = check_value(prefix + key, ALL_KEYS[prefix + key], value, problems)
     if problems:
         raise StudySettingsError(kind, problems)
     if kind == "reflection" and "domains" in given and "names" not in given:

@@ -17,7 +17,7 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..config import ALL_KEYS, Case, check_value, check_studies, toml_value
+from ..config import ALL_KEYS, Case, check_studies, check_value, toml_value
 from ..errors import CaseError
 from ..schema import BUILDING_PROBES, SCHEMA, Param
 

@@ -72,6 +72,9 @@ def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigen
     """
 
     n, m = mesh.n_nodes, len(eigenvalues)
+    # attributes are written collectively: every rank must pass the same values (the
+    # stats hold per-rank timings, so rank 0's are taken; unequal strings corrupt them)
+    attrs = comm.bcast(dict(attrs), root=0)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather((node_range, translation, rot_range, rotation, nodal_mass), root=0)

@@ -38,8 +38,10 @@ test-serial: setup-test
 test-mpi: setup
 	$(TIMEOUT) $(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
 
+# ruff, then the layer order and the ban on import cycles (.importlinter)
 lint: setup
 	$(VENV)/bin/ruff check railvib_hpc tests bench
+	$(VENV)/bin/lint-imports --no-cache
 
 docs: setup
 	$(PY) -m railvib_hpc.docs

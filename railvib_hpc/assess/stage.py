@@ -6,9 +6,10 @@ forces for the report), evaluates every probe against the standards of
 ``[assessment]`` and writes ``assessment.json`` plus the report
 (``report.md``, ``report.html``, ``report.json``, ``figures/*.png``).
 
-DIN 4150-3 location per probe: names with ``slab`` are floors (vertical
-floor-slab limit), everything else is assessed as a foundation (footing,
-basement wall, ground points).
+DIN 4150-3 location per probe, from the role it carries (set where the probe is
+defined: the mesh layout, ``output.probe_roles``): ``floor`` probes get the vertical
+floor-slab limit, every other role (foundation, wall, ground) is assessed as a
+foundation (:data:`railvib_hpc.assess.standards.DIN4150_3_LOCATION_OF_ROLE`).
 
 Wave arrivals: the load enters the soil when the first wheel reaches the
 flexible rail (``t_entry``); at a probe at distance ``r`` from that point the
@@ -26,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +36,9 @@ from ..errors import UserError
 from ..io.atomic import write_text_atomic
 from ..log import Reporter
 from ..parallel import on_root
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: What the thesis reports (../shared/reference/benchmarks.md section 2).
 THESIS = {
@@ -88,9 +93,15 @@ def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
         coords = f["coords"][()]
         for name, xyz in zip(names, coords):
             g = f[f"probes/{name}"]
+            role = g.attrs.get("role")
+            if role is None:
+                raise AssessStageError(f"{path}: probe '{name}' has no role (file written by "
+                                       "an older version): rerun 'railvib run' (modal and "
+                                       "reconstruct recompute their files)")
             out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
                          "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
-                         "coords": np.asarray(xyz, dtype=float)}
+                         "coords": np.asarray(xyz, dtype=float),
+                         "role": role.decode() if isinstance(role, bytes) else str(role)}
     return out
 
 
@@ -207,14 +218,14 @@ def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary."""
     from .report import write_report
-    from .standards import assess_probe, format_table
+    from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
 
     rep = rep or Reporter(0)
     hist = read_probes(out_dir / "probes.h5")
     a = case["assessment"]
     results = {}
     for name, h in hist.items():
-        location = "floor" if "slab" in name else "foundation"
+        location = DIN4150_3_LOCATION_OF_ROLE[h["role"]]
         results[name] = assess_probe(
             h["t"], h["acceleration"], h["velocity"], a["standards"],
             building_use=a["building_use"], period=a["period"], fta_events=a["fta_events"],
@@ -332,7 +343,7 @@ def model_summary(case: Case, out_dir: Path) -> str:
     return "\n".join(lines)
 
 
-def run_assess_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Collective: rank 0 assesses (:func:`assess_case`), every rank gets the summary."""
     with rep.stage("assess"):
         return on_root(lambda: assess_case(case, out_dir, rep), comm)

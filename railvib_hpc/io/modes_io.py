@@ -7,7 +7,7 @@ Layout of ``modes.h5``::
     /modes/translation     (m, n, 3)       ux uy uz of every node (0 where constrained)
     /modes/rotation        (m, nr, 3)      rx ry rz of the beam nodes /mesh/rotation_nodes
     /mesh/points (n, 3), /mesh/node_ids (n,), /mesh/hexes, /mesh/hex_part, /mesh/lines,
-    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5
+    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5 (probes/roles too)
     /mesh/rotation_nodes   (nr,)           nodes that carry rotations (rails, sleepers)
     /mesh/rail_nodes       (2, k)          flexible-rail nodes of each rail, sorted along x
     /mesh/nodal_mass       (n,)            lumped translational mass per node [kg]
@@ -32,30 +32,21 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .parallel_h5 import h5py_parallel_ok, write_collective
 from .xdmf import H5Array, Series, hex_mesh, write_series
 
+if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here
+    from mpi4py import MPI
 
-def rail_nodes(mesh: Mesh) -> np.ndarray:
-    """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x."""
-    nodes = np.unique(mesh.lines[mesh.line_part == PART_ID["rail"]])
-    y = mesh.points[nodes, 1]
-    out = []
-    for side in (y < 0, y >= 0):
-        n = nodes[side]
-        out.append(n[np.argsort(mesh.points[n, 0], kind="stable")])
-    if len(out[0]) != len(out[1]):
-        width = max(len(out[0]), len(out[1]))
-        out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
-    return np.array(out, dtype=np.int64)
+    from ..mesh.model import Mesh
 
 
-def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
+def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
                 attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
@@ -81,6 +72,9 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
     """
 
     n, m = mesh.n_nodes, len(eigenvalues)
+    # attributes are written collectively: every rank must pass the same values (the
+    # stats hold per-rank timings, so rank 0's are taken; unequal strings corrupt them)
+    attrs = comm.bcast(dict(attrs), root=0)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather((node_range, translation, rot_range, rotation, nodal_mass), root=0)
@@ -114,7 +108,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     d_t = g.create_dataset("translation", (m, n, 3), "f8")
     d_r = g.create_dataset("rotation", (m, len(rotation_nodes), 3), "f8")
     gm = f.create_group("mesh")
-    rails = rail_nodes(mesh)
+    rails = mesh.rail_nodes()
     names = list(mesh.probes)
     coords = np.array([mesh.probes[k] for k in names], dtype=float).reshape(-1, 3)
     mesh_data = {
@@ -130,6 +124,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     # fixed-length ASCII: parallel HDF5 cannot write variable-length strings
     d_pn = pr.create_dataset("names", (len(names),), "S64")
     d_pc = pr.create_dataset("coords", coords.shape, "f8")
+    d_pr = pr.create_dataset("roles", (len(names),), "S16")
     d_dof = f.create_group("dofs").create_dataset("index", dof_index.shape, dof_index.dtype)
     gp = f.create_group("pads")
     d_pads = {k: gp.create_dataset(k, v.shape, v.dtype) for k, v in pads.items()}
@@ -150,6 +145,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
             ns_sets[k][...] = v
         d_pn[:] = np.array(names, dtype="S64")
         d_pc[...] = coords
+        d_pr[:] = np.array([mesh.probe_roles.get(k, "") for k in names], dtype="S16")
         d_dof[...] = dof_index
         for k, v in pads.items():
             d_pads[k][...] = v
@@ -194,6 +190,15 @@ def read_modes_summary(path: Path) -> dict | None:
             return out
     except (OSError, KeyError):
         return None
+
+
+def has_probe_roles(path: Path) -> bool:
+    """True when ``modes.h5`` stores the roles of its named probes (written since roles
+    exist); the modal stage recomputes older files."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return "mesh/probes/roles" in f or "mesh/probes/names" not in f
 
 
 def read_strain_energies(path: Path) -> dict[str, np.ndarray] | None:

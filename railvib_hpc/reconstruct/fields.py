@@ -56,6 +56,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -64,6 +65,9 @@ from ..io.parallel_h5 import h5py_parallel_ok
 from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
 from ..parallel import on_root
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Upper bound for the per-rank output buffers of one block of steps (bytes).
 OUTPUT_BUDGET_BYTES = 512 * 2**20
@@ -164,7 +168,7 @@ def read_slab(ds, start: Sequence[int], count: Sequence[int], out: np.ndarray | 
     ds.id.read(mspace, fspace, data, dxpl=_dxpl(collective))
 
 
-def open_h5(path: str | os.PathLike, mode: str, comm, parallel: bool):
+def open_h5(path: str | os.PathLike, mode: str, comm: MPI.Comm, parallel: bool):
     """Open an HDF5 file with the mpio driver on ``comm`` (``parallel``) or the plain driver."""
     import h5py
 
@@ -173,7 +177,7 @@ def open_h5(path: str | os.PathLike, mode: str, comm, parallel: bool):
     return h5py.File(path, mode)
 
 
-def check_collective(comm, error: BaseException | None, what: str) -> None:
+def check_collective(comm: MPI.Comm, error: BaseException | None, what: str) -> None:
     """Raise on every rank when any rank had an error (call before the next collective)."""
     if comm.size == 1:
         if error is not None:
@@ -188,8 +192,8 @@ def check_collective(comm, error: BaseException | None, what: str) -> None:
 
 
 # --------------------------------------------------------------------------- main routine
-def _read_basis(comm, parallel: bool, modes_path: Path, m: int, extra: Sequence[ExtraBasis],
-                nodes: slice, n: int) -> np.ndarray:
+def _read_basis(comm: MPI.Comm, parallel: bool, modes_path: Path, m: int,
+                extra: Sequence[ExtraBasis], nodes: slice, n: int) -> np.ndarray:
     """This rank's rows of all bases as one C-contiguous (m + sum k, n_local, 3) array."""
     ks = [np.asarray(e[2]).shape[1] for e in extra]
     nl = nodes.stop - nodes.start
@@ -211,7 +215,7 @@ def _read_basis(comm, parallel: bool, modes_path: Path, m: int, extra: Sequence[
     return phi
 
 
-def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLike, comm,
+def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLike, comm: MPI.Comm,
                        t: np.ndarray, q: np.ndarray, q_dot: np.ndarray, q_ddot: np.ndarray, *,
                        steps: Sequence[int] | np.ndarray | None = None, float32: bool = False,
                        block_steps: int | None = None, extra: Sequence[ExtraBasis] | None = None,
@@ -453,7 +457,7 @@ def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarr
     dsets["steps"][...] = steps
 
 
-def _stream(comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
+def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
             buf32: np.ndarray | None, nb: int, ns: int, nodes: slice, parallel: bool,
             gather: bool, stats: dict, rep: Reporter | None) -> None:
     """GEMM + collective write of every block of steps and every field.
@@ -509,7 +513,7 @@ def _gemm(q_block: np.ndarray, phi2: np.ndarray, out: np.ndarray) -> None:
     np.matmul(q_block, phi2, out=out)
 
 
-def _gather_write(comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
+def _gather_write(comm: MPI.Comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
     """Without parallel HDF5: rank 0 receives every rank's block and writes it.
 
     Rank 0 keeps receiving after a failed write (the error is raised afterwards), so the

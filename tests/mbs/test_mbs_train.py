@@ -226,3 +226,18 @@ def test_irregularity_with_vehicle_layout():
     expected = np.tile([0.0, 1e-3], 4)
     expected[4] += flat.profile(30.0 + VEH.wheel_offsets[4])
     np.testing.assert_allclose(h, expected, atol=1e-18)
+
+
+def test_every_vehicle_satisfies_the_vehicle_protocol():
+    from railvib_hpc.mbs import SuspendedWheelset, Vehicle
+
+    for veh in (SuspendedWheelset(), RailVehicle(), Train([RailVehicle(), RailVehicle()])):
+        assert isinstance(veh, Vehicle), type(veh).__name__
+        assert len(veh.wheel_rail) == len(veh.wheel_offsets) == veh.n_wheels
+        assert veh.contact_matrix().shape == (veh.n_dof, veh.n_wheels)
+    assert not isinstance(object(), Vehicle)
+    # the integrators name what a non-vehicle lacks
+    from railvib_hpc.mbs import simulate_vehicle
+
+    with pytest.raises(TypeError, match=r"not a railvib_hpc\.mbs\.Vehicle: it lacks conicity"):
+        simulate_vehicle(np.ones(2), 0.0, None, object(), 0.0, 1.0, 1.0)

@@ -54,7 +54,7 @@ def test_modes_file_contents(modal_run):
         assert f["pads/nodes"].shape == (3 * 74, 2)
         assert np.bincount(f["pads/direction"][()]).tolist() == [74, 74, 74]
         assert np.all(f["pads/damping"][()] == case["pads.cz"])
-    from railvib_hpc.io.mesh_io import read_mesh_h5
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
 
     mesh, _ = read_mesh_h5(modal_run / "mesh.h5")
     vol = mesh.hex_volumes()
@@ -153,9 +153,9 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     by the modal stage and refused by the MBS with a clear message."""
     from modal_cases import energy_sum_allowance, modes_from_file
 
-    from railvib_hpc.io.mesh_io import read_mesh_h5
     from railvib_hpc.io.modes_io import read_strain_energies
     from railvib_hpc.mbs.stage import MBSInputError, modal_damping
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
     from railvib_hpc.modal.dofmap import build_dofmap
 
     energies = read_strain_energies(modal_run / "modes.h5")

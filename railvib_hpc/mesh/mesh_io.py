@@ -11,6 +11,7 @@ Layout of ``mesh.h5``::
     /mesh/probes/names      (p,) str         named probe points
     /mesh/probes/coords     (p, 3) float64
     /mesh/probes/nearest_node (p,) int64
+    /mesh/probes/roles      (p,) str         role of each probe (schema.PROBE_ROLES)
     attrs: part_names (JSON {id: name}), inputs_sha256, railvib_version, case_toml
 
 The XDMF file (:mod:`railvib_hpc.io.xdmf`) holds two grids sharing the points: ``solids``
@@ -25,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh.model import Mesh
+from ..io.atomic import atomic_path, write_text_atomic
+from ..io.xdmf import CellBlock, H5Array, mesh_document
 from ..schema import PART_ID
-from .atomic import atomic_path, write_text_atomic
-from .xdmf import CellBlock, H5Array, mesh_document
+from .model import Mesh
 
 
 def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
@@ -50,6 +51,8 @@ def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
         pr.create_dataset("names", data=np.array(names, dtype=h5py.string_dtype()))
         coords = np.array([mesh.probes[n] for n in names], dtype=float).reshape(-1, 3)
         pr.create_dataset("coords", data=coords)
+        pr.create_dataset("roles", data=np.array([mesh.probe_roles.get(n, "") for n in names],
+                                                 dtype=h5py.string_dtype()))
         pr.create_dataset("nearest_node",
                           data=np.array([mesh.nearest_node(c) for c in coords], dtype=np.int64))
         f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
@@ -65,10 +68,13 @@ def read_mesh_h5(path: Path) -> tuple[Mesh, dict]:
         g = f["mesh"]
         names = [n.decode() if isinstance(n, bytes) else n for n in g["probes/names"][()]]
         coords = g["probes/coords"][()]
+        roles = ([r.decode() if isinstance(r, bytes) else r for r in g["probes/roles"][()]]
+                 if "probes/roles" in g else [])
         mesh = Mesh(points=g["points"][()], hexes=g["hexes"][()], hex_part=g["hex_part"][()],
                     lines=g["lines"][()], line_part=g["line_part"][()],
                     node_sets={k: v[()] for k, v in g["node_sets"].items()},
-                    probes={n: tuple(map(float, c)) for n, c in zip(names, coords)})
+                    probes={n: tuple(map(float, c)) for n, c in zip(names, coords)},
+                    probe_roles={n: r for n, r in zip(names, roles) if r})
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
     return mesh, attrs
 

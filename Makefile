@@ -1,5 +1,8 @@
 # Two commands: `make run` (the thesis baseline on 2 MPI ranks) and `make test`.
-# Both set everything up on a fresh Debian 12 machine (idempotent, seconds when done).
+# Both set everything up on a fresh Debian 12 machine (idempotent, seconds when done);
+# with PETSC_DIR/SLEPC_DIR set (or without dpkg) they use your own stack (docs/install.md).
+# `make test` also needs ParaView's pvbatch (Debian: python3-paraview, installed by
+# setup-test); RAILVIB_SKIP_PARAVIEW=1 skips the ParaView checks (CI never sets it).
 VENV    ?= .venv
 PY      := $(VENV)/bin/python
 NP      ?= 2
@@ -11,10 +14,13 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 # Oversubscription keeps `-n 2` working on 1-core CI machines.
 MPIRUN  ?= mpirun --oversubscribe -n $(NP)
 
-.PHONY: setup run thesis test test-serial test-mpi lint bench clean docs
+.PHONY: setup setup-test run thesis test test-serial test-mpi lint bench clean docs
 
 setup:
 	@bash tools/setup.sh
+
+setup-test:
+	@bash tools/setup.sh --test
 
 run: setup
 	$(MPIRUN) $(PY) -m railvib_hpc run $(CASE) --out $(OUT)
@@ -26,18 +32,20 @@ thesis: setup
 # A hung collective must fail the run, not eat the CI budget: each pass has a time limit.
 TIMEOUT ?= timeout --signal=KILL 1500
 
-test: setup
+test: setup-test
 	$(TIMEOUT) $(PY) -m pytest -q
 	$(TIMEOUT) $(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
 
-test-serial: setup
+test-serial: setup-test
 	$(TIMEOUT) $(PY) -m pytest -q
 
 test-mpi: setup
 	$(TIMEOUT) $(MPIRUN) $(PY) -m pytest -q -m mpi -p no:cacheprovider
 
+# ruff, then the layer order and the ban on import cycles (.importlinter)
 lint: setup
 	$(VENV)/bin/ruff check railvib_hpc tests bench
+	$(VENV)/bin/lint-imports --no-cache
 
 docs: setup
 	$(PY) -m railvib_hpc.docs

@@ -9,12 +9,16 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from . import __version__
 from .config import Case, load_case
 from .errors import UserError
 from .log import Reporter
 from .parallel import on_root, world
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed", "thesis")
@@ -106,13 +110,13 @@ def _cmd_mesh(case: Case, out: Path, rep: Reporter) -> int:
     return 0
 
 
-def _cmd_modal(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_modal(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .modal.stage import run_modal_stage
 
     return run_modal_stage(case, out, comm, rep)
 
 
-def _cmd_mbs(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_mbs(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .mbs.stage import run_mbs_stage
 
     return run_mbs_stage(case, out, comm, rep)
@@ -132,20 +136,22 @@ def _reconstruct_options(case: Case, out: Path) -> dict:
             stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
     w = case["output.window"]
     probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    names = [f"user_{i + 1}" for i in range(len(probes))]
     return {"stride": stride, "window": tuple(w) if w else None,
             "float32": case["output.float32"], "stress_times": case["output.stress_times"],
             "correction_rates": case["output.static_correction_rates"],
-            "user_probes": {f"user_{i + 1}": p for i, p in enumerate(probes)}}
+            "user_probes": dict(zip(names, probes)),
+            "user_probe_roles": dict(zip(names, case["output.probe_roles"]))}
 
 
-def _cmd_reconstruct(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_reconstruct(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .reconstruct import run_reconstruct_stage
 
     opts = on_root(lambda: _reconstruct_options(case, out), comm)
     return run_reconstruct_stage(out / "modes.h5", out / "mbs.h5", out, comm, rep, **opts)
 
 
-def _cmd_assess(case: Case, out: Path, comm, rep: Reporter) -> dict:
+def _cmd_assess(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     from .assess.stage import run_assess_stage
 
     return run_assess_stage(case, out, comm, rep)

@@ -14,6 +14,7 @@ import difflib
 import hashlib
 import json
 import math
+import re
 from collections.abc import Collection
 from dataclasses import dataclass
 from pathlib import Path
@@ -138,25 +139,100 @@ def _did_you_mean(key: str) -> str:
 def parse_override(text: str) -> tuple[str, Any]:
     """Parse one ``--set key=value``; the value is read as a TOML value.
 
-    Unquoted text that is not valid TOML is taken as a string, so
-    ``--set vehicle.type=wheelset`` works without quotes.
+    Unquoted text that is not valid TOML is taken as a string, also inside a flat list,
+    so ``--set vehicle.type=wheelset`` and ``--set output.probe_roles=[floor,wall]`` work
+    without quotes.
     """
     if "=" not in text:
         raise CaseError([(text, None, "an override must look like key=value, "
                           "e.g. --set mesh.refinement=2")])
     key, raw = text.split("=", 1)
-    key, raw = key.strip(), raw.strip()
+    return key.strip(), toml_value(raw.strip())
+
+
+def toml_value(raw: str) -> Any:
+    """A TOML value; unquoted words are strings, also inside a flat list (``[a, b]``)."""
     try:
-        value = tomllib.loads(f"v = {raw}")["v"]
+        return tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
-        value = raw
-    return key, value
+        pass
+    if raw.startswith("[") and raw.endswith("]") and "[" not in raw[1:-1]:
+        return [toml_value(x.strip()) for x in raw[1:-1].split(",") if x.strip()]
+    return raw
 
 
-def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
-    """Type-check and convert one value; append problems; return the converted value."""
-    unit = "" if param.unit == "-" else f" in {param.unit}"
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+
+
+def _number(v: Any) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _integer(v: Any) -> bool:
+    return (isinstance(v, int) and not isinstance(v, bool)) or (
+        isinstance(v, float) and v.is_integer())
+
+
+def _range_problem(param: Param, value: Any) -> str | None:
+    """What is wrong with one (scalar or list entry) value under ``param.check``."""
+    unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
+    check = param.check
+    if check == "pos" and not value > 0:
+        return f"must be > 0{unit} ({param.doc})"
+    if check == "nonneg" and not value >= 0:
+        return f"must be >= 0{unit} ({param.doc})"
+    if check == "poisson" and not (0.0 <= value < 0.5):
+        return "Poisson's ratio must satisfy 0 <= nu < 0.5"
+    if check == "fraction" and not (0.0 <= value < 1.0):
+        return "must satisfy 0 <= value < 1"
+    if check == "refinement" and not (0.0 < value <= 6.0):
+        return f"must satisfy 0 < value <= 6 ({param.doc})"
+    if check == "name" and not _NAME.match(value):
+        return "must be a name (letters, digits, '_.+-')"
+    return None
+
+
+def _check_list(key: str, param: Param, value: Any, problems: list) -> Any:
+    """The list kinds: type of every entry, its range, and ``unique``."""
+    unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
     kind = param.kind
+    entry_ok, convert, what = {
+        "floats": (_number, float, f"a list of numbers{unit}"),
+        "ints": (_integer, int, "a list of integers"),
+        "bools": (lambda v: isinstance(v, bool), bool, "a list of true/false"),
+        "strs": (lambda v: isinstance(v, str), str, "a list of strings"),
+        "triples": (lambda v: isinstance(v, list) and len(v) == 3 and all(map(_number, v)),
+                    lambda v: [float(x) for x in v], f"a list of [a, b, c] number triples{unit}"),
+    }[kind]
+    if not isinstance(value, list) or not all(entry_ok(v) for v in value):
+        problems.append((key, value, f"expected {what} ({param.doc})"))
+        return value
+    out = [convert(v) for v in value]
+    bad = [v for v in out if param.choices and v not in param.choices]
+    if bad:
+        problems.append((key, value, f"unknown entries {bad}; allowed: "
+                         + ", ".join(map(repr, param.choices))))
+        return value
+    scalars = [x for v in out for x in (v if kind == "triples" else [v])]
+    wrong = next(((x, m) for x in scalars if (m := _range_problem(param, x))), None)
+    if wrong:
+        problems.append((key, value, f"entry {wrong[0]!r} {wrong[1]}"))
+        return value
+    if param.unique:
+        keys = [tuple(v) if kind == "triples" else v for v in out]
+        if not keys:
+            problems.append((key, value, f"expected a non-empty list ({param.doc})"))
+        elif len(set(keys)) != len(keys):
+            problems.append((key, value, "entries must be distinct"))
+    return out
+
+
+def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
+    """Type-check and convert one value; append problems; return the converted value."""
+    unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
+    kind = param.kind
+    if kind in ("floats", "ints", "bools", "strs", "triples"):
+        return _check_list(key, param, value, problems)
     if kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             problems.append((key, value, f"expected a number{unit} ({param.doc})"))
@@ -166,8 +242,7 @@ def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
             problems.append((key, value, "expected a finite number"))
             return value
     elif kind == "int":
-        if isinstance(value, bool) or not (isinstance(value, int) or
-                                           (isinstance(value, float) and value.is_integer())):
+        if isinstance(value, bool) or not _integer(value):
             problems.append((key, value, f"expected an integer ({param.doc})"))
             return value
         value = int(value)
@@ -185,30 +260,9 @@ def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
         if param.choices and value not in param.choices:
             problems.append((key, value, "allowed values: " + ", ".join(map(repr, param.choices))))
             return value
-    elif kind == "strs":
-        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
-            problems.append((key, value, "expected a list of strings"))
-            return value
-        bad = [v for v in value if param.choices and v not in param.choices]
-        if bad:
-            problems.append((key, value, f"unknown entries {bad}; allowed: "
-                             + ", ".join(map(repr, param.choices))))
-        return value
-    elif kind == "floats":
-        if not isinstance(value, list) or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
-            problems.append((key, value, f"expected a list of numbers{unit}"))
-            return value
-        return [float(v) for v in value]
-    check = param.check
-    if check == "pos" and not value > 0:
-        problems.append((key, value, f"must be > 0{unit} ({param.doc})"))
-    elif check == "nonneg" and not value >= 0:
-        problems.append((key, value, f"must be >= 0{unit} ({param.doc})"))
-    elif check == "poisson" and not (0.0 <= value < 0.5):
-        problems.append((key, value, "Poisson's ratio must satisfy 0 <= nu < 0.5"))
-    elif check == "fraction" and not (0.0 <= value < 1.0):
-        problems.append((key, value, "must satisfy 0 <= value < 1"))
+    wrong = _range_problem(param, value)
+    if wrong:
+        problems.append((key, value, wrong))
     return value
 
 
@@ -236,7 +290,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         for key, value in PRESETS[preset].items():
             _set(data, key, value)
     for key, value in flat.items():
-        _set(data, key, _check_value(key, ALL_KEYS[key], value, problems))
+        _set(data, key, check_value(key, ALL_KEYS[key], value, problems))
     if problems:
         raise CaseError(problems)
     notes = []
@@ -416,6 +470,33 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     if case["modal.f_max"] == 0 and case["modal.n_modes"] < 1:
         out.append(("modal.n_modes", case["modal.n_modes"], "must be >= 1"))
     out.extend(_check_mbs(case))
+    out.extend(check_studies(case["study"]))
+    return out
+
+
+def check_studies(tables: dict[str, dict[str, Any]]) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of the ``[study.KIND]`` tables; returns the problems.
+
+    ``tables`` maps study kinds to their (type-checked) settings; keys in the problems are
+    ``study.<kind>.<key>``.
+    """
+    out: list[tuple[str, Any, str]] = []
+    conv = tables.get("convergence")
+    if conv is not None and len(conv["levels"]) < 2:
+        out.append(("study.convergence.levels", conv["levels"],
+                    "need at least 2 refinement levels (3 for an observed order)"))
+    refl = tables.get("reflection")
+    if refl is not None:
+        if len(refl["names"]) != len(refl["domains"]):
+            out.append(("study.reflection.names", refl["names"],
+                        f"needs one name per entry of domains ({len(refl['domains'])})"))
+        if len(refl["domains"]) < 2:
+            out.append(("study.reflection.domains", refl["domains"],
+                        "need at least 2 domains to compare"))
+        if any(x < 0 for d in refl["domains"] for x in d[1:]):
+            out.append(("study.reflection.domains", refl["domains"],
+                        "length and width changes must be >= 0 (only the depth change may be "
+                        "negative: it raises the fixed base)"))
     return out
 
 
@@ -467,6 +548,10 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     if len(o["probes"]) % 3:
         out.append(("output.probes", o["probes"],
                     "must be a flat list of x, y, z triples (length a multiple of 3)"))
+    elif o["probe_roles"] and len(o["probe_roles"]) != len(o["probes"]) // 3:
+        out.append(("output.probe_roles", o["probe_roles"],
+                    f"must be empty or give one role per point of output.probes "
+                    f"({len(o['probes']) // 3})"))
     if any(t < 0 for t in o["stress_times"]):
         out.append(("output.stress_times", o["stress_times"], "times must be >= 0"))
     modes, ratios = mbs["damping_modes"], mbs["damping_ratios"]

@@ -8,14 +8,17 @@ or the exception, so all ranks return or raise together.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from .errors import UserError
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 T = TypeVar("T")
 
 
-def world():
+def world() -> MPI.Comm:
     """The MPI communicator used by railvib (COMM_WORLD)."""
     from mpi4py import MPI
 
@@ -26,7 +29,8 @@ class RootFailure(RuntimeError):
     """A non-user error raised on rank 0, re-raised on the other ranks."""
 
 
-def on_root(fn: Callable[[], T], comm=None, broadcast_result: bool = True) -> T | None:
+def on_root(fn: Callable[[], T], comm: MPI.Comm | None = None,
+            broadcast_result: bool = True) -> T | None:
     """Run ``fn`` on rank 0 only and broadcast its outcome.
 
     Parameters

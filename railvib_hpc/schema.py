@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
 from .sections import APDL_RAIL, APDL_SLEEPER
 
 
@@ -35,16 +36,20 @@ class Param:
         Default value (the thesis's APDL value where one exists).
     kind
         ``"float"``, ``"int"``, ``"str"``, ``"bool"``, ``"floats"`` (list of
-        numbers) or ``"strs"`` (list of strings).
+        numbers), ``"ints"`` (list of integers), ``"bools"`` (list of true/false),
+        ``"strs"`` (list of strings) or ``"triples"`` (list of ``[a, b, c]`` numbers).
     unit
         SI unit, ``"-"`` for dimensionless.
     doc
         One-line meaning (shown in the README reference and in errors).
     check
         ``"pos"`` (> 0), ``"nonneg"`` (>= 0), ``"poisson"`` (0 <= nu < 0.5),
-        ``"fraction"`` (0 <= x < 1) or ``None``.
+        ``"fraction"`` (0 <= x < 1), ``"refinement"`` (0 < x <= 6), ``"name"`` (letters,
+        digits and ``_.+-``) or ``None``; applied to every entry of a list.
     choices
         Allowed values for strings (or list items).
+    unique
+        Lists only: at least one entry, all distinct.
     """
 
     default: Any
@@ -53,6 +58,17 @@ class Param:
     doc: str
     check: str | None = None
     choices: tuple[str, ...] = field(default_factory=tuple)
+    unique: bool = False
+
+
+#: Probes of the building whose responses the studies compare (names of the mesh probes).
+BUILDING_PROBES = ("footing", "basement_wall", "slab1", "slab2")
+
+
+def _study_probes() -> Param:
+    return Param(list(BUILDING_PROBES), "strs", "-",
+                 "mesh probes whose responses are compared (the building probes)", "name",
+                 unique=True)
 
 
 def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
@@ -76,6 +92,13 @@ BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
 PAD_PARTS = ("pad_x", "pad_y", "pad_z")
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
+#: Roles of probe points, carried as metadata from where a probe is defined (the mesh
+#: layout's named probes, ``output.probe_roles`` for the user's): ``floor`` a floor slab
+#: (DIN 4150-3 floor limit), ``wall`` a building wall, ``foundation`` a footing or
+#: foundation, ``ground`` the ground surface.
+PROBE_ROLES = ("floor", "wall", "foundation", "ground")
+#: Role of a user probe without one.
+DEFAULT_PROBE_ROLE = "ground"
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "case": {
@@ -419,6 +442,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "times of the element stress/strain fields (thesis: 0.54, 0.61 s)"),
         "probes": Param([], "floats", "m",
                         "extra probe points as a flat list x1, y1, z1, x2, y2, z2, ..."),
+        "probe_roles": Param([], "strs", "-",
+                             "role of each extra probe point, in the order of output.probes "
+                             "(empty: every point is 'ground'); 'floor' points are assessed "
+                             "with the DIN 4150-3 floor limit, the others as foundations",
+                             choices=PROBE_ROLES),
         "static_correction_rates": Param(False, "bool", "-",
                                          "with mbs.static_correction: add the correction also "
                                          "to velocities and accelerations (R g', R g''); off: "
@@ -428,17 +456,16 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                          "stepping of the moving load far above the modal band)"),
     },
     "assessment": {
-        "standards": Param(["iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis"],
-                           "strs", "-", "vibration criteria to evaluate",
-                           choices=("iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis")),
+        "standards": Param(list(STANDARDS), "strs", "-",
+                           "vibration criteria to evaluate: " + "; ".join(
+                               f"{s.name} = {s.title}" for s in STANDARDS.values()),
+                           choices=tuple(STANDARDS)),
         "building_use": Param("residential", "str", "-",
                               "use of the building: ISO multiplier, FTA category, VC curve, "
-                              "DIN 4150-3 line",
-                              choices=("critical", "residential", "office", "workshop")),
+                              "DIN 4150-3 line", choices=tuple(BUILDING_USES)),
         "period": Param("day", "str", "-", "assessment period (ISO 10137, DIN 4150-2)",
-                        choices=("day", "night")),
-        "fta_events": Param("frequent", "str", "-", "FTA event frequency",
-                            choices=("frequent", "occasional", "infrequent")),
+                        choices=PERIODS),
+        "fta_events": Param("frequent", "str", "-", "FTA event frequency", choices=FTA_EVENTS),
         "din4150_2_events": Param(0, "int", "-",
                                   "train passages per assessment period for DIN 4150-2 KB_FTr "
                                   "(0: not given; the middle band stays undetermined)",
@@ -446,6 +473,79 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "wave_threshold": Param(0.1, "float", "-",
                                 "wave arrival: first time the acceleration magnitude exceeds "
                                 "this fraction of its peak", "fraction"),
+    },
+    # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
+    # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.
+    "study": {
+        "convergence": {
+            "levels": Param([0.5, 0.75, 1.0, 1.25], "floats", "-",
+                            "mesh.refinement of each level (at least 2, coarse to fine)",
+                            "refinement", unique=True),
+            "tolerance": Param(5.0, "float", "%", "verdict: converged when the estimated "
+                               "error of the finest level is at most this many percent", "pos"),
+            "n_frequencies": Param(5, "int", "-", "lowest natural frequencies compared", "pos"),
+            "formal_order": Param(2.0, "float", "-", "order assumed with two levels or when "
+                                  "the observed order is unreliable (trilinear hexahedra: 2)",
+                                  "pos"),
+            "probes": _study_probes(),
+        },
+        "modes": {
+            "n_modes": Param([50, 100, 200, 300], "ints", "-",
+                             "numbers of modes used by the MBS (mbs.n_modes), from one modal "
+                             "solve with the largest", "pos", unique=True),
+            "static_correction": Param([False, True], "bools", "-",
+                                       "run every mode count without and/or with the static "
+                                       "correction", unique=True),
+            "tolerance": Param(5.0, "float", "%", "accuracy asked for: modes needed to stay "
+                               "within this many percent of the reference (most modes, "
+                               "corrected if run)", "pos"),
+            "probes": _study_probes(),
+        },
+        "reflection": {
+            "domains": Param([[-1.8, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 2.0, 6.0],
+                              [4.0, 4.0, 12.0]], "triples", "m",
+                             "[depth, length, width] change of each domain: depth > 0 deepens "
+                             "the subgrade (domain.extra_depth), < 0 raises the fixed base "
+                             "(geometry.z0); length (each end) and width (beyond the building) "
+                             ">= 0 (domain.extra_*); smallest first, the last is the reference. "
+                             "Defaults: the thesis's Models 1-3 (3 m deep; the APDL's 4.8 m, "
+                             "its '5 m'; + 2 m length, + 6 m width) and a larger reference",
+                             unique=True),
+            "names": Param(["model1", "model2", "model3", "larger"], "strs", "-",
+                           "variant names, one per domain (default with other domains: "
+                           "domain1, domain2, ...)", "name", unique=True),
+            "threshold": Param(10.0, "float", "%", "verdict: reflections matter when a "
+                               "building peak acceleration differs from the reference domain "
+                               "by more than this many percent", "pos"),
+            "band_hz": Param(0.0, "float", "Hz", "0: every domain uses modal.n_modes of the "
+                             "case; > 0: every domain uses all its modes below this frequency "
+                             "(the same band for all domains)", "nonneg"),
+            "probes": _study_probes(),
+        },
+        "speed": {
+            "speeds": Param([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats", "m/s",
+                            "vehicle speeds (one MBS run each on the same modes)", "pos",
+                            unique=True),
+            "probes": _study_probes(),
+        },
+        "thesis": {
+            "n_modes": Param(300, "int", "-", "the thesis's mode count (mbs.n_modes of the "
+                             "count variants; the band must hold at least this many)", "pos"),
+            "band_hz": Param(57.87, "float", "Hz", "the thesis's band: the shared model has "
+                             "every mode below it (modal.f_max), the band variants use them "
+                             "all", "pos"),
+            "drop_heights": Param([0.0, 1e-5, 1e-4], "floats", "m",
+                                  "wheelset drop heights (vehicle.drop_height; 0: start at "
+                                  "rest): the thesis's unspecified start", "nonneg",
+                                  unique=True),
+            "contact_damping": Param([0.0], "floats", "N s/m^2",
+                                     "Hertz contact damping C of the drops "
+                                     "(vehicle.contact_damping; the thesis gives none)",
+                                     "nonneg", unique=True),
+            "probes": Param([*BUILDING_PROBES, "basement_wall_far"], "strs", "-",
+                            "mesh probes whose responses are compared (the building probes "
+                            "and the thesis's wave-arrival point)", "name", unique=True),
+        },
     },
 }
 

@@ -189,7 +189,8 @@ def test_cli_study_validates_settings_and_lists_variants(capsys, tmp_path):
                 "--study-set", "n_modes=[50, -1]", "--study-set", "tolerance=x"]) == 2
     err = capsys.readouterr().err
     assert "invalid settings of the 'modes' study (2 problems)" in err
-    assert "n_modes = -1: must be > 0" in err and "tolerance = 'x': expected a" in err
+    assert "study.modes.n_modes = [50, -1]: entry -1 must be > 0" in err
+    assert "study.modes.tolerance = 'x': expected a" in err
     assert "Traceback" not in err
     assert run(["check", str(ROOT / "jobs" / "engineering.toml")]) == 0
     for kind, job in (("convergence", "mesh_convergence"), ("modes", "modal_truncation"),
@@ -224,3 +225,16 @@ def test_preset_values_overridden_by_the_file_are_noted():
     short = load_case(ROOT / "jobs" / "thesis_table1.toml")
     assert short["pads.kz"] == 26.5e7 and short["materials.ballast.rho"] == 1300.0
     assert short.notes == ()
+
+
+def test_user_probe_roles_are_validated():
+    from railvib_hpc.config import load_case
+
+    case = load_case(None, ["output.probes=[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]",
+                            "output.probe_roles=[floor, ground]"])
+    assert case["output.probe_roles"] == ["floor", "ground"]
+    with pytest.raises(CaseError, match=r"output.probe_roles = \['roof'\]: unknown entries"):
+        load_case(None, ["output.probes=[1.0, 2.0, 3.0]", "output.probe_roles=[roof]"])
+    with pytest.raises(CaseError, match=r"one role per point of output\.probes"):
+        load_case(None, ["output.probes=[1.0, 2.0, 3.0]",
+                         "output.probe_roles=[floor, wall]"])

@@ -74,9 +74,9 @@ def test_cli_exit_codes_agree_on_all_ranks(shared_tmp):
 
 @pytest.mark.mpi
 def test_mesh_command_in_parallel_equals_serial(shared_tmp):
-    from railvib_hpc.io.mesh_io import read_mesh_h5
     from railvib_hpc.mesh.gmsh_model import generate
     from railvib_hpc.mesh.layout import build_layout
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
 
     out = shared_tmp / "res"
     code = run(["mesh", str(BASELINE), "--set", "mesh.refinement=0.5", "--out", str(out)])

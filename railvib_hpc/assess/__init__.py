@@ -7,6 +7,11 @@
 * :mod:`.standards`: limits (ISO 10137/BS 6472, DIN 4150-2/-3, FTA, VC curves, the thesis
   criterion), :func:`assess_probe` and :func:`format_table`.
 * :mod:`.report`: :func:`write_report` (markdown, HTML, PNG figures, JSON).
+
+The criteria (weighting, metrics, standards) sit low in the layer order (the case schema
+reads the standards registry); the report and the stage sit high. So that importing the
+criteria does not import the report (and its file layer), ``write_report`` is loaded on
+first use.
 """
 
 from .metrics import (
@@ -23,10 +28,10 @@ from .metrics import (
     vdv,
     velocity_level,
 )
-from .report import write_report
 from .standards import (
     STANDARDS,
     AssessInputError,
+    Standard,
     assess_probe,
     din4150_2_guide_values,
     din4150_3_limit,
@@ -53,6 +58,7 @@ __all__ = [
     "STANDARDS",
     "AssessInputError",
     "BandSpectrum",
+    "Standard",
     "ThirdOctaveBands",
     "apply_response",
     "assess_probe",
@@ -84,3 +90,12 @@ __all__ = [
     "wm_response",
     "write_report",
 ]
+
+
+def __getattr__(name: str):
+    """``write_report`` on first use (see the module notes)."""
+    if name == "write_report":
+        from .report import write_report
+
+        return write_report
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

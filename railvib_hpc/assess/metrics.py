@@ -32,6 +32,7 @@ import numpy as np
 from scipy.fft import next_fast_len, rfft, rfftfreq
 from scipy.signal import lfilter
 
+from ..constants import METRES_PER_INCH
 from .weighting import weight_kb
 
 __all__ = [
@@ -56,8 +57,8 @@ __all__ = [
 TAU_SLOW = 1.0
 #: "fast" time constant [s] (DIN 4150-2 KB_F).
 TAU_FAST = 0.125
-#: FTA reference velocity 1e-6 in/s in m/s.
-FTA_V_REF = 1e-6 * 0.0254
+#: FTA reference velocity 1e-6 in/s in m/s (FTA-VA-90-1003-06, section 5.1).
+FTA_V_REF = 1e-6 * METRES_PER_INCH
 
 
 def _prep(x, fs, axis: int) -> tuple[np.ndarray, float]:

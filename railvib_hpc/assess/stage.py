@@ -6,9 +6,10 @@ forces for the report), evaluates every probe against the standards of
 ``[assessment]`` and writes ``assessment.json`` plus the report
 (``report.md``, ``report.html``, ``report.json``, ``figures/*.png``).
 
-DIN 4150-3 location per probe: names with ``slab`` are floors (vertical
-floor-slab limit), everything else is assessed as a foundation (footing,
-basement wall, ground points).
+DIN 4150-3 location per probe, from the role it carries (set where the probe is
+defined: the mesh layout, ``output.probe_roles``): ``floor`` probes get the vertical
+floor-slab limit, every other role (foundation, wall, ground) is assessed as a
+foundation (:data:`railvib_hpc.assess.standards.DIN4150_3_LOCATION_OF_ROLE`).
 
 Wave arrivals: the load enters the soil when the first wheel reaches the
 flexible rail (``t_entry``); at a probe at distance ``r`` from that point the
@@ -24,8 +25,8 @@ how well the modes represent wave propagation.
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -35,32 +36,14 @@ from ..io.atomic import write_text_atomic
 from ..log import Reporter
 from ..parallel import on_root
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
+from .waves import wave_arrival, wave_speeds  # re-exported
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 class AssessStageError(UserError):
     """Missing or inconsistent inputs of the assessment."""
-
-
-def wave_speeds(case: Case) -> tuple[float, float]:
-    """P- and S-wave speeds of the subgrade [m/s]."""
-    e, nu, rho = (case[f"materials.subgrade.{k}"] for k in ("E", "nu", "rho"))
-    c_p = math.sqrt(e * (1 - nu) / (rho * (1 + nu) * (1 - 2 * nu)))
-    c_s = math.sqrt(e / (2 * rho * (1 + nu)))
-    return c_p, c_s
-
-
-def wave_arrival(t: np.ndarray, acceleration: np.ndarray, t_entry: float,
-                 threshold: float) -> float:
-    """First time after ``t_entry`` with ``|a| >= threshold * peak`` (NaN: never)."""
-    mag = np.linalg.norm(acceleration, axis=1)
-    after = t >= t_entry
-    if not after.any():
-        return float("nan")
-    peak = mag[after].max()
-    if peak <= 0.0:
-        return float("nan")
-    idx = np.flatnonzero(after & (mag >= threshold * peak))
-    return float(t[idx[0]]) if idx.size else float("nan")
 
 
 def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
@@ -77,9 +60,15 @@ def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
         coords = f["coords"][()]
         for name, xyz in zip(names, coords):
             g = f[f"probes/{name}"]
+            role = g.attrs.get("role")
+            if role is None:
+                raise AssessStageError(f"{path}: probe '{name}' has no role (file written by "
+                                       "an older version): rerun 'railvib run' (modal and "
+                                       "reconstruct recompute their files)")
             out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
                          "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
-                         "coords": np.asarray(xyz, dtype=float)}
+                         "coords": np.asarray(xyz, dtype=float),
+                         "role": role.decode() if isinstance(role, bytes) else str(role)}
     return out
 
 
@@ -196,7 +185,7 @@ def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary."""
     from .report import write_report
-    from .standards import assess_probe, format_table
+    from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
 
     rep = rep or Reporter(0)
@@ -204,7 +193,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     a = case["assessment"]
     results = {}
     for name, h in hist.items():
-        location = "floor" if "slab" in name else "foundation"
+        location = DIN4150_3_LOCATION_OF_ROLE[h["role"]]
         results[name] = assess_probe(
             h["t"], h["acceleration"], h["velocity"], a["standards"],
             building_use=a["building_use"], period=a["period"], fta_events=a["fta_events"],
@@ -326,7 +315,7 @@ def model_summary(case: Case, out_dir: Path) -> str:
     return "\n".join(lines)
 
 
-def run_assess_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Collective: rank 0 assesses (:func:`assess_case`), every rank gets the summary."""
     with rep.stage("assess"):
         return on_root(lambda: assess_case(case, out_dir, rep), comm)

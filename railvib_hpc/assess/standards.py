@@ -5,6 +5,11 @@ numbers); each choice beyond it is documented where it is made.
 
 Standards (names accepted in ``standards``)
 -------------------------------------------
+The standards form a registry, :data:`STANDARDS` (name -> :class:`Standard`), filled by the
+:func:`standard` decorator on each evaluation function below. The registry gives the case
+schema its choices (``assessment.standards``), :func:`assess_probe` its dispatch and the
+report its order and titles; a new standard is one decorated function.
+
 ``"iso2631"``
     ISO 2631-2:2003 W_m weighting; the verdict compares the **MTVV** (maximum of the
     τ = 1 s running RMS of a_w) of each direction with the ISO 10137 / BS 6472 base curve
@@ -57,11 +62,13 @@ Results are plain JSON-serialisable dicts (floats, ints, strings, bools, ``None`
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from ..errors import UserError
 from . import metrics
 from .weighting import BandSpectrum, third_octave_rms, weight_wm
@@ -71,6 +78,7 @@ __all__ = [
     "DIN4150_2_RESIDENTIAL",
     "DIN4150_3_FLOOR_VERTICAL",
     "DIN4150_3_LINES",
+    "DIN4150_3_LOCATION_OF_ROLE",
     "DIN4150_3_TOP_FLOOR",
     "FTA_CRITERIA",
     "ISO_BASE_CURVE",
@@ -79,6 +87,8 @@ __all__ = [
     "THESIS_LIMIT",
     "VC_CURVES",
     "AssessInputError",
+    "ProbeRecord",
+    "Standard",
     "assess_probe",
     "din4150_2_guide_values",
     "din4150_3_limit",
@@ -89,16 +99,6 @@ __all__ = [
     "vc_spectrum",
 ]
 
-#: Names accepted in ``standards``, in report order.
-STANDARDS = ("iso2631", "din4150-2", "din4150-3", "fta", "vc", "thesis")
-_TITLES = {
-    "iso2631": "ISO 2631-2 Wm / ISO 10137 base curve",
-    "din4150-2": "DIN 4150-2 (people in buildings)",
-    "din4150-3": "DIN 4150-3 (structural damage)",
-    "fta": "FTA (US transit) velocity level",
-    "vc": "VC curves (one-third-octave velocity)",
-    "thesis": "Thesis 0.005 g peak (comparison only)",
-}
 DIRECTIONS = ("x", "y", "z")
 
 #: ISO 10137 / BS 6472 base curve [m/s² RMS] (vertical, 4–8 Hz).
@@ -153,7 +153,7 @@ VC_CURVES: dict[str, float] = {
 VC_FMIN, VC_FMAX, VC_CORNER = 1.0, 80.0, 8.0
 
 #: Thesis criterion 0.005 g [m/s², peak].
-THESIS_LIMIT = 0.005 * 9.80665
+THESIS_LIMIT = 0.005 * STANDARD_GRAVITY
 
 #: What each building use selects in each standard (each overridable by keyword).
 BUILDING_USES: dict[str, dict[str, str]] = {
@@ -165,6 +165,10 @@ BUILDING_USES: dict[str, dict[str, str]] = {
 PERIODS = ("day", "night")
 FTA_EVENTS = ("frequent", "occasional", "infrequent")
 DIN4150_3_LOCATIONS = ("foundation", "floor", "top_floor")
+#: DIN 4150-3 location of a probe by its role (railvib_hpc.schema.PROBE_ROLES): floor slabs
+#: get the vertical floor limit; footings, walls and ground points the foundation limits.
+DIN4150_3_LOCATION_OF_ROLE = {"floor": "floor", "wall": "foundation",
+                              "foundation": "foundation", "ground": "foundation"}
 VC_LOW_FREQUENCY = ("constant_acceleration", "flat")
 
 
@@ -181,6 +185,86 @@ def _choice(name: str, value: Any, allowed: Iterable[str]) -> str:
     if not isinstance(value, str) or value not in allowed:
         raise _bad(name, value, "allowed are " + ", ".join(repr(a) for a in allowed))
     return value
+
+
+# --------------------------------------------------------------------------------------
+# the registry
+
+
+@dataclass(frozen=True)
+class ProbeRecord:
+    """One probe's checked histories, as every standard's evaluation receives them.
+
+    Attributes
+    ----------
+    acceleration, velocity
+        (nt, 3) histories [m/s², m/s], columns x, y, z (z vertical).
+    fs
+        Sample rate [Hz].
+    duration
+        Record length [s] (``nt / fs``).
+    """
+
+    acceleration: np.ndarray
+    velocity: np.ndarray
+    fs: float
+    duration: float
+
+
+@dataclass(frozen=True)
+class Standard:
+    """One entry of the standards registry.
+
+    Attributes
+    ----------
+    name
+        The name used in case files (``assessment.standards``) and results.
+    title
+        Heading of its block in results and reports.
+    quantity
+        The history it assesses: ``"acceleration"`` or ``"velocity"``.
+    comparison_only
+        Reported for comparison, never part of the overall verdict.
+    evaluate
+        ``evaluate(record, settings) -> dict``: the result block of one probe, from a
+        :class:`ProbeRecord` and the resolved settings of :func:`assess_probe`
+        (``settings["building_use"]``, ``"period"``, ...).
+    """
+
+    name: str
+    title: str
+    quantity: str
+    comparison_only: bool
+    evaluate: Callable[[ProbeRecord, Mapping[str, Any]], dict[str, Any]]
+
+
+#: The registry: name -> :class:`Standard`, in report order (the order of registration).
+STANDARDS: dict[str, Standard] = {}
+
+
+def standard(name: str, title: str, quantity: str, comparison_only: bool = False):
+    """Register the decorated ``evaluate(record, settings)`` function as a standard.
+
+    Parameters
+    ----------
+    name, title, quantity, comparison_only
+        See :class:`Standard`.
+
+    Raises
+    ------
+    ValueError
+        For a name registered twice or an unknown quantity.
+    """
+    if name in STANDARDS:
+        raise ValueError(f"standard {name!r} is registered twice")
+    if quantity not in ("acceleration", "velocity"):
+        raise ValueError(f"standard {name!r}: quantity must be 'acceleration' or 'velocity'")
+
+    def register(evaluate):
+        STANDARDS[name] = Standard(name, title, quantity, comparison_only, evaluate)
+        return evaluate
+
+    return register
 
 
 # --------------------------------------------------------------------------------------
@@ -365,7 +449,7 @@ def _entry(value, limit, *, passed: Any = _AUTO, **extra) -> dict[str, Any]:
 
 
 def _block(name: str, metric: str, unit: str, directions: dict[str, dict],
-           notes: list[str], comparison_only: bool = False, **extra) -> dict[str, Any]:
+           notes: list[str], **extra) -> dict[str, Any]:
     verdicts = [d["passed"] for d in directions.values()]
     if any(v is False for v in verdicts):
         passed = False
@@ -374,13 +458,16 @@ def _block(name: str, metric: str, unit: str, directions: dict[str, dict],
     else:
         passed = True
     utils = [d["utilisation"] for d in directions.values() if d["utilisation"] is not None]
-    return {"title": _TITLES[name], "metric": metric, "unit": unit,
-            "comparison_only": comparison_only, "passed": passed,
+    return {"title": STANDARDS[name].title, "metric": metric, "unit": unit,
+            "comparison_only": STANDARDS[name].comparison_only, "passed": passed,
             "utilisation": max(utils) if utils else None, "directions": directions,
             "notes": notes, **extra}
 
 
-def _iso2631(a, fs, duration, use, period) -> dict[str, Any]:
+@standard("iso2631", "ISO 2631-2 Wm / ISO 10137 base curve", "acceleration")
+def _iso2631(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    a, fs, duration = r.acceleration, r.fs, r.duration
+    use, period = s["building_use"], s["period"]
     aw = weight_wm(a, fs)
     mt = metrics.mtvv(aw, fs, metrics.TAU_SLOW)
     awr = metrics.rms(aw)
@@ -402,7 +489,10 @@ def _iso2631(a, fs, duration, use, period) -> dict[str, Any]:
                   notes, vdv_unit="m/s^1.75")
 
 
-def _din4150_2(v, fs, duration, use, period, events) -> dict[str, Any]:
+@standard("din4150-2", "DIN 4150-2 (people in buildings)", "velocity")
+def _din4150_2(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    v, fs = r.velocity, r.fs
+    use, period, events = s["building_use"], s["period"], s["din4150_2_events"]
     v_mm = v * 1e3
     kbf = metrics.kb_f(v_mm, fs)
     kbmax = np.max(kbf, axis=0)
@@ -439,7 +529,11 @@ def _din4150_2(v, fs, duration, use, period, events) -> dict[str, Any]:
                   notes, n_cycles=n_cycles, din4150_2_events=events)
 
 
-def _din4150_3(v, fs, structure, location, ppv_method) -> dict[str, Any]:
+@standard("din4150-3", "DIN 4150-3 (structural damage)", "velocity")
+def _din4150_3(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    v, fs = r.velocity, r.fs
+    structure, location = s["din4150_3_structure"], s["din4150_3_location"]
+    ppv_method = s["ppv_frequency"]
     pk, freq = metrics.ppv(v * 1e3, fs, method=ppv_method)
     dirs: dict[str, dict] = {}
     if location == "foundation":
@@ -463,7 +557,10 @@ def _din4150_3(v, fs, structure, location, ppv_method) -> dict[str, Any]:
                   structure=structure, location=location)
 
 
-def _fta(v, fs, duration, category, events) -> dict[str, Any]:
+@standard("fta", "FTA (US transit) velocity level", "velocity")
+def _fta(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    v, fs, duration = r.velocity, r.fs, r.duration
+    category, events = s["fta_category"], s["fta_events"]
     lv = metrics.fta_vdb(v, fs, tau=metrics.TAU_SLOW)
     lim = fta_limit(category, events)
     dirs = {}
@@ -500,7 +597,10 @@ def vc_spectrum(v, fs: float) -> BandSpectrum:
     return third_octave_rms(v, fs, fmin=VC_FMIN, fmax=VC_FMAX, axis=0)
 
 
-def _vc(v, fs, vc_class, low_frequency) -> dict[str, Any]:
+@standard("vc", "VC curves (one-third-octave velocity)", "velocity")
+def _vc(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    v, fs = r.velocity, r.fs
+    vc_class, low_frequency = s["vc_class"], s["vc_low_frequency"]
     spec = vc_spectrum(v, fs)
     nominal = spec.bands.nominal
     lim = vc_curve(nominal, vc_class, low_frequency)
@@ -528,21 +628,24 @@ def _vc(v, fs, vc_class, low_frequency) -> dict[str, Any]:
                             for i, d in enumerate(DIRECTIONS)}})
 
 
-def _thesis(a) -> dict[str, Any]:
+@standard("thesis", "Thesis 0.005 g peak (comparison only)", "acceleration",
+          comparison_only=True)
+def _thesis(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
+    a = r.acceleration
     pk = metrics.peak(a)
     total = float(np.max(np.linalg.norm(a, axis=1)))
     dirs = {d: _entry(pk[i], THESIS_LIMIT) for i, d in enumerate(DIRECTIONS)}
     dirs["total"] = _entry(total, THESIS_LIMIT)
     notes = ["0.005 g walking-vibration limit (AISC/Murray), about 10× the ISO base curve: "
              "for comparison with the thesis only, not a verdict"]
-    return _block("thesis", "peak acceleration", "m/s^2", dirs, notes, comparison_only=True)
+    return _block("thesis", "peak acceleration", "m/s^2", dirs, notes)
 
 
 # --------------------------------------------------------------------------------------
 # public entry points
 
 
-def assess_probe(t, acceleration, velocity, standards: Sequence[str] = STANDARDS, *,
+def assess_probe(t, acceleration, velocity, standards: Sequence[str] | None = None, *,
                  building_use: str = "residential", period: str = "day",
                  fta_events: str = "frequent", fta_category: str | None = None,
                  vc_class: str | None = None,
@@ -560,8 +663,8 @@ def assess_probe(t, acceleration, velocity, standards: Sequence[str] = STANDARDS
     acceleration, velocity
         (nt, 3) histories [m/s², m/s], columns x, y, z (z vertical).
     standards
-        Names from :data:`STANDARDS` (``iso2631``, ``din4150-2``, ``din4150-3``, ``fta``,
-        ``vc``, ``thesis``).
+        Names from the registry :data:`STANDARDS` (``iso2631``, ``din4150-2``,
+        ``din4150-3``, ``fta``, ``vc``, ``thesis``); None: all of them.
     building_use
         ``critical``, ``residential``, ``office`` or ``workshop``: selects the ISO
         multiplier and (unless overridden) the FTA category, VC curve and DIN 4150-3 line.
@@ -600,7 +703,7 @@ def assess_probe(t, acceleration, velocity, standards: Sequence[str] = STANDARDS
         (a ``ValueError``) naming the argument, its value and what is allowed.
     """
     t, a, v, fs = _check_histories(t, acceleration, velocity)
-    names = _check_standards(standards)
+    names = _check_standards(list(STANDARDS) if standards is None else standards)
     use = _choice("building_use", building_use, BUILDING_USES)
     period = _choice("period", period, PERIODS)
     fta_events = _choice("fta_events", fta_events, FTA_EVENTS)
@@ -621,20 +724,13 @@ def assess_probe(t, acceleration, velocity, standards: Sequence[str] = STANDARDS
     events = None if din4150_2_events is None else int(din4150_2_events)
     duration = float(t[-1] - t[0] + 1.0 / fs)
 
-    blocks: dict[str, dict[str, Any]] = {}
-    for name in names:
-        if name == "iso2631":
-            blocks[name] = _iso2631(a, fs, duration, use, period)
-        elif name == "din4150-2":
-            blocks[name] = _din4150_2(v, fs, duration, use, period, events)
-        elif name == "din4150-3":
-            blocks[name] = _din4150_3(v, fs, structure, location, ppv_frequency)
-        elif name == "fta":
-            blocks[name] = _fta(v, fs, duration, fta_category, fta_events)
-        elif name == "vc":
-            blocks[name] = _vc(v, fs, vc_class, vc_low_frequency)
-        else:
-            blocks[name] = _thesis(a)
+    settings = {"standards": names, "building_use": use, "period": period,
+                "fta_events": fta_events, "fta_category": fta_category,
+                "vc_class": vc_class, "vc_low_frequency": vc_low_frequency,
+                "din4150_3_structure": structure, "din4150_3_location": location,
+                "din4150_2_events": events, "ppv_frequency": ppv_frequency}
+    record = ProbeRecord(acceleration=a, velocity=v, fs=fs, duration=duration)
+    blocks = {name: STANDARDS[name].evaluate(record, settings) for name in names}
     verdicts = [b["passed"] for b in blocks.values() if not b["comparison_only"]]
     if any(p is False for p in verdicts):
         overall = False
@@ -646,11 +742,7 @@ def assess_probe(t, acceleration, velocity, standards: Sequence[str] = STANDARDS
         "schema": "railvib_hpc.assess/1",
         "record": {"n_samples": int(t.size), "sample_rate_hz": fs, "duration_s": duration,
                    "t_start_s": float(t[0])},
-        "settings": {"standards": names, "building_use": use, "period": period,
-                     "fta_events": fta_events, "fta_category": fta_category,
-                     "vc_class": vc_class, "vc_low_frequency": vc_low_frequency,
-                     "din4150_3_structure": structure, "din4150_3_location": location,
-                     "din4150_2_events": events, "ppv_frequency": ppv_frequency},
+        "settings": settings,
         "standards": blocks,
         "passed": overall,
     }

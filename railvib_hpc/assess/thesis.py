@@ -70,7 +70,7 @@ def weyl_count(case: Case, f_hz: float) -> float:
     elastic body; the building and embankment add little volume).
     """
     from ..mesh.layout import build_layout
-    from .stage import wave_speeds
+    from .waves import wave_speeds
 
     x0, x1, y0, y1, z0, z1 = build_layout(case).bounds
     c_p, c_s = wave_speeds(case)
@@ -173,7 +173,7 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
     """
     import h5py
 
-    from .stage import wave_speeds
+    from .waves import wave_speeds
 
     rows = []
     modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
@@ -349,7 +349,7 @@ def thesis_clock_arrival(case: Case, hist: dict, probe: str = "basement_wall_far
         acceleration magnitude reaches ``assessment.wave_threshold`` of its peak after the
         entry) on the thesis's clock [s]; None without that probe.
     """
-    from .stage import wave_arrival
+    from .waves import wave_arrival
 
     if probe not in hist:
         return None

@@ -14,6 +14,7 @@ from .beam import (
     shear_modulus,
 )
 from .hex8 import (
+    ElementGeometryError,
     hex8_lumped_mass_diagonal,
     hex8_mass,
     hex8_stiffness,
@@ -25,6 +26,7 @@ from .modes import lowest_modes, mass_normalise
 from .spring import damper_matrices, spring_dofs, spring_matrices
 
 __all__ = [
+    "ElementGeometryError",
     "assemble_matrix",
     "assemble_vector",
     "beam_frames",

@@ -32,14 +32,20 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import MeshError
-from ..mesh.model import hex_shape_gradients
-from ..mesh.search import hex_shape_values
 from .material import isotropic_elasticity, isotropic_elasticity_batch, lame_parameters
-from .quadrature import gauss_hex
+from .reference import (
+    GAUSS_POINTS,
+    GAUSS_VALUES,
+    GAUSS_WEIGHTS,
+    ElementGeometryError,
+    hex_centre_jacobians,
+    hex_gauss_geometry,
+    hex_volumes,
+)
 
 __all__ = [
     "FORMULATIONS",
+    "ElementGeometryError",
     "hex8_jacobians",
     "hex8_lumped_mass_diagonal",
     "hex8_mass",
@@ -50,15 +56,12 @@ __all__ = [
     "isotropic_elasticity_batch",
 ]
 
-_XI, _W = gauss_hex(2)
-_DN = hex_shape_gradients(_XI)      # (8 points, 8 nodes, 3)
-_DN_T = np.ascontiguousarray(_DN.transpose(0, 2, 1))
-_N = hex_shape_values(_XI)          # (8 points, 8 nodes)
+_XI, _W = GAUSS_POINTS, GAUSS_WEIGHTS
+_N = GAUSS_VALUES                   # (8 points, 8 nodes)
 #: Elements per block in :func:`hex8_stiffness` (bounds temporary memory to ~100 MB).
 _BLOCK = 8192
 #: Stiffness formulations of :func:`hex8_stiffness`.
 FORMULATIONS = ("bbar", "incompatible", "full")
-_DN0_T = np.ascontiguousarray(hex_shape_gradients(np.zeros((1, 3)))[0].T)   # (3, 8) at xi = 0
 
 
 def _as_coords(x: ArrayLike) -> np.ndarray:
@@ -89,20 +92,15 @@ def hex8_jacobians(x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
 
     Raises
     ------
-    MeshError
-        If the Jacobian determinant is not positive at some Gauss point (inverted or
-        degenerate element).
+    ElementGeometryError
+        (a ``ValueError``) If the Jacobian determinant is not positive at some Gauss point
+        (inverted or degenerate element).
     """
-    x = _as_coords(x)
-    J = np.matmul(_DN_T[None], x[:, None])           # J[i, j] = dx_j / dxi_i, (nel, 8, 3, 3)
-    adj = np.cross(J[..., [1, 2, 0], :], J[..., [2, 0, 1], :])        # rows: cofactor rows
-    det = np.einsum("eqj,eqj->eq", J[..., 0, :], adj[..., 0, :])
-    bad = np.flatnonzero(np.any(det <= 0.0, axis=1))
+    grad, det = hex_gauss_geometry(_as_coords(x))
+    bad = np.flatnonzero(np.any(~(det > 0.0), axis=1))
     if bad.size:
-        raise MeshError(f"{bad.size} hexahedra have a non-positive Jacobian "
-                        f"(first: element {bad[0]})")
-    # J^-1 has the cofactor rows as columns, so grad_a = J^-1 dN_a = dN_a^T adj / det
-    grad = np.matmul(_DN[None], adj) / det[..., None, None]
+        raise ElementGeometryError(f"{bad.size} hexahedra have a non-positive Jacobian "
+                                   f"(first: element {bad[0]})")
     return grad, det * _W
 
 
@@ -117,8 +115,20 @@ def hex8_volume(x: ArrayLike) -> np.ndarray:
     Returns
     -------
     ndarray, shape (nel,)
+
+    Raises
+    ------
+    ElementGeometryError
+        For inverted or degenerate elements (:func:`railvib_hpc.fem.reference.hex_volumes`
+        returns signed volumes without checking).
     """
-    return hex8_jacobians(x)[1].sum(axis=1)
+    x = _as_coords(x)
+    volumes = hex_volumes(x)
+    bad = np.flatnonzero(~(volumes > 0.0))
+    if bad.size:
+        raise ElementGeometryError(f"{bad.size} hexahedra have a non-positive volume "
+                                   f"(first: element {bad[0]})")
+    return volumes
 
 
 def _strain_matrix(grad: np.ndarray) -> np.ndarray:
@@ -177,7 +187,7 @@ def _incompatible_gradients(x: np.ndarray, det: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (nel, 8, 3, 3)
     """
-    J0 = np.matmul(_DN0_T[None], x)                           # (nel, 3, 3), J0[i, j] = dx_j/dxi_i
+    J0 = hex_centre_jacobians(x)                              # (nel, 3, 3), J0[i, j] = dx_j/dxi_i
     inv0 = np.linalg.inv(J0)                                  # inv0[j, i]: d xi_i / d x_j
     det0 = np.linalg.det(J0)
     # g[e, q, k, j] = det0/det_q * inv0[e, j, k] * (-2 xi_qk)

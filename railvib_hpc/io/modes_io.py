@@ -7,7 +7,7 @@ Layout of ``modes.h5``::
     /modes/translation     (m, n, 3)       ux uy uz of every node (0 where constrained)
     /modes/rotation        (m, nr, 3)      rx ry rz of the beam nodes /mesh/rotation_nodes
     /mesh/points (n, 3), /mesh/node_ids (n,), /mesh/hexes, /mesh/hex_part, /mesh/lines,
-    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5
+    /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5 (probes/roles too)
     /mesh/rotation_nodes   (nr,)           nodes that carry rotations (rails, sleepers)
     /mesh/rail_nodes       (2, k)          flexible-rail nodes of each rail, sorted along x
     /mesh/nodal_mass       (n,)            lumped translational mass per node [kg]
@@ -23,39 +23,30 @@ With more than one rank and an MPI-enabled h5py, every rank writes its own
 node slice collectively (``driver="mpio"``); otherwise slices are gathered to
 rank 0. The file is written under a temporary name, ``complete`` is set last
 and rank 0 renames it: an interrupted run never leaves a file that looks
-complete. ``modes.xdmf`` (rank 0, written after the rename) animates the mode
-shapes in ParaView: one time step per mode.
+complete. ``modes.xdmf`` (rank 0, written after the rename, with its sidecar of per-step
+views ``modes_views.h5``, see :mod:`railvib_hpc.io.xdmf`) animates the mode shapes in
+ParaView: one time step per mode.
 """
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..mesh.model import Mesh
 from ..schema import PART_ID
-from .atomic import write_text_atomic
 from .parallel_h5 import h5py_parallel_ok, write_collective
-from .xdmf import temporal_xdmf
+from .xdmf import H5Array, Series, hex_mesh, write_series
+
+if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here
+    from mpi4py import MPI
+
+    from ..mesh.model import Mesh
 
 
-def rail_nodes(mesh: Mesh) -> np.ndarray:
-    """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x."""
-    nodes = np.unique(mesh.lines[mesh.line_part == PART_ID["rail"]])
-    y = mesh.points[nodes, 1]
-    out = []
-    for side in (y < 0, y >= 0):
-        n = nodes[side]
-        out.append(n[np.argsort(mesh.points[n, 0], kind="stable")])
-    if len(out[0]) != len(out[1]):
-        width = max(len(out[0]), len(out[1]))
-        out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
-    return np.array(out, dtype=np.int64)
-
-
-def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
+def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
                 attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
@@ -81,6 +72,9 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
     """
 
     n, m = mesh.n_nodes, len(eigenvalues)
+    # attributes are written collectively: every rank must pass the same values (the
+    # stats hold per-rank timings, so rank 0's are taken; unequal strings corrupt them)
+    attrs = comm.bcast(dict(attrs), root=0)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather((node_range, translation, rot_range, rotation, nodal_mass), root=0)
@@ -97,7 +91,7 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
 
     write_collective(path, comm, fill)
     if comm.rank == 0:
-        write_text_atomic(path.with_suffix(".xdmf"), modes_xdmf(path.name, mesh, eigenvalues))
+        write_modes_xdmf(path)
     comm.Barrier()
 
 
@@ -114,7 +108,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     d_t = g.create_dataset("translation", (m, n, 3), "f8")
     d_r = g.create_dataset("rotation", (m, len(rotation_nodes), 3), "f8")
     gm = f.create_group("mesh")
-    rails = rail_nodes(mesh)
+    rails = mesh.rail_nodes()
     names = list(mesh.probes)
     coords = np.array([mesh.probes[k] for k in names], dtype=float).reshape(-1, 3)
     mesh_data = {
@@ -130,6 +124,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
     # fixed-length ASCII: parallel HDF5 cannot write variable-length strings
     d_pn = pr.create_dataset("names", (len(names),), "S64")
     d_pc = pr.create_dataset("coords", coords.shape, "f8")
+    d_pr = pr.create_dataset("roles", (len(names),), "S16")
     d_dof = f.create_group("dofs").create_dataset("index", dof_index.shape, dof_index.dtype)
     gp = f.create_group("pads")
     d_pads = {k: gp.create_dataset(k, v.shape, v.dtype) for k, v in pads.items()}
@@ -150,6 +145,7 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
             ns_sets[k][...] = v
         d_pn[:] = np.array(names, dtype="S64")
         d_pc[...] = coords
+        d_pr[:] = np.array([mesh.probe_roles.get(k, "") for k in names], dtype="S16")
         d_dof[...] = dof_index
         for k, v in pads.items():
             d_pads[k][...] = v
@@ -160,33 +156,25 @@ def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, 
         d_r[:, rot_range, :] = rotation
 
 
-def modes_xdmf(h5_name: str, mesh: Mesh, eigenvalues: np.ndarray) -> str:
-    """XDMF temporal collection: time step k shows mode k (its frequency in the grid name)."""
-    n, ne, m = mesh.n_nodes, len(mesh.hexes), len(eigenvalues)
-    freq = np.sqrt(np.maximum(eigenvalues, 0.0)) / (2 * np.pi)
-    topo = (f'<Topology TopologyType="Hexahedron" NumberOfElements="{ne}"><DataItem '
-            f'Dimensions="{ne} 8" NumberType="Int" Precision="8" Format="HDF">{h5_name}:'
-            f'/mesh/hexes</DataItem></Topology>')
-    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
-           f'Precision="8" Format="HDF">{h5_name}:/mesh/points</DataItem></Geometry>')
-    part = (f'<Attribute Name="part_id" AttributeType="Scalar" Center="Cell"><DataItem '
-            f'Dimensions="{ne}" NumberType="Int" Precision="4" Format="HDF">{h5_name}:'
-            f'/mesh/hex_part</DataItem></Attribute>')
-    steps = []
-    for k in range(m):
-        steps.append(f"""      <Grid Name="mode_{k + 1}_{freq[k]:.4f}Hz" GridType="Uniform">
-        <Time Value="{k + 1}"/>
-        {topo}
-        {geo}
-        {part}
-        <Attribute Name="mode_shape" AttributeType="Vector" Center="Node">
-          <DataItem ItemType="HyperSlab" Dimensions="{n} 3" Type="HyperSlab">
-            <DataItem Dimensions="3 3" Format="XML">{k} 0 0 1 1 1 1 {n} 3</DataItem>
-            <DataItem Dimensions="{m} {n} 3" NumberType="Float" Precision="8" Format="HDF">{h5_name}:/modes/translation</DataItem>
-          </DataItem>
-        </Attribute>
-      </Grid>""")  # noqa: E501
-    return temporal_xdmf("modes", steps)
+def write_modes_xdmf(path: Path) -> Path:
+    """Write ``modes.xdmf`` (+ ``modes_views.h5``) for the modes file ``path``: time step k
+    shows mode k (serial; returns the XDMF path).
+
+    The grid of mode k is named ``mode_<k>_<frequency>Hz``; its node vector
+    ``mode_shape`` is row k - 1 of ``/modes/translation`` (:mod:`railvib_hpc.io.xdmf`).
+    """
+    import h5py
+
+    path = Path(path)
+    with h5py.File(path, "r") as f:
+        points, block = hex_mesh(f)
+        shapes = H5Array.of(f, "/modes/translation")
+        freq = f["modes/frequency_hz"][()]
+    xdmf = path.with_suffix(".xdmf")
+    write_series(xdmf, points, block, np.arange(1, len(freq) + 1),
+                 [Series("mode_shape", shapes, "Node")],
+                 [f"mode_{k + 1}_{fk:.4f}Hz" for k, fk in enumerate(freq)])
+    return xdmf
 
 
 def read_modes_summary(path: Path) -> dict | None:
@@ -202,6 +190,15 @@ def read_modes_summary(path: Path) -> dict | None:
             return out
     except (OSError, KeyError):
         return None
+
+
+def has_probe_roles(path: Path) -> bool:
+    """True when ``modes.h5`` stores the roles of its named probes (written since roles
+    exist); the modal stage recomputes older files."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        return "mesh/probes/roles" in f or "mesh/probes/names" not in f
 
 
 def read_strain_energies(path: Path) -> dict[str, np.ndarray] | None:

@@ -5,16 +5,20 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
-def h5py_parallel_ok(comm) -> bool:
+def h5py_parallel_ok(comm: MPI.Comm) -> bool:
     """True when h5py can open files with the mpio driver on this communicator."""
     import h5py
 
     return comm.size > 1 and bool(h5py.get_config().mpi)
 
 
-def write_collective(path: Path, comm, fill: Callable[[object, bool], None]) -> None:
+def write_collective(path: Path, comm: MPI.Comm, fill: Callable[[object, bool], None]) -> None:
     """Create ``path`` collectively through ``fill(file, parallel)``; atomic.
 
     With MPI-enabled h5py and several ranks the file is opened with the

@@ -27,7 +27,7 @@ from .integrate import (
 )
 from .modal_input import RailModes, read_rail_modes
 from .propagator import ModalPropagator, modal_propagator
-from .vehicles import SuspendedWheelset, static_equilibrium
+from .vehicles import SuspendedWheelset, Vehicle, static_equilibrium
 
 __all__ = [
     "MBSResult",
@@ -35,6 +35,7 @@ __all__ = [
     "RailCoupling",
     "RailModes",
     "SuspendedWheelset",
+    "Vehicle",
     "auto_time_step",
     "coupled_energy",
     "hertz_force",

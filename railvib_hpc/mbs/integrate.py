@@ -50,14 +50,14 @@ from .coupling import RailCoupling
 from .propagator import modal_propagator
 from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
 from .static_correction import ContactResidual
-from .vehicles import SuspendedWheelset, static_equilibrium
+from .vehicles import Vehicle, missing_members, static_equilibrium
 
 Irregularity = Callable[[np.ndarray], np.ndarray]
 
 
 def auto_time_step(
     omega: np.ndarray, rails: Sequence[RailCoupling] = (),
-    vehicle: SuspendedWheelset | None = None, points_per_period: int = 20,
+    vehicle: Vehicle | None = None, points_per_period: int = 20,
     speed: float = 0.0,
 ) -> float:
     """Automatic time step (see the module notes).
@@ -268,15 +268,15 @@ def wheel_rails(rails: RailCoupling | Sequence[RailCoupling], vehicle) -> tuple:
     if isinstance(rails, RailCoupling):
         return (rails,) * nw
     rails = tuple(rails)
-    wr = getattr(vehicle, "wheel_rail", None)
-    if len(rails) != nw and wr is not None and len(rails) > int(np.max(wr)):
+    wr = vehicle.wheel_rail
+    if len(rails) != nw and len(rails) > int(np.max(wr)):
         return tuple(rails[int(r)] for r in wr)
     return rails_tuple(rails, nw)
 
 
 def simulate_vehicle(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
-    vehicle, x0: float, speed: float, t_end: float,
+    vehicle: Vehicle, x0: float, speed: float, t_end: float,
     dt: float | None = None, irregularity: Irregularity | None = None,
     initial_state: tuple[np.ndarray, ...] | None = None, store_every: int = 1,
     points_per_period: int = 20, newton_tol: float = 1e-10, max_iter: int = 50,
@@ -296,10 +296,10 @@ def simulate_vehicle(
         rails indexed by ``vehicle.wheel_rail`` (wheel 0 of a wheelset at
         ``+contact_span/2`` on rail 0).
     vehicle
-        :class:`SuspendedWheelset` or any object with the same interface
-        (mass/damping/stiffness/contact matrices, external force, Hertz data);
-        optional ``wheel_offsets`` (n_wheels,) along x relative to ``x0`` and
-        ``wheel_rail`` (n_wheels,) rail indices.
+        Any :class:`~railvib_hpc.mbs.vehicles.Vehicle` (wheelset, car, train):
+        mass/damping/stiffness/contact matrices, external force, Hertz data,
+        ``wheel_offsets`` (n_wheels,) along x relative to ``x0`` and ``wheel_rail``
+        (n_wheels,) rail indices.
     x0
         Position of the reference (leading) wheel at t = 0 [m] (e.g. on the rigid
         rail before the flexible part).
@@ -344,6 +344,9 @@ def simulate_vehicle(
     """
     if drop_height < 0.0:
         raise ValueError(f"drop_height must be >= 0, got {drop_height!r}")
+    if not isinstance(vehicle, Vehicle):
+        raise TypeError(f"{type(vehicle).__name__} is not a railvib_hpc.mbs.Vehicle: it lacks "
+                        + ", ".join(missing_members(vehicle)))
     rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
     if dt is None:
@@ -353,14 +356,12 @@ def simulate_vehicle(
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     nw = vehicle.n_wheels
-    offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(nw)), dtype=float)
+    offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
     x = float(x0) + offsets[None, :] + speed * t[:, None]
     rows = RowEvaluator(rl, x)
     res = None
     if residual is not None:
-        wr = getattr(vehicle, "wheel_rail", None)
-        if wr is None:
-            wr = np.arange(nw) % 2
+        wr = np.asarray(vehicle.wheel_rail)
         uniq = tuple(rails) if not isinstance(rails, RailCoupling) else (rails,)
         res = ContactResidual(residual, uniq if len(uniq) > 1 else rl, wr, x)
     irr = (lambda xs: np.zeros(nw)) if irregularity is None else irregularity
@@ -477,14 +478,14 @@ def drop_state(vehicle, drop_height: float, rail_height: np.ndarray | None = Non
 
 def simulate_wheelset(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
-    vehicle: SuspendedWheelset, x0: float, speed: float, t_end: float, **kwargs,
+    vehicle: Vehicle, x0: float, speed: float, t_end: float, **kwargs,
 ) -> MBSResult:
     """The suspended wheelset rolling over the rails: :func:`simulate_vehicle` (same arguments)."""
     return simulate_vehicle(omega, zeta, rails, vehicle, x0, speed, t_end, **kwargs)
 
 
 def coupled_energy(
-    result: MBSResult, omega: np.ndarray, vehicle: SuspendedWheelset
+    result: MBSResult, omega: np.ndarray, vehicle: Vehicle
 ) -> np.ndarray:
     """Total mechanical energy of track + vehicle + Hertz springs at every stored step.
 

@@ -30,15 +30,21 @@ import hashlib
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import __version__
 from ..config import Case
+from ..constants import STANDARD_GRAVITY
 from ..errors import UserError
 from ..io.atomic import atomic_path
 from ..log import Reporter
 from ..parallel import on_root
+from .vehicles import Vehicle
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 class MBSInputError(UserError):
@@ -99,7 +105,7 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
     return zeta
 
 
-def build_vehicle(case: Case):
+def build_vehicle(case: Case) -> Vehicle | None:
     """The vehicle of ``[vehicle]`` (None for ``moving_force``)."""
     from .vehicles import SuspendedWheelset
 
@@ -163,7 +169,7 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
 def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
     v = case["vehicle"]
-    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * 9.81
+    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
     offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
     rails = np.tile([0, 1], len(v["axle_offsets"]))
     return np.full(offs.size, force), offs, rails
@@ -240,8 +246,8 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     if vehicle is None:
         forces, offsets, wheel_rail = _moving_loads(case)
     else:
-        offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(vehicle.n_wheels)))
-        wheel_rail = np.asarray(getattr(vehicle, "wheel_rail", np.arange(vehicle.n_wheels) % 2))
+        offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
+        wheel_rail = np.asarray(vehicle.wheel_rail)
     t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
     residual = None
     if case["mbs.static_correction"]:
@@ -271,7 +277,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
         x_lo = x_start + float(np.min(offsets)) - 1.0
         irregularity = build_irregularity(case, wheel_rail, (x_lo, x_end + speed *
                                                              case["vehicle.t_after"] + 1.0))
-        rails = rm.normal_rails(getattr(vehicle, "conicity", 0.0))
+        rails = rm.normal_rails(vehicle.conicity)
         result = simulate_vehicle(
             rm.omega, zeta, rails, vehicle, x_start, speed, t_end, dt=dt,
             irregularity=irregularity, store_every=case["mbs.store_every"],
@@ -442,7 +448,7 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
     return paths
 
 
-def run_mbs_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_mbs_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Collective: rank 0 simulates (see :func:`simulate_case`), every rank gets the summary."""
 
     with rep.stage("mbs"):

@@ -60,6 +60,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from .contact import jenkins_hertz_constant
 from .vehicles import LinearVehicle
 
@@ -132,7 +133,7 @@ class RailVehicle(_LinearVehicle):
     contact_damping
         Hertz contact damping ``C`` [N s/m^2] (see :mod:`.contact`).
     gravity
-        Gravitational acceleration [m/s^2].
+        Gravitational acceleration [m/s^2] (standard gravity by default).
     k_hertz
         Hertz constant [N/m^1.5]; None for Jenkins' formula.
     """
@@ -158,11 +159,13 @@ class RailVehicle(_LinearVehicle):
     c_secondary: float = 2.0e4
     k_antiroll: float = 940e3
     contact_damping: float = 0.0
-    gravity: float = 9.81
+    gravity: float = STANDARD_GRAVITY
     k_hertz: float | None = None
 
     n_dof = 17
     n_wheels = 8
+    #: Vertical model: the contact normals are vertical (no tread conicity).
+    conicity = 0.0
     dof_names = (_BODY_NAMES
                  + tuple(f"bogie{i}.{d}" for i in range(2) for d in ("z", "pitch", "roll"))
                  + tuple(f"wheelset{i}.{d}" for i in range(4) for d in ("z", "roll")))
@@ -331,6 +334,9 @@ class Train(_LinearVehicle):
     k_coupler, c_coupler
         Vertical coupler stiffness [N/m] and damping [N s/m].
     """
+
+    #: Vertical model: the contact normals are vertical (no tread conicity).
+    conicity = 0.0
 
     def __init__(self, vehicles: Sequence[RailVehicle], gaps: float | Sequence[float] = 0.0,
                  k_coupler: float = 0.0, c_coupler: float = 0.0):

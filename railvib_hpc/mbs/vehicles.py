@@ -10,7 +10,7 @@ Wheel 0 runs on rail 0 (the rail at negative global y) at lateral position
 and damper) connects it to a frame that moves at constant height, lateral
 position and speed; the frame may push down with a static ``preload`` per side
 (the share of car body weight; 0 in the thesis, whose wheel load 7.69 kN is
-half the wheelset weight 1568 kg * 9.81 m/s^2).
+half the wheelset weight 1568 kg * 9.80665 m/s^2, standard gravity).
 
 Lateral motion couples through the coned treads (linearised contact
 geometry, conicity ``lambda``): the contact normal of each wheel leans towards
@@ -33,11 +33,85 @@ and the UIC tread inclination 1:40 (conicity 0.025).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from ..constants import STANDARD_GRAVITY
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
+
+
+@runtime_checkable
+class Vehicle(Protocol):
+    """What the integrators (:mod:`.integrate`) need from a vehicle: the plug-in point for
+    new vehicle models.
+
+    A vehicle is linear between its wheels: constant mass, damping and stiffness matrices
+    in its ``n_dof`` generalised coordinates, and a contact matrix ``B`` that maps the
+    ``n_wheels`` normal contact forces to generalised forces. :class:`SuspendedWheelset`,
+    :class:`~railvib_hpc.mbs.train.RailVehicle` and :class:`~railvib_hpc.mbs.train.Train`
+    implement it; ``isinstance(obj, Vehicle)`` checks the members' presence.
+
+    Attributes
+    ----------
+    n_dof, n_wheels
+        Numbers of generalised coordinates and of wheels.
+    dof_names
+        (n_dof,) names of the coordinates (stored in ``mbs.h5``).
+    wheel_rail
+        (n_wheels,) rail of each wheel: 0 at negative global y, 1 at positive.
+    wheel_offsets
+        (n_wheels,) x of each wheel relative to the leading wheel [m] (<= 0).
+    conicity
+        Equivalent conicity of the treads: the contact normals lean by it towards the
+        track centre (0 for vertical-only models).
+    contact_damping
+        Hertz contact damping [N s/m^2].
+    hertz_constant
+        Hertz constant K_H [N/m^1.5] (the same for every wheel).
+    """
+
+    n_dof: int
+    n_wheels: int
+    dof_names: tuple[str, ...]
+    wheel_rail: Sequence[int] | np.ndarray
+    wheel_offsets: Sequence[float] | np.ndarray
+    conicity: float
+    contact_damping: float
+
+    @property
+    def hertz_constant(self) -> float: ...
+
+    def mass_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) mass matrix."""
+
+    def stiffness_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) suspension stiffness matrix."""
+
+    def damping_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) suspension damping matrix."""
+
+    def contact_matrix(self) -> np.ndarray:
+        """(n_dof, n_wheels) matrix B: generalised force ``B @ F`` of the wheel forces F."""
+
+    def external_force(self) -> np.ndarray:
+        """(n_dof,) constant generalised force (gravity, preload)."""
+
+    def static_wheel_loads(self) -> np.ndarray:
+        """(n_wheels,) wheel loads on a rigid, level rail [N]."""
+
+    def energy(self, y: np.ndarray, y_dot: np.ndarray) -> np.ndarray:
+        """Kinetic + suspension + potential energy [J] of states (..., n_dof)."""
+
+
+def missing_members(obj: object) -> list[str]:
+    """The members of the :class:`Vehicle` protocol that ``obj`` lacks (sorted)."""
+    members = set(Vehicle.__annotations__) | {
+        n for n, v in vars(Vehicle).items() if not n.startswith("_")
+        and (callable(v) or isinstance(v, property))}
+    return sorted(m for m in members if not hasattr(obj, m))
 
 
 class LinearVehicle:
@@ -84,7 +158,7 @@ class SuspendedWheelset(LinearVehicle):
     contact_damping
         Hertz contact damping ``C`` [N s/m^2] (see :mod:`.contact`).
     gravity
-        Gravitational acceleration [m/s^2].
+        Gravitational acceleration [m/s^2] (standard gravity by default).
     k_hertz
         Hertz constant [N/m^1.5]; None for Jenkins' formula.
     k_lateral, c_lateral
@@ -102,7 +176,7 @@ class SuspendedWheelset(LinearVehicle):
     c_suspension: float = 1_000.0
     preload: float = 0.0
     contact_damping: float = 0.0
-    gravity: float = 9.81
+    gravity: float = STANDARD_GRAVITY
     k_hertz: float | None = None
     k_lateral: float = 25_000.0
     c_lateral: float = 1_000.0
@@ -154,7 +228,7 @@ class SuspendedWheelset(LinearVehicle):
 
 
 def static_equilibrium(
-    vehicle: SuspendedWheelset, flexibility: np.ndarray, rail_height: np.ndarray,
+    vehicle: Vehicle, flexibility: np.ndarray, rail_height: np.ndarray,
     tol: float = 1e-12, max_iter: int = 50,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Static equilibrium of the vehicle on a (flexible) rail.

@@ -95,6 +95,7 @@ class Layout:
     deform: dict = field(default_factory=dict)
     bounds: tuple[float, float, float, float, float, float] = (0, 0, 0, 0, 0, 0)
     probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    probe_roles: dict[str, str] = field(default_factory=dict)
 
     def vertex(self, i: int, j: int, z: float) -> tuple[float, float, float]:
         """Coordinates of grid vertex (x index, y index, z), with shoulder slopes applied."""
@@ -276,22 +277,26 @@ def build_layout(case: Case) -> Layout:
         deform[(jhi, round(z, 9))] = hw
 
     zs = zbb
-    probes = {
+    # the named probes: point and role (railvib_hpc.schema.PROBE_ROLES)
+    located = {
         # top centre of the footing nearest the track, first reached by the train
-        "footing": (g["xbb"] - (half - fs / 2), g["ybb"] + (half - fs / 2), zs + fh),
+        "footing": ((g["xbb"] - (half - fs / 2), g["ybb"] + (half - fs / 2), zs + fh),
+                    "foundation"),
         # outer face of the basement wall facing the track, mid-length, mid-height
-        "basement_wall": (g["xbb"], g["ys2"], zs + 0.5 * (g["z1"] - zs)),
+        "basement_wall": ((g["xbb"], g["ys2"], zs + 0.5 * (g["z1"] - zs)), "wall"),
         # the same wall's far end (x = X3), mid-height: the thesis's 20.2 m wave-arrival
         # point (20.2 m from the far rail at the entry of the flexible track, section 6.6)
-        "basement_wall_far": (g["x3"], g["ys2"], zs + 0.5 * (g["z1"] - zs)),
-        "slab1": (g["xbb"], g["ybb"], zs + levels["s1t"]),
-        "slab2": (g["xbb"], g["ybb"], zs + levels["s2t"]),
-        "ground_toe": (g["xbb"], -toe, g["z1"]),
-        "ground_mid": (g["xbb"], 0.5 * (-toe + g["ys2"]), g["z1"]),
-        "ground_building": (g["xbb"], g["ys2"], g["z1"]),
-        "ground_far": (g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]),
-        "ground_opposite": (g["xbb"], 0.5 * (toe + g["ys0"]), g["z1"]),
+        "basement_wall_far": ((g["x3"], g["ys2"], zs + 0.5 * (g["z1"] - zs)), "wall"),
+        "slab1": ((g["xbb"], g["ybb"], zs + levels["s1t"]), "floor"),
+        "slab2": ((g["xbb"], g["ybb"], zs + levels["s2t"]), "floor"),
+        "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
+        "ground_mid": ((g["xbb"], 0.5 * (-toe + g["ys2"]), g["z1"]), "ground"),
+        "ground_building": ((g["xbb"], g["ys2"], g["z1"]), "ground"),
+        "ground_far": ((g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]), "ground"),
+        "ground_opposite": ((g["xbb"], 0.5 * (toe + g["ys0"]), g["z1"]), "ground"),
     }
+    probes = {name: point for name, (point, _) in located.items()}
+    probe_roles = {name: role for name, (_, role) in located.items()}
 
     return Layout(
         xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
@@ -299,4 +304,5 @@ def build_layout(case: Case) -> Layout:
         rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
         rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]), sleeper_y=np.array([-hs, -hg, hg, hs]),
         sleeper_z=g["z3"], deform=deform,
-        bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes)
+        bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes,
+        probe_roles=probe_roles)

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..fem.reference import hex_volumes
 from ..schema import PART_ID, PARTS
 
 #: For each hex corner, its three edge neighbours in right-handed order.
@@ -17,28 +18,6 @@ _CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
                                [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
 _EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
                    [0, 4], [1, 5], [2, 6], [3, 7]])
-_REF = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                 [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
-
-
-def hex_shape_gradients(xi: np.ndarray) -> np.ndarray:
-    """Reference gradients of the 8 trilinear shape functions at points ``xi`` (q, 3).
-
-    Returns
-    -------
-    ndarray, shape (q, 8, 3)
-    """
-    xi = np.atleast_2d(xi)
-    f = 1.0 + xi[:, None, :] * _REF[None, :, :]          # (q, 8, 3)
-    d = np.empty_like(f)
-    d[..., 0] = _REF[:, 0] * f[..., 1] * f[..., 2]
-    d[..., 1] = _REF[:, 1] * f[..., 0] * f[..., 2]
-    d[..., 2] = _REF[:, 2] * f[..., 0] * f[..., 1]
-    return d / 8.0
-
-
-_GAUSS2 = np.array([[a, b, c] for c in (-1, 1) for b in (-1, 1) for a in (-1, 1)]) / np.sqrt(3.0)
-
 
 @dataclass
 class Mesh:
@@ -56,6 +35,8 @@ class Mesh:
         Boundary node indices: ``bottom``, ``x_faces``, ``y_faces``.
     probes
         Named points: ``name -> (x, y, z)``.
+    probe_roles
+        ``name -> role`` of the named points (:data:`railvib_hpc.schema.PROBE_ROLES`).
     """
 
     points: np.ndarray
@@ -65,6 +46,7 @@ class Mesh:
     line_part: np.ndarray
     node_sets: dict[str, np.ndarray] = field(default_factory=dict)
     probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
+    probe_roles: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_nodes(self) -> int:
@@ -87,11 +69,8 @@ class Mesh:
         return out
 
     def hex_volumes(self) -> np.ndarray:
-        """Element volumes by 2x2x2 Gauss quadrature (exact for trilinear hexes)."""
-        x = self.points[self.hexes]                              # (ne, 8, 3)
-        dn = hex_shape_gradients(_GAUSS2)                        # (8q, 8, 3)
-        jac = np.einsum("eai,qaj->eqij", x, dn)                  # (ne, q, 3, 3)
-        return np.linalg.det(jac).sum(axis=1)
+        """Signed element volumes (:func:`railvib_hpc.fem.reference.hex_volumes`, exact)."""
+        return hex_volumes(self.points[self.hexes])
 
     def volume_per_part(self) -> dict[str, float]:
         vol = self.hex_volumes()
@@ -123,12 +102,6 @@ class Mesh:
         used[self.lines.ravel()] = True
         return int((~used).sum())
 
-    def nonconformal_faces(self) -> int:
-        """Unshared hex faces inside the meshed volume (0 for a conformal mesh)."""
-        from .search import nonconformal_faces
-
-        return nonconformal_faces(self)
-
     def quality(self) -> dict[str, float]:
         """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count."""
         sj = self.scaled_jacobians()
@@ -141,6 +114,20 @@ class Mesh:
             "max_aspect_ratio": float(ar.max()) if len(ar) else 1.0,
             "n_inverted": int((sj <= 0).sum()),
         }
+
+    def rail_nodes(self) -> np.ndarray:
+        """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x
+        (padded with -1 when the rails have different node counts)."""
+        nodes = np.unique(self.lines[self.line_part == PART_ID["rail"]])
+        y = self.points[nodes, 1]
+        out = []
+        for side in (y < 0, y >= 0):
+            n = nodes[side]
+            out.append(n[np.argsort(self.points[n, 0], kind="stable")])
+        if len(out[0]) != len(out[1]):
+            width = max(len(out[0]), len(out[1]))
+            out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
+        return np.array(out, dtype=np.int64)
 
     def nearest_node(self, xyz: tuple[float, float, float]) -> int:
         return int(np.argmin(np.linalg.norm(self.points - np.asarray(xyz), axis=1)))

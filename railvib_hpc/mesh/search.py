@@ -10,16 +10,19 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .model import _REF, Mesh, hex_shape_gradients
+from ..fem.reference import hex_shape_gradients, hex_shape_values
+from .model import Mesh
+
+#: Newton steps of the inversion of the trilinear map: a fixed count keeps every candidate
+#: of every point in one batch (quadratic convergence: ample for elements of the model).
+NEWTON_STEPS = 12
+#: Bound of the reference coordinates during the iteration: candidates that do not contain
+#: the point move out of [-1, 1]^3 and are stopped here instead of diverging.
+XI_BOUND = 3.0
 
 #: Outward faces of a VTK-ordered hexahedron.
 HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4],
                       [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
-
-
-def hex_shape_values(xi: np.ndarray) -> np.ndarray:
-    """Trilinear shape functions at reference points ``xi`` (..., 3) -> (..., 8)."""
-    return np.prod(1.0 + xi[..., None, :] * _REF, axis=-1) / 8.0
 
 
 def locate(points: np.ndarray, mesh: Mesh, k: int = 12, tol: float = 1e-6
@@ -52,7 +55,7 @@ def locate(points: np.ndarray, mesh: Mesh, k: int = 12, tol: float = 1e-6
     cand = cand.reshape(len(points), k)
     x = xe[cand]                                                  # (m, k, 8, 3)
     xi = np.zeros(cand.shape + (3,))
-    for _ in range(12):
+    for _ in range(NEWTON_STEPS):
         n = hex_shape_values(xi)                                  # (m, k, 8)
         dn = hex_shape_gradients(xi.reshape(-1, 3)).reshape(cand.shape + (8, 3))
         r = np.einsum("mka,mkai->mki", n, x) - points[:, None, :]
@@ -61,7 +64,7 @@ def locate(points: np.ndarray, mesh: Mesh, k: int = 12, tol: float = 1e-6
         ok = np.abs(det) > 1e-300
         step = np.zeros_like(xi)
         step[ok] = np.linalg.solve(jac[ok], r[ok][..., None])[..., 0]
-        xi = np.clip(xi - step, -3.0, 3.0)
+        xi = np.clip(xi - step, -XI_BOUND, XI_BOUND)
     inside = np.all(np.abs(xi) <= 1.0 + tol, axis=-1)
     first = np.argmax(inside, axis=1)
     found = inside[np.arange(len(points)), first]

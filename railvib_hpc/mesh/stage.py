@@ -10,12 +10,13 @@ from .. import __version__
 from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text_atomic
-from ..io.mesh_io import read_mesh_h5, write_mesh_files
 from ..log import Reporter
 from ..schema import PARTS
 from .gmsh_model import generate, read_msh
 from .layout import build_layout
+from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
+from .search import nonconformal_faces
 
 #: Case sections that determine the mesh (its reuse key).
 MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
@@ -39,11 +40,12 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         mesh, timings = generate(layout, msh_path)
         source = "generated"
     mesh.probes = dict(layout.probes)
+    mesh.probe_roles = dict(layout.probe_roles)
     t0 = time.perf_counter()
     quality = mesh.quality()
     quality["duplicate_nodes"] = mesh.duplicate_nodes()
     quality["unused_nodes"] = mesh.unused_nodes()
-    quality["nonconformal_faces"] = mesh.nonconformal_faces()
+    quality["nonconformal_faces"] = nonconformal_faces(mesh)
     timings["quality"] = time.perf_counter() - t0
     if quality["n_inverted"]:
         raise MeshError(f"mesh has {quality['n_inverted']} inverted hexahedra (non-positive "
@@ -57,6 +59,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         "volume_per_part": mesh.volume_per_part(),
         "node_sets": {k: len(v) for k, v in mesh.node_sets.items()},
         "probes": {k: list(v) for k, v in mesh.probes.items()},
+        "probe_roles": dict(mesh.probe_roles),
         "timings": timings,
     }
     return mesh, report
@@ -93,6 +96,8 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
             mesh, attrs = read_mesh_h5(h5)
             if attrs.get("inputs_sha256") == key:
                 reporter.info(f"reusing {h5} (same mesh inputs)")
+                if not mesh.probe_roles:      # mesh.h5 written before probes had roles
+                    mesh.probe_roles = dict(build_layout(case).probe_roles)
                 report = json.loads(report_path.read_text())
                 report["reused"] = True
                 return mesh, report

@@ -61,6 +61,44 @@ class DofMap:
     def owned_dofs(self, rank: int) -> tuple[int, int]:
         return int(self.dof_offsets[rank]), int(self.dof_offsets[rank + 1])
 
+    def node_arrays(self, columns: np.ndarray, rank: int
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, slice, slice]:
+        """Reshape this rank's DOF rows of vectors into per-node translations and rotations.
+
+        Parameters
+        ----------
+        columns
+            (owned DOFs, m): this rank's rows of ``m`` global vectors (modes, static
+            solutions), in the numbering of :attr:`index`.
+        rank
+            This rank.
+
+        Returns
+        -------
+        translation : ndarray, shape (m, owned nodes, 3)
+            ``ux uy uz`` of the owned nodes (0 where constrained).
+        rotation : ndarray, shape (m, owned rotation nodes, 3)
+            ``rx ry rz`` of the owned nodes that carry rotations.
+        rotation_nodes : ndarray
+            All nodes that carry rotations (global, sorted).
+        rot_range : slice
+            The part of ``rotation_nodes`` owned by ``rank``.
+        nodes : slice
+            The nodes owned by ``rank``.
+        """
+        nodes = self.owned_nodes(rank)
+        r0, _ = self.owned_dofs(rank)
+        idx = self.index[nodes]
+        m = columns.shape[1]
+        full = np.zeros((m, idx.shape[0], 6))
+        ok = idx >= 0
+        full[:, ok] = columns[idx[ok] - r0].T
+        rotation_nodes = np.flatnonzero(self.has_rotations)
+        lo, hi = np.searchsorted(rotation_nodes, [nodes.start, nodes.stop])
+        owned_rot = rotation_nodes[lo:hi] - nodes.start
+        return (full[:, :, :3], full[:, owned_rot, 3:], rotation_nodes,
+                slice(int(lo), int(hi)), nodes)
+
 
 #: Appendix A: bottom fixed, u_x = 0 on faces normal to x, u_y = 0 on faces normal to y.
 DEFAULT_RULES: dict[str, tuple[str, ...]] = {

@@ -15,10 +15,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import UserError
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 PREFIX = "railvib_eig_"
 
@@ -41,7 +46,7 @@ class ModalResult:
         return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
 
 
-def _configure(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
+def _configure(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
                max_it: int, mpd: int):
     from petsc4py import PETSc
     from slepc4py import SLEPc
@@ -79,7 +84,7 @@ def _configure(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: flo
     return eps
 
 
-def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
+def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
                 tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
                 monitor=None, static_rhs: np.ndarray | None = None,
@@ -143,7 +148,7 @@ def solve_modes(K, M, comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: fl
             PETSc.Options().delValue(ooc_name)
 
 
-def _solve_slepc(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
+def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
                  max_it: int, mpd: int, monitor) -> ModalResult:
     """SLEPc Krylov-Schur (or spectrum slicing when ``f_max > 0``)."""
     from petsc4py import PETSc
@@ -197,7 +202,7 @@ def _solve_slepc(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: f
     return result
 
 
-def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
+def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
                  static_rhs: np.ndarray | None = None, out_of_core: str = "auto") -> ModalResult:
     from petsc4py import PETSc
@@ -220,7 +225,9 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
     basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
-    extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
+    # dense blocks: the Lanczos basis, three work blocks and the eigenvectors
+    extra_gb = (BYTES_PER_DOUBLE * n_global * (basis + 3 * block_size + n_modes)
+                / BYTES_PER_GB)
     try:
         op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
                            out_of_core=out_of_core)
@@ -256,7 +263,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     return result
 
 
-def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None = None,
+def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndarray | None = None,
                         MPhi: np.ndarray | None = None) -> None:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
 

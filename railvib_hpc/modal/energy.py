@@ -14,6 +14,8 @@ damped with ``modal.damping_ratio``). Only groups with elements in the mesh appe
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ..config import Case
@@ -22,6 +24,9 @@ from ..schema import PART_ID
 from .dofmap import DofMap
 from .elements import BEAM_MATERIAL, PAD_DIRECTION, SOLID_MATERIAL
 from .petsc import assemble
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Name of the rail-pad group (its damping ratio is ``modal.damping_ratio``).
 PADS = "pads"
@@ -40,7 +45,7 @@ def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:
             if any(PART_ID[p] in present for p in parts)}
 
 
-def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm,
+def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
                           phi: np.ndarray) -> dict[str, np.ndarray]:
     """``E_ig = phi_i^T K_g phi_i`` for every mode and material group (collective).
 

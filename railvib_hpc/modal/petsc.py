@@ -14,14 +14,20 @@ from __future__ import annotations
 import time
 from collections.abc import Collection
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..config import Case
+from ..errors import MeshError
+from ..fem.reference import ElementGeometryError
 from ..mesh.model import Mesh
 from ..schema import PART_ID
 from .dofmap import DofMap
 from .elements import element_batches
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 @dataclass
@@ -82,8 +88,8 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
     return LocalPattern(indptr, indices.astype(np.int64), hex_mask, line_mask)
 
 
-def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str] | None = None,
-             mass: bool = True):
+def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
+             parts: Collection[str] | None = None, mass: bool = True):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
@@ -109,18 +115,28 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
     t_kernels = t_insert = 0.0
     add = PETSc.InsertMode.ADD_VALUES
     t_k = time.perf_counter()
-    for batch in element_batches(mesh, case, hex_mask, line_mask, with_mass=mass):
-        t_b = time.perf_counter()
-        t_kernels += t_b - t_k
-        cols = batch.dofs(dofmap.index)
-        rows = np.where((cols >= r0) & (cols < r1), cols, -1)  # other ranks' rows: skipped
-        rows = np.ascontiguousarray(rows, dtype=PETSc.IntType)
-        cols = np.ascontiguousarray(cols, dtype=PETSc.IntType)
-        K.setValuesRCV(rows, cols, np.ascontiguousarray(batch.K), addv=add)
-        if M is not None and batch.M is not None:
-            M.setValuesRCV(rows, cols, np.ascontiguousarray(batch.M), addv=add)
-        t_k = time.perf_counter()
-        t_insert += t_k - t_b
+    geometry_error = None
+    try:
+        for batch in element_batches(mesh, case, hex_mask, line_mask, with_mass=mass):
+            t_b = time.perf_counter()
+            t_kernels += t_b - t_k
+            cols = batch.dofs(dofmap.index)
+            rows = np.where((cols >= r0) & (cols < r1), cols, -1)  # other ranks' rows: skipped
+            rows = np.ascontiguousarray(rows, dtype=PETSc.IntType)
+            cols = np.ascontiguousarray(cols, dtype=PETSc.IntType)
+            K.setValuesRCV(rows, cols, np.ascontiguousarray(batch.K), addv=add)
+            if M is not None and batch.M is not None:
+                M.setValuesRCV(rows, cols, np.ascontiguousarray(batch.M), addv=add)
+            t_k = time.perf_counter()
+            t_insert += t_k - t_b
+    except ElementGeometryError as exc:       # local work only so far: no collective missed
+        geometry_error = str(exc)
+    errors = [e for e in comm.allgather(geometry_error) if e]
+    if errors:
+        for A in mats:
+            A.destroy()
+        raise MeshError(f"the mesh cannot be assembled: {errors[0]}; check mesh.file or "
+                        "the geometry (mesh_report.json lists the element quality)")
     t2 = time.perf_counter()
     for A in mats:
         A.assemble()

@@ -6,12 +6,21 @@ import json
 import resource
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import __version__
 from ..config import Case
-from ..io.modes_io import read_modes_summary, read_strain_energies, write_modes
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
+from ..io.modes_io import (
+    has_probe_roles,
+    read_modes_summary,
+    read_strain_energies,
+    write_modes,
+    write_modes_xdmf,
+)
+from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import MESH_INPUTS, run_mesh_stage
 from ..parallel import on_root
@@ -21,6 +30,9 @@ from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
 from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
 _NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core")
@@ -38,11 +50,21 @@ def modal_digest(case: Case) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+#: Memory budget of the automatic Lanczos basis (all ranks together) [GB]: the basis holds
+#: ``3 n_modes`` vectors unless that exceeds this (the thesis model's 300 modes: 1.2 GB).
+AUTO_BASIS_BUDGET_GB = 4.0
+#: Seconds between two progress lines of the eigensolve.
+PROGRESS_INTERVAL_S = 2.0
+#: ``ru_maxrss`` is in kB on Linux: kB per GB.
+KB_PER_GB = 1e6
+
+
 def _max_basis(case: Case, n_dofs: int) -> int:
-    """``modal.max_basis``, or 3 n_modes capped at ~4 GB of basis vectors (all ranks)."""
+    """``modal.max_basis``, or 3 n_modes capped at :data:`AUTO_BASIS_BUDGET_GB` of basis
+    vectors (all ranks)."""
     if case["modal.max_basis"] > 0:
         return case["modal.max_basis"]
-    cap = int(4e9 / (8.0 * n_dofs))
+    cap = int(AUTO_BASIS_BUDGET_GB * BYTES_PER_GB / (BYTES_PER_DOUBLE * n_dofs))
     return max(min(3 * case["modal.n_modes"], cap),
                case["modal.n_modes"] + 3 * case["modal.block_size"])
 
@@ -53,7 +75,7 @@ def _progress(rep: Reporter):
 
     def monitor(nconv: int, nev: int, basis: int) -> None:
         now = time.perf_counter()
-        if now - state["last"] < 2.0 and nconv < nev:
+        if now - state["last"] < PROGRESS_INTERVAL_S and nconv < nev:
             return
         state["last"] = now
         rep.progress(f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
@@ -62,7 +84,7 @@ def _progress(rep: Reporter):
     return monitor
 
 
-def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Compute (or reuse) ``modes.h5`` in ``out_dir``; collective. Returns a summary dict."""
     key = modal_digest(case)
     path = out_dir / "modes.h5"
@@ -80,6 +102,9 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             rep.info(f"{path} has no per-material strain energies (modal.damping = "
                      "'strain_energy' needs them); recomputing")
             return None
+        if not has_probe_roles(path):
+            rep.info(f"{path} has no probe roles (written by an older version); recomputing")
+            return None
         return summary
 
     old = on_root(previous, comm)
@@ -89,6 +114,9 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         f = old["frequency_hz"]
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
                  f"{f[0]:.3f} - {f[-1]:.3f} Hz")
+        xdmf = path.with_suffix(".xdmf")
+        if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
+            rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
         if want_static and not on_root(lambda: static_is_valid(static_path, key), comm):
             _static_only(case, out_dir, comm, rep, key)
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
@@ -130,15 +158,15 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     K.destroy()
     M.destroy()
     with rep.stage("write modes"):
-        translation, rotation, rot_nodes, rot_range, nodes = node_arrays(result.phi, dofmap,
-                                                                          comm.rank)
+        translation, rotation, rot_nodes, rot_range, nodes = dofmap.node_arrays(result.phi,
+                                                                                 comm.rank)
         mask = np.zeros(mesh.n_nodes, dtype=bool)
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
         stats = dict(result.stats)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
-        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KB_PER_GB)
         stats["peak_rss_gb_per_rank"] = rss
         stats["peak_rss_gb_total"] = float(sum(rss))
         stats["n_dofs"] = dofmap.n_dofs
@@ -165,7 +193,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     return summary
 
 
-def _static_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> None:
+def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str) -> None:
     """static.h5 for reused modes: assemble K again and factor it once."""
     with rep.stage("static correction: mesh + assembly"):
         mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
@@ -209,28 +237,3 @@ def _versions() -> tuple[str, str]:
 
     return (".".join(map(str, PETSc.Sys.getVersion())),
             ".".join(map(str, SLEPc.Sys.getVersion())))
-
-
-def node_arrays(phi: np.ndarray, dofmap, rank: int):
-    """Reshape this rank's DOF rows of the modes into per-node translation/rotation arrays.
-
-    Returns
-    -------
-    translation : (m, owned nodes, 3)
-    rotation : (m, owned rotation nodes, 3)
-    rotation_nodes : all rotation nodes (global)
-    rot_range : slice of ``rotation_nodes`` owned here
-    nodes : slice of owned nodes
-    """
-    nodes = dofmap.owned_nodes(rank)
-    r0, _ = dofmap.owned_dofs(rank)
-    idx = dofmap.index[nodes]
-    m = phi.shape[1]
-    full = np.zeros((m, idx.shape[0], 6))
-    ok = idx >= 0
-    full[:, ok] = phi[idx[ok] - r0].T
-    rotation_nodes = np.flatnonzero(dofmap.has_rotations)
-    lo, hi = np.searchsorted(rotation_nodes, [nodes.start, nodes.stop])
-    owned_rot = rotation_nodes[lo:hi] - nodes.start
-    return (full[:, :, :3], full[:, owned_rot, 3:], rotation_nodes, slice(int(lo), int(hi)),
-            nodes)

@@ -19,11 +19,15 @@ Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..io.modes_io import rail_nodes
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 
 def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
@@ -36,7 +40,7 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     table
         (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
     """
-    rails = rail_nodes(mesh)
+    rails = mesh.rail_nodes()
     if np.any(rails < 0):
         raise ValueError("the two rails must have the same number of nodes")
     comp = np.array([2, 4])                        # uz, ry in the node's 6 components
@@ -65,7 +69,7 @@ def unit_loads(dofs: np.ndarray, r0: int, r1: int) -> tuple[np.ndarray, np.ndarr
 
 
 def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0: int,
-                     comm) -> np.ndarray:
+                     comm: MPI.Comm) -> np.ndarray:
     """``K^-1`` restricted to the rail DOFs (n_r, n_r), from the distributed solutions."""
     n_r = dofs.size
     part = np.zeros((n_r, n_r))
@@ -78,18 +82,15 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
     return 0.5 * (out + out.T)
 
 
-def write_static(path: Path, comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
+def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
                  dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
     """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
-
-    from .stage import node_arrays
-
     n_r = dofs.size
     r0 = dofmap.owned_dofs(comm.rank)[0]
     flex = rail_flexibility(x_local, dofs, free, r0, comm)
     cols = np.zeros((x_local.shape[0], n_r))
     cols[:, free] = x_local
-    translation, _, _, _, nodes = node_arrays(cols, dofmap, comm.rank)
+    translation, _, _, _, nodes = dofmap.node_arrays(cols, comm.rank)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
         parts = comm.gather(translation, root=0)
@@ -127,12 +128,14 @@ def static_is_valid(path: Path, modes_sha: str) -> bool:
         return False
 
 
-def solve_static(K, M, comm, rhs: np.ndarray) -> np.ndarray:
+def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:
     """``K^-1 rhs`` with its own MUMPS Cholesky factorization (options prefix railvib_eig_)."""
     from .block_lanczos import BlockOperator
     from .eigen import PREFIX
 
-    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=16.0 * rhs.size / 1e9)
+    # dense blocks held besides the factor: the right-hand sides and the solutions
+    extra_gb = 2 * BYTES_PER_DOUBLE * rhs.size / BYTES_PER_GB
+    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
     try:
         return op.solve(rhs)
     finally:

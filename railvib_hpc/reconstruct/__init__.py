@@ -18,9 +18,9 @@ from .fields import (
     FIELD_NAMES,
     OUTPUT_BUDGET_BYTES,
     block_steps_for_budget,
-    fields_xdmf,
     node_range,
     reconstruct_fields,
+    write_fields_xdmf,
 )
 from .probes import (
     ProbeError,
@@ -40,7 +40,7 @@ from .stress import (
     rail_moment_modes,
     rail_section,
     stress_from_fields,
-    stress_xdmf,
+    write_stress_xdmf,
 )
 
 __all__ = [
@@ -50,7 +50,6 @@ __all__ = [
     "ReconstructInputError",
     "block_steps_for_budget",
     "element_stress",
-    "fields_xdmf",
     "hex_materials",
     "locate_probes",
     "mesh_probes",
@@ -65,7 +64,8 @@ __all__ = [
     "reconstruct_fields",
     "run_reconstruct_stage",
     "stress_from_fields",
-    "stress_xdmf",
+    "write_fields_xdmf",
     "write_probes_csv",
     "write_probes_h5",
+    "write_stress_xdmf",
 ]

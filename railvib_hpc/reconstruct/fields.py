@@ -44,8 +44,10 @@ receive buffer is bounded by the same budget).
 The file is written under a hidden temporary name; ``complete`` is set and the file is
 renamed by rank 0 only after every rank finished (a failed or killed run never leaves a
 ``fields.h5``). ``fields.xdmf`` (rank 0, after the rename) is a temporal collection with
-one grid per stored step whose node attributes are HyperSlab views of the three
-datasets, with the hexahedra and their part ids: ParaView opens it directly.
+one grid per stored step, with the hexahedra and their part ids; its node attributes are
+per-step views of the three datasets in the sidecar ``fields_views.h5`` (HDF5 virtual
+datasets, no data copied; see :mod:`railvib_hpc.io.xdmf`): both of ParaView's XDMF
+readers open it directly.
 """
 
 from __future__ import annotations
@@ -54,15 +56,18 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import __version__
-from ..io.atomic import write_text_atomic
 from ..io.parallel_h5 import h5py_parallel_ok
-from ..io.xdmf import temporal_xdmf
+from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
 from ..parallel import on_root
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Upper bound for the per-rank output buffers of one block of steps (bytes).
 OUTPUT_BUDGET_BYTES = 512 * 2**20
@@ -163,7 +168,7 @@ def read_slab(ds, start: Sequence[int], count: Sequence[int], out: np.ndarray | 
     ds.id.read(mspace, fspace, data, dxpl=_dxpl(collective))
 
 
-def open_h5(path: str | os.PathLike, mode: str, comm, parallel: bool):
+def open_h5(path: str | os.PathLike, mode: str, comm: MPI.Comm, parallel: bool):
     """Open an HDF5 file with the mpio driver on ``comm`` (``parallel``) or the plain driver."""
     import h5py
 
@@ -172,7 +177,7 @@ def open_h5(path: str | os.PathLike, mode: str, comm, parallel: bool):
     return h5py.File(path, mode)
 
 
-def check_collective(comm, error: BaseException | None, what: str) -> None:
+def check_collective(comm: MPI.Comm, error: BaseException | None, what: str) -> None:
     """Raise on every rank when any rank had an error (call before the next collective)."""
     if comm.size == 1:
         if error is not None:
@@ -187,8 +192,8 @@ def check_collective(comm, error: BaseException | None, what: str) -> None:
 
 
 # --------------------------------------------------------------------------- main routine
-def _read_basis(comm, parallel: bool, modes_path: Path, m: int, extra: Sequence[ExtraBasis],
-                nodes: slice, n: int) -> np.ndarray:
+def _read_basis(comm: MPI.Comm, parallel: bool, modes_path: Path, m: int,
+                extra: Sequence[ExtraBasis], nodes: slice, n: int) -> np.ndarray:
     """This rank's rows of all bases as one C-contiguous (m + sum k, n_local, 3) array."""
     ks = [np.asarray(e[2]).shape[1] for e in extra]
     nl = nodes.stop - nodes.start
@@ -210,7 +215,7 @@ def _read_basis(comm, parallel: bool, modes_path: Path, m: int, extra: Sequence[
     return phi
 
 
-def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLike, comm,
+def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLike, comm: MPI.Comm,
                        t: np.ndarray, q: np.ndarray, q_dot: np.ndarray, q_ddot: np.ndarray, *,
                        steps: Sequence[int] | np.ndarray | None = None, float32: bool = False,
                        block_steps: int | None = None, extra: Sequence[ExtraBasis] | None = None,
@@ -380,9 +385,7 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
         finally:
             if tmp.exists():
                 tmp.unlink()
-        write_text_atomic(out_path.with_suffix(".xdmf"),
-                          fields_xdmf(out_path.name, n, hshape[0], t[steps], float32,
-                                      hdtype, pdtype))
+        write_fields_xdmf(out_path)
 
     on_root(finish, comm)
     t_gemm = comm.allreduce(stats["t_gemm"], op=_mpi_max()) if comm.size > 1 else stats["t_gemm"]
@@ -454,7 +457,7 @@ def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarr
     dsets["steps"][...] = steps
 
 
-def _stream(comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
+def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
             buf32: np.ndarray | None, nb: int, ns: int, nodes: slice, parallel: bool,
             gather: bool, stats: dict, rep: Reporter | None) -> None:
     """GEMM + collective write of every block of steps and every field.
@@ -510,7 +513,7 @@ def _gemm(q_block: np.ndarray, phi2: np.ndarray, out: np.ndarray) -> None:
     np.matmul(q_block, phi2, out=out)
 
 
-def _gather_write(comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
+def _gather_write(comm: MPI.Comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
     """Without parallel HDF5: rank 0 receives every rank's block and writes it.
 
     Rank 0 keeps receiving after a failed write (the error is raised afterwards), so the
@@ -537,84 +540,30 @@ def _gather_write(comm, ds, block: np.ndarray, s0: int, b: int, ranges) -> None:
 
 
 # --------------------------------------------------------------------------- XDMF
-def _precision(dtype: str) -> tuple[str, int]:
-    dt = np.dtype(dtype)
-    return ("Float" if dt.kind == "f" else "Int"), dt.itemsize
-
-
-def mesh_xdmf_items(h5_name: str, n: int, ne: int, hex_dtype: str = "<i8",
-                    part_dtype: str = "<i4") -> tuple[str, str, str]:
-    """Topology, geometry and ``part_id`` cell attribute of the hexahedra (XDMF snippets)."""
-    _, hp = _precision(hex_dtype)
-    _, pp = _precision(part_dtype)
-    topo = (f'<Topology TopologyType="Hexahedron" NumberOfElements="{ne}"><DataItem '
-            f'Dimensions="{ne} 8" NumberType="Int" Precision="{hp}" Format="HDF">{h5_name}:'
-            f'/mesh/hexes</DataItem></Topology>')
-    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
-           f'Precision="8" Format="HDF">{h5_name}:/mesh/points</DataItem></Geometry>')
-    part = (f'<Attribute Name="part_id" AttributeType="Scalar" Center="Cell"><DataItem '
-            f'Dimensions="{ne}" NumberType="Int" Precision="{pp}" Format="HDF">{h5_name}:'
-            f'/mesh/hex_part</DataItem></Attribute>')
-    return topo, geo, part
-
-
-def hyperslab_item(h5_name: str, dataset: str, k: int, shape: tuple[int, ...],
-                   precision: int) -> str:
-    """XDMF HyperSlab DataItem selecting row ``k`` of a (ns, ...) HDF5 dataset."""
-    rest = shape[1:]
-    nd = len(shape)
-    start = " ".join([str(k)] + ["0"] * (nd - 1))
-    stride = " ".join(["1"] * nd)
-    count = " ".join(["1"] + [str(d) for d in rest])
-    dims = " ".join(str(d) for d in rest)
-    full = " ".join(str(d) for d in shape)
-    return (f'<DataItem ItemType="HyperSlab" Dimensions="{dims}" Type="HyperSlab">'
-            f'<DataItem Dimensions="3 {nd}" Format="XML">{start} {stride} {count}</DataItem>'
-            f'<DataItem Dimensions="{full}" NumberType="Float" Precision="{precision}" '
-            f'Format="HDF">{h5_name}:{dataset}</DataItem></DataItem>')
-
-
-def fields_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, float32: bool = False,
-                hex_dtype: str = "<i8", part_dtype: str = "<i4") -> str:
-    """XDMF temporal collection of ``fields.h5``: one grid per stored step.
+def write_fields_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Path:
+    """Write ``fields.xdmf`` (+ ``fields_views.h5``) next to ``h5_path``: one grid per
+    stored step with the displacement, velocity and acceleration (serial).
 
     Parameters
     ----------
-    h5_name
-        File name of ``fields.h5`` as referenced from the XDMF file (same folder).
-    n, ne
-        Number of nodes and hexahedra.
-    times
-        (ns,) stored times.
-    float32
-        The field datasets are single precision.
-    hex_dtype, part_dtype
-        dtypes of ``/mesh/hexes`` and ``/mesh/hex_part``.
+    h5_path
+        A ``fields.h5`` (complete, or the temporary file that becomes it).
+    name
+        File name the XDMF refers to (default: ``h5_path``'s name).
+
+    Returns
+    -------
+    Path
+        The XDMF file.
     """
-    return mesh_series_xdmf(h5_name, n, ne, times, "fields", FIELD_NAMES, "Vector", "Node",
-                             (len(times), n, 3), 4 if float32 else 8, hex_dtype, part_dtype)
+    import h5py
 
-
-def mesh_series_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, group: str,
-                     names: Sequence[str], attribute_type: str, center: str,
-                     shape: tuple[int, ...], precision: int, hex_dtype: str = "<i8",
-                     part_dtype: str = "<i4") -> str:
-    """XDMF temporal collection over the mesh of ``h5_name``: one grid per time ``k``
-    whose attributes ``names`` are the hyperslabs ``/<group>/<name>[k]`` of ``shape``
-    (``(ns, n, 3)`` node vectors, ``(ns, ne)`` cell scalars, ...)."""
-    topo, geo, part = mesh_xdmf_items(h5_name, n, ne, hex_dtype, part_dtype)
-    grids = []
-    for k, tk in enumerate(times):
-        attrs = "\n".join(
-            f'        <Attribute Name="{name}" AttributeType="{attribute_type}" '
-            f'Center="{center}">'
-            f'{hyperslab_item(h5_name, f"/{group}/{name}", k, shape, precision)}</Attribute>'
-            for name in names)
-        grids.append(f"""      <Grid Name="{group}_{k}" GridType="Uniform">
-        <Time Value="{float(tk)!r}"/>
-        {topo}
-        {geo}
-        {part}
-{attrs}
-      </Grid>""")
-    return temporal_xdmf(group, grids)
+    h5_path = Path(h5_path)
+    name = name or h5_path.name
+    with h5py.File(h5_path, "r") as f:
+        points, block = hex_mesh(f, name)
+        times = f["time"][()]
+        series = [Series(k, H5Array.of(f, f"/fields/{k}", name), "Node") for k in FIELD_NAMES]
+    xdmf = h5_path.with_name(Path(name).stem + ".xdmf")
+    write_series(xdmf, points, block, times, series)
+    return xdmf

@@ -20,7 +20,8 @@ Outputs
     /probes/<name>/displacement (nt, 3)      [m]      ux uy uz
     /probes/<name>/velocity (nt, 3)          [m/s]
     /probes/<name>/acceleration (nt, 3)      [m/s^2]
-        attrs: coords, element (containing hex), xi (reference coordinates)
+        attrs: coords, element (containing hex), xi (reference coordinates), role
+        (railvib_hpc.schema.PROBE_ROLES)
     /<group>/<dataset>                       optional extra groups (e.g. /rail)
     attrs: complete = 1, plus the caller's attrs
 
@@ -39,9 +40,11 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import UserError
+from ..fem.reference import hex_shape_values
 from ..io.atomic import atomic_path, write_text_atomic
 from ..mesh.model import Mesh
-from ..mesh.search import hex_shape_values, locate
+from ..mesh.search import locate
+from ..schema import DEFAULT_PROBE_ROLE, PROBE_ROLES
 from .fields import ExtraBasis
 
 #: Column names of the probe CSV files.
@@ -72,6 +75,24 @@ def mesh_probes(modes_path: str | os.PathLike) -> dict[str, np.ndarray]:
                  for n in f["mesh/probes/names"][()]]
         coords = f["mesh/probes/coords"][()].reshape(-1, 3)
     return dict(zip(names, coords))
+
+
+def mesh_probe_roles(modes_path: str | os.PathLike) -> dict[str, str] | None:
+    """Roles of the named probes in ``/mesh/probes/roles`` of ``modes.h5`` (name -> role;
+    a probe stored without one gets ``"ground"``); None when the file has no roles (written
+    by a version before probes had roles)."""
+    import h5py
+
+    with h5py.File(modes_path, "r") as f:
+        if "mesh/probes/names" not in f:
+            return {}
+        if "mesh/probes/roles" not in f:
+            return None
+        names = [n.decode() if isinstance(n, bytes) else str(n)
+                 for n in f["mesh/probes/names"][()]]
+        roles = [r.decode() if isinstance(r, bytes) else str(r)
+                 for r in f["mesh/probes/roles"][()]]
+    return {n: r or DEFAULT_PROBE_ROLE for n, r in zip(names, roles)}
 
 
 def user_probe_dict(user_probes: UserProbes) -> dict[str, np.ndarray]:
@@ -197,7 +218,8 @@ def probe_modes(modes_path: str | os.PathLike, coords: np.ndarray, m: int,
 
 def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
                     q_dot: np.ndarray, q_ddot: np.ndarray, *, user_probes: UserProbes = (),
-                    mesh: bool = True, extra: Sequence[ExtraBasis] | None = None
+                    user_roles: Mapping[str, str] | None = None, mesh: bool = True,
+                    extra: Sequence[ExtraBasis] | None = None
                     ) -> dict[str, dict[str, np.ndarray]]:
     """Displacement, velocity and acceleration histories at the probe points.
 
@@ -211,8 +233,11 @@ def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
         (nt, m) modal histories.
     user_probes
         Extra probe points, ``{name: xyz}`` or a list of ``xyz``.
+    user_roles
+        Roles of the user probes by name (:data:`railvib_hpc.schema.PROBE_ROLES`; missing:
+        ``"ground"``).
     mesh
-        Include the named probes of ``/mesh/probes``.
+        Include the named probes of ``/mesh/probes`` (with their stored roles).
     extra
         Additional bases ``(h5 file, dataset, g, g_dot, g_ddot)`` added like extra modes.
 
@@ -220,15 +245,33 @@ def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
     -------
     dict
         ``name -> {"t", "displacement", "velocity", "acceleration", "coords", "element",
-        "xi"}`` with (nt, 3) histories.
+        "xi", "role"}`` with (nt, 3) histories.
+
+    Raises
+    ------
+    ProbeError
+        For a user probe named like a mesh probe or with an unknown role, and for a
+        ``modes.h5`` written before probes had roles.
     """
     import h5py
 
     probes = mesh_probes(modes_path) if mesh else {}
+    roles: dict[str, str] = {}
+    if probes:
+        stored = mesh_probe_roles(modes_path)
+        if stored is None:
+            raise ProbeError(f"{modes_path} stores no probe roles (written by an older "
+                             "version): rerun 'railvib modal' (it recomputes the file)")
+        roles.update(stored)
+    user_roles = dict(user_roles or {})
     for name, xyz in user_probe_dict(user_probes).items():
         if name in probes:
             raise ProbeError(f"user probe '{name}' has the name of a probe of the mesh")
         probes[name] = xyz
+        roles[name] = user_roles.get(name, DEFAULT_PROBE_ROLE)
+        if roles[name] not in PROBE_ROLES:
+            raise ProbeError(f"probe '{name}': role {roles[name]!r} is not one of "
+                             + ", ".join(PROBE_ROLES))
     names = list(probes)
     if not names:
         return {}
@@ -250,7 +293,8 @@ def probe_histories(modes_path: str | os.PathLike, t: np.ndarray, q: np.ndarray,
     for i, name in enumerate(names):
         u, v, a = (h @ basis[i] for h in hist)
         out[name] = {"t": t, "displacement": u, "velocity": v, "acceleration": a,
-                     "coords": coords[i], "element": np.int64(elem[i]), "xi": xi[i]}
+                     "coords": coords[i], "element": np.int64(elem[i]), "xi": xi[i],
+                     "role": roles[name]}
     return out
 
 
@@ -313,6 +357,8 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
             for key in ("element", "xi"):
                 if key in h:
                     p.attrs[key] = h[key]
+            if h.get("role"):
+                p.attrs["role"] = h["role"]
             p.create_dataset("time", data=h["t"])
             for key in ("displacement", "velocity", "acceleration"):
                 p.create_dataset(key, data=h[key])

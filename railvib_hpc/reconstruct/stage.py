@@ -19,13 +19,14 @@ dataset and shape is raised on every rank together.
 
 Outputs (in ``out_dir``)
 ------------------------
-* ``fields.h5`` + ``fields.xdmf``: displacement, velocity, acceleration of every node at
-  every ``stride``-th step of the time ``window`` (:mod:`.fields`);
-* ``/stress`` in ``fields.h5`` + ``stress.xdmf`` when ``stress_times`` are given
-  (:mod:`.stress`). With new fields the stresses are written into the temporary file
-  before it is renamed (fields and stresses are one atomic result); when only the stress
-  times changed they are rewritten in place in the reused ``fields.h5`` (attribute
-  ``stress_complete`` is 0 while that happens);
+* ``fields.h5`` + ``fields.xdmf`` (+ its views ``fields_views.h5``): displacement,
+  velocity, acceleration of every node at every ``stride``-th step of the time ``window``
+  (:mod:`.fields`);
+* ``/stress`` in ``fields.h5`` + ``stress.xdmf`` (+ ``stress_views.h5``) when
+  ``stress_times`` are given (:mod:`.stress`). With new fields the stresses are written
+  into the temporary file before it is renamed (fields and stresses are one atomic
+  result); when only the stress times changed they are rewritten in place in the reused
+  ``fields.h5`` (attribute ``stress_complete`` is 0 while that happens);
 * ``probes.h5`` + ``probes/<name>.csv``: histories of the mesh probes and the user probes
   at every step of the window (full time resolution: probes are cheap), and in
   ``probes.h5`` ``/rail``: the vertical bending moment of both rails (modal part only, the
@@ -49,16 +50,18 @@ import hashlib
 import json
 import os
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .. import __version__
 from ..errors import UserError
+from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
-from .fields import reconstruct_fields
+from .fields import reconstruct_fields, write_fields_xdmf
 from .probes import (
     UserProbes,
     locate_probes,
@@ -67,10 +70,21 @@ from .probes import (
     write_probes_csv,
     write_probes_h5,
 )
-from .stress import hex_materials, rail_moment_history, rail_moment_modes, stress_from_fields
+from .stress import (
+    hex_materials,
+    rail_moment_history,
+    rail_moment_modes,
+    stress_from_fields,
+    write_stress_xdmf,
+)
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Bumped when the output format changes (part of every reuse digest).
 FORMAT_VERSION = 1
+#: Version of the probes.h5 layout (2: every probe carries its role).
+PROBE_FORMAT = 2
 
 
 class ReconstructInputError(UserError):
@@ -250,15 +264,23 @@ def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[
     return [(str(basis_file), basis, *hist)], _digest({"file": key, "dataset": basis}), k
 
 
-def _keys(info: dict, stride: int, window, float32: bool, stress_times, user_probes) -> dict:
+def _keys(info: dict, stride: int, window, float32: bool, stress_times, user_probes,
+          user_roles) -> dict:
     base = {"modes": info["modes_key"], "mbs": info["mbs_key"], "static": info["static_key"],
             "m": info["m"], "k": info["k"], "format": FORMAT_VERSION,
             "window": None if window is None else [float(v) for v in window]}
     fields = _digest({**base, "stride": int(stride), "float32": bool(float32)})
     stress = _digest({"fields": fields, "times": [float(v) for v in stress_times]})
     probes = _digest({**base, "probes": {k: v.tolist() for k, v in
-                                         user_probe_dict(user_probes).items()}})
+                                         user_probe_dict(user_probes).items()},
+                      "roles": dict(user_roles or {}), "probe_format": PROBE_FORMAT})
     return {"fields": fields, "stress": stress, "probes": probes}
+
+
+def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
+    """Rewrite the XDMF file of a reused data file when it has the earlier form."""
+    if on_root(lambda: ensure_views(xdmf, write), comm):
+        rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
 
 
 def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
@@ -291,9 +313,11 @@ def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
 
 
 def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
-                          out_dir: str | os.PathLike, comm, rep: Reporter, *, stride: int = 1,
-                          window: tuple[float, float] | None = None, float32: bool = False,
+                          out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter, *,
+                          stride: int = 1, window: tuple[float, float] | None = None,
+                          float32: bool = False,
                           stress_times: Sequence[float] = (), user_probes: UserProbes = (),
+                          user_probe_roles: Mapping[str, str] | None = None,
                           correction_rates: bool = False) -> dict:
     """Reconstruct fields, stresses and probe histories (collective; reuses what it can).
 
@@ -319,6 +343,8 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         Times [s] at which element stresses are computed (nearest stored steps).
     user_probes
         Extra probe points, ``{name: (x, y, z)}`` or a list of ``(x, y, z)``.
+    user_probe_roles
+        Their roles by name (:data:`railvib_hpc.schema.PROBE_ROLES`; missing: ``ground``).
     correction_rates
         Add a static correction also to velocities and accelerations (see
         :func:`read_inputs`).
@@ -346,7 +372,8 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         if user:
             locate_probes(modes_path, np.array(list(user.values())), list(user))
         full.update(info)
-        keys = _keys(info, stride, window, float32, stress_times, user_probes)
+        keys = _keys(info, stride, window, float32, stress_times, user_probes,
+                     user_probe_roles)
         reuse = _reusable(out_dir, keys, bool(stress_times)) if out_dir.is_dir() else \
             {"fields": False, "stress": False, "probes": False}
         if stress_times:
@@ -377,6 +404,8 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     if reuse["fields"]:
         rep.info(f"reusing {fields_path} (same modes, histories and options)")
         result["fields"] = on_root(lambda: _fields_summary(fields_path), comm)
+        _refresh_xdmf(out_dir / "fields.xdmf", lambda: write_fields_xdmf(fields_path), comm,
+                      rep)
     else:
         with rep.stage("reconstruct fields"):
             t0 = time.perf_counter()
@@ -412,12 +441,14 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
             result["seconds"]["stress"] = stress_stats["seconds"]
             result["seconds"]["fields"] -= stress_stats["seconds"]
         elif comm.rank == 0:                     # a new fields.h5 has no /stress
-            (out_dir / "stress.xdmf").unlink(missing_ok=True)
+            remove_xdmf(out_dir / "stress.xdmf")
 
     # ---- stresses of reused fields: written into the existing fields.h5
     if stress_times and reuse["fields"]:
         if reuse["stress"]:
             rep.info(f"reusing /stress of {fields_path}")
+            _refresh_xdmf(out_dir / "stress.xdmf", lambda: write_stress_xdmf(fields_path),
+                          comm, rep)
         else:
             with rep.stage("reconstruct stress"):
                 t0 = time.perf_counter()
@@ -432,7 +463,8 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         with rep.stage("reconstruct probes"):
             t0 = time.perf_counter()
             result["probes"] = on_root(lambda: _probes(modes_path, out_dir, full, user_probes,
-                                                       keys["probes"]), comm)
+                                                       user_probe_roles, keys["probes"]),
+                                       comm)
             result["seconds"]["probes"] = time.perf_counter() - t0
             rep.info(f"  {result['probes']['n_probes']} probes x {result['probes']['n_steps']}"
                      f" steps -> {out_dir / 'probes.h5'}, {out_dir / 'probes'}/*.csv")
@@ -443,7 +475,7 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     return result
 
 
-def _stress(path: Path, modes_path: Path, comm, stress_times, rep: Reporter, keys,
+def _stress(path: Path, modes_path: Path, comm: MPI.Comm, stress_times, rep: Reporter, keys,
             temporary: bool) -> dict:
     materials = on_root(lambda: _materials(modes_path), comm)
     stats = stress_from_fields(path, comm, stress_times, materials, rep=rep,
@@ -476,11 +508,13 @@ def _materials(modes_path: Path) -> dict:
         return hex_materials(case_from_modes(f))
 
 
-def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, key: str) -> dict:
+def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, user_roles,
+            key: str) -> dict:
     """Rank 0: probe histories (full resolution of the window) and rail moments."""
     t = info["t"]
     hist = probe_histories(modes_path, t, info["q"], info["q_dot"], info["q_ddot"],
-                           user_probes=user_probes, extra=info["extra"])
+                           user_probes=user_probes, user_roles=user_roles,
+                           extra=info["extra"])
     groups = {}
     if info["rails"]:
         rail = rail_moment_modes(modes_path, info["m"])

@@ -50,16 +50,16 @@ import os
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
-from ..io.atomic import write_text_atomic
+from ..fem.reference import hex_centre_gradients
 from ..io.parallel_h5 import h5py_parallel_ok
 from ..log import Reporter
-from ..mesh.model import hex_shape_gradients
 from ..parallel import on_root
 from ..schema import PART_ID
 from .fields import (
@@ -70,8 +70,9 @@ from .fields import (
     write_slab,
 )
 
-#: Centre gradients of the reference shape functions, (8, 3).
-_DN0 = hex_shape_gradients(np.zeros(3))[0]
+if TYPE_CHECKING:
+    from mpi4py import MPI
+
 #: Elements per block in :func:`element_stress` (bounds temporary memory).
 _BLOCK = 65536
 
@@ -93,23 +94,6 @@ def hex_materials(case: Case) -> dict[int, tuple[float, float]]:
 
     return {PART_ID[part]: (float(case[f"materials.{mat}.E"]), float(case[f"materials.{mat}.nu"]))
             for part, mat in SOLID_MATERIAL.items()}
-
-
-def centre_gradients(x: np.ndarray) -> np.ndarray:
-    """Physical shape-function gradients at the element centres.
-
-    Parameters
-    ----------
-    x
-        Nodal coordinates (nel, 8, 3).
-
-    Returns
-    -------
-    ndarray, shape (nel, 8, 3)
-        ``g[e, a, j] = dN_a / dx_j`` at ``xi = 0``.
-    """
-    jac = np.einsum("aj,eai->eji", _DN0, x)           # jac[e, j, i] = dx_i / dxi_j
-    return np.einsum("aj,eji->eai", _DN0, np.linalg.inv(jac).transpose(0, 2, 1))
 
 
 def _material_arrays(hex_part: np.ndarray, materials: Mapping[int, tuple[float, float]]
@@ -188,7 +172,7 @@ def element_stress(points: np.ndarray, hexes: np.ndarray, hex_part: np.ndarray,
     for s in range(0, nel, _BLOCK):
         e = slice(s, min(s + _BLOCK, nel))
         conn = hexes[e]
-        g = centre_gradients(points[conn])                        # (b, 8, 3)
+        g = hex_centre_gradients(points[conn])                    # (b, 8, 3)
         grad = np.einsum("teai,eaj->teij", u[:, conn], g)          # du_i / dx_j
         eps = 0.5 * (grad + grad.swapaxes(-1, -2))
         vm[:, e], eq[:, e] = strain_measures(eps, E[e], nu[e])
@@ -373,7 +357,7 @@ def select_steps(times: np.ndarray, wanted: Sequence[float]) -> np.ndarray:
     return pos.astype(np.int64)
 
 
-def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[float],
+def stress_from_fields(fields_path: str | os.PathLike, comm: MPI.Comm, times: Sequence[float],
                        materials: Mapping[int, tuple[float, float]], *,
                        rep: Reporter | None = None, attrs: Mapping[str, object] | None = None,
                        require_complete: bool = True) -> dict:
@@ -418,9 +402,9 @@ def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[flo
 
         with h5py.File(fields_path, "r") as f:
             return (int(f.attrs.get("complete", 0)), f["time"][()], f["fields/displacement"].shape,
-                    f["mesh/hexes"].shape, f["mesh/hexes"].dtype.str, f["mesh/hex_part"].dtype.str)
+                    f["mesh/hexes"].shape)
 
-    complete, stored, ushape, hshape, hdtype, pdtype = on_root(header, comm)
+    complete, stored, ushape, hshape = on_root(header, comm)
     if require_complete and complete != 1:  # the same decision on every rank
         raise ValueError(f"{fields_path} is not complete")
     sel = select_steps(stored, times)
@@ -473,8 +457,7 @@ def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[flo
         name = fields_path.name
         if name.startswith(".") and ".part-" in name:
             name = name[1:name.rindex(".part-")]
-        write_text_atomic(fields_path.with_name("stress.xdmf"),
-                          stress_xdmf(name, n, ne, t_sel, hdtype, pdtype))
+        write_stress_xdmf(fields_path, name)
 
     on_root(xdmf, comm)
     return {"n_times": n_sel, "n_hexes": ne, "seconds": time.perf_counter() - t_start,
@@ -487,7 +470,7 @@ def _max_op():
     return MPI.MAX
 
 
-def _write_stress(path: Path, comm, parallel: bool, vm: np.ndarray, eq: np.ndarray,
+def _write_stress(path: Path, comm: MPI.Comm, parallel: bool, vm: np.ndarray, eq: np.ndarray,
                   sel: np.ndarray, t_sel: np.ndarray, elems: slice, ne: int,
                   attrs: Mapping[str, object] | None = None) -> None:
     """Write ``/stress`` into ``fields.h5`` (parallel, or gathered to rank 0)."""
@@ -526,10 +509,33 @@ def _write_stress(path: Path, comm, parallel: bool, vm: np.ndarray, eq: np.ndarr
     check_collective(comm, error, f"writing /stress into {path}")
 
 
-def stress_xdmf(h5_name: str, n: int, ne: int, times: np.ndarray, hex_dtype: str = "<i8",
-                part_dtype: str = "<i4") -> str:
-    """XDMF temporal collection of ``/stress`` (cell data), one grid per selected time."""
-    from .fields import mesh_series_xdmf
+def write_stress_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Path:
+    """Write ``stress.xdmf`` (+ ``stress_views.h5``) next to ``h5_path``: ``/stress`` as
+    cell data, one grid per selected time (serial).
 
-    return mesh_series_xdmf(h5_name, n, ne, times, "stress", ("von_mises", "strain_eq"),
-                            "Scalar", "Cell", (len(times), ne), 8, hex_dtype, part_dtype)
+    Parameters
+    ----------
+    h5_path
+        A ``fields.h5`` with ``/stress`` (or the temporary file that becomes it).
+    name
+        File name the XDMF refers to (default: ``h5_path``'s name).
+
+    Returns
+    -------
+    Path
+        The XDMF file.
+    """
+    import h5py
+
+    from ..io.xdmf import H5Array, Series, hex_mesh, write_series
+
+    h5_path = Path(h5_path)
+    name = name or h5_path.name
+    with h5py.File(h5_path, "r") as f:
+        points, block = hex_mesh(f, name)
+        times = f["stress/time"][()]
+        series = [Series(k, H5Array.of(f, f"/stress/{k}", name), "Cell")
+                  for k in ("von_mises", "strain_eq")]
+    xdmf = h5_path.with_name("stress.xdmf")
+    write_series(xdmf, points, block, times, series)
+    return xdmf

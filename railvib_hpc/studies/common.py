@@ -47,7 +47,7 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -57,6 +57,9 @@ from ..errors import UserError
 from ..io.atomic import write_text_atomic
 from ..log import Reporter
 from ..parallel import on_root
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
 
 #: Bumped when the content of ``result.json`` changes (part of the variant digest).
 RESULT_FORMAT = "railvib_hpc.study/1"
@@ -249,7 +252,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
         ``duration``.
     """
-    from ..assess.standards import assess_probe
+    from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
     from ..assess.weighting import third_octave_rms
     from ..reconstruct.probes import probe_histories, write_probes_h5
     from ..reconstruct.stage import read_inputs
@@ -285,7 +288,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
             continue
         res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],
                            period=a_cfg["period"], fta_events=a_cfg["fta_events"],
-                           din4150_3_location="floor" if "slab" in name else "foundation",
+                           din4150_3_location=DIN4150_3_LOCATION_OF_ROLE[h["role"]],
                            din4150_2_events=a_cfg["din4150_2_events"] or None)
         utils = {s: b.get("utilisation") for s, b in res["standards"].items()}
         binding = [u for s, u in utils.items()
@@ -303,7 +306,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
             "n_steps": int(t.size), "duration": float(t[-1] - t[0]) if t.size else 0.0}
 
 
-def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm, rep: Reporter) -> dict:
+def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     """Compute (or reuse) the shared model of a study in ``<root>/model`` (collective)."""
     from ..modal.stage import run_modal_stage
 
@@ -314,7 +317,7 @@ def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm, rep: Reporter)
         return run_modal_stage(mcase, root / SHARED_DIR, comm, rep)
 
 
-def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm, rep: Reporter,
+def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
                 settings: dict[str, Any]) -> dict:
     """Run one variant (collective) unless it is finished; returns its result.
 
@@ -397,7 +400,7 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm, rep: 
     return {**result, "reused_result": False}
 
 
-def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm, rep: Reporter,
+def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm: MPI.Comm, rep: Reporter,
                     attempts: int = 4) -> tuple[dict, Case]:
     """Modal solve(s) until the modes reach ``band_hz``; the MBS case uses those below it.
 

@@ -77,7 +77,7 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     bad = [dom for dom in settings["domains"] if dom[0] <= lowest]
     if bad:
         raise StudySettingsError("reflection", [(
-            "domains", settings["domains"],
+            "study.reflection.domains", settings["domains"],
             f"the depth changes {[dom[0] for dom in bad]} m raise the fixed base to or above "
             f"the building base (z = {case['geometry.zbb']:g} m): a depth change must be "
             f"> {lowest:g} m")])

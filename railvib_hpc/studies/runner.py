@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..config import Case
 from ..log import Reporter
@@ -42,6 +42,9 @@ from .common import (
 from .report import text_table, write_report
 from .settings import StudySettingsError, study_settings
 
+if TYPE_CHECKING:
+    from mpi4py import MPI
+
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
                  "speed": speed, "thesis": thesis}
@@ -54,7 +57,7 @@ def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
     known = list(build_layout(case).probes)
     bad = [p for p in settings["probes"] if p not in known]
     if bad:
-        raise StudySettingsError(kind, [("probes", settings["probes"],
+        raise StudySettingsError(kind, [(f"study.{kind}.probes", settings["probes"],
                                          f"unknown probes {bad}; the mesh has: "
                                          + ", ".join(known))])
     plan = STUDY_MODULES[kind].plan(case, settings)
@@ -147,7 +150,7 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
             "variants": entries}
 
 
-def run_study(kind: str, case: Case, out: Path, comm, rep: Reporter, *,
+def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
               variants: Sequence[str] = (), merge_only: bool = False, prepare: bool = False,
               list_only: bool = False, study_set: Sequence[str] = (),
               settings: dict[str, Any] | None = None,
@@ -189,7 +192,7 @@ def run_study(kind: str, case: Case, out: Path, comm, rep: Reporter, *,
         0, or 2 when a selected variant failed (its ``failed.json`` says why).
     """
     t0 = time.perf_counter()
-    cfg = on_root(lambda: study_settings(kind, study_set, settings), comm)
+    cfg = on_root(lambda: study_settings(kind, study_set, settings, case), comm)
     plan = on_root(lambda: make_plan(kind, case, cfg), comm)
     root = Path(out) / kind
     chosen = on_root(lambda: select(plan, variants), comm) if variants else []

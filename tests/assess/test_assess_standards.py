@@ -268,3 +268,22 @@ def test_bad_histories():
     a2[5, 1] = np.nan
     with pytest.raises(ValueError, match=r"acceleration = .*finite"):
         assess_probe(t, a2, v, ["iso2631"])
+
+
+def test_registry_drives_schema_dispatch_and_report():
+    """One registry: the schema's choices, assess_probe's blocks and the titles come from it."""
+    from railvib_hpc.assess.standards import STANDARDS, Standard, standard
+    from railvib_hpc.schema import SCHEMA
+
+    param = SCHEMA["assessment"]["standards"]
+    assert param.choices == tuple(STANDARDS) == tuple(param.default)
+    assert all(isinstance(s, Standard) and s.name == k for k, s in STANDARDS.items())
+    t = np.arange(512) / 256.0
+    a = np.column_stack([np.sin(2 * np.pi * 8.0 * t)] * 3) * 1e-3
+    res = assess_probe(t, a, a / (2 * np.pi * 8.0))
+    assert list(res["standards"]) == list(STANDARDS)
+    for name, block in res["standards"].items():
+        assert block["title"] == STANDARDS[name].title
+        assert block["comparison_only"] == STANDARDS[name].comparison_only
+    with pytest.raises(ValueError, match="registered twice"):
+        standard("fta", "again", "velocity")

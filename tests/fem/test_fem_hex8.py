@@ -8,8 +8,9 @@ import scipy.linalg as la
 import scipy.sparse.linalg as spla
 from fem_tools import box_mesh, node_dofs, solid_matrices
 
-from railvib_hpc.errors import MeshError
+from railvib_hpc.errors import UserError
 from railvib_hpc.fem import (
+    ElementGeometryError,
     assemble_vector,
     element_dofs,
     eliminate_dofs,
@@ -185,10 +186,15 @@ def test_consistent_mass_exact_on_parallelepiped():
     assert np.allclose(Me[1::3, 2::3], 0.0, atol=0)
 
 
-def test_inverted_element_raises():
+def test_inverted_element_raises_value_error_not_user_error():
+    """Kernels raise a ValueError (ElementGeometryError); the stages make it a MeshError."""
     pts, hexes = box_mesh(1, 1, 1)
-    with pytest.raises(MeshError):
-        hex8_stiffness(pts[hexes[:, [4, 5, 6, 7, 0, 1, 2, 3]]], 1e8, 0.3)
+    inverted = pts[hexes[:, [4, 5, 6, 7, 0, 1, 2, 3]]]
+    for kernel in (lambda x: hex8_stiffness(x, 1e8, 0.3), hex8_volume):
+        with pytest.raises(ElementGeometryError, match="non-positive") as info:
+            kernel(inverted)
+        assert isinstance(info.value, ValueError)
+        assert not isinstance(info.value, UserError)
 
 
 def _cantilever_tip_ratio(nu: float, formulation: str, shape=(20, 2, 2)) -> float:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from railvib_hpc.cli import run
+from railvib_hpc.constants import STANDARD_GRAVITY
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 COARSE = ["--set", "mesh.refinement=0.5", "--set", "modal.n_modes=12"]
@@ -48,10 +49,10 @@ def test_wheelset_passage_writes_mbs_h5_and_plots(modal_dir, tmp_path):
     # entry on the rigid rail at x_start = 0, exit when the wheel reaches the rail end
     assert x[0, 0] == pytest.approx(0.0)
     assert x[-1, 0] == pytest.approx(27.6, abs=30.0 * stats["dt"])
-    # the wheelset's weight alone: 1568 kg * 9.81 / 2 = 7691 N per wheel (less 0.5 N: the
+    # the wheelset's weight alone: 1568 kg * g / 2 = 7688 N per wheel (less 0.5 N: the
     # suspension springs, 25 kN/m, stretch by the 20 um Hertz penetration)
-    assert force[0] == pytest.approx(0.5 * 1568 * 9.81 - 25e3 * 20.0e-6, rel=2e-5)
-    assert np.allclose(stats["mean_contact_force"], 0.5 * 1568 * 9.81, rtol=0.01)
+    assert force[0] == pytest.approx(0.5 * 1568 * STANDARD_GRAVITY - 25e3 * 20.0e-6, rel=2e-5)
+    assert np.allclose(stats["mean_contact_force"], 0.5 * 1568 * STANDARD_GRAVITY, rtol=0.01)
     assert stats["loss_of_contact_steps"] == 0
     for name in ("contact_force", "wheel_displacement", "rail_deflection"):
         png = out / f"mbs_{name}.png"
@@ -83,7 +84,7 @@ def test_static_correction_softens_the_track(modal_dir, tmp_path):
     # 12 modes miss most of the local rail flexibility; the correction restores it
     assert w_full < 1.5 * w_modal < 0.0
     # the rail-DOF loads carry the wheel forces (Hermite: sum of the w-loads = -sum F)
-    assert g[:, 0::2].sum(axis=1) == pytest.approx(-2 * 0.5 * 1568 * 9.81, rel=0.02)
+    assert g[:, 0::2].sum(axis=1) == pytest.approx(-2 * 0.5 * 1568 * STANDARD_GRAVITY, rel=0.02)
     assert np.allclose(x_rr, x_rr.T) and np.all(np.diag(x_rr) >= 0)
 
 
@@ -93,7 +94,7 @@ def test_moving_force_and_train_and_irregularity(modal_dir, tmp_path):
     assert _mbs(out, "vehicle.type=moving_force", "vehicle.axle_offsets=[0, -2.5]") == 0
     with h5py.File(out / "mbs.h5", "r") as f:
         assert f["wheels/contact_force"].shape[1] == 4
-        assert np.allclose(f["wheels/contact_force"][()], 0.5 * 1568 * 9.81)
+        assert np.allclose(f["wheels/contact_force"][()], 0.5 * 1568 * STANDARD_GRAVITY)
     assert _mbs(out, "vehicle.type=vehicle", "irregularity.type=fra",
                 "irregularity.track_class=6", "vehicle.speed=40") == 0
     with h5py.File(out / "mbs.h5", "r") as f:

@@ -13,6 +13,7 @@ import pytest
 from mbs_beams import supported_beam_fe
 from scipy.linalg import eigh
 
+from railvib_hpc.constants import STANDARD_GRAVITY
 from railvib_hpc.mbs import RailCoupling, SuspendedWheelset, simulate_vehicle
 from railvib_hpc.mbs.static_correction import ContactResidual, residual_flexibility
 
@@ -78,7 +79,7 @@ def test_fe_track_matches_the_semi_analytic_solution(track):
 
 
 def test_standing_wheel_rail_deflection_within_5_percent(track):
-    exact = -discrete_support_deflection(0.5 * 1568.0 * 9.81, X0)
+    exact = -discrete_support_deflection(0.5 * 1568.0 * STANDARD_GRAVITY, X0)
     # 20 of 481 modes (up to 1.47 kHz) give the static deflection within 5 % (2.2 %);
     # 10 modes (up to 444 Hz) do not (16 %)
     res, _ = standing(track, 20, corrected=False)

@@ -255,3 +255,18 @@ def test_anti_roll_bar_static_roll_stiffness():
     a, b = RailVehicle(k_antiroll=0.0).stiffness_matrix(), RailVehicle().stiffness_matrix()
     diff = np.abs(b - a)
     assert set(np.flatnonzero(diff.sum(axis=0))) == {2, 5, 8}
+
+
+def test_every_vehicle_satisfies_the_vehicle_protocol():
+    from railvib_hpc.mbs import SuspendedWheelset, Vehicle
+
+    for veh in (SuspendedWheelset(), RailVehicle(), Train([RailVehicle(), RailVehicle()])):
+        assert isinstance(veh, Vehicle), type(veh).__name__
+        assert len(veh.wheel_rail) == len(veh.wheel_offsets) == veh.n_wheels
+        assert veh.contact_matrix().shape == (veh.n_dof, veh.n_wheels)
+    assert not isinstance(object(), Vehicle)
+    # the integrators name what a non-vehicle lacks
+    from railvib_hpc.mbs import simulate_vehicle
+
+    with pytest.raises(TypeError, match=r"not a railvib_hpc\.mbs\.Vehicle: it lacks conicity"):
+        simulate_vehicle(np.ones(2), 0.0, None, object(), 0.0, 1.0, 1.0)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import h5py
@@ -12,6 +11,7 @@ from mpi4py import MPI
 
 from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
+from railvib_hpc.io.xdmf import read_xdmf
 from railvib_hpc.schema import PART_ID
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
@@ -54,7 +54,7 @@ def test_modes_file_contents(modal_run):
         assert f["pads/nodes"].shape == (3 * 74, 2)
         assert np.bincount(f["pads/direction"][()]).tolist() == [74, 74, 74]
         assert np.all(f["pads/damping"][()] == case["pads.cz"])
-    from railvib_hpc.io.mesh_io import read_mesh_h5
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
 
     mesh, _ = read_mesh_h5(modal_run / "mesh.h5")
     vol = mesh.hex_volumes()
@@ -71,15 +71,31 @@ def test_modes_file_contents(modal_run):
 
 
 def test_modes_xdmf_matches_h5(modal_run):
-    root = ET.parse(modal_run / "modes.xdmf").getroot()
-    grids = [g for g in root.iter("Grid") if g.attrib.get("GridType") == "Uniform"]
+    """Step k of modes.xdmf shows mode k: row k of /modes/translation, through the views."""
+    grids = read_xdmf(modal_run / "modes.xdmf")
     assert len(grids) == 12
     with h5py.File(modal_run / "modes.h5", "r") as f:
-        for item in root.iter("DataItem"):
-            if item.attrib.get("Format") == "HDF":
-                name, dset = item.text.strip().split(":")
-                assert name == "modes.h5"
-                assert f[dset].shape == tuple(int(d) for d in item.attrib["Dimensions"].split())
+        freq = f["modes/frequency_hz"][()]
+        for k, g in enumerate(grids):
+            assert g["time"] == k + 1 and g["name"] == f"mode_{k + 1}_{freq[k]:.4f}Hz"
+            assert np.array_equal(g["points"], f["mesh/points"][()])
+            assert np.array_equal(g["cells"], f["mesh/hexes"][()])
+            center, shape = g["attributes"]["mode_shape"]
+            assert center == "Node" and np.array_equal(shape, f["modes/translation"][k])
+            assert np.array_equal(g["attributes"]["part_id"][1], f["mesh/hex_part"][()])
+
+
+def test_reuse_rewrites_modes_xdmf_of_the_earlier_form(modal_run, capsys):
+    """A modes.xdmf without its views (the HyperSlab form, which ParaView's XDMF 3 reader
+    shows without data) is rewritten when modes.h5 is reused."""
+    (modal_run / "modes_views.h5").unlink()
+    stamp = (modal_run / "modes.h5").stat().st_mtime_ns
+    capsys.readouterr()
+    assert run(["modal", str(BASELINE), *ARGS, "--out", str(modal_run)]) == 0
+    text = capsys.readouterr().out
+    assert "reusing" in text and f"rewrote {modal_run / 'modes.xdmf'}" in text
+    assert (modal_run / "modes.h5").stat().st_mtime_ns == stamp
+    assert len(read_xdmf(modal_run / "modes.xdmf")) == 12
 
 
 def test_rerun_reuses_and_physics_change_recomputes(modal_run, capsys):
@@ -137,9 +153,9 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     by the modal stage and refused by the MBS with a clear message."""
     from modal_cases import energy_sum_allowance, modes_from_file
 
-    from railvib_hpc.io.mesh_io import read_mesh_h5
     from railvib_hpc.io.modes_io import read_strain_energies
     from railvib_hpc.mbs.stage import MBSInputError, modal_damping
+    from railvib_hpc.mesh.mesh_io import read_mesh_h5
     from railvib_hpc.modal.dofmap import build_dofmap
 
     energies = read_strain_energies(modal_run / "modes.h5")

@@ -62,7 +62,8 @@ def box_mesh(nx: int = 3, ny: int = 2, nz: int = 2, distort: float = 0.15) -> Me
     part = np.where(zc < nz / 2, PART_ID["subgrade"], PART_ID["slab"]).astype(np.int32)
     return Mesh(points=pts, hexes=hexes, hex_part=part, lines=np.zeros((0, 2), np.int64),
                 line_part=np.zeros(0, np.int32), node_sets={"bottom": np.flatnonzero(
-                    pts[:, 2] == 0.0)}, probes={"centre": (nx / 2, ny / 2, nz / 2)})
+                    pts[:, 2] == 0.0)}, probes={"centre": (nx / 2, ny / 2, nz / 2)},
+                probe_roles={"centre": "floor"})
 
 
 def write_synthetic_modes(path: Path, mesh: Mesh, translation: np.ndarray) -> None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import io
-import xml.etree.ElementTree as ET
 
 import h5py
 import numpy as np
@@ -17,6 +16,7 @@ from reconstruct_cases import (
     write_static_basis,
 )
 
+from railvib_hpc.io.xdmf import read_xdmf, views_path
 from railvib_hpc.log import Reporter
 from railvib_hpc.reconstruct import (
     block_steps_for_budget,
@@ -42,27 +42,24 @@ def _reference(modes, t, q, qd, qdd, steps, extra=()):
 
 
 def check_xdmf(xdmf_path, h5_path):
-    """Every HDF DataItem has the shape of its dataset; every HyperSlab selects a row."""
-    root = ET.parse(xdmf_path).getroot()
-    grids = [g for g in root.iter("Grid") if g.attrib.get("GridType") == "Uniform"]
+    """Read the XDMF file as a reader does: every grid shows the mesh of ``h5_path`` and
+    every attribute of step k is row k of its dataset there (through the views)."""
+    grids = read_xdmf(xdmf_path)
+    assert views_path(xdmf_path).is_file()
     with h5py.File(h5_path, "r") as f:
-        for item in root.iter("DataItem"):
-            if item.attrib.get("Format") == "HDF":
-                name, dset = item.text.strip().split(":")
-                assert name == h5_path.name
-                dims = tuple(int(d) for d in item.attrib["Dimensions"].split())
-                assert f[dset].shape == dims, dset
-                prec = int(item.attrib.get("Precision", 4))
-                assert f[dset].dtype.itemsize == prec, dset
-            if item.attrib.get("ItemType") == "HyperSlab":
-                sel, data = list(item)
-                start, stride, count = np.array(sel.text.split(), int).reshape(3, -1)
-                full = tuple(int(d) for d in data.attrib["Dimensions"].split())
-                assert np.all(start + (count - 1) * stride < full)
-                assert tuple(count[1:]) == tuple(int(d) for d in
-                                                 item.attrib["Dimensions"].split())
-        times = [float(g.find("Time").attrib["Value"]) for g in grids]
-    return grids, times
+        for k, g in enumerate(grids):
+            assert g["topology"] == "Hexahedron" and g["n_cells"] == f["mesh/hexes"].shape[0]
+            assert np.array_equal(g["points"], f["mesh/points"][()])
+            assert np.array_equal(g["cells"], f["mesh/hexes"][()])
+            for name, (center, data) in g["attributes"].items():
+                if name == "part_id":
+                    assert center == "Cell" and np.array_equal(data, f["mesh/hex_part"][()])
+                    continue
+                group = "fields" if f"fields/{name}" in f else "stress"
+                assert center == ("Node" if group == "fields" else "Cell")
+                assert data.dtype == f[group][name].dtype
+                assert np.array_equal(data, f[group][name][k]), (name, k)
+    return grids, [g["time"] for g in grids]
 
 
 @pytest.mark.mpi
@@ -172,7 +169,8 @@ def test_serial_failure_leaves_no_file_and_keeps_the_old_one(coarse_modes, tmp_p
     with pytest.raises(OSError, match="disk full"):
         reconstruct_fields(coarse_modes, out, MPI.COMM_SELF, t, 2 * q, qd, qdd)
     assert out.read_bytes() == before                 # the previous result is untouched
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["fields.h5", "fields.xdmf"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fields.h5", "fields.xdmf",
+                                                          "fields_views.h5"]
 
 
 def test_invalid_histories_are_rejected(coarse_modes, tmp_path):

@@ -16,7 +16,7 @@ from reconstruct_cases import (
 )
 
 from railvib_hpc.errors import UserError
-from railvib_hpc.mesh.search import hex_shape_values
+from railvib_hpc.fem.reference import hex_shape_values
 from railvib_hpc.reconstruct import (
     ProbeError,
     mesh_probes,
@@ -144,3 +144,56 @@ def test_probe_histories_are_q_times_phi(linear_modes):
     phi, _, _ = probe_modes(path, [mesh_probes(path)["centre"]], 2)
     for key, h in (("displacement", q), ("velocity", qd), ("acceleration", qdd)):
         assert np.allclose(hist["centre"][key], h @ phi[0], rtol=1e-14, atol=0)
+
+
+def test_probe_roles_travel_from_the_definition_to_probes_h5_and_the_assessment(linear_modes,
+                                                                                tmp_path):
+    """Mesh probes keep the role they were defined with; user probes default to 'ground'."""
+    from railvib_hpc.assess.stage import read_probes
+    from railvib_hpc.assess.standards import DIN4150_3_LOCATION_OF_ROLE
+
+    path, _, _, _ = linear_modes
+    t, q, qd, qdd = histories(6, 3)
+    hist = probe_histories(path, t, q, qd, qdd,
+                           user_probes={"u1": (1.0, 1.0, 1.0), "u2": (2.0, 1.0, 0.5)},
+                           user_roles={"u2": "wall"})
+    assert {k: h["role"] for k, h in hist.items()} == {"centre": "floor", "u1": "ground",
+                                                       "u2": "wall"}
+    write_probes_h5(tmp_path / "probes.h5", hist)
+    back = read_probes(tmp_path / "probes.h5")
+    assert {k: h["role"] for k, h in back.items()} == {"centre": "floor", "u1": "ground",
+                                                       "u2": "wall"}
+    assert [DIN4150_3_LOCATION_OF_ROLE[h["role"]] for h in back.values()] == [
+        "floor", "foundation", "foundation"]
+    with pytest.raises(ProbeError, match="role 'roof' is not one of"):
+        probe_histories(path, t, q, qd, qdd, user_probes={"u1": (1.0, 1.0, 1.0)},
+                        user_roles={"u1": "roof"})
+
+
+def test_layout_probes_carry_their_roles():
+    from railvib_hpc.config import load_case
+    from railvib_hpc.mesh.layout import build_layout
+    from railvib_hpc.schema import PROBE_ROLES
+
+    layout = build_layout(load_case(None))
+    assert set(layout.probe_roles) == set(layout.probes)
+    assert set(layout.probe_roles.values()) == set(PROBE_ROLES)
+    assert layout.probe_roles["slab1"] == layout.probe_roles["slab2"] == "floor"
+    assert layout.probe_roles["footing"] == "foundation"
+    assert layout.probe_roles["basement_wall"] == "wall"
+
+
+def test_modes_without_probe_roles_are_named(linear_modes, tmp_path):
+    """A modes.h5 of a version before probe roles: one clear error, not a silent default."""
+    import shutil
+
+    path, _, _, _ = linear_modes
+    old = tmp_path / "modes.h5"
+    shutil.copy(path, old)
+    with h5py.File(old, "a") as f:
+        del f["mesh/probes/roles"]
+    t, q, qd, qdd = histories(4, 3)
+    with pytest.raises(ProbeError, match=r"stores no probe roles.*rerun 'railvib modal'"):
+        probe_histories(old, t, q, qd, qdd)
+    assert list(probe_histories(old, t, q, qd, qdd, mesh=False,
+                                user_probes={"u": (1.0, 1.0, 1.0)})) == ["u"]

@@ -16,6 +16,7 @@ from reconstruct_cases import (
     write_mbs,
     write_static_basis,
 )
+from test_reconstruct_fields import check_xdmf
 
 from railvib_hpc.errors import UserError
 from railvib_hpc.log import Reporter
@@ -71,7 +72,8 @@ def test_stage_outputs_equal_serial_superposition(coarse_modes, shared_tmp):
             assert relative_error(f["fields/" + name][()], ref) < 1e-12
         assert f["stress/von_mises"].shape == (2, len(mesh["hexes"]))
         assert np.allclose(f["stress/time"][()], [t[9], t[29]])
-    assert (out / "fields.xdmf").is_file() and (out / "stress.xdmf").is_file()
+    check_xdmf(out / "fields.xdmf", out / "fields.h5")
+    check_xdmf(out / "stress.xdmf", out / "fields.h5")
     with h5py.File(out / "probes.h5", "r") as f:
         names = [n.decode() for n in f["names"][()]]
         assert names[-1] == "p1" and len(names) == 11  # 10 mesh probes + p1
@@ -139,6 +141,22 @@ def test_rerun_reuses_and_option_changes_recompute(coarse_modes, shared_tmp):
         assert "reusing" in text and f"reusing {out / 'probes.h5'}" in text
     comm.Barrier()
     assert {p: (out / p).stat().st_mtime_ns for p in stamp} == stamp
+    # XDMF files of the earlier form (no views) are rewritten; the data are reused
+    if comm.rank == 0:
+        for name in ("fields", "stress"):
+            (out / f"{name}_views.h5").unlink()
+    comm.Barrier()
+    stream = io.StringIO()
+    res, _ = _run(coarse_modes, mbs, out, stream=stream, **kw)
+    assert res["reused"] == {"fields": True, "stress": True, "probes": True}
+    if comm.rank == 0:
+        text = stream.getvalue()
+        assert f"rewrote {out / 'fields.xdmf'}" in text
+        assert f"rewrote {out / 'stress.xdmf'}" in text
+    comm.Barrier()
+    assert {p: (out / p).stat().st_mtime_ns for p in stamp} == stamp
+    check_xdmf(out / "fields.xdmf", out / "fields.h5")
+    check_xdmf(out / "stress.xdmf", out / "fields.h5")
     # other probes: only the probes are recomputed
     res, _ = _run(coarse_modes, mbs, out, **{**kw, "user_probes": [(15.0, -9.0, 4.0)]})
     assert res["reused"] == {"fields": True, "stress": True, "probes": False}
@@ -152,6 +170,7 @@ def test_rerun_reuses_and_option_changes_recompute(coarse_modes, shared_tmp):
     with h5py.File(out / "fields.h5", "r") as f:
         assert f["fields/displacement"].dtype == np.float32
         assert int(f.attrs["stress_complete"]) == 1
+    check_xdmf(out / "fields.xdmf", out / "fields.h5")          # float32 views
     # a new multibody result (other digest) recomputes everything
     mbs, _ = _inputs(shared_tmp, coarse_modes, digest="mbs-2")
     res, _ = _run(coarse_modes, mbs, out, float32=True, **kw)

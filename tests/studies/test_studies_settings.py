@@ -43,9 +43,10 @@ def test_every_problem_named_with_key_value_and_allowed():
         study_settings("convergence", ["levels=[0.5, 7]", "tolerence=3", "n_frequencies=x"])
     msg = str(exc.value)
     assert "3 problems" in msg
-    assert "levels = 7.0: must satisfy 0 < value <= 6" in msg
-    assert "tolerence = 3: unknown setting" in msg and "did you mean 'tolerance'" in msg
-    assert "n_frequencies = 'x': expected an integer" in msg
+    assert "study.convergence.levels = [0.5, 7]: entry 7.0 must satisfy 0 < value <= 6" in msg
+    assert "study.convergence.tolerence = 3: unknown setting" in msg
+    assert "did you mean 'study.convergence.tolerance'" in msg
+    assert "study.convergence.n_frequencies = 'x': expected an integer" in msg
     with pytest.raises(StudySettingsError, match="need at least 2 refinement levels"):
         study_settings("convergence", ["levels=[1.0]"])
     with pytest.raises(StudySettingsError, match="needs one name per entry of domains"):
@@ -212,7 +213,8 @@ def test_reflection_and_speed_verdicts(case):
 def test_cli_study_errors_and_list(capsys, tmp_path):
     assert run(["study", "convergence", str(BASELINE), "--study-set", "levels=[0.5, 9]",
                 "--out", str(tmp_path)]) == 2
-    assert "levels = 9.0: must satisfy 0 < value <= 6" in capsys.readouterr().err
+    assert ("study.convergence.levels = [0.5, 9]: entry 9.0 must satisfy 0 < value <= 6"
+            in capsys.readouterr().err)
     assert run(["study", "speed", str(BASELINE), "--variant", "v33", "--list",
                 "--out", str(tmp_path)]) == 2
     assert "unknown variant of the speed study" in capsys.readouterr().err
@@ -254,3 +256,25 @@ def test_thesis_study_plan_and_table(case):
     assert "not a fitted value" in a["verdict"]["text"]
     with pytest.raises(StudySettingsError, match="drop_heights"):
         study_settings("thesis", ["drop_heights=[-1e-5]"])
+
+
+def test_study_tables_in_the_case_file_use_the_case_schema_engine(tmp_path):
+    """[study.KIND] tables are case keys: load_case checks them; --study-set overrides them."""
+    from railvib_hpc.errors import CaseError
+
+    path = tmp_path / "case.toml"
+    path.write_text('[study.speed]\nspeeds = [40, 20]\nprobes = ["slab1"]\n')
+    case = load_case(path)
+    s = study_settings("speed", case=case)
+    assert s["speeds"] == [20.0, 40.0] and s["probes"] == ["slab1"]
+    assert study_settings("speed", ["speeds=[5]"], case=case)["speeds"] == [5.0]
+    path.write_text("[study.speed]\nspeeds = [40, -20]\n")
+    with pytest.raises(CaseError, match=r"study\.speed\.speeds = \[40, -20\]: entry -20.0 "
+                                        "must be > 0"):
+        load_case(path)
+    path.write_text('[study.reflection]\nnames = ["a"]\n')
+    with pytest.raises(CaseError, match="needs one name per entry of domains"):
+        load_case(path)
+    with pytest.raises(StudySettingsError) as info:
+        study_settings("speed", ["speeds=[x]"])
+    assert isinstance(info.value, CaseError)

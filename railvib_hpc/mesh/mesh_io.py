@@ -11,10 +11,12 @@ Layout of ``mesh.h5``::
     /mesh/probes/names      (p,) str         named probe points
     /mesh/probes/coords     (p, 3) float64
     /mesh/probes/nearest_node (p,) int64
+    /mesh/probes/roles      (p,) str         role of each probe (schema.PROBE_ROLES)
     attrs: part_names (JSON {id: name}), inputs_sha256, railvib_version, case_toml
 
-The XDMF file holds two grids sharing the points: ``solids`` (Hexahedron) and
-``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell data.
+The XDMF file (:mod:`railvib_hpc.io.xdmf`) holds two grids sharing the points: ``solids``
+(Hexahedron) and ``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell
+data.
 """
 
 from __future__ import annotations
@@ -24,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh.model import Mesh
+from ..io.atomic import atomic_path, write_text_atomic
+from ..io.xdmf import CellBlock, H5Array, mesh_document
 from ..schema import PART_ID
-from .atomic import atomic_path, write_text_atomic
+from .model import Mesh
 
 
 def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
@@ -48,6 +51,8 @@ def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
         pr.create_dataset("names", data=np.array(names, dtype=h5py.string_dtype()))
         coords = np.array([mesh.probes[n] for n in names], dtype=float).reshape(-1, 3)
         pr.create_dataset("coords", data=coords)
+        pr.create_dataset("roles", data=np.array([mesh.probe_roles.get(n, "") for n in names],
+                                                 dtype=h5py.string_dtype()))
         pr.create_dataset("nearest_node",
                           data=np.array([mesh.nearest_node(c) for c in coords], dtype=np.int64))
         f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
@@ -63,47 +68,31 @@ def read_mesh_h5(path: Path) -> tuple[Mesh, dict]:
         g = f["mesh"]
         names = [n.decode() if isinstance(n, bytes) else n for n in g["probes/names"][()]]
         coords = g["probes/coords"][()]
+        roles = ([r.decode() if isinstance(r, bytes) else r for r in g["probes/roles"][()]]
+                 if "probes/roles" in g else [])
         mesh = Mesh(points=g["points"][()], hexes=g["hexes"][()], hex_part=g["hex_part"][()],
                     lines=g["lines"][()], line_part=g["line_part"][()],
                     node_sets={k: v[()] for k, v in g["node_sets"].items()},
-                    probes={n: tuple(map(float, c)) for n, c in zip(names, coords)})
+                    probes={n: tuple(map(float, c)) for n, c in zip(names, coords)},
+                    probe_roles={n: r for n, r in zip(names, roles) if r})
         attrs = {k: (v.decode() if isinstance(v, bytes) else v) for k, v in f.attrs.items()}
     return mesh, attrs
 
 
 def mesh_xdmf(h5_name: str, mesh: Mesh) -> str:
-    """XDMF text describing ``mesh.h5`` (relative path ``h5_name``)."""
-    n, ne, nl = mesh.n_nodes, len(mesh.hexes), len(mesh.lines)
-    h5 = f'Format="HDF">{h5_name}:/mesh'
+    """XDMF text describing ``mesh.h5`` (relative path ``h5_name``).
 
-    geo = (f'<Geometry GeometryType="XYZ"><DataItem Dimensions="{n} 3" NumberType="Float" '
-           f'Precision="8" {h5}/points</DataItem></Geometry>')
-    return f"""<?xml version="1.0" ?>
-<Xdmf Version="3.0">
-  <Domain>
-    <Grid Name="railvib_model" GridType="Collection" CollectionType="Spatial">
-      <Grid Name="solids" GridType="Uniform">
-        <Topology TopologyType="Hexahedron" NumberOfElements="{ne}">
-          <DataItem Dimensions="{ne} 8" NumberType="Int" Precision="8" {h5}/hexes</DataItem>
-        </Topology>
-        {geo}
-        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
-          <DataItem Dimensions="{ne}" NumberType="Int" Precision="4" {h5}/hex_part</DataItem>
-        </Attribute>
-      </Grid>
-      <Grid Name="beams_and_pads" GridType="Uniform">
-        <Topology TopologyType="Polyline" NodesPerElement="2" NumberOfElements="{nl}">
-          <DataItem Dimensions="{nl} 2" NumberType="Int" Precision="8" {h5}/lines</DataItem>
-        </Topology>
-        {geo}
-        <Attribute Name="part_id" AttributeType="Scalar" Center="Cell">
-          <DataItem Dimensions="{nl}" NumberType="Int" Precision="4" {h5}/line_part</DataItem>
-        </Attribute>
-      </Grid>
-    </Grid>
-  </Domain>
-</Xdmf>
-"""
+    Two grids share the points: ``solids`` (Hexahedron) and ``beams_and_pads``
+    (Polyline; left out when the mesh has no line elements), each with ``part_id``.
+    """
+    def arr(name: str, a: np.ndarray) -> H5Array:
+        return H5Array(h5_name, f"/mesh/{name}", a.shape, a.dtype.str)
+
+    return mesh_document(arr("points", mesh.points), [
+        CellBlock("solids", "Hexahedron", arr("hexes", mesh.hexes),
+                  arr("hex_part", mesh.hex_part)),
+        CellBlock("beams_and_pads", "Polyline", arr("lines", mesh.lines),
+                  arr("line_part", mesh.line_part))])
 
 
 def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> dict[str, Path]:

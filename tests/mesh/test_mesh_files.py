@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 
 from railvib_hpc.cli import run
-from railvib_hpc.io.mesh_io import read_mesh_h5
+from railvib_hpc.mesh.mesh_io import read_mesh_h5
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 

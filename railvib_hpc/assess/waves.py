@@ -1,0 +1,35 @@
+"""Wave speeds of the subgrade and the detection of a wave's arrival in a probe history."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from ..config import Case
+
+__all__ = ["wave_arrival", "wave_speeds"]
+
+
+def wave_speeds(case: Case) -> tuple[float, float]:
+    """P- and S-wave speeds of the subgrade [m/s]."""
+    e, nu, rho = (case[f"materials.subgrade.{k}"] for k in ("E", "nu", "rho"))
+    c_p = math.sqrt(e * (1 - nu) / (rho * (1 + nu) * (1 - 2 * nu)))
+    c_s = math.sqrt(e / (2 * rho * (1 + nu)))
+    return c_p, c_s
+
+
+def wave_arrival(t: np.ndarray, acceleration: np.ndarray, t_entry: float,
+                 threshold: float) -> float:
+    """First time after ``t_entry`` with ``|a| >= threshold * peak`` (NaN: never)."""
+    mag = np.linalg.norm(acceleration, axis=1)
+    after = t >= t_entry
+    if not after.any():
+        return float("nan")
+    peak = mag[after].max()
+    if peak <= 0.0:
+        return float("nan")
+    idx = np.flatnonzero(after & (mag >= threshold * peak))
+    return float(t[idx[0]]) if idx.size else float("nan")

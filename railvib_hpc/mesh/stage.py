@@ -20,6 +20,43 @@ from .model import Mesh
 #: Case sections that determine the mesh (its reuse key).
 MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
 
+#: Aspect ratio (longest / shortest edge of a hexahedron) above which the mesh check warns:
+#: the default shape-check warning limit of ANSYS Mechanical APDL for solids (SHPP,
+#: "Aspect ratio", warning 20; error 1e6). Flat elements bend poorly (B-bar locks less but
+#: is too soft) and stiffen the eigenproblem as (aspect ratio)^2.
+ASPECT_RATIO_WARNING = 20.0
+
+#: Relative round-off of the lowest eigenvalue that a tiny element may cause, as a multiple
+#: of modal.tol. An element of size h in a model of size L (wave speed c) raises the largest
+#: eigenvalue to ~12 c^2 / h^2 against ~(c / L)^2 for the lowest, so the lowest eigenpairs
+#: carry a relative round-off ~ u 12 (L / h)^2 (railvib_hpc.tolerances, item 1): the check
+#: warns when that exceeds modal.tol, i.e. when h < L sqrt(12 u / tol) (2.6 cm for a 50 m
+#: model at tol = 1e-8).
+TINY_ELEMENT_FACTOR = 12.0
+
+
+def quality_warnings(quality: dict, tol: float) -> list[str]:
+    """Warnings of the mesh check: extreme aspect ratios and tiny elements (see
+    :data:`ASPECT_RATIO_WARNING`, :data:`TINY_ELEMENT_FACTOR`); ``tol`` is modal.tol."""
+    from ..tolerances import EPS
+
+    out = []
+    ar = quality.get("max_aspect_ratio", 1.0)
+    if ar > ASPECT_RATIO_WARNING:
+        out.append(f"max aspect ratio {ar:.3g} > {ASPECT_RATIO_WARNING:g} (ANSYS's shape-check "
+                   "warning limit): flat elements bend poorly and make the eigenproblem "
+                   "ill-conditioned; refine across the thin direction or coarsen along it")
+    h, size = quality.get("min_edge"), quality.get("model_size")
+    if h is not None and size and h > 0:
+        roundoff = EPS * TINY_ELEMENT_FACTOR * (size / h) ** 2
+        if roundoff > tol:
+            out.append(f"tiny elements: shortest edge {h:.3g} m in a {size:.3g} m model; the "
+                       f"lowest eigenpairs carry a relative round-off of ~{roundoff:.1e} > "
+                       f"modal.tol = {tol:.1e} (edges below "
+                       f"{size * (TINY_ELEMENT_FACTOR * EPS / tol) ** 0.5:.3g} m); merge or "
+                       "remove slivers")
+    return out
+
 
 def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     """Generate the model with gmsh (or read ``mesh.file``) and attach the probe points.
@@ -52,6 +89,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     report = {
         "source": source,
         "quality": quality,
+        "warnings": quality_warnings(quality, case["modal.tol"]),
         "elements_per_part": mesh.counts_per_part(),
         "nodes_per_part": mesh.nodes_per_part(),
         "volume_per_part": mesh.volume_per_part(),
@@ -95,6 +133,8 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
                 reporter.info(f"reusing {h5} (same mesh inputs)")
                 report = json.loads(report_path.read_text())
                 report["reused"] = True
+                report["warnings"] = quality_warnings(report["quality"], case["modal.tol"])
+                _print_warnings(report, reporter)
                 return mesh, report
         except (OSError, KeyError, ValueError) as exc:
             reporter.info(f"ignoring unreadable {h5} ({exc}); rebuilding")
@@ -105,4 +145,10 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0
     report["reused"] = False
     write_text_atomic(report_path, json.dumps(report, indent=2))
+    _print_warnings(report, reporter)
     return mesh, report
+
+
+def _print_warnings(report: dict, reporter: Reporter) -> None:
+    for warning in report.get("warnings", []):
+        reporter.info(f"WARNING (mesh check): {warning}")

@@ -116,6 +116,8 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"])
+    for warning in result.warnings:
+        rep.info(f"WARNING: {warning}")
     if result.stats.get("out_of_core"):
         rep.info(f"  MUMPS out of core (factor on disk): in-core estimate "
                  f"{result.stats['factor_memory_in_core_gb']:.1f} GB, out of core "
@@ -136,6 +138,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
         stats = dict(result.stats)
+        stats["convergence_warnings"] = list(result.warnings)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
         rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)

@@ -6,13 +6,15 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text_atomic
 from ..io.mesh_io import read_mesh_h5, write_mesh_files
 from ..log import Reporter
-from ..schema import PARTS
+from ..schema import PART_ID, PARTS
 from .gmsh_model import generate, read_msh
 from .layout import build_layout
 from .model import Mesh
@@ -68,14 +70,17 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     """
     t0 = time.perf_counter()
     layout = build_layout(case)
+    derived, dropped = [], {}
     if case["mesh.file"]:
         mesh = read_msh(case.resolve(case["mesh.file"]))
         timings = {"read_msh": time.perf_counter() - t0}
         source = str(case.resolve(case["mesh.file"]))
+        derived = complete_node_sets(mesh)
+        mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
         mesh, timings = generate(layout, msh_path)
         source = "generated"
-    mesh.probes = dict(layout.probes)
+        mesh.probes = dict(layout.probes)
     t0 = time.perf_counter()
     quality = mesh.quality()
     quality["duplicate_nodes"] = mesh.duplicate_nodes()
@@ -95,9 +100,63 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         "volume_per_part": mesh.volume_per_part(),
         "node_sets": {k: len(v) for k, v in mesh.node_sets.items()},
         "probes": {k: list(v) for k, v in mesh.probes.items()},
+        "parts": present_parts(mesh),
+        "node_sets_derived": derived,
+        "probes_outside": {k: list(v) for k, v in dropped.items()},
         "timings": timings,
     }
     return mesh, report
+
+
+def present_parts(mesh: Mesh) -> list[str]:
+    """The parts (physical groups) that have elements in ``mesh``, in schema order."""
+    ids = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
+    return [p for p in PARTS if PART_ID[p] in ids]
+
+
+def require_parts(mesh: Mesh, parts: tuple[str, ...], what: str) -> None:
+    """One clear line when a stage needs parts the (user) mesh does not have."""
+    have = present_parts(mesh)
+    missing = [p for p in parts if p not in have]
+    if missing:
+        raise MeshError(f"{what} needs the part(s) {', '.join(missing)}, which the mesh does "
+                        f"not have (it has: {', '.join(have) or 'nothing'}); use a mesh with "
+                        "them or switch that feature off")
+
+
+def complete_node_sets(mesh: Mesh, rel_tol: float = 1e-9) -> list[str]:
+    """Add the boundary node sets a user mesh does not define, as the generator defines
+    them: ``bottom`` = hexahedron nodes at the lowest z, ``x_faces`` / ``y_faces`` = those
+    at the smallest or largest x / y (Appendix A: bottom fixed, rollers on the sides).
+    Returns the names added."""
+    added = []
+    used = np.unique(mesh.hexes)
+    if used.size == 0:
+        return added
+    p = mesh.points[used]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    tol = rel_tol * max(float(np.max(hi - lo)), 1.0)
+    rules = {"bottom": np.abs(p[:, 2] - lo[2]) <= tol,
+             "x_faces": (np.abs(p[:, 0] - lo[0]) <= tol) | (np.abs(p[:, 0] - hi[0]) <= tol),
+             "y_faces": (np.abs(p[:, 1] - lo[1]) <= tol) | (np.abs(p[:, 1] - hi[1]) <= tol)}
+    for name, mask in rules.items():
+        if name not in mesh.node_sets:
+            mesh.node_sets[name] = used[mask]
+            added.append(name)
+    return added
+
+
+def probes_inside(mesh: Mesh, probes: dict) -> tuple[dict, dict]:
+    """Split the named probe points into those inside the hexahedra and those outside
+    (a partial user mesh: a soil column has no slab)."""
+    from .search import locate
+
+    if not probes or len(mesh.hexes) == 0:
+        return {}, dict(probes)
+    names = list(probes)
+    elem, _ = locate(np.array([probes[k] for k in names], dtype=float), mesh)
+    inside = {k: probes[k] for k, e in zip(names, elem) if e >= 0}
+    return inside, {k: probes[k] for k, e in zip(names, elem) if e < 0}
 
 
 def format_report(report: dict) -> str:
@@ -117,6 +176,12 @@ def format_report(report: dict) -> str:
         f"non-conformal faces {q['nonconformal_faces']}",
         "node sets: " + ", ".join(f"{k} {v}" for k, v in report["node_sets"].items()),
     ]
+    if report.get("node_sets_derived"):
+        lines.append("node sets derived from the bounding box (not in mesh.file): "
+                     + ", ".join(report["node_sets_derived"]))
+    if report.get("probes_outside"):
+        lines.append("probe points outside the mesh (left out): "
+                     + ", ".join(report["probes_outside"]))
     return "\n".join(lines)
 
 
@@ -150,5 +215,12 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
 
 
 def _print_warnings(report: dict, reporter: Reporter) -> None:
+    """The mesh check's warnings, and what was completed or left out of a user mesh."""
     for warning in report.get("warnings", []):
         reporter.info(f"WARNING (mesh check): {warning}")
+    if report.get("node_sets_derived"):
+        reporter.info("note: node sets derived from the bounding box (not in mesh.file): "
+                      + ", ".join(report["node_sets_derived"]))
+    if report.get("probes_outside"):
+        reporter.info("note: probe points outside the mesh (left out): "
+                      + ", ".join(report["probes_outside"]))

@@ -36,6 +36,9 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     table
         (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
     """
+    from ..mesh.stage import require_parts
+
+    require_parts(mesh, ("rail",), "mbs.static_correction = true (unit loads on the rails)")
     rails = rail_nodes(mesh)
     if np.any(rails < 0):
         raise ValueError("the two rails must have the same number of nodes")

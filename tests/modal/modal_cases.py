@@ -207,3 +207,35 @@ def energy_sum_allowance(mesh, case, dofmap, phi, comm=None):
     whole = np.diag(tolerances.product_error(to_scipy(K), phi))
     per_group = np.stack(per_group, axis=1)
     return per_group, per_group.sum(axis=1) + whole
+
+
+def write_msh(mesh: Mesh, path, node_sets: bool = False) -> None:
+    """Write ``mesh`` as a gmsh .msh with one physical group per part present (and the node
+    sets as physical groups of points when ``node_sets``), like a user's own mesh."""
+    from railvib_hpc.mesh.gmsh_model import gmsh_session
+    from railvib_hpc.schema import PARTS
+
+    with gmsh_session() as gmsh:
+        gmsh.model.add("user")
+        gmsh.model.addDiscreteEntity(0, 1)
+        tags = np.arange(1, mesh.n_nodes + 1)
+        gmsh.model.mesh.addNodes(0, 1, tags.tolist(), mesh.points.ravel().tolist())
+        first = 1
+        for part in PARTS:
+            for conn, etype, dim in ((mesh.hexes[mesh.hex_part == PART_ID[part]], 5, 3),
+                                     (mesh.lines[mesh.line_part == PART_ID[part]], 1, 1)):
+                if len(conn) == 0:
+                    continue
+                ent = gmsh.model.addDiscreteEntity(dim)
+                gmsh.model.mesh.addElementsByType(
+                    ent, etype, list(range(first, first + len(conn))), (conn + 1).ravel().tolist())
+                first += len(conn)
+                gmsh.model.addPhysicalGroup(dim, [ent], PART_ID[part], name=part)
+        if node_sets:
+            for k, (name, nodes) in enumerate(mesh.node_sets.items()):
+                ent = gmsh.model.addDiscreteEntity(0)
+                gmsh.model.mesh.addElementsByType(ent, 15, list(range(first, first + len(nodes))),
+                                                  (np.asarray(nodes) + 1).tolist())
+                first += len(nodes)
+                gmsh.model.addPhysicalGroup(0, [ent], 100 + k, name=name)
+        gmsh.write(str(path))

@@ -113,7 +113,7 @@ class BlockOperator:
     """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
 
     def __init__(self, K, M, sigma: float, comm, prefix: str, extra_gb: float = 0.0,
-                 out_of_core: str = "auto"):
+                 out_of_core: str = "auto", inertia: bool = False):
         """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
 
         ``out_of_core``: ``"auto"`` switches MUMPS to out-of-core (factor on disk,
@@ -121,10 +121,16 @@ class BlockOperator:
         ``"always"`` / ``"never"`` force it on / off. An explicit PETSc option
         ``-<prefix>st_mat_mumps_icntl_22`` always wins. The option is removed again by
         :meth:`destroy` when this operator set it.
+
+        ``inertia``: also count the eigenvalues below ``sigma`` (Sylvester: the negative
+        pivots of the LDL^T factor, MUMPS INFOG(12), exact with ICNTL(13) = 1 so that the
+        root front is not factored by ScaLAPACK) into :attr:`n_below`.
         """
         from petsc4py import PETSc
 
         self.K, self.M, self.comm, self.sigma = K, M, comm, sigma
+        self._inertia = inertia
+        self.n_below: int | None = None
         self.n_global = K.getSize()[0]
         self.n_local = K.getLocalSize()[0]
         if sigma != 0.0:
@@ -147,6 +153,7 @@ class BlockOperator:
             return PEAK_RATIO * (factor_gb + extra_gb)
 
         fits = peak(self.factor_memory_gb) <= 0.9 * avail_gb
+        self.available_gb = avail_gb
         ooc_note = ""
         if not fits and out_of_core == "auto" and not user_set:
             self._use_out_of_core(True)
@@ -172,6 +179,8 @@ class BlockOperator:
                 f"GB at the peak{ooc_note}, but {avail_gb:.1f} GB are available on "
                 f"{comm.size} rank(s) (modal.out_of_core = '{out_of_core}'); use {advice}")
         self.out_of_core = opts.getInt(self._ooc_option, 0) == 1
+        #: the memory predictor: PEAK_RATIO x (factor + dense blocks), all ranks [GB]
+        self.predicted_peak_gb = peak(self.factor_memory_gb)
         ksp, F = self._factor_solver(prefix)
         try:
             ksp.setUp()
@@ -189,6 +198,8 @@ class BlockOperator:
         self.time_factorization = time.perf_counter() - t0
         self.ksp = ksp
         self.factor = F
+        if inertia:
+            self.n_below = int(F.getMumpsInfog(12))
         self.n_solves = 0
         self.time_solves = 0.0
 
@@ -214,7 +225,10 @@ class BlockOperator:
         ksp.setOptionsPrefix(prefix + "st_")
         ksp.setFromOptions()
         pc.setFactorSetUpSolverType()
-        return ksp, pc.getFactorMatrix()
+        F = pc.getFactorMatrix()
+        if self._inertia and F.getType() == "mumps":
+            F.setMumpsIcntl(13, 1)          # exact inertia: no ScaLAPACK root
+        return ksp, F
 
     def _estimate_factor_memory(self, prefix: str) -> float:
         """MUMPS's own estimate (GB, all ranks) of the in-core factorization, after analysis only.
@@ -302,9 +316,20 @@ def start_block(n_global: int, r0: int, r1: int, b: int, seed: int = 20261123) -
 
 def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: float = 1e-8,
                   max_basis: int = 0, max_restarts: int = 50,
-                  monitor: Callable[[int, int, int], None] | None = None
+                  monitor: Callable[[int, int, int], None] | None = None,
+                  theta_cut: float | None = None, margin: int = 1, guard: int = 0
                   ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Largest ``nev`` eigenvalues ``theta`` of the M-self-adjoint operator ``op.apply``.
+    """Largest ``nev`` eigenvalues ``theta`` (in modulus) of the M-self-adjoint ``op.apply``.
+
+    With a shift inside the spectrum (``op.sigma > 0``) ``theta = 1 / (lambda - sigma)``
+    has both signs: the eigenvalues nearest to the shift, on both sides, come first. With
+    ``theta_cut`` the solve goes on past ``nev`` until every Ritz value with ``|theta| >=
+    theta_cut`` (every eigenvalue within ``1 / theta_cut`` of the shift: a band) has
+    converged, followed by ``margin`` converged ones beyond it — Krylov methods converge the
+    extreme ``|theta|`` first, so the band is then complete (the caller checks it with
+    inertia counts). Raises :class:`NotConverged` when the band does not fit ``max_basis``.
+    ``guard``: up to this many further (unconverged) Ritz vectors are appended to ``X``
+    (``stats["n_guard"]``), for a later Rayleigh-Ritz step that needs them.
 
     Parameters
     ----------
@@ -327,7 +352,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
 
     Returns
     -------
-    theta : (nev,) descending
+    theta : (nev,) descending in modulus (with ``theta_cut``: all converged ones)
     X : (n_local, nev) M-orthonormal Ritz vectors
     stats : dict
     """
@@ -342,6 +367,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     if nev + 2 * b > max_basis:
         raise ValueError(f"too many modes ({nev}) for {n} DOFs with block size {b}")
     keep = min(nev + b, max_basis - 2 * b)
+    two_sided = op.sigma != 0.0          # theta of both signs: order by modulus
     V = np.zeros((op.n_local, max_basis + b), order="F")   # column slices stay contiguous
     T = np.zeros((max_basis + b, max_basis + b))
     t_orth = 0.0
@@ -406,11 +432,26 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
         # Rayleigh-Ritz on the m vectors whose images are known
         if m >= nev + b:
             S = np.triu(T[:m, :m]) + np.triu(T[:m, :m], 1).T
-            theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
-            theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])  # BLAS needs + strides
+            if two_sided:
+                theta, Y = eigh(S)
+                order = np.argsort(-np.abs(theta), kind="stable")[:min(m, keep)]
+                theta, Y = theta[order], np.asfortranarray(Y[:, order])
+            else:
+                theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
+                theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])  # + strides
             res = np.linalg.norm(T[m:m + b, :m] @ Y, axis=0)
             ok = res <= tol * np.abs(theta)
             nconv = int(np.argmin(ok)) if not ok.all() else len(ok)
+            if theta_cut is not None:
+                # the band: every Ritz value above the cut, then `margin` converged below it
+                inside = int(np.sum(np.abs(theta) >= theta_cut))
+                want = max(nev, inside + margin)
+                if want + 2 * b > max_basis:
+                    raise NotConverged(f"block Lanczos: the band holds at least {inside} "
+                                       f"modes, more than a basis of {max_basis} can take")
+                if want > nev:
+                    nev = want
+                    keep = min(nev + b, max_basis - 2 * b)
             if monitor:
                 monitor(min(nconv, nev), nev, m)
             if nconv >= nev:
@@ -437,13 +478,17 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
             m = p
             restarts += 1
             just_restarted = True
+    if theta_cut is not None:          # return every converged pair (band + margin)
+        nev = nconv
+    n_guard = max(0, min(guard, Y.shape[1] - nev))
     t0 = time.perf_counter()
-    X = V[:, :m] @ Y[:, :nev]
+    X = V[:, :m] @ Y[:, :nev + n_guard]
     t_orth += time.perf_counter() - t0
     stats = {"block_size": b, "max_basis": max_basis, "restarts": restarts,
              "expansions": expansions, "basis_size": m, "linear_solves": op.n_solves,
              "time_block_solves": op.time_solves, "time_orthogonalization": t_orth,
-             "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max())}
+             "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max()),
+             "n_wanted": int(nev), "n_guard": int(n_guard)}
     return theta[:nev], X, stats
 
 

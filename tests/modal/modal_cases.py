@@ -239,3 +239,48 @@ def write_msh(mesh: Mesh, path, node_sets: bool = False) -> None:
                 first += len(nodes)
                 gmsh.model.addPhysicalGroup(0, [ent], 100 + k, name=name)
         gmsh.write(str(path))
+
+
+def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, edges=(),
+                 band_modes: int = 250, groups: int = 1, band_only: int = 0,
+                 block_size: int = 8, tol: float = 1e-10):
+    """Band-sliced solve of the model on ``comm`` (cache in ``cache_dir``); returns
+    (result, K, M, dofmap)."""
+    from pathlib import Path
+
+    from mpi4py import MPI
+
+    from railvib_hpc.petsc_env import init_petsc
+
+    init_petsc([])
+    from railvib_hpc.modal.band_solve import BandSettings
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.eigen import solve_modes
+    from railvib_hpc.modal.petsc import assemble
+
+    comm = comm or MPI.COMM_SELF
+    dofmap = build_dofmap(mesh, comm.size, rules=rules)
+    K, M, _ = assemble(mesh, case, dofmap, comm)
+
+    def on(sub):
+        return assemble(mesh, case, build_dofmap(mesh, sub.size, rules=rules), sub)[:2]
+
+    s = BandSettings(f_max=f_max, edges=list(edges), band_modes=band_modes, groups=groups,
+                     band_only=band_only, tol=tol, block_size=block_size, max_restarts=100,
+                     out_of_core="auto", cache_dir=Path(cache_dir), key="test")
+    result = solve_modes(K, M, comm, f_max=f_max, tol=tol, block_size=block_size, bands=s,
+                         assemble=on)
+    return result, K, M, dofmap
+
+
+def copies(mesh: Mesh, n: int, dx: float) -> Mesh:
+    """``n`` disconnected copies of ``mesh`` side by side along x: every eigenvalue of the
+    mesh becomes an n-fold one (a planted cluster)."""
+    pts = np.concatenate([mesh.points + [k * dx, 0.0, 0.0] for k in range(n)])
+    off = mesh.n_nodes
+    return Mesh(points=pts, hexes=np.concatenate([mesh.hexes + k * off for k in range(n)]),
+                hex_part=np.tile(mesh.hex_part, n),
+                lines=np.concatenate([mesh.lines + k * off for k in range(n)]),
+                line_part=np.tile(mesh.line_part, n),
+                node_sets={k: np.concatenate([v + j * off for j in range(n)])
+                           for k, v in mesh.node_sets.items()})

@@ -436,10 +436,12 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
 
 
 def merge_memory_gb(n_dofs: int, n_candidates: int, n_modes: int) -> float:
-    """Dense memory of the merge [GB, all ranks]: the candidates, the merged modes and their
-    products with K and M in :func:`~railvib_hpc.modal.eigen.normalise_and_check`
-    (8 bytes each); the matrices and the mesh are already there."""
-    return 8.0 * n_dofs * (n_candidates + 3 * n_modes) / 1e9
+    """Dense memory of the merge [GB, all ranks]: the candidates, the merged modes, and the
+    chunks of K Phi and M Phi in :func:`~railvib_hpc.modal.eigen.normalise_and_check` and
+    of the Gram products (8 bytes each); the matrices and the mesh are already there."""
+    from .eigen import NORMALISE_CHUNK
+
+    return 8.0 * n_dofs * (n_candidates + n_modes + 4 * NORMALISE_CHUNK) / 1e9
 
 
 def _gram(A, Phi: np.ndarray, comm, chunk: int = 256) -> np.ndarray:
@@ -477,17 +479,21 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
             f"merging {len(bands)} bands ({m_c} candidate modes of {n_global:,} DOFs) needs "
             f"~{need:.1f} GB, {avail:.1f} GB are available on {comm.size} rank(s); use more "
             "nodes or a lower modal.f_max")
-    blocks, lams, per_band = [], [], []
-    for band in bands:
-        rec = cache.find(band)
-        lam, rows = _read_band(s.cache_dir / rec.file, r0, r1)
-        # the band's own modes and its margin, but nothing far above f_max
-        keep = lam <= lam_max * (1.0 + 0.05)
-        blocks.append(rows[:, keep])
-        lams.append(lam[keep])
-        per_band.append(rec)
-    Phi = np.ascontiguousarray(np.concatenate(blocks, axis=1))
-    del blocks
+    import h5py
+
+    per_band = [cache.find(b) for b in bands]
+    keeps = []
+    for rec in per_band:
+        with h5py.File(s.cache_dir / rec.file, "r") as f:
+            # the band's own modes and its margin, but nothing far above f_max
+            keeps.append(np.flatnonzero(f["eigenvalue"][()] <= lam_max * (1.0 + 0.05)))
+    Phi = np.empty((r1 - r0, sum(len(k) for k in keeps)))
+    col = 0
+    for rec, keep in zip(per_band, keeps):
+        _, rows = _read_band(s.cache_dir / rec.file, r0, r1)
+        Phi[:, col:col + len(keep)] = rows[:, keep]
+        col += len(keep)
+        del rows
     t_read = time.perf_counter() - t0
     t1 = time.perf_counter()
     GM = _gram(M, Phi, comm)

@@ -441,6 +441,10 @@ def convergence_verdict(result: ModalResult, tol: float) -> list[str]:
     return out
 
 
+#: Columns per chunk when normalise_and_check forms K Phi and M Phi itself.
+NORMALISE_CHUNK = 128
+
+
 def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None = None,
                         MPhi: np.ndarray | None = None, tol: float = 0.0) -> None:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
@@ -462,18 +466,37 @@ def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None
     from .block_lanczos import abs_matrix, longest_row, sparse_times_block
 
     phi = result.phi
-    if MPhi is None:
-        MPhi = sparse_times_block(M, phi, comm)
-    modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
-    scale = 1.0 / np.sqrt(modal_mass)
-    phi *= scale
-    MPhi = MPhi * scale
-    KPhi = sparse_times_block(K, phi, comm) if KPhi is None else KPhi * scale
-    gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
-    stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
     lam = result.eigenvalues
-    res = comm.allreduce(np.sum((KPhi - MPhi * lam) ** 2, axis=0), op=MPI.SUM)
-    knorm = comm.allreduce(np.sum(KPhi**2, axis=0), op=MPI.SUM)
+    if KPhi is None and MPhi is None:
+        # column chunks: no (n, m) copies of K Phi and M Phi (many modes of a big model)
+        chunk = NORMALISE_CHUNK
+        cols = [slice(j, j + chunk) for j in range(0, phi.shape[1], chunk)]
+        modal_mass = np.concatenate([np.einsum("ij,ij->j", phi[:, c], sparse_times_block(
+            M, phi[:, c], comm)) for c in cols]) if cols else np.zeros(0)
+        phi *= 1.0 / np.sqrt(comm.allreduce(modal_mass, op=MPI.SUM))
+        gram = np.empty((len(lam), len(lam)))
+        stiff = np.empty_like(gram)
+        res = np.empty(len(lam))
+        knorm = np.empty(len(lam))
+        for c in cols:
+            MP, KP = sparse_times_block(M, phi[:, c], comm), sparse_times_block(K, phi[:, c], comm)
+            gram[:, c], stiff[:, c] = phi.T @ MP, phi.T @ KP
+            res[c] = np.sum((KP - MP * lam[c]) ** 2, axis=0)
+            knorm[c] = np.sum(KP**2, axis=0)
+        for a in (gram, stiff, res, knorm):
+            comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
+    else:
+        if MPhi is None:
+            MPhi = sparse_times_block(M, phi, comm)
+        modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
+        scale = 1.0 / np.sqrt(modal_mass)
+        phi *= scale
+        MPhi = MPhi * scale
+        KPhi = sparse_times_block(K, phi, comm) if KPhi is None else KPhi * scale
+        gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
+        stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
+        res = comm.allreduce(np.sum((KPhi - MPhi * lam) ** 2, axis=0), op=MPI.SUM)
+        knorm = comm.allreduce(np.sum(KPhi**2, axis=0), op=MPI.SUM)
     result.residuals = np.sqrt(res / knorm)
     floor = np.zeros(len(lam))
     need = np.flatnonzero(result.residuals > tol)

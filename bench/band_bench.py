@@ -14,7 +14,8 @@ Each configuration runs in a fresh process (so that peak memory is its own) unde
 with a fresh output folder; printed: modes, bands, wall time of the command, eigensolve
 time, factorisations, right-hand sides, orthogonalisation, the merge, max |Phi^T M Phi - I|,
 max relative residual, peak memory summed over the ranks (getrusage) and the memory
-predictor's value (largest band: 2.3 x (factor + basis); merge: dense blocks + K, M), and
+predictor's value (largest band: base + matrices + MUMPS estimate + dense arrays; merge:
+candidates + modes), and
 the largest relative eigenvalue difference to the first configuration.
 """
 

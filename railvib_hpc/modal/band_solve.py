@@ -195,7 +195,9 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
     Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
     ``N(sigma)`` and statistics.
     """
-    from .block_lanczos import NotConverged, block_lanczos, default_max_basis
+    from mpi4py import MPI
+
+    from .block_lanczos import NotConverged, block_lanczos, default_max_basis, dense_gb
 
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
@@ -203,7 +205,8 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
     nev = min(estimate + 2 * EDGE_MARGIN, max(n_global - 3 * b, 1))
     for attempt in range(3):
         max_basis = min(default_max_basis(nev, b) * (2**attempt), n_global - b)
-        extra_gb = 8.0 * n_global * (max_basis + 3 * b + nev) / 1e9
+        extra_gb = dense_gb(n_global, max_basis, b, nev + b, 0 if static_rhs is None else
+                            comm.allreduce(static_rhs.shape[1], op=MPI.MAX))
         op = _factor(K, M, comm, band.sigma, extra_gb, s.out_of_core, inertia=band.sigma > 0)
         try:
             for lanczos_tol in (s.tol, s.tol / RETRY_TOL_FACTOR):

@@ -72,11 +72,30 @@ def longest_row(A, comm) -> int:
     return comm.allreduce(int(np.diff(ip).max(initial=0)), op=MPI.MAX)
 
 
-#: Peak memory of a modal solve (RSS summed over the ranks) over MUMPS's factor estimate plus
-#: the dense blocks (basis, work blocks, eigenvectors): 1.8-2.3 measured on five solves of the
-#: thesis model (168k-471k DOFs, 300-1000 modes; the rest is K, M, the mesh on every rank and
-#: MUMPS work space).
-PEAK_RATIO = 2.3
+#: Resident memory of one rank besides the model's arrays: Python, numpy/scipy,
+#: PETSc/SLEPc/MUMPS, MPI, h5py, gmsh (0.12 GB after the imports), the replicated mesh and
+#: DOF map, allocator slack: 0.75 GB measured (getrusage) on 2 ranks of the coarse thesis
+#: model, whose own arrays take < 0.15 GB.
+BASE_GB_PER_RANK = 0.3
+
+#: Bytes per stored matrix entry (double value + 32-bit column index).
+BYTES_PER_ENTRY = 12
+
+
+def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: int = 0
+             ) -> float:
+    """Peak of the dense arrays of a block Lanczos solve [GB, all ranks], 8 bytes each.
+
+    The larger of: the Lanczos phase (basis of ``basis + block`` columns, three work
+    blocks, the Ritz vectors ``wanted`` — guards included — formed at its end), the
+    purification (Ritz vectors, their purified copies and K and M products, one rotated
+    copy being formed: 5 x ``wanted``, plus the solve blocks), and the static solves (modes,
+    right-hand sides and solutions of ``static_cols`` loads).
+    """
+    lanczos = basis + 4 * block + wanted
+    purify = 5 * wanted + 3 * block
+    static = wanted + 2 * static_cols + block
+    return 8.0 * n_global * max(lanczos, purify, static) / 1e9
 
 
 class InsufficientMemory(RuntimeError):
@@ -116,6 +135,12 @@ class BlockOperator:
                  out_of_core: str = "auto", inertia: bool = False):
         """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
 
+        The memory predictor (:attr:`predicted_peak_gb`, all ranks): the ranks' base
+        (:data:`BASE_GB_PER_RANK`), the matrices K, M and K - sigma M (nonzeros x
+        :data:`BYTES_PER_ENTRY`), MUMPS's own estimate of everything it allocates
+        (INFOG(17) in core, INFOG(27) out of core) and the dense arrays ``extra_gb``
+        (:func:`dense_gb`); it must stay below 90 % of the available memory.
+
         ``out_of_core``: ``"auto"`` switches MUMPS to out-of-core (factor on disk,
         ICNTL(22) = 1) when the in-core estimate does not fit but the out-of-core one does;
         ``"always"`` / ``"never"`` force it on / off. An explicit PETSc option
@@ -149,8 +174,13 @@ class BlockOperator:
         self.factor_memory_gb = self._estimate_factor_memory(prefix)
         self.in_core_memory_gb = self.factor_memory_gb
 
+        nnz = sum(int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
+                  for A in ({id(K): K, id(M): M, id(self.A): self.A}.values()))
+        self.matrices_gb = BYTES_PER_ENTRY * nnz / 1e9
+        base_gb = BASE_GB_PER_RANK * comm.size
+
         def peak(factor_gb: float) -> float:
-            return PEAK_RATIO * (factor_gb + extra_gb)
+            return base_gb + self.matrices_gb + factor_gb + extra_gb
 
         fits = peak(self.factor_memory_gb) <= 0.9 * avail_gb
         self.available_gb = avail_gb
@@ -174,12 +204,13 @@ class BlockOperator:
             raise InsufficientMemory(
                 f"the model has {self.n_global:,} DOFs: MUMPS estimates "
                 f"~{self.factor_memory_gb:.1f} GB for the Cholesky factor "
-                f"{'out of core' if out_of_core == 'always' else 'in core'} and the "
-                f"Lanczos basis needs ~{extra_gb:.1f} GB, ~{peak(self.factor_memory_gb):.1f} "
-                f"GB at the peak{ooc_note}, but {avail_gb:.1f} GB are available on "
-                f"{comm.size} rank(s) (modal.out_of_core = '{out_of_core}'); use {advice}")
+                f"{'out of core' if out_of_core == 'always' else 'in core'}, the matrices "
+                f"~{self.matrices_gb:.1f} GB and the Lanczos basis and blocks ~{extra_gb:.1f} "
+                f"GB, ~{peak(self.factor_memory_gb):.1f} GB at the peak{ooc_note}, but "
+                f"{avail_gb:.1f} GB are available on {comm.size} rank(s) "
+                f"(modal.out_of_core = '{out_of_core}'); use {advice}")
         self.out_of_core = opts.getInt(self._ooc_option, 0) == 1
-        #: the memory predictor: PEAK_RATIO x (factor + dense blocks), all ranks [GB]
+        #: the memory predictor (see above), all ranks [GB]
         self.predicted_peak_gb = peak(self.factor_memory_gb)
         ksp, F = self._factor_solver(prefix)
         try:
@@ -527,5 +558,12 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     op.comm.Allreduce(MPI.IN_PLACE, kp, op=MPI.SUM)
     op.comm.Allreduce(MPI.IN_PLACE, mp, op=MPI.SUM)
     lam, Z = eigh(0.5 * (kp + kp.T), 0.5 * (mp + mp.T))
+    # one rotated copy at a time (memory: see dense_gb)
+    Phi = Xp @ Z
+    del Xp
+    KPhi = KX @ Z
+    del KX
+    MPhi = MX @ Z
+    del MX
     # ||S z_i|| <= sum_j |z_ji| ||s_j|| (triangle inequality; S itself is not kept)
-    return lam, Xp @ Z, KX @ Z, MX @ Z, np.abs(Z).T @ np.sqrt(sres)
+    return lam, Phi, KPhi, MPhi, np.abs(Z).T @ np.sqrt(sres)

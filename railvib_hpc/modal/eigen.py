@@ -252,6 +252,7 @@ def _solve_slepc(K, M, comm, n_modes: int, f_max: float, shift_hz: float, tol: f
 def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
                  static_rhs: np.ndarray | None = None, out_of_core: str = "auto") -> ModalResult:
+    from mpi4py import MPI
     from petsc4py import PETSc
 
     from .block_lanczos import (
@@ -261,6 +262,7 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
         NotConverged,
         block_lanczos,
         default_max_basis,
+        dense_gb,
     )
 
     opts = PETSc.Options(PREFIX)
@@ -271,7 +273,9 @@ def _solve_block(K, M, comm, n_modes: int, shift_hz: float, tol: float, max_rest
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
     basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
-    extra_gb = 8.0 * n_global * (basis + 3 * block_size + n_modes) / 1e9
+    extra_gb = dense_gb(n_global, basis, block_size, n_modes + block_size,
+                        0 if static_rhs is None else comm.allreduce(
+                            static_rhs.shape[1], op=MPI.MAX))
     try:
         op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
                            out_of_core=out_of_core)

@@ -135,7 +135,8 @@ def solve_static(K, M, comm, rhs: np.ndarray) -> np.ndarray:
     from .block_lanczos import BlockOperator
     from .eigen import PREFIX
 
-    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=16.0 * rhs.size / 1e9)
+    op = BlockOperator(K, M, 0.0, comm, PREFIX,
+                       extra_gb=16.0 * comm.allreduce(rhs.size) / 1e9)
     try:
         return op.solve(rhs)
     finally:

@@ -446,7 +446,7 @@ def convergence_verdict(result: ModalResult, tol: float) -> list[str]:
 
 
 #: Columns per chunk when normalise_and_check forms K Phi and M Phi itself.
-NORMALISE_CHUNK = 128
+NORMALISE_CHUNK = 64
 
 
 def normalise_and_check(result: ModalResult, K, M, comm, KPhi: np.ndarray | None = None,

@@ -97,6 +97,8 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], dest="extra")
     ap.add_argument("--petsc", nargs="*", default=[])
     ap.add_argument("--timeout", type=float, default=3600)
+    ap.add_argument("--json", default="", help="append one JSON line per run (for the "
+                                                 "scaling model, bench/band_scaling_model.py)")
     args = ap.parse_args()
     from railvib_hpc.modal.bands import weyl_edges
 
@@ -133,6 +135,11 @@ def main() -> None:
         finally:
             shutil.rmtree(out, ignore_errors=True)
         print(row(name, r, ref_lam), flush=True)
+        if args.json and "error" not in r:
+            with open(args.json, "a") as fj:
+                fj.write(json.dumps({"name": name, "ranks": args.ranks, "wall": r["wall"],
+                                     "n_modes": len(r["lam"]), "stats": r["stats"]},
+                                    default=float) + "\n")
         if "error" not in r:
             if ref_lam is None:
                 ref_lam = r["lam"]

@@ -6,7 +6,8 @@ The plan and its proof are in :mod:`railvib_hpc.modal.bands`. Here:
 2. Per band: factor ``K - sigma M`` (its inertia gives ``N(sigma)``), block shift-invert
    Lanczos until every eigenvalue of the band and two beyond it have converged
    (:func:`~railvib_hpc.modal.block_lanczos.block_lanczos` with ``theta_cut``), purify
-   (:func:`~railvib_hpc.modal.eigen.purified_modes`), write the band to
+   (:func:`~railvib_hpc.modal.eigen.purified_modes`; only the band's own pairs must reach
+   the tolerance), write the band's own modes to
    ``<out>/bands/band_<shift>.h5`` and free the basis: the dense memory is bounded by the
    largest band, not by all modes. The lowest band (shift 0) also solves the static
    correction with its factor.
@@ -43,6 +44,7 @@ from .eigen import (
     ModalResult,
     convergence_verdict,
     hopeless,
+    in_window,
     purified_modes,
 )
 
@@ -54,9 +56,14 @@ from .eigen import (
 DUPLICATE_GRAM = 1e-6
 
 #: Converged modes beyond each band's edge that the Lanczos run must also deliver: the
-#: proof that the band is complete (Krylov methods converge the largest |theta| first)
-#: and the overlap that lets the merge check the neighbouring band.
+#: proof that the band is complete (Krylov methods converge the largest |theta| first).
+#: They are not kept (:func:`_trim`): the neighbouring band computes them.
 EDGE_MARGIN = 2
+
+#: Relative widening of a band's eigenvalue range when its modes are kept: an eigenvalue
+#: on an edge is computed by both bands to ~1e-12 and may fall on either side; with the
+#: overlap at least one band keeps it (two copies are merged by the Gram test).
+EDGE_OVERLAP = 1e-6
 
 #: Relative nudge of a shift that hits an eigenvalue (singular factor).
 SHIFT_NUDGE = 1e-6
@@ -236,10 +243,11 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
                                          monitor=monitor, theta_cut=band.theta_cut,
                                          margin=EDGE_MARGIN, guard=b)
                 t_p = time.perf_counter()
-                result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st)
+                window = band_window(band)
+                result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st, window)
                 st["time_purify_project"] = time.perf_counter() - t_p
                 st["lanczos_tol"] = lanczos_tol
-                if not hopeless(result, s.tol).any():
+                if not (hopeless(result, s.tol) & in_window(result, window)).any():
                     break
         except NotConverged as exc:
             op.destroy()
@@ -267,18 +275,20 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
     raise AssertionError("unreachable")
 
 
+def band_window(band: Band) -> tuple[float, float]:
+    """The band's eigenvalue range, widened by :data:`EDGE_OVERLAP` at both edges."""
+    return (float(omega2(band.lo_hz)) * (1.0 - EDGE_OVERLAP),
+            float(omega2(band.hi_hz)) * (1.0 + EDGE_OVERLAP))
+
+
 def _trim(result: ModalResult, band: Band) -> ModalResult:
-    """The band's modes and :data:`EDGE_MARGIN` beyond each edge (what the merge needs)."""
-    f = result.frequencies_hz
-    inside = np.flatnonzero((f >= band.lo_hz) & (f <= band.hi_hz))
-    if inside.size == 0:
-        return result
-    lo = max(int(inside[0]) - EDGE_MARGIN, 0)
-    hi = min(int(inside[-1]) + 1 + EDGE_MARGIN, len(f))
-    out = ModalResult(result.eigenvalues[lo:hi], np.ascontiguousarray(result.phi[:, lo:hi]),
+    """The band's own modes (:func:`band_window`): what the merge needs. The pairs beyond
+    the edges (the Lanczos margin) are the neighbouring bands' modes, computed there."""
+    keep = np.flatnonzero(in_window(result, band_window(band)))
+    out = ModalResult(result.eigenvalues[keep], np.ascontiguousarray(result.phi[:, keep]),
                       result.stats, result.static)
-    out.residuals = result.residuals[lo:hi]
-    out.residual_floors = result.residual_floors[lo:hi]
+    out.residuals = result.residuals[keep]
+    out.residual_floors = result.residual_floors[keep]
     return out
 
 
@@ -420,8 +430,9 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
             _write_band(s.cache_dir / name, sub, band, result, n_below, st)
             f = result.frequencies_hz
             if sub.rank == 0:
-                records.append(BandRecord(band, name, n_below, len(f), float(f[0]),
-                                          float(f[-1]), st).to_json())
+                records.append(BandRecord(           # (a band may hold no mode at all)
+                    band, name, n_below, len(f), float(f[0]) if len(f) else band.lo_hz,
+                    float(f[-1]) if len(f) else band.hi_hz, st).to_json())
             del result
             release_memory()
         if groups > 1:

@@ -332,7 +332,8 @@ EXTRA_PURIFICATIONS = 2
 
 
 def purified_modes(op, X: np.ndarray, block: int, K, M, comm, tol: float,
-                   stats: dict | None = None) -> ModalResult:
+                   stats: dict | None = None,
+                   window: tuple[float, float] | None = None) -> ModalResult:
     """Purify and project Ritz vectors, normalise, and purify again (at most
     :data:`EXTRA_PURIFICATIONS` times, with iterative refinement) while some true residual
     is above ``tol`` and above its round-off floor. Needs the factor of ``op``; returns the
@@ -343,6 +344,8 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm, tol: float,
     the extra passes include the guards, so that the components of the next modes, which
     purification damps only by lambda_i / lambda_j ~ 1 near the top of the set, are removed
     by the Rayleigh-Ritz step instead; the ``n_wanted`` nearest to the shift are kept.
+    ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a band; the pairs beyond
+    its edges belong to the neighbouring bands).
     """
     from mpi4py import MPI
 
@@ -361,7 +364,7 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm, tol: float,
         result = ModalResult(lam[order], np.ascontiguousarray(Xp[:, order]), {})
         normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order], tol=tol)
         stats["extra_purifications"] = attempt
-        if not unconverged(result, tol).any():
+        if not (unconverged(result, tol) & in_window(result, window)).any():
             break
         if guards.shape[1]:
             rest = np.setdiff1d(np.arange(len(lam)), order)
@@ -373,6 +376,14 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm, tol: float,
     result.residual_floors = np.maximum(result.residual_floors, solve_floor)
     stats["max_solve_residual"] = float(solve_floor.max())
     return result
+
+
+def in_window(result: ModalResult, window: tuple[float, float] | None) -> np.ndarray:
+    """Modes whose eigenvalue lies in ``window`` (all without one)."""
+    lam = result.eigenvalues
+    if window is None:
+        return np.ones(len(lam), dtype=bool)
+    return (lam >= window[0]) & (lam <= window[1])
 
 
 def unconverged(result: ModalResult, tol: float) -> np.ndarray:

@@ -469,6 +469,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     "must be <= 6 (refinement 3 is already ~1.5M nodes)"))
     if case["modal.f_max"] == 0 and case["modal.n_modes"] < 1:
         out.append(("modal.n_modes", case["modal.n_modes"], "must be >= 1"))
+    out.extend(_check_bands(case))
     out.extend(_check_mbs(case))
     out.extend(check_studies(case["study"]))
     return out
@@ -497,6 +498,26 @@ def check_studies(tables: dict[str, dict[str, Any]]) -> list[tuple[str, Any, str
             out.append(("study.reflection.domains", refl["domains"],
                         "length and width changes must be >= 0 (only the depth change may be "
                         "negative: it raises the fixed base)"))
+    return out
+
+
+def _check_bands(case: Case) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of the band-sliced eigensolve settings."""
+    out: list[tuple[str, Any, str]] = []
+    md = case["modal"]
+    edges = list(md["bands"])
+    if edges:
+        if md["f_max"] <= 0:
+            out.append(("modal.bands", edges, "needs modal.f_max > 0 (the top of the last band)"))
+        elif any(not 0 < e < md["f_max"] for e in edges) or \
+                any(b <= a for a, b in zip(edges, edges[1:])):
+            out.append(("modal.bands", edges, f"must be strictly ascending inside (0, "
+                                              f"modal.f_max = {md['f_max']!r})"))
+    if md["band_only"] and md["f_max"] <= 0:
+        out.append(("modal.band_only", md["band_only"], "needs modal.f_max > 0"))
+    if (md["bands"] or md["band_only"] or md["band_groups"] > 1) and \
+            md["method"] != "block_lanczos":
+        out.append(("modal.method", md["method"], "band settings need 'block_lanczos'"))
     return out
 
 

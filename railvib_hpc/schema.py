@@ -252,8 +252,22 @@ SCHEMA: dict[str, dict[str, Any]] = {
     "modal": {
         "n_modes": Param(300, "int", "-", "number of modes to extract", "pos"),
         "f_max": Param(0.0, "float", "Hz",
-                       "if > 0: extract all modes below this frequency instead of n_modes",
-                       "nonneg"),
+                       "if > 0: extract all modes below this frequency instead of n_modes "
+                       "(block Lanczos: band-sliced, Sylvester inertia counts prove none is "
+                       "missed; krylovschur: SLEPc spectrum slicing)", "nonneg"),
+        "bands": Param([], "floats", "Hz",
+                       "f_max: inner band edges, ascending in (0, f_max); [] = automatic split "
+                       "from the inertia count at f_max (about modal.band_modes per band)"),
+        "band_modes": Param(250, "int", "-",
+                            "f_max, automatic split: target number of modes per band", "pos"),
+        "band_groups": Param(1, "int", "-",
+                             "f_max: bands solved concurrently, each on its own sub-communicator "
+                             "of size ranks / band_groups (1: one band after the other on all "
+                             "ranks)", "pos"),
+        "band_only": Param(0, "int", "-",
+                           "f_max, array jobs: compute only band k (1-based) into <out>/bands/ "
+                           "and stop; a run with 0 merges the cached bands (computing the "
+                           "missing ones)", "nonneg"),
         "damping_ratio": Param(0.03, "float", "-",
                                "modal damping ratio for all modes (modal.damping = 'uniform'; "
                                "with 'strain_energy': the rail pads' share)", "fraction"),
@@ -271,8 +285,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                  "integration", choices=("bbar", "incompatible", "full")),
         "method": Param("block_lanczos", "str", "-",
                         "eigensolver: block shift-invert Lanczos (fast, many right-hand sides "
-                        "per MUMPS solve) or SLEPc Krylov-Schur; f_max always uses SLEPc "
-                        "spectrum slicing", choices=("block_lanczos", "krylovschur")),
+                        "per MUMPS solve) or SLEPc Krylov-Schur (with f_max: SLEPc spectrum "
+                        "slicing)", choices=("block_lanczos", "krylovschur")),
         "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos"),
         "out_of_core": Param("auto", "str", "-",
                              "MUMPS factor on disk (ICNTL(22)): auto = only when the in-core "

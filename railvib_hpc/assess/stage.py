@@ -107,6 +107,8 @@ def _building_displacements(fields_path: Path) -> dict:
         hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
         ids = [PART_ID[p] for p in BUILDING_PARTS]
         nodes = np.unique(hexes[np.isin(part, ids)])
+        if nodes.size == 0:                     # a mesh without the building (mesh.file)
+            return {}
         d = f["fields/displacement"]
         ux = uy = 0.0
         lo, hi = int(nodes.min()), int(nodes.max()) + 1

@@ -7,7 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import UserError
+from ..schema import PART_ID, PARTS
 from .coupling import RailCoupling, contact_normal_rail
+
+
+class RailModesError(UserError, ValueError):
+    """The modes file cannot drive the multibody stage (e.g. a mesh without rails)."""
 
 
 @dataclass
@@ -72,7 +78,16 @@ def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
         m = f["modes/eigenvalue"].shape[0] if n_modes is None else int(n_modes)
         lam = f["modes/eigenvalue"][:m]
         rail_nodes = f["mesh/rail_nodes"][()]
-        if rail_nodes.size == 0 or np.any(rail_nodes < 0):
+        if rail_nodes.size == 0:
+            ids = set(np.unique(f["mesh/hex_part"][()]).tolist()) | \
+                set(np.unique(f["mesh/line_part"][()]).tolist())
+            have = [p for p in PARTS if PART_ID[p] in ids]
+            raise RailModesError(
+                f"the multibody stage needs the flexible rails (part 'rail'), sleepers and "
+                f"rail pads, which the mesh of {path} does not have (it has: "
+                f"{', '.join(have) or 'nothing'}); 'railvib modal' works on such a mesh, "
+                "'mbs' and 'run' do not")
+        if np.any(rail_nodes < 0):
             raise ValueError(f"{path}: the two rails must have the same number of nodes")
         points = f["mesh/points"][()]
         rot_nodes = f["mesh/rotation_nodes"][()]

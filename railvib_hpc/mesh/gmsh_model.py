@@ -164,10 +164,14 @@ def extract_mesh(gmsh) -> Mesh:
     index[tags] = np.arange(len(tags))
 
     groups = {gmsh.model.getPhysicalName(d, t): (d, t) for d, t in gmsh.model.getPhysicalGroups()}
-    missing = [p for p in (*SOLID_PARTS[:3], *BEAM_PARTS, *PAD_PARTS) if p not in groups]
-    if missing:
-        raise MeshError(f"mesh has no physical group(s) {missing}; required names: "
-                        f"{', '.join(SOLID_PARTS + BEAM_PARTS + PAD_PARTS)}")
+    # any subset of the parts is a model (a soil column, a track without building, ...);
+    # the stages that need rails, sleepers or pads say so themselves
+    known = (*SOLID_PARTS, *BEAM_PARTS, *PAD_PARTS)
+    if not any(p in groups for p in known):
+        found = ", ".join(repr(g) for g in groups) or "none"
+        raise MeshError(f"mesh has no physical group named after a part (found: {found}); "
+                        f"allowed names: {', '.join(known)} (node sets: "
+                        f"{', '.join(NODE_SETS)})")
 
     def elements(dim: int, tag: int, etype: int, nper: int) -> np.ndarray:
         chunks = []
@@ -192,17 +196,21 @@ def extract_mesh(gmsh) -> Mesh:
             hexes.append(conn)
             hex_part.append(np.full(len(conn), PART_ID[part], dtype=np.int32))
     for part in (*BEAM_PARTS, *PAD_PARTS):
-        conn = elements(*groups[part], 1, 2)
-        lines.append(conn)
-        line_part.append(np.full(len(conn), PART_ID[part], dtype=np.int32))
+        if part in groups:
+            conn = elements(*groups[part], 1, 2)
+            lines.append(conn)
+            line_part.append(np.full(len(conn), PART_ID[part], dtype=np.int32))
     node_sets = {}
     for name in NODE_SETS:
         if name in groups:
             nodes, _ = gmsh.model.mesh.getNodesForPhysicalGroup(*groups[name])
             node_sets[name] = np.unique(index[np.asarray(nodes, dtype=np.int64)])
-    return Mesh(points=coords, hexes=np.concatenate(hexes), hex_part=np.concatenate(hex_part),
-                lines=np.concatenate(lines), line_part=np.concatenate(line_part),
-                node_sets=node_sets)
+    def stack(arrays, width, dtype):
+        return np.concatenate(arrays) if arrays else np.zeros((0, width) if width else 0, dtype)
+
+    return Mesh(points=coords, hexes=stack(hexes, 8, np.int64),
+                hex_part=stack(hex_part, 0, np.int32), lines=stack(lines, 2, np.int64),
+                line_part=stack(line_part, 0, np.int32), node_sets=node_sets)
 
 
 def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False) -> tuple[Mesh, dict]:

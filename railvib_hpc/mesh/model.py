@@ -84,10 +84,14 @@ class Mesh:
         e /= np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
         return np.linalg.det(e).min(axis=1)
 
+    def edge_lengths(self) -> np.ndarray:
+        """(n_hexes, 12) edge lengths."""
+        x = self.points[self.hexes]
+        return np.linalg.norm(x[:, _EDGES[:, 1]] - x[:, _EDGES[:, 0]], axis=-1)
+
     def aspect_ratios(self) -> np.ndarray:
         """Longest over shortest edge per hex."""
-        x = self.points[self.hexes]
-        lengths = np.linalg.norm(x[:, _EDGES[:, 1]] - x[:, _EDGES[:, 0]], axis=-1)
+        lengths = self.edge_lengths()
         return lengths.max(axis=1) / np.maximum(lengths.min(axis=1), 1e-300)
 
     def duplicate_nodes(self, tol: float = 1e-8) -> int:
@@ -105,7 +109,9 @@ class Mesh:
     def quality(self) -> dict[str, float]:
         """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count."""
         sj = self.scaled_jacobians()
-        ar = self.aspect_ratios()
+        edges = self.edge_lengths()
+        ar = edges.max(axis=1) / np.maximum(edges.min(axis=1), 1e-300)
+        size = float(np.linalg.norm(np.ptp(self.points, axis=0))) if self.n_nodes else 0.0
         return {
             "n_nodes": self.n_nodes,
             "n_hexes": len(self.hexes),
@@ -113,6 +119,8 @@ class Mesh:
             "min_scaled_jacobian": float(sj.min()) if len(sj) else 1.0,
             "max_aspect_ratio": float(ar.max()) if len(ar) else 1.0,
             "n_inverted": int((sj <= 0).sum()),
+            "min_edge": float(edges.min()) if len(edges) else 0.0,
+            "model_size": size,
         }
 
     def rail_nodes(self) -> np.ndarray:

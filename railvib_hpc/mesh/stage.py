@@ -6,12 +6,14 @@ import json
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .. import __version__
 from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text_atomic
 from ..log import Reporter
-from ..schema import PARTS
+from ..schema import PART_ID, PARTS
 from .gmsh_model import generate, read_msh
 from .layout import build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
@@ -20,6 +22,43 @@ from .search import nonconformal_faces
 
 #: Case sections that determine the mesh (its reuse key).
 MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
+
+#: Aspect ratio (longest / shortest edge of a hexahedron) above which the mesh check warns:
+#: the default shape-check warning limit of ANSYS Mechanical APDL for solids (SHPP,
+#: "Aspect ratio", warning 20; error 1e6). Flat elements bend poorly (B-bar locks less but
+#: is too soft) and stiffen the eigenproblem as (aspect ratio)^2.
+ASPECT_RATIO_WARNING = 20.0
+
+#: Relative round-off of the lowest eigenvalue that a tiny element may cause, as a multiple
+#: of modal.tol. An element of size h in a model of size L (wave speed c) raises the largest
+#: eigenvalue to ~12 c^2 / h^2 against ~(c / L)^2 for the lowest, so the lowest eigenpairs
+#: carry a relative round-off ~ u 12 (L / h)^2 (railvib_hpc.tolerances, item 1): the check
+#: warns when that exceeds modal.tol, i.e. when h < L sqrt(12 u / tol) (2.6 cm for a 50 m
+#: model at tol = 1e-8).
+TINY_ELEMENT_FACTOR = 12.0
+
+
+def quality_warnings(quality: dict, tol: float) -> list[str]:
+    """Warnings of the mesh check: extreme aspect ratios and tiny elements (see
+    :data:`ASPECT_RATIO_WARNING`, :data:`TINY_ELEMENT_FACTOR`); ``tol`` is modal.tol."""
+    from ..tolerances import EPS
+
+    out = []
+    ar = quality.get("max_aspect_ratio", 1.0)
+    if ar > ASPECT_RATIO_WARNING:
+        out.append(f"max aspect ratio {ar:.3g} > {ASPECT_RATIO_WARNING:g} (ANSYS's shape-check "
+                   "warning limit): flat elements bend poorly and make the eigenproblem "
+                   "ill-conditioned; refine across the thin direction or coarsen along it")
+    h, size = quality.get("min_edge"), quality.get("model_size")
+    if h is not None and size and h > 0:
+        roundoff = EPS * TINY_ELEMENT_FACTOR * (size / h) ** 2
+        if roundoff > tol:
+            out.append(f"tiny elements: shortest edge {h:.3g} m in a {size:.3g} m model; the "
+                       f"lowest eigenpairs carry a relative round-off of ~{roundoff:.1e} > "
+                       f"modal.tol = {tol:.1e} (edges below "
+                       f"{size * (TINY_ELEMENT_FACTOR * EPS / tol) ** 0.5:.3g} m); merge or "
+                       "remove slivers")
+    return out
 
 
 def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
@@ -32,15 +71,18 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     """
     t0 = time.perf_counter()
     layout = build_layout(case)
+    derived, dropped = [], {}
     if case["mesh.file"]:
         mesh = read_msh(case.resolve(case["mesh.file"]))
         timings = {"read_msh": time.perf_counter() - t0}
         source = str(case.resolve(case["mesh.file"]))
+        derived = complete_node_sets(mesh)
+        mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
         mesh, timings = generate(layout, msh_path)
         source = "generated"
-    mesh.probes = dict(layout.probes)
-    mesh.probe_roles = dict(layout.probe_roles)
+        mesh.probes = dict(layout.probes)
+    mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
     t0 = time.perf_counter()
     quality = mesh.quality()
     quality["duplicate_nodes"] = mesh.duplicate_nodes()
@@ -54,15 +96,70 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     report = {
         "source": source,
         "quality": quality,
+        "warnings": quality_warnings(quality, case["modal.tol"]),
         "elements_per_part": mesh.counts_per_part(),
         "nodes_per_part": mesh.nodes_per_part(),
         "volume_per_part": mesh.volume_per_part(),
         "node_sets": {k: len(v) for k, v in mesh.node_sets.items()},
         "probes": {k: list(v) for k, v in mesh.probes.items()},
         "probe_roles": dict(mesh.probe_roles),
+        "parts": present_parts(mesh),
+        "node_sets_derived": derived,
+        "probes_outside": {k: list(v) for k, v in dropped.items()},
         "timings": timings,
     }
     return mesh, report
+
+
+def present_parts(mesh: Mesh) -> list[str]:
+    """The parts (physical groups) that have elements in ``mesh``, in schema order."""
+    ids = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
+    return [p for p in PARTS if PART_ID[p] in ids]
+
+
+def require_parts(mesh: Mesh, parts: tuple[str, ...], what: str) -> None:
+    """One clear line when a stage needs parts the (user) mesh does not have."""
+    have = present_parts(mesh)
+    missing = [p for p in parts if p not in have]
+    if missing:
+        raise MeshError(f"{what} needs the part(s) {', '.join(missing)}, which the mesh does "
+                        f"not have (it has: {', '.join(have) or 'nothing'}); use a mesh with "
+                        "them or switch that feature off")
+
+
+def complete_node_sets(mesh: Mesh, rel_tol: float = 1e-9) -> list[str]:
+    """Add the boundary node sets a user mesh does not define, as the generator defines
+    them: ``bottom`` = hexahedron nodes at the lowest z, ``x_faces`` / ``y_faces`` = those
+    at the smallest or largest x / y (Appendix A: bottom fixed, rollers on the sides).
+    Returns the names added."""
+    added = []
+    used = np.unique(mesh.hexes)
+    if used.size == 0:
+        return added
+    p = mesh.points[used]
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    tol = rel_tol * max(float(np.max(hi - lo)), 1.0)
+    rules = {"bottom": np.abs(p[:, 2] - lo[2]) <= tol,
+             "x_faces": (np.abs(p[:, 0] - lo[0]) <= tol) | (np.abs(p[:, 0] - hi[0]) <= tol),
+             "y_faces": (np.abs(p[:, 1] - lo[1]) <= tol) | (np.abs(p[:, 1] - hi[1]) <= tol)}
+    for name, mask in rules.items():
+        if name not in mesh.node_sets:
+            mesh.node_sets[name] = used[mask]
+            added.append(name)
+    return added
+
+
+def probes_inside(mesh: Mesh, probes: dict) -> tuple[dict, dict]:
+    """Split the named probe points into those inside the hexahedra and those outside
+    (a partial user mesh: a soil column has no slab)."""
+    from .search import locate
+
+    if not probes or len(mesh.hexes) == 0:
+        return {}, dict(probes)
+    names = list(probes)
+    elem, _ = locate(np.array([probes[k] for k in names], dtype=float), mesh)
+    inside = {k: probes[k] for k, e in zip(names, elem) if e >= 0}
+    return inside, {k: probes[k] for k, e in zip(names, elem) if e < 0}
 
 
 def format_report(report: dict) -> str:
@@ -82,6 +179,12 @@ def format_report(report: dict) -> str:
         f"non-conformal faces {q['nonconformal_faces']}",
         "node sets: " + ", ".join(f"{k} {v}" for k, v in report["node_sets"].items()),
     ]
+    if report.get("node_sets_derived"):
+        lines.append("node sets derived from the bounding box (not in mesh.file): "
+                     + ", ".join(report["node_sets_derived"]))
+    if report.get("probes_outside"):
+        lines.append("probe points outside the mesh (left out): "
+                     + ", ".join(report["probes_outside"]))
     return "\n".join(lines)
 
 
@@ -100,6 +203,8 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
                     mesh.probe_roles = dict(build_layout(case).probe_roles)
                 report = json.loads(report_path.read_text())
                 report["reused"] = True
+                report["warnings"] = quality_warnings(report["quality"], case["modal.tol"])
+                _print_warnings(report, reporter)
                 return mesh, report
         except (OSError, KeyError, ValueError) as exc:
             reporter.info(f"ignoring unreadable {h5} ({exc}); rebuilding")
@@ -110,4 +215,17 @@ def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh,
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0
     report["reused"] = False
     write_text_atomic(report_path, json.dumps(report, indent=2))
+    _print_warnings(report, reporter)
     return mesh, report
+
+
+def _print_warnings(report: dict, reporter: Reporter) -> None:
+    """The mesh check's warnings, and what was completed or left out of a user mesh."""
+    for warning in report.get("warnings", []):
+        reporter.info(f"WARNING (mesh check): {warning}")
+    if report.get("node_sets_derived"):
+        reporter.info("note: node sets derived from the bounding box (not in mesh.file): "
+                      + ", ".join(report["node_sets_derived"]))
+    if report.get("probes_outside"):
+        reporter.info("note: probe points outside the mesh (left out): "
+                      + ", ".join(report["probes_outside"]))

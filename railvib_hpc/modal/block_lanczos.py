@@ -32,6 +32,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.linalg import eigh
 
+from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
+
 if TYPE_CHECKING:
     from mpi4py import MPI
 
@@ -58,15 +60,53 @@ def sparse_times_block(A, X: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     return out
 
 
-#: Peak memory of a modal solve (RSS summed over the ranks) over MUMPS's factor estimate plus
-#: the dense blocks (basis, work blocks, eigenvectors): 1.8-2.3 measured on five solves of the
-#: thesis model (168k-471k DOFs, 300-1000 modes; the rest is K, M, the mesh on every rank and
-#: MUMPS work space).
-PEAK_RATIO = 2.3
+def abs_matrix(A, comm):
+    """``|A|`` (entrywise absolute values) with A's parallel layout and pattern."""
+    from petsc4py import PETSc
+
+    ip, ix, v = A.getValuesCSR()
+    B = PETSc.Mat().createAIJ(size=A.getSizes(), csr=(ip, ix, np.abs(v)), comm=comm)
+    B.assemble()
+    return B
+
+
+def longest_row(A, comm) -> int:
+    """Largest number of stored entries in a row of A (all ranks)."""
+    from mpi4py import MPI
+
+    ip = A.getValuesCSR()[0]
+    return comm.allreduce(int(np.diff(ip).max(initial=0)), op=MPI.MAX)
+
+
+#: Resident memory of one rank besides the model's arrays: Python, numpy/scipy,
+#: PETSc/SLEPc/MUMPS, MPI, h5py, gmsh (0.12 GB after the imports), the replicated mesh and
+#: DOF map, allocator slack: 0.75 GB measured (getrusage) on 2 ranks of the coarse thesis
+#: model, whose own arrays take < 0.15 GB.
+BASE_GB_PER_RANK = 0.3
+
+#: Bytes per stored matrix entry (double value + 32-bit column index).
+BYTES_PER_ENTRY = 12
+
+
 #: Share of the available memory (``MemAvailable``) a modal solve may plan to use at its peak:
-#: the remaining 10 % absorb what the PEAK_RATIO fit does not cover (its spread over the five
-#: measured solves was +-12 %) and what other processes allocate meanwhile.
+#: the rest absorbs the spread of the predictor and what other processes allocate meanwhile.
 MEMORY_HEADROOM = 0.9
+
+
+def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: int = 0
+             ) -> float:
+    """Peak of the dense arrays of a block Lanczos solve [GB, all ranks], 8 bytes each.
+
+    The larger of: the Lanczos phase (basis of ``basis + block`` columns, three work
+    blocks, the Ritz vectors ``wanted`` — guards included — formed at its end), the
+    purification (Ritz vectors, their purified copies and K and M products, one rotated
+    copy being formed: 5 x ``wanted``, plus the solve blocks), and the static solves (modes,
+    right-hand sides and solutions of ``static_cols`` loads).
+    """
+    lanczos = basis + 4 * block + wanted
+    purify = 5 * wanted + 3 * block
+    static = wanted + 2 * static_cols + block
+    return BYTES_PER_DOUBLE * n_global * max(lanczos, purify, static) / BYTES_PER_GB
 
 
 class InsufficientMemory(RuntimeError):
@@ -103,18 +143,30 @@ class BlockOperator:
     """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
 
     def __init__(self, K, M, sigma: float, comm: MPI.Comm, prefix: str, extra_gb: float = 0.0,
-                 out_of_core: str = "auto"):
+                 out_of_core: str = "auto", inertia: bool = False):
         """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
+
+        The memory predictor (:attr:`predicted_peak_gb`, all ranks): the ranks' base
+        (:data:`BASE_GB_PER_RANK`), the matrices K, M and K - sigma M (nonzeros x
+        :data:`BYTES_PER_ENTRY`), MUMPS's own estimate of everything it allocates
+        (INFOG(17) in core, INFOG(27) out of core) and the dense arrays ``extra_gb``
+        (:func:`dense_gb`); it must stay below 90 % of the available memory.
 
         ``out_of_core``: ``"auto"`` switches MUMPS to out-of-core (factor on disk,
         ICNTL(22) = 1) when the in-core estimate does not fit but the out-of-core one does;
         ``"always"`` / ``"never"`` force it on / off. An explicit PETSc option
         ``-<prefix>st_mat_mumps_icntl_22`` always wins. The option is removed again by
         :meth:`destroy` when this operator set it.
+
+        ``inertia``: also count the eigenvalues below ``sigma`` (Sylvester: the negative
+        pivots of the LDL^T factor, MUMPS INFOG(12), exact with ICNTL(13) = 1 so that the
+        root front is not factored by ScaLAPACK) into :attr:`n_below`.
         """
         from petsc4py import PETSc
 
         self.K, self.M, self.comm, self.sigma = K, M, comm, sigma
+        self._inertia = inertia
+        self.n_below: int | None = None
         self.n_global = K.getSize()[0]
         self.n_local = K.getLocalSize()[0]
         if sigma != 0.0:
@@ -133,10 +185,16 @@ class BlockOperator:
         self.factor_memory_gb = self._estimate_factor_memory(prefix)
         self.in_core_memory_gb = self.factor_memory_gb
 
+        nnz = sum(int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
+                  for A in ({id(K): K, id(M): M, id(self.A): self.A}.values()))
+        self.matrices_gb = BYTES_PER_ENTRY * nnz / 1e9
+        base_gb = BASE_GB_PER_RANK * comm.size
+
         def peak(factor_gb: float) -> float:
-            return PEAK_RATIO * (factor_gb + extra_gb)
+            return base_gb + self.matrices_gb + factor_gb + extra_gb
 
         fits = peak(self.factor_memory_gb) <= MEMORY_HEADROOM * avail_gb
+        self.available_gb = avail_gb
         ooc_note = ""
         if not fits and out_of_core == "auto" and not user_set:
             self._use_out_of_core(True)
@@ -157,11 +215,14 @@ class BlockOperator:
             raise InsufficientMemory(
                 f"the model has {self.n_global:,} DOFs: MUMPS estimates "
                 f"~{self.factor_memory_gb:.1f} GB for the Cholesky factor "
-                f"{'out of core' if out_of_core == 'always' else 'in core'} and the "
-                f"Lanczos basis needs ~{extra_gb:.1f} GB, ~{peak(self.factor_memory_gb):.1f} "
-                f"GB at the peak{ooc_note}, but {avail_gb:.1f} GB are available on "
-                f"{comm.size} rank(s) (modal.out_of_core = '{out_of_core}'); use {advice}")
+                f"{'out of core' if out_of_core == 'always' else 'in core'}, the matrices "
+                f"~{self.matrices_gb:.1f} GB and the Lanczos basis and blocks ~{extra_gb:.1f} "
+                f"GB, ~{peak(self.factor_memory_gb):.1f} GB at the peak{ooc_note}, but "
+                f"{avail_gb:.1f} GB are available on {comm.size} rank(s) "
+                f"(modal.out_of_core = '{out_of_core}'); use {advice}")
         self.out_of_core = opts.getInt(self._ooc_option, 0) == 1
+        #: the memory predictor (see above), all ranks [GB]
+        self.predicted_peak_gb = peak(self.factor_memory_gb)
         ksp, F = self._factor_solver(prefix)
         try:
             ksp.setUp()
@@ -179,6 +240,8 @@ class BlockOperator:
         self.time_factorization = time.perf_counter() - t0
         self.ksp = ksp
         self.factor = F
+        if inertia:
+            self.n_below = int(F.getMumpsInfog(12))
         self.n_solves = 0
         self.time_solves = 0.0
 
@@ -204,7 +267,10 @@ class BlockOperator:
         ksp.setOptionsPrefix(prefix + "st_")
         ksp.setFromOptions()
         pc.setFactorSetUpSolverType()
-        return ksp, pc.getFactorMatrix()
+        F = pc.getFactorMatrix()
+        if self._inertia and F.getType() == "mumps":
+            F.setMumpsIcntl(13, 1)          # exact inertia: no ScaLAPACK root
+        return ksp, F
 
     def _estimate_factor_memory(self, prefix: str) -> float:
         """MUMPS's own estimate (GB, all ranks) of the in-core factorization, after analysis only.
@@ -292,9 +358,20 @@ def start_block(n_global: int, r0: int, r1: int, b: int, seed: int = 20261123) -
 
 def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: float = 1e-8,
                   max_basis: int = 0, max_restarts: int = 50,
-                  monitor: Callable[[int, int, int], None] | None = None
+                  monitor: Callable[[int, int, int], None] | None = None,
+                  theta_cut: float | None = None, margin: int = 1, guard: int = 0
                   ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Largest ``nev`` eigenvalues ``theta`` of the M-self-adjoint operator ``op.apply``.
+    """Largest ``nev`` eigenvalues ``theta`` (in modulus) of the M-self-adjoint ``op.apply``.
+
+    With a shift inside the spectrum (``op.sigma > 0``) ``theta = 1 / (lambda - sigma)``
+    has both signs: the eigenvalues nearest to the shift, on both sides, come first. With
+    ``theta_cut`` the solve goes on past ``nev`` until every Ritz value with ``|theta| >=
+    theta_cut`` (every eigenvalue within ``1 / theta_cut`` of the shift: a band) has
+    converged, followed by ``margin`` converged ones beyond it — Krylov methods converge the
+    extreme ``|theta|`` first, so the band is then complete (the caller checks it with
+    inertia counts). Raises :class:`NotConverged` when the band does not fit ``max_basis``.
+    ``guard``: up to this many further (unconverged) Ritz vectors are appended to ``X``
+    (``stats["n_guard"]``), for a later Rayleigh-Ritz step that needs them.
 
     Parameters
     ----------
@@ -317,7 +394,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
 
     Returns
     -------
-    theta : (nev,) descending
+    theta : (nev,) descending in modulus (with ``theta_cut``: all converged ones)
     X : (n_local, nev) M-orthonormal Ritz vectors
     stats : dict
     """
@@ -332,6 +409,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     if nev + 2 * b > max_basis:
         raise ValueError(f"too many modes ({nev}) for {n} DOFs with block size {b}")
     keep = min(nev + b, max_basis - 2 * b)
+    two_sided = op.sigma != 0.0          # theta of both signs: order by modulus
     V = np.zeros((op.n_local, max_basis + b), order="F")   # column slices stay contiguous
     T = np.zeros((max_basis + b, max_basis + b))
     t_orth = 0.0
@@ -396,11 +474,26 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
         # Rayleigh-Ritz on the m vectors whose images are known
         if m >= nev + b:
             S = np.triu(T[:m, :m]) + np.triu(T[:m, :m], 1).T
-            theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
-            theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])  # BLAS needs + strides
+            if two_sided:
+                theta, Y = eigh(S)
+                order = np.argsort(-np.abs(theta), kind="stable")[:min(m, keep)]
+                theta, Y = theta[order], np.asfortranarray(Y[:, order])
+            else:
+                theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
+                theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])  # + strides
             res = np.linalg.norm(T[m:m + b, :m] @ Y, axis=0)
             ok = res <= tol * np.abs(theta)
             nconv = int(np.argmin(ok)) if not ok.all() else len(ok)
+            if theta_cut is not None:
+                # the band: every Ritz value above the cut, then `margin` converged below it
+                inside = int(np.sum(np.abs(theta) >= theta_cut))
+                want = max(nev, inside + margin)
+                if want + 2 * b > max_basis:
+                    raise NotConverged(f"block Lanczos: the band holds at least {inside} "
+                                       f"modes, more than a basis of {max_basis} can take")
+                if want > nev:
+                    nev = want
+                    keep = min(nev + b, max_basis - 2 * b)
             if monitor:
                 monitor(min(nconv, nev), nev, m)
             if nconv >= nev:
@@ -427,34 +520,61 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
             m = p
             restarts += 1
             just_restarted = True
+    if theta_cut is not None:          # return every converged pair (band + margin)
+        nev = nconv
+    n_guard = max(0, min(guard, Y.shape[1] - nev))
     t0 = time.perf_counter()
-    X = V[:, :m] @ Y[:, :nev]
+    X = V[:, :m] @ Y[:, :nev + n_guard]
     t_orth += time.perf_counter() - t0
     stats = {"block_size": b, "max_basis": max_basis, "restarts": restarts,
              "expansions": expansions, "basis_size": m, "linear_solves": op.n_solves,
              "time_block_solves": op.time_solves, "time_orthogonalization": t_orth,
-             "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max())}
+             "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max()),
+             "n_wanted": int(nev), "n_guard": int(n_guard)}
     return theta[:nev], X, stats
 
 
-def purify_and_project(op: BlockOperator, X: np.ndarray, block: int
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One more operator application (purification), then Rayleigh-Ritz with K and M.
 
     Applying ``(K - sigma M)^-1 M`` once more damps the high-frequency error left in the
     Ritz vectors (what SLEPc calls purification); the final Rayleigh-Ritz step makes the
     modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues (ascending), modes
-    ``Phi`` and the products ``K Phi`` and ``M Phi``.
+    ``Phi``, the products ``K Phi`` and ``M Phi``, and for every mode an upper bound of
+    the norm of its solve residual ``M X - (K - sigma M) X_p`` (the accuracy of the
+    factorisation: a floor for the eigen-residual, since ``K phi - lambda M phi`` contains
+    it). ``refine``: one step of iterative refinement per solve (``X_p += (K - sigma
+    M)^-1 s``), which brings an inaccurate factor's solves to working accuracy.
     """
     from mpi4py import MPI
 
     Xp = np.empty_like(X)
+    KX = np.empty_like(X)
+    MX = np.empty_like(X)
+    sres = np.zeros(X.shape[1])
     for j in range(0, X.shape[1], block):
-        Xp[:, j:j + block] = op.apply(X[:, j:j + block])
-    KX, MX = op.stiffness(Xp), op.mass(Xp)
+        B = op.mass(X[:, j:j + block])
+        Y = op.solve(B, chunk=max(B.shape[1], 1))
+        KY, MY = op.stiffness(Y), op.mass(Y)
+        if refine:
+            Y += op.solve(B - (KY - op.sigma * MY), chunk=max(B.shape[1], 1))
+            KY, MY = op.stiffness(Y), op.mass(Y)
+        S = B - (KY - op.sigma * MY)
+        sres[j:j + block] = np.sum(S**2, axis=0)
+        Xp[:, j:j + block], KX[:, j:j + block], MX[:, j:j + block] = Y, KY, MY
+    op.comm.Allreduce(MPI.IN_PLACE, sres, op=MPI.SUM)
     kp = np.ascontiguousarray(Xp.T @ KX)
     mp = np.ascontiguousarray(Xp.T @ MX)
     op.comm.Allreduce(MPI.IN_PLACE, kp, op=MPI.SUM)
     op.comm.Allreduce(MPI.IN_PLACE, mp, op=MPI.SUM)
     lam, Z = eigh(0.5 * (kp + kp.T), 0.5 * (mp + mp.T))
-    return lam, Xp @ Z, KX @ Z, MX @ Z
+    # one rotated copy at a time (memory: see dense_gb)
+    Phi = Xp @ Z
+    del Xp
+    KPhi = KX @ Z
+    del KX
+    MPhi = MX @ Z
+    del MX
+    # ||S z_i|| <= sum_j |z_ji| ||s_j|| (triangle inequality; S itself is not kept)
+    return lam, Phi, KPhi, MPhi, np.abs(Z).T @ np.sqrt(sres)

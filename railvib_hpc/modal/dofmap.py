@@ -15,7 +15,8 @@ Default constraints reproduce the thesis (Appendix A):
   normal to y: ``uy = 0``;
 * rigid rail nodes: all 6 DOFs fixed (this includes the rigid/flexible joints);
 * all rotations of sleeper nodes fixed;
-* all rotations of the rail nodes that carry a pad fixed.
+* all rotations of the rail nodes that carry a pad fixed;
+* nodes that belong to no element (left over in a user's mesh) have no DOF.
 """
 
 from __future__ import annotations
@@ -121,6 +122,10 @@ def constraint_mask(mesh: Mesh, fix_sleeper_rotations: bool = True,
     beam_nodes[mesh.lines[np.isin(mesh.line_part, beam_ids)].ravel()] = True
     fixed = np.zeros((n, 6), dtype=bool)
     fixed[~beam_nodes, 3:] = True                       # rotations do not exist there
+    used = np.zeros(n, dtype=bool)                      # nodes of no element (a user mesh's
+    used[mesh.hexes.ravel()] = True                     # leftovers) carry no DOF
+    used[mesh.lines.ravel()] = True
+    fixed[~used] = True
     ns = dict(mesh.node_sets, all=np.arange(n))
     for name, comps in (DEFAULT_RULES if rules is None else rules).items():
         if name in ns:

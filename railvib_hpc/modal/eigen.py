@@ -14,36 +14,27 @@ counts guaranteeing none is missed.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from ..errors import UserError
-
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-PREFIX = "railvib_eig_"
-
-
-class EigenSolveError(UserError):
-    """The eigensolver did not deliver the requested modes."""
-
-
-@dataclass
-class ModalResult:
-    """Eigenpairs with this rank's rows of the mass-normalised mode matrix."""
-
-    eigenvalues: np.ndarray
-    phi: np.ndarray                    # (n_local_dofs, n_modes)
-    stats: dict = field(default_factory=dict)
-    static: np.ndarray | None = None   # (n_local_dofs, k) K^-1 static_rhs, when asked for
-
-    @property
-    def frequencies_hz(self) -> np.ndarray:
-        return np.sqrt(np.maximum(self.eigenvalues, 0.0)) / (2 * np.pi)
+from .ritz import (  # noqa: F401  (re-exported: the solver's public names)
+    EXTRA_PURIFICATIONS,
+    NORMALISE_CHUNK,
+    PREFIX,
+    RETRY_TOL_FACTOR,
+    EigenSolveError,
+    ModalResult,
+    convergence_verdict,
+    hopeless,
+    in_window,
+    normalise_and_check,
+    purified_modes,
+    unconverged,
+)
 
 
 def _configure(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
@@ -53,8 +44,10 @@ def _configure(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float
 
     eps = SLEPc.EPS().create(comm)
     if f_max > 0:
-        # MUMPS reports the inertia (needed by spectrum slicing) only for SBAIJ matrices
-        K, M = K.convert(PETSc.Mat.Type.SBAIJ), M.convert(PETSc.Mat.Type.SBAIJ)
+        # MUMPS reports the inertia (needed by spectrum slicing) only for SBAIJ matrices;
+        # converted copies (petsc4py's convert() without a target converts in place)
+        K = K.convert(PETSc.Mat.Type.SBAIJ, PETSc.Mat())
+        M = M.convert(PETSc.Mat.Type.SBAIJ, PETSc.Mat())
     eps.setOperators(K, M)
     eps.setProblemType(SLEPc.EPS.ProblemType.GHEP)
     eps.setType(SLEPc.EPS.Type.KRYLOVSCHUR)
@@ -88,7 +81,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
                 tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
                 monitor=None, static_rhs: np.ndarray | None = None,
-                out_of_core: str = "auto") -> ModalResult:
+                out_of_core: str = "auto", bands=None, assemble=None) -> ModalResult | None:
     """Extract mass-normalised modes.
 
     Parameters
@@ -108,12 +101,14 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
     mpd
         Maximum projected dimension (bounds memory); 0 lets SLEPc decide.
     method
-        ``"block_lanczos"`` (block shift-invert Lanczos, :mod:`.block_lanczos`) or
-        ``"krylovschur"`` (SLEPc). Spectrum slicing (``f_max``) always uses SLEPc.
+        ``"block_lanczos"`` (block shift-invert Lanczos, :mod:`.block_lanczos`; with
+        ``f_max``: band-sliced, :mod:`.band_solve`) or ``"krylovschur"`` (SLEPc; with
+        ``f_max``: SLEPc spectrum slicing).
     block_size, max_basis
         Block Lanczos: right-hand sides per solve and restart size (0: automatic).
     monitor
-        Progress callback ``monitor(n_converged, n_wanted, basis_size)``.
+        Progress callback ``monitor(n_converged, n_wanted, basis_size)`` (band-sliced:
+        ``monitor(done, total, basis_size, label=...)`` over all bands).
     static_rhs
         (n_local_dofs, k) right-hand sides solved with the factorization of K
         when the block solver factors K itself (shift 0); the solutions are
@@ -122,11 +117,20 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         MUMPS out-of-core factorization: ``"auto"`` (block Lanczos: when the in-core
         factor would not fit in memory but the out-of-core one does), ``"always"`` or
         ``"never"``; an explicit ``-railvib_eig_st_mat_mumps_icntl_22`` option wins.
+    bands
+        :class:`~railvib_hpc.modal.band_solve.BandSettings` of a band-sliced solve
+        (``f_max`` with block Lanczos); None: one band plan with the defaults and a
+        temporary cache folder.
+    assemble
+        ``assemble(subcomm) -> (K, M)``: the matrices on a sub-communicator (band groups).
 
     Raises
     ------
     EigenSolveError
-        When fewer than the requested modes converged.
+        When fewer than the requested modes converged, or when a mode's true relative
+        residual is above ``tol`` (and above its round-off floor, or above ``sqrt(tol)``):
+        see :func:`convergence_verdict`. Round-off-limited modes come back with
+        ``ModalResult.warnings``.
     """
     from petsc4py import PETSc
 
@@ -137,6 +141,9 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
     if method == "block_lanczos" and f_max <= 0:
         return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
                             monitor, static_rhs, out_of_core)
+    if method == "block_lanczos":
+        return _solve_bands(K, M, comm, f_max, tol, max_it, block_size, monitor, static_rhs,
+                            out_of_core, bands, assemble)
     ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
     set_ooc = out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
     if set_ooc:
@@ -146,6 +153,35 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
     finally:
         if set_ooc:
             PETSc.Options().delValue(ooc_name)
+
+
+def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, block_size: int,
+                 monitor, static_rhs, out_of_core: str, bands, assemble) -> ModalResult | None:
+    """Band-sliced block Lanczos (:mod:`.band_solve`); a temporary cache without settings."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    from petsc4py import PETSc
+
+    from .band_solve import BandSettings, solve_bands
+
+    opts = PETSc.Options(PREFIX)
+    tol = opts.getReal("eps_tol", tol)
+    block_size = opts.getInt("bl_block_size", block_size)
+    tmp = None
+    if bands is None:
+        tmp = comm.bcast(tempfile.mkdtemp(prefix="railvib-bands-") if comm.rank == 0 else None)
+        bands = BandSettings(f_max=f_max, edges=[], band_modes=250, groups=1, band_only=0,
+                             tol=tol, block_size=block_size, max_restarts=max_it,
+                             out_of_core=out_of_core, cache_dir=Path(tmp), key="temporary")
+    try:
+        return solve_bands(K, M, comm, bands, assemble=assemble, monitor=monitor,
+                           static_rhs=static_rhs)
+    finally:
+        comm.Barrier()
+        if tmp is not None and comm.rank == 0:
+            shutil.rmtree(tmp, ignore_errors=True)
 
 
 def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
@@ -196,15 +232,20 @@ def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: flo
         "tol": float(eps.getTolerances()[0]),
         "time_factorization": t1 - t0, "time_solve": t2 - t1, "time_extract": t3 - t2,
     }
+    for A in eps.getOperators():
+        if A is not None and A.getType() == "sbaij":      # the copies made for slicing
+            A.destroy()
     eps.destroy()
     result = ModalResult(lam, phi, stats)
-    normalise_and_check(result, K, M, comm)
+    normalise_and_check(result, K, M, comm, tol=stats["tol"])
+    result.warnings = convergence_verdict(result, stats["tol"])
     return result
 
 
 def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
                  static_rhs: np.ndarray | None = None, out_of_core: str = "auto") -> ModalResult:
+    from mpi4py import MPI
     from petsc4py import PETSc
 
     from .block_lanczos import (
@@ -214,7 +255,7 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
         NotConverged,
         block_lanczos,
         default_max_basis,
-        purify_and_project,
+        dense_gb,
     )
 
     opts = PETSc.Options(PREFIX)
@@ -225,9 +266,9 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
     basis = max_basis if max_basis > 0 else default_max_basis(n_modes, block_size)
-    # dense blocks: the Lanczos basis, three work blocks and the eigenvectors
-    extra_gb = (BYTES_PER_DOUBLE * n_global * (basis + 3 * block_size + n_modes)
-                / BYTES_PER_GB)
+    extra_gb = dense_gb(n_global, basis, block_size, n_modes + block_size,
+                        0 if static_rhs is None else comm.allreduce(
+                            static_rhs.shape[1], op=MPI.MAX))
     try:
         op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
                            out_of_core=out_of_core)
@@ -235,12 +276,16 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
         raise EigenSolveError(str(exc)) from None
     r0 = K.getOwnershipRange()[0]
     try:
-        _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=tol,
+        for lanczos_tol in (tol, tol / RETRY_TOL_FACTOR):
+            _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=lanczos_tol,
                                      max_basis=max_basis, max_restarts=max_restarts,
-                                     monitor=monitor)
-        t_p = time.perf_counter()
-        lam, X, KX, MX = purify_and_project(op, X, st["block_size"])
-        st["time_purify_project"] = time.perf_counter() - t_p
+                                     monitor=monitor, guard=block_size)
+            t_p = time.perf_counter()
+            result = purified_modes(op, X, st["block_size"], K, M, comm, tol, st)
+            st["time_purify_project"] = time.perf_counter() - t_p
+            st["lanczos_tol"] = lanczos_tol
+            if not hopeless(result, tol).any():
+                break
         static = None
         if static_rhs is not None and sigma == 0.0:
             t_s = time.perf_counter()
@@ -252,44 +297,12 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
     finally:
         op.destroy()
     t1 = time.perf_counter()
-    order = np.argsort(lam, kind="stable")
-    stats = dict(st, nconv=int(n_modes), eps_type="block_lanczos", st_type="sinvert",
-                 factor_solver="mumps", tol=tol, time_factorization=op.time_factorization,
-                 factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
-                 factor_memory_in_core_gb=op.in_core_memory_gb,
-                 time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
-    result = ModalResult(lam[order], np.ascontiguousarray(X[:, order]), stats, static)
-    normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order])
+    result.stats.update(st, nconv=int(n_modes), eps_type="block_lanczos", st_type="sinvert",
+                        factor_solver="mumps", tol=tol,
+                        time_factorization=op.time_factorization,
+                        factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
+                        factor_memory_in_core_gb=op.in_core_memory_gb,
+                        time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
+    result.static = static
+    result.warnings = convergence_verdict(result, tol)
     return result
-
-
-def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndarray | None = None,
-                        MPhi: np.ndarray | None = None) -> None:
-    """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
-
-    ``KPhi``/``MPhi`` may be given when already computed (they are scaled along).
-    """
-    from mpi4py import MPI
-
-    t0 = time.perf_counter()
-    from .block_lanczos import sparse_times_block
-
-    phi = result.phi
-    if MPhi is None:
-        MPhi = sparse_times_block(M, phi, comm)
-    modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
-    scale = 1.0 / np.sqrt(modal_mass)
-    phi *= scale
-    MPhi = MPhi * scale
-    KPhi = sparse_times_block(K, phi, comm) if KPhi is None else KPhi * scale
-    gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
-    stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
-    lam = result.eigenvalues
-    res = comm.allreduce(np.sum((KPhi - MPhi * lam) ** 2, axis=0), op=MPI.SUM)
-    knorm = comm.allreduce(np.sum(KPhi**2, axis=0), op=MPI.SUM)
-    result.stats.update({
-        "max_orthonormality_error": float(np.abs(gram - np.eye(len(lam))).max()),
-        "max_stiffness_diag_error": float(np.abs(stiff - np.diag(lam)).max() / lam.max()),
-        "max_relative_residual": float(np.sqrt(res / knorm).max()),
-        "time_checks": time.perf_counter() - t0,
-    })

@@ -34,8 +34,10 @@ from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, w
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
-_NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core")
+#: Keys of [modal] and of each material that do not change the modes (not in the reuse key);
+#: the band split and its parallel layout change them by round-off only.
+_NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core", "bands", "band_modes",
+                     "band_groups", "band_only")
 
 
 def modal_digest(case: Case) -> str:
@@ -73,12 +75,12 @@ def _progress(rep: Reporter):
     t_start = time.perf_counter()
     state = {"last": -1e9}
 
-    def monitor(nconv: int, nev: int, basis: int) -> None:
+    def monitor(nconv: int, nev: int, basis: int, label: str | None = None) -> None:
         now = time.perf_counter()
         if now - state["last"] < PROGRESS_INTERVAL_S and nconv < nev:
             return
         state["last"] = now
-        rep.progress(f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
+        rep.progress(label or f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
                      max(nconv, 0), nev, t_start)
 
     return monitor
@@ -143,7 +145,18 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
             max_it=case["modal.max_restarts"], method=case["modal.method"],
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
-            static_rhs=static_rhs, out_of_core=case["modal.out_of_core"])
+            static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
+            bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
+                mesh, case, build_dofmap(mesh, sub.size, case["modal.fix_sleeper_rotations"],
+                                         case["modal.fix_rail_rotations_at_pads"]), sub)[:2])
+    if result is None:                                   # modal.band_only: one band cached
+        K.destroy()
+        M.destroy()
+        rep.info(f"band {case['modal.band_only']} written to {out_dir / 'bands'}; run with "
+                 "modal.band_only = 0 to merge the bands into modes.h5")
+        return {"reused": False, "band_only": case["modal.band_only"], "n_modes": 0}
+    for warning in result.warnings:
+        rep.info(f"WARNING: {warning}")
     if result.stats.get("out_of_core"):
         rep.info(f"  MUMPS out of core (factor on disk): in-core estimate "
                  f"{result.stats['factor_memory_in_core_gb']:.1f} GB, out of core "
@@ -164,6 +177,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
         stats = dict(result.stats)
+        stats["convergence_warnings"] = list(result.warnings)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
         rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KB_PER_GB)
@@ -171,6 +185,8 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         stats["peak_rss_gb_total"] = float(sum(rss))
         stats["n_dofs"] = dofmap.n_dofs
         stats["ranks"] = comm.size
+        # rank 0's (timings differ per rank): parallel HDF5 needs identical attributes
+        stats = comm.bcast(stats, root=0)
         attrs = {"inputs_sha256": key, "case_toml": case.to_toml(), "railvib_version": __version__,
                  "petsc_version": _versions()[0], "slepc_version": _versions()[1],
                  "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}
@@ -191,6 +207,21 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary
+
+
+def band_settings(case: Case, out_dir: Path):
+    """The band-sliced solve's settings (``modal.f_max`` with block Lanczos), else None."""
+    from .band_solve import BandSettings, cache_key
+
+    md = case["modal"]
+    if md["f_max"] <= 0 or md["method"] != "block_lanczos":
+        return None
+    return BandSettings(f_max=md["f_max"], edges=list(md["bands"]),
+                        band_modes=md["band_modes"], groups=md["band_groups"],
+                        band_only=md["band_only"], tol=md["tol"],
+                        block_size=md["block_size"], max_restarts=md["max_restarts"],
+                        out_of_core=md["out_of_core"], cache_dir=out_dir / "bands",
+                        key=cache_key(case))
 
 
 def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str) -> None:

@@ -40,6 +40,9 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     table
         (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
     """
+    from ..mesh.stage import require_parts
+
+    require_parts(mesh, ("rail",), "mbs.static_correction = true (unit loads on the rails)")
     rails = mesh.rail_nodes()
     if np.any(rails < 0):
         raise ValueError("the two rails must have the same number of nodes")
@@ -133,8 +136,8 @@ def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:
     from .block_lanczos import BlockOperator
     from .eigen import PREFIX
 
-    # dense blocks held besides the factor: the right-hand sides and the solutions
-    extra_gb = 2 * BYTES_PER_DOUBLE * rhs.size / BYTES_PER_GB
+    # dense blocks held besides the factor: the right-hand sides and the solutions (all ranks)
+    extra_gb = 2 * BYTES_PER_DOUBLE * comm.allreduce(rhs.size) / BYTES_PER_GB
     op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
     try:
         return op.solve(rhs)

@@ -423,6 +423,12 @@ def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm: MPI.Comm, rep
                 return f["modes/frequency_hz"][()].tolist()
 
         freq = on_root(top, comm)
+        if case["modal.f_max"] >= band_hz:           # band-sliced: every mode below f_max
+            rep.info(f"  {len(freq)} modes below the band limit {band_hz:g} Hz (inertia-"
+                     "checked band solve)")
+            k = len(freq)
+            return modal, on_root(lambda c=case, k=k: variant_case(c, [f"mbs.n_modes={k}"]),
+                                  comm)
         if freq[-1] >= band_hz:
             k = int(sum(f <= band_hz for f in freq))
             rep.info(f"  {k} of {len(freq)} modes lie below the band limit {band_hz:g} Hz")

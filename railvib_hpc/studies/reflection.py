@@ -13,12 +13,12 @@ change) raises the base; a positive one deepens the subgrade (``domain.extra_dep
 
 Compared: the building peak accelerations (vertical and total) and their one-third-octave
 spectra (1–80 Hz, total acceleration). Verdict: boundary reflections matter when the case's
-own domain (the one with no change; otherwise the first) differs from the reference by
-more than ``threshold`` percent in any building peak acceleration. With ``band_hz = 0``
-every domain keeps the case's number of modes, so larger domains end at lower frequencies
+own domain (the one with no change; otherwise the first) differs from the reference by more
+than ``threshold`` percent in any building peak acceleration. With ``band_hz = 0`` every
+domain keeps the case's number of modes, so larger domains end at lower frequencies
 (listed); ``band_hz > 0`` gives every domain exactly its modes below that frequency instead
-(block Lanczos with a Weyl estimate of the count, :func:`weyl_count`, repeated with more
-modes if they fall short; the MBS uses the modes below the band).
+(``modal.f_max = band_hz``: the band-sliced eigensolve, whose inertia counts prove the
+count; the MBS uses them all).
 """
 
 from __future__ import annotations
@@ -68,7 +68,6 @@ def domain_overrides(case: Case, change: tuple[float, float, float]) -> list[str
 
 def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     """One variant per domain (own mesh and modes)."""
-    from .common import variant_case
     from .settings import StudySettingsError
 
     variants = []
@@ -84,9 +83,8 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
         ov = domain_overrides(case, (d, ln, w))
         if band > 0:
-            # modes: Weyl's estimate + 25 % + 16 (the solve is repeated if they fall short)
-            n = int(math.ceil(1.25 * weyl_count(variant_case(case, ov), band))) + 16
-            ov += [f"modal.n_modes={n}", "modal.f_max=0.0"]
+            # every mode below the band, proved by the inertia counts of the band solve
+            ov += [f"modal.f_max={float(band)!r}"]
         variants.append(Variant(name=name, overrides=tuple(ov),
                                 parameter={"extra_depth": d, "extra_length": ln,
                                            "extra_width": w}, band_hz=band))

@@ -65,11 +65,28 @@ def test_tiny_user_mesh_is_accepted(tmp_path):
                                                        "subgrade": 1.0})
 
 
-def test_missing_physical_groups_is_a_clear_error(tmp_path):
-    msh = tmp_path / "nogroups.msh"
+def test_any_subset_of_parts_is_a_mesh_but_none_is_a_clear_error(tmp_path):
+    msh = tmp_path / "twolayers.msh"
     _tiny_msh(msh, groups=("ballast", "subgrade"))
-    with pytest.raises(MeshError, match=r"no physical group.*subballast"):
-        make_mesh(load_case(BASELINE, [f"mesh.file='{msh}'"]))
+    mesh, report = make_mesh(load_case(BASELINE, [f"mesh.file='{msh}'"]))
+    assert len(mesh.hexes) == 2 and "subballast" not in report["parts"]
+    with pytest.raises(MeshError, match=r"no physical group named after a part \(found: "
+                                        r"'soil'\); allowed names: ballast, subballast"):
+        _one_unknown_group(tmp_path / "unknown.msh")
+        make_mesh(load_case(BASELINE, [f"mesh.file='{tmp_path / 'unknown.msh'}'"]))
+
+
+def _one_unknown_group(path: Path) -> None:
+    with gmsh_session() as gmsh:
+        gmsh.model.add("unknown")
+        pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                        [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=float)
+        gmsh.model.addDiscreteEntity(0, 1)
+        gmsh.model.mesh.addNodes(0, 1, list(range(1, 9)), pts.ravel().tolist())
+        ent = gmsh.model.addDiscreteEntity(3)
+        gmsh.model.mesh.addElementsByType(ent, 5, [1], list(range(1, 9)))
+        gmsh.model.addPhysicalGroup(3, [ent], 1, name="soil")
+        gmsh.write(str(path))
 
 
 def test_inverted_element_fails_mesh_command(tmp_path, capsys):

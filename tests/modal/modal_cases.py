@@ -207,3 +207,80 @@ def energy_sum_allowance(mesh, case, dofmap, phi, comm=None):
     whole = np.diag(tolerances.product_error(to_scipy(K), phi))
     per_group = np.stack(per_group, axis=1)
     return per_group, per_group.sum(axis=1) + whole
+
+
+def write_msh(mesh: Mesh, path, node_sets: bool = False) -> None:
+    """Write ``mesh`` as a gmsh .msh with one physical group per part present (and the node
+    sets as physical groups of points when ``node_sets``), like a user's own mesh."""
+    from railvib_hpc.mesh.gmsh_model import gmsh_session
+    from railvib_hpc.schema import PARTS
+
+    with gmsh_session() as gmsh:
+        gmsh.model.add("user")
+        gmsh.model.addDiscreteEntity(0, 1)
+        tags = np.arange(1, mesh.n_nodes + 1)
+        gmsh.model.mesh.addNodes(0, 1, tags.tolist(), mesh.points.ravel().tolist())
+        first = 1
+        for part in PARTS:
+            for conn, etype, dim in ((mesh.hexes[mesh.hex_part == PART_ID[part]], 5, 3),
+                                     (mesh.lines[mesh.line_part == PART_ID[part]], 1, 1)):
+                if len(conn) == 0:
+                    continue
+                ent = gmsh.model.addDiscreteEntity(dim)
+                gmsh.model.mesh.addElementsByType(
+                    ent, etype, list(range(first, first + len(conn))), (conn + 1).ravel().tolist())
+                first += len(conn)
+                gmsh.model.addPhysicalGroup(dim, [ent], PART_ID[part], name=part)
+        if node_sets:
+            for k, (name, nodes) in enumerate(mesh.node_sets.items()):
+                ent = gmsh.model.addDiscreteEntity(0)
+                gmsh.model.mesh.addElementsByType(ent, 15, list(range(first, first + len(nodes))),
+                                                  (np.asarray(nodes) + 1).tolist())
+                first += len(nodes)
+                gmsh.model.addPhysicalGroup(0, [ent], 100 + k, name=name)
+        gmsh.write(str(path))
+
+
+def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, edges=(),
+                 band_modes: int = 250, groups: int = 1, band_only: int = 0,
+                 block_size: int = 8, tol: float = 1e-10):
+    """Band-sliced solve of the model on ``comm`` (cache in ``cache_dir``); returns
+    (result, K, M, dofmap)."""
+    from pathlib import Path
+
+    from mpi4py import MPI
+
+    from railvib_hpc.petsc_env import init_petsc
+
+    init_petsc([])
+    from railvib_hpc.modal.band_solve import BandSettings
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.eigen import solve_modes
+    from railvib_hpc.modal.petsc import assemble
+
+    comm = comm or MPI.COMM_SELF
+    dofmap = build_dofmap(mesh, comm.size, rules=rules)
+    K, M, _ = assemble(mesh, case, dofmap, comm)
+
+    def on(sub):
+        return assemble(mesh, case, build_dofmap(mesh, sub.size, rules=rules), sub)[:2]
+
+    s = BandSettings(f_max=f_max, edges=list(edges), band_modes=band_modes, groups=groups,
+                     band_only=band_only, tol=tol, block_size=block_size, max_restarts=100,
+                     out_of_core="auto", cache_dir=Path(cache_dir), key="test")
+    result = solve_modes(K, M, comm, f_max=f_max, tol=tol, block_size=block_size, bands=s,
+                         assemble=on)
+    return result, K, M, dofmap
+
+
+def copies(mesh: Mesh, n: int, dx: float) -> Mesh:
+    """``n`` disconnected copies of ``mesh`` side by side along x: every eigenvalue of the
+    mesh becomes an n-fold one (a planted cluster)."""
+    pts = np.concatenate([mesh.points + [k * dx, 0.0, 0.0] for k in range(n)])
+    off = mesh.n_nodes
+    return Mesh(points=pts, hexes=np.concatenate([mesh.hexes + k * off for k in range(n)]),
+                hex_part=np.tile(mesh.hex_part, n),
+                lines=np.concatenate([mesh.lines + k * off for k in range(n)]),
+                line_part=np.tile(mesh.line_part, n),
+                node_sets={k: np.concatenate([v + j * off for j in range(n)])
+                           for k, v in mesh.node_sets.items()})

@@ -40,3 +40,24 @@ def test_reflection_study_compares_domains_and_resumes(shared_tmp, capsys):
         for png in ("reflection_peaks.png", "reflection_spectra.png"):
             assert (root / "figures" / png).exists()
     comm.Barrier()
+
+
+@pytest.mark.mpi
+def test_reflection_study_with_a_band_uses_band_sliced_modes(shared_tmp, capsys):
+    """band_hz: every domain gets all its modes below the band (modal.f_max, inertia
+    counted), one solve each, and the MBS uses them all."""
+    args = ["study", "reflection", str(BASELINE), *TINY, "--out", str(shared_tmp),
+            "--study-set", "domains=[[0, 0, 0], [1.2, 1.2, 3]]",
+            "--study-set", "names=[small, big]", "--study-set", "band_hz=13"]
+    assert run(args) == 0
+    out = capsys.readouterr().out
+    if comm.rank == 0:
+        assert out.count("modes below the band limit 13 Hz (inertia-checked band solve)") == 2
+        counts = {}
+        for name in ("small", "big"):
+            res = json.loads((shared_tmp / "reflection" / name / "result.json").read_text())
+            f = res["model"]["frequencies_hz"]
+            assert max(f) < 13.0 and res["model"]["f_max_hz"] < 13.0
+            counts[name] = len(f)
+        assert counts["big"] >= counts["small"] >= 1
+    comm.Barrier()

@@ -1,0 +1,165 @@
+"""Band-sliced eigensolve benchmark (issue 14's table): one ``railvib modal`` run per line.
+
+Usage (every heavy run under the shared lock)::
+
+    flock /tmp/railvib-heavy.lock python bench/band_bench.py --ranks 2 --f-max 65 \\
+        --bands 1 2 4 8            # (c): the split's effect; --bands 0 = automatic (a)
+    flock /tmp/railvib-heavy.lock python bench/band_bench.py --ranks 2 --f-max 65 \\
+        --groups 2                 # (a) with 2 bands at a time on 1 rank each
+    flock /tmp/railvib-heavy.lock python bench/band_bench.py --refinement 2 --f-max 42.2
+    flock /tmp/railvib-heavy.lock python bench/band_bench.py --f-max 65 \\
+        --reference slepc-slicing single-shift     # (d): SLEPc and one shift, same matrix
+
+Each configuration runs in a fresh process (so that peak memory is its own) under mpirun
+with a fresh output folder; printed: modes, bands, wall time of the command, eigensolve
+time, factorisations, right-hand sides, orthogonalisation, the merge, max |Phi^T M Phi - I|,
+max relative residual, peak memory summed over the ranks (getrusage) and the memory
+predictor's value (largest band: base + matrices + MUMPS estimate + dense arrays; merge:
+candidates + modes), and
+the largest relative eigenvalue difference to the first configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE = ROOT / "jobs" / "thesis_baseline.toml"
+
+
+def run(out: Path, ranks: int, sets: list[str], petsc: list[str], timeout: float) -> dict:
+    env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, "-m", "railvib_hpc",
+           "modal", str(CASE), "--out", str(out)]
+    for s in sets:
+        cmd += ["--set", s]
+    if petsc:
+        cmd += ["--", *petsc]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        return {"error": (proc.stderr.strip().splitlines() or ["?"])[-1], "wall": wall}
+    with h5py.File(out / "modes.h5", "r") as f:
+        stats = json.loads(f.attrs["stats"])
+        lam = f["modes/eigenvalue"][()]
+    progress = [ln for ln in proc.stdout.splitlines() if "ETA" in ln]
+    return {"wall": wall, "stats": stats, "lam": lam, "progress_lines": len(progress),
+            "last_progress": progress[-1].strip() if progress else ""}
+
+
+def row(name: str, r: dict, ref: np.ndarray | None) -> str:
+    if "error" in r:
+        return f"| {name} | failed after {r['wall']:.0f} s: {r['error']} |"
+    st, lam = r["stats"], r["lam"]
+    bands = st.get("bands", [])
+    pred = max([b["stats"].get("predicted_peak_gb", 0.0) for b in bands] or
+               [st.get("factor_memory_gb", 0.0)])
+    merge = st.get("merge_predicted_gb")
+    orth = sum(b["stats"].get("time_orthogonalization", 0.0) for b in bands) or \
+        st.get("time_orthogonalization", 0.0)
+    diff = ""
+    if ref is not None and len(ref) == len(lam):
+        diff = f"{np.abs(lam / ref - 1).max():.1e}"
+    elif ref is not None:
+        diff = f"{len(lam)} vs {len(ref)} modes"
+    f = np.sqrt(lam) / (2 * np.pi)
+    return (f"| {name} | {st.get('n_dofs', 0):,} | {len(lam)} ({f[0]:.3f}-{f[-1]:.3f} Hz) | "
+            f"{st.get('n_bands', 1)} | {r['wall']:.1f} | {st.get('time_solve', 0.0):.1f} | "
+            f"{st.get('time_factorization', 0.0):.1f} | {st.get('linear_solves', 0)} | "
+            f"{orth:.1f} | {st.get('time_merge_rayleigh_ritz', 0.0):.1f} | "
+            f"{st['max_orthonormality_error']:.1e} | {st['max_relative_residual']:.1e} | "
+            f"{st['peak_rss_gb_total']:.2f} | {pred:.1f}"
+            f"{'' if merge is None else f' / {merge:.1f}'} | {diff} |")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ranks", type=int, default=2)
+    ap.add_argument("--refinement", type=float, default=1.0)
+    ap.add_argument("--f-max", type=float, default=65.0)
+    ap.add_argument("--bands", type=int, nargs="*", default=[0],
+                    help="numbers of bands (Weyl split); 0 = automatic (modal.band_modes)")
+    ap.add_argument("--groups", type=int, default=1)
+    ap.add_argument("--reference", nargs="*", default=[],
+                    choices=["slepc-slicing", "single-shift", "krylovschur"])
+    ap.add_argument("--set", action="append", default=[], dest="extra")
+    ap.add_argument("--petsc", nargs="*", default=[])
+    ap.add_argument("--timeout", type=float, default=3600)
+    ap.add_argument("--json", default="", help="append one JSON line per run (for the "
+                                                 "scaling model, bench/band_scaling_model.py)")
+    args = ap.parse_args()
+    from railvib_hpc.modal.bands import weyl_edges
+
+    base = [f"mesh.refinement={args.refinement!r}", "modal.hex_formulation=bbar", *args.extra]
+    configs = []
+    for nb in args.bands:
+        sets = [*base, f"modal.f_max={args.f_max!r}", f"modal.band_groups={args.groups}"]
+        if nb > 0:
+            edges = weyl_edges(0.0, args.f_max, nb)
+            sets.append(f"modal.bands={json.dumps(edges)}")
+        configs.append((f"bands {'auto' if nb == 0 else nb}, groups {args.groups}", sets))
+    ref_counts = None
+    for ref in args.reference:
+        if ref == "slepc-slicing":
+            configs.append(("SLEPc spectrum slicing", [*base, f"modal.f_max={args.f_max!r}",
+                                                       "modal.method=krylovschur"]))
+        else:
+            method = "block_lanczos" if ref == "single-shift" else "krylovschur"
+            configs.append((ref, [*base, "modal.f_max=0", "modal.n_modes=@N",
+                                  f"modal.method={method}"]))
+    print(f"# {args.ranks} rank(s), refinement {args.refinement}, f_max {args.f_max} Hz, "
+          f"{os.cpu_count()} cores")
+    print("| run | DOFs | modes | bands | wall [s] | eigensolve [s] | factorisations [s] | "
+          "RHS | orthogonalisation [s] | merge RR [s] | max abs(PhiTMPhi-I) | max rel. residual | "
+          "peak [GB] | predicted [GB] (band / merge) | max rel. eigenvalue diff. |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    ref_lam = None
+    for name, sets in configs:
+        if ref_counts is not None:
+            sets = [s.replace("@N", str(ref_counts)) for s in sets]
+        out = Path(tempfile.mkdtemp(prefix="railvib-bandbench-"))
+        try:
+            r = run(out, args.ranks, sets, args.petsc, args.timeout)
+        finally:
+            shutil.rmtree(out, ignore_errors=True)
+        print(row(name, r, ref_lam), flush=True)
+        if args.json and "error" not in r:
+            with open(args.json, "a") as fj:
+                fj.write(json.dumps({"name": name, "ranks": args.ranks, "wall": r["wall"],
+                                     "n_modes": len(r["lam"]), "stats": r["stats"]},
+                                    default=float) + "\n")
+        if "error" not in r:
+            if ref_lam is None:
+                ref_lam = r["lam"]
+                ref_counts = len(ref_lam)
+            print(f"<!-- {name}: progress lines {r['progress_lines']}, last: "
+                  f"{r['last_progress']} -->", flush=True)
+            for b in r["stats"].get("bands", []):
+                st = b["stats"]
+                print(f"<!--   band {b['index']} [{b['lo_hz']:.2f}, {b['hi_hz']:.2f}] shift "
+                      f"{b['shift_hz']:.2f}: {b['n_modes']} modes, N(shift) {b['n_below']}, "
+                      f"factor {st.get('time_factorization', 0):.1f} s "
+                      f"({st.get('factor_memory_gb', 0):.2f} GB"
+                      f"{', out of core' if st.get('out_of_core') else ''}), "
+                      f"{st.get('linear_solves', 0)} RHS in "
+                      f"{st.get('time_block_solves', 0):.1f} s, "
+                      f"orth {st.get('time_orthogonalization', 0):.1f} s, band "
+                      f"{st.get('time_band', 0):.1f} s, peak so far "
+                      f"{st.get('peak_rss_gb', 0):.2f} GB, "
+                      f"predicted {st.get('predicted_peak_gb', 0):.2f} GB -->", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,595 @@
+"""Band-sliced eigensolve: every mode below ``f_max``, band by band (PETSc/MPI driver).
+
+The plan and its proof are in :mod:`railvib_hpc.modal.bands`. Here:
+
+1. ``N(f_max)``: one factorisation of ``K - omega(f_max)^2 M`` and its inertia.
+2. Per band: factor ``K - sigma M`` (its inertia gives ``N(sigma)``), block shift-invert
+   Lanczos until every eigenvalue of the band and two beyond it have converged
+   (:func:`~railvib_hpc.modal.block_lanczos.block_lanczos` with ``theta_cut``), purify
+   (:func:`~railvib_hpc.modal.eigen.purified_modes`; only the band's own pairs must reach
+   the tolerance), write the band's own modes to
+   ``<out>/bands/band_<shift>.h5`` and free the basis: the dense memory is bounded by the
+   largest band, not by all modes. The lowest band (shift 0) also solves the static
+   correction with its factor.
+3. Bands run one after the other on all ranks, or ``modal.band_groups`` at a time on
+   sub-communicators, or as separate jobs (``modal.band_only``); the merge reads the band
+   files.
+4. Merge: a Rayleigh-Ritz step with K and M in the union of the bands' modes removes
+   the modes two bands found both (directions of the union's M-Gram matrix below
+   :data:`DUPLICATE_GRAM`) and makes all modes M-orthonormal together; the eigenvalues
+   below ``f_max`` are kept and counted against the inertia of every stretch between two
+   counted points (:func:`railvib_hpc.modal.bands.check_counts`).
+
+Cache: ``<out>/bands/index.json`` records the bands, the inertia counts and the merged
+chain under a key of the model and solver settings; a later run reuses every band of its
+plan, and a higher ``f_max`` only adds bands above the old one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import resource
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .bands import Band, check_counts, hz, omega2, plan_bands
+from .ritz import (
+    PREFIX,
+    RETRY_TOL_FACTOR,
+    EigenSolveError,
+    ModalResult,
+    convergence_verdict,
+    hopeless,
+    in_window,
+    purified_modes,
+)
+
+#: A direction of the union of the bands' modes whose M-Gram eigenvalue is below this
+#: fraction of the largest is a duplicate (two bands found the same mode): two copies
+#: differing by e give an eigenvalue ~|e|^2 / 2, and |e| <= 2 rho / relgap <= 1e-4 for
+#: residuals rho <= 1e-8 and relative gaps >= 2e-4, i.e. <= 5e-9; distinct M-orthogonal
+#: modes give ~1.
+DUPLICATE_GRAM = 1e-6
+
+#: Converged modes beyond each band's edge that the Lanczos run must also deliver: the
+#: proof that the band is complete (Krylov methods converge the largest |theta| first).
+#: They are not kept (:func:`_trim`): the neighbouring band computes them.
+EDGE_MARGIN = 2
+
+#: Relative widening of a band's eigenvalue range when its modes are kept: an eigenvalue
+#: on an edge is computed by both bands to ~1e-12 and may fall on either side; with the
+#: overlap at least one band keeps it (two copies are merged by the Gram test).
+EDGE_OVERLAP = 1e-6
+
+#: Relative nudge of a shift that hits an eigenvalue (singular factor).
+SHIFT_NUDGE = 1e-6
+
+#: Basis size of a band's Lanczos run before a thick restart, in multiples of the band's
+#: modes (as the single-shift stage's 3 n_modes): measured on the thesis model, 1006 modes
+#: in 5 bands, 2 x needed 5-7 restarts per band and 7-9.5 right-hand sides per mode.
+BASIS_FACTOR = 3
+
+
+def release_memory() -> None:
+    """Return freed heap memory to the operating system (glibc ``malloc_trim``).
+
+    Between bands: blocks of n x 32 doubles (tens of MB) fall below glibc's dynamic mmap
+    threshold and fragment the heap; measured, the peak grew by ~1 GB per band at thesis
+    size without this. A no-op where glibc is absent."""
+    import contextlib
+    import ctypes
+    import ctypes.util
+
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
+
+
+@dataclass
+class BandRecord:
+    """A solved band as cached in ``index.json`` (rank 0's view)."""
+
+    band: Band
+    file: str
+    n_below: int
+    n_modes: int
+    cover_lo_hz: float
+    cover_hi_hz: float
+    stats: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        b = self.band
+        return {"index": b.index, "lo_hz": b.lo_hz, "hi_hz": b.hi_hz, "shift_hz": b.shift_hz,
+                "file": self.file, "n_below": self.n_below, "n_modes": self.n_modes,
+                "cover_lo_hz": self.cover_lo_hz, "cover_hi_hz": self.cover_hi_hz,
+                "stats": self.stats}
+
+    @classmethod
+    def from_json(cls, d: dict) -> BandRecord:
+        return cls(Band(int(d["index"]), float(d["lo_hz"]), float(d["hi_hz"]),
+                        float(d["shift_hz"])), d["file"], int(d["n_below"]), int(d["n_modes"]),
+                   float(d["cover_lo_hz"]), float(d["cover_hi_hz"]), dict(d.get("stats", {})))
+
+
+def _same(a: float, b: float) -> bool:
+    return abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1.0)
+
+
+class BandCache:
+    """``<out>/bands/index.json`` (read on every rank, written by rank 0 atomically)."""
+
+    def __init__(self, folder: Path, key: str, comm):
+        self.folder, self.key, self.comm = Path(folder), key, comm
+        data = None
+        if comm.rank == 0:
+            path = self.folder / "index.json"
+            try:
+                data = json.loads(path.read_text()) if path.is_file() else None
+            except (OSError, ValueError):
+                data = None
+            if data is not None and data.get("key") != key:
+                data = None                  # another model or solver setting
+        data = comm.bcast(data, root=0)
+        data = data or {"key": key, "counts": {}, "bands": [], "chain": None}
+        self.counts: dict[float, int] = {float(k): int(v) for k, v in data["counts"].items()}
+        self.bands = [BandRecord.from_json(d) for d in data["bands"]
+                      if (self.folder / d["file"]).is_file()]
+        self.chain = data.get("chain")
+
+    def find(self, band: Band) -> BandRecord | None:
+        for r in self.bands:
+            if _same(r.band.lo_hz, band.lo_hz) and _same(r.band.hi_hz, band.hi_hz) and \
+                    _same(r.band.shift_hz, band.shift_hz):
+                return r
+        return None
+
+    def count(self, f_hz: float) -> int | None:
+        for f, n in self.counts.items():
+            if _same(f, f_hz):
+                return n
+        return None
+
+    def save(self) -> None:
+        """Rank 0 writes the index (call on every rank after the band files exist)."""
+        if self.comm.rank == 0:
+            from ..io.atomic import write_text_atomic
+
+            data = {"key": self.key, "counts": {repr(k): v for k, v in self.counts.items()},
+                    "bands": [r.to_json() for r in self.bands], "chain": self.chain}
+            write_text_atomic(self.folder / "index.json", json.dumps(data, indent=1))
+        self.comm.Barrier()
+
+
+@dataclass
+class BandSettings:
+    """What :func:`solve_bands` needs besides the matrices."""
+
+    f_max: float
+    edges: list[float]
+    band_modes: int
+    groups: int
+    band_only: int
+    tol: float
+    block_size: int
+    max_restarts: int
+    out_of_core: str
+    cache_dir: Path
+    key: str
+
+
+def _factor(K, M, comm, sigma: float, extra_gb: float, out_of_core: str, inertia: bool):
+    """BlockOperator at ``sigma`` (nudged when it hits an eigenvalue)."""
+    from .block_lanczos import BlockOperator, FactorizationError, InsufficientMemory
+
+    for attempt in range(3):
+        s = sigma * (1.0 + SHIFT_NUDGE * attempt) if sigma else 0.0
+        try:
+            return BlockOperator(K, M, s, comm, PREFIX, extra_gb=extra_gb,
+                                 out_of_core=out_of_core, inertia=inertia)
+        except InsufficientMemory as exc:
+            raise EigenSolveError(str(exc)) from None
+        except FactorizationError as exc:
+            if attempt == 2 or not sigma:
+                raise EigenSolveError(str(exc)) from None
+    raise AssertionError("unreachable")
+
+
+def count_below(K, M, comm, f_hz: float, out_of_core: str) -> int:
+    """``N(f)``: eigenvalues below ``f_hz``, from the inertia of ``K - omega^2 M``."""
+    op = _factor(K, M, comm, float(omega2(f_hz)), 0.0, out_of_core, inertia=True)
+    try:
+        return int(op.n_below)
+    finally:
+        op.destroy()
+
+
+def _band_estimate(band: Band, f_max: float, n_total: int | None) -> int:
+    """Weyl's estimate of the modes in ``band`` (at least 1; 16 without a count)."""
+    if n_total is None:
+        return 16
+    share = (band.hi_hz**3 - band.lo_hz**3) / max(f_max**3, 1e-300)
+    return max(1, int(math.ceil(share * n_total)))
+
+
+def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=None,
+               static_rhs: np.ndarray | None = None) -> tuple[ModalResult, int, dict]:
+    """One band: factor, block Lanczos to the band's radius, purify. Collective on ``comm``.
+
+    Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
+    ``N(sigma)`` and statistics.
+    """
+    from mpi4py import MPI
+
+    from .block_lanczos import NotConverged, block_lanczos, default_max_basis, dense_gb
+
+    t0 = time.perf_counter()
+    n_global = K.getSize()[0]
+    b = max(1, min(s.block_size, n_global // 4 if n_global >= 8 else 1))
+    nev = min(estimate + 2 * EDGE_MARGIN, max(n_global - 3 * b, 1))
+    for attempt in range(3):
+        max_basis = min(max(BASIS_FACTOR * nev, default_max_basis(nev, b)) * (2**attempt),
+                        n_global - b)
+        extra_gb = dense_gb(n_global, max_basis, b, nev + b, 0 if static_rhs is None else
+                            comm.allreduce(static_rhs.shape[1], op=MPI.MAX))
+        op = _factor(K, M, comm, band.sigma, extra_gb, s.out_of_core, inertia=band.sigma > 0)
+        try:
+            for lanczos_tol in (s.tol, s.tol / RETRY_TOL_FACTOR):
+                _, X, st = block_lanczos(op, min(nev, max_basis - 2 * b),
+                                         K.getOwnershipRange()[0], block=b, tol=lanczos_tol,
+                                         max_basis=max_basis, max_restarts=s.max_restarts,
+                                         monitor=monitor, theta_cut=band.theta_cut,
+                                         margin=EDGE_MARGIN, guard=b)
+                t_p = time.perf_counter()
+                window = band_window(band)
+                result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st, window)
+                st["time_purify_project"] = time.perf_counter() - t_p
+                st["lanczos_tol"] = lanczos_tol
+                if not (hopeless(result, s.tol) & in_window(result, window)).any():
+                    break
+        except NotConverged as exc:
+            op.destroy()
+            if attempt == 2:
+                raise EigenSolveError(f"{band.label(0)}: {exc}; use more bands "
+                                      "(smaller modal.band_modes or more modal.bands)") from None
+            continue
+        try:
+            if static_rhs is not None and op.sigma == 0.0:
+                t_s = time.perf_counter()
+                result.static = op.solve(static_rhs)
+                st["time_static_solves"] = time.perf_counter() - t_s
+            n_below = 0 if op.n_below is None else op.n_below
+            st["linear_solves"] = op.n_solves            # Lanczos, purification, static
+            st["time_block_solves"] = op.time_solves
+            st.update(time_factorization=op.time_factorization,
+                      factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
+                      predicted_peak_gb=op.predicted_peak_gb, shift_hz=float(hz(op.sigma)))
+        finally:
+            op.destroy()
+        st["time_band"] = time.perf_counter() - t0
+        st["peak_rss_gb"] = comm.allreduce(
+            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+        return result, n_below, st
+    raise AssertionError("unreachable")
+
+
+def band_window(band: Band) -> tuple[float, float]:
+    """The band's eigenvalue range, widened by :data:`EDGE_OVERLAP` at both edges."""
+    return (float(omega2(band.lo_hz)) * (1.0 - EDGE_OVERLAP),
+            float(omega2(band.hi_hz)) * (1.0 + EDGE_OVERLAP))
+
+
+def _trim(result: ModalResult, band: Band) -> ModalResult:
+    """The band's own modes (:func:`band_window`): what the merge needs. The pairs beyond
+    the edges (the Lanczos margin) are the neighbouring bands' modes, computed there."""
+    keep = np.flatnonzero(in_window(result, band_window(band)))
+    out = ModalResult(result.eigenvalues[keep], np.ascontiguousarray(result.phi[:, keep]),
+                      result.stats, result.static)
+    out.residuals = result.residuals[keep]
+    out.residual_floors = result.residual_floors[keep]
+    return out
+
+
+def _write_band(path: Path, comm, band: Band, result: ModalResult, n_below: int,
+                stats: dict) -> None:
+    """The band's modes (n_dofs, m) by rows, eigenvalues and residuals (collective)."""
+    from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+
+    n_local, m = result.phi.shape
+    # rank 0's statistics everywhere: parallel HDF5 needs identical attributes on all ranks
+    stats = comm.bcast(stats, root=0)
+    r0 = comm.exscan(n_local) or 0
+    n = comm.allreduce(n_local)
+    parallel = h5py_parallel_ok(comm)
+    rows = [result.phi]
+    if not parallel and comm.size > 1:
+        parts = comm.gather(result.phi, root=0)
+        rows = [np.concatenate(parts)] if comm.rank == 0 else [None]
+        r0 = 0
+
+    def fill(f, par: bool) -> None:
+        d = f.create_dataset("modes", (n, m), "f8")
+        f.create_dataset("eigenvalue", data=result.eigenvalues)
+        f.create_dataset("residual", data=result.residuals)
+        for k, v in (("lo_hz", band.lo_hz), ("hi_hz", band.hi_hz),
+                     ("shift_hz", band.shift_hz), ("n_below", n_below)):
+            f.attrs[k] = v
+        f.attrs["stats"] = json.dumps(stats, default=float)
+        if rows[0] is not None and rows[0].shape[0]:
+            d[r0:r0 + rows[0].shape[0], :] = rows[0]
+
+    write_collective(path, comm, fill)
+
+
+def _read_band(path: Path, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        if int(f.attrs.get("complete", 0)) != 1:
+            raise EigenSolveError(f"{path} is incomplete: delete it and rerun")
+        return f["eigenvalue"][()], f["modes"][r0:r1, :]
+
+
+def _band_file(band: Band) -> str:
+    return f"band_{band.lo_hz:.6f}_{band.hi_hz:.6f}_{band.shift_hz:.6f}.h5"
+
+
+def plan_for(cache: BandCache, s: BandSettings, n_total: int) -> list[Band]:
+    """The bands for ``[0, f_max]``: the cached merged chain (when it covers a lower f_max,
+    only bands above it are added), or a fresh plan."""
+    chain = cache.chain
+    if chain:
+        f_c = float(chain["f_hz"])
+        old = [Band(int(d["index"]), float(d["lo_hz"]), float(d["hi_hz"]), float(d["shift_hz"]))
+               for d in chain["bands"]]
+        n_c = cache.count(f_c)
+        if n_c is not None and all(cache.find(b) for b in old):
+            if f_c >= s.f_max * (1 - 1e-12):
+                return [b for b in old if b.lo_hz < s.f_max]
+            return old + plan_bands(s.f_max, n_total, s.band_modes, s.edges, start_hz=f_c,
+                                    first_index=len(old) + 1, n_below_start=n_c)
+    return plan_bands(s.f_max, n_total, s.band_modes, s.edges)
+
+
+def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
+                static_rhs: np.ndarray | None = None) -> ModalResult | None:
+    """Every mode below ``s.f_max`` by band slicing (collective on ``comm``).
+
+    Parameters
+    ----------
+    K, M
+        The matrices on ``comm``.
+    s
+        :class:`BandSettings`.
+    assemble
+        ``assemble(subcomm) -> (K, M)`` for band groups on sub-communicators.
+    monitor
+        ``monitor(done, total, basis, label=...)`` progress callback (modes of all bands).
+    static_rhs
+        Rows of right-hand sides solved with the lowest band's factor (shift 0).
+
+    Returns
+    -------
+    ModalResult, or None with ``band_only`` (the band is cached, nothing merged).
+    """
+    t_start = time.perf_counter()
+    s.cache_dir.mkdir(parents=True, exist_ok=True) if comm.rank == 0 else None
+    comm.Barrier()
+    cache = BandCache(s.cache_dir, s.key, comm)
+    t0 = time.perf_counter()
+    n_total = cache.count(s.f_max)
+    if n_total is None and not (s.band_only and s.edges):
+        n_total = count_below(K, M, comm, s.f_max, s.out_of_core)
+        cache.counts[float(s.f_max)] = n_total
+    # an array task with given edges needs no count: the band grows to its edges by itself
+    # and the merge counts at f_max
+    t_count = time.perf_counter() - t0
+    if n_total == 0:
+        raise EigenSolveError(f"modal.f_max = {s.f_max}: no mode below this frequency")
+    bands = plan_for(cache, s, n_total or 0)
+    n_bands = len(bands)
+    if s.band_only and not 1 <= s.band_only <= n_bands:
+        raise EigenSolveError(f"modal.band_only = {s.band_only}: the plan has {n_bands} "
+                              f"band(s) below modal.f_max = {s.f_max} Hz (1 .. {n_bands})")
+    todo = [b for b in bands if cache.find(b) is None
+            and (not s.band_only or b.index == s.band_only)]
+    groups = 1 if s.band_only else s.groups
+    if comm.size % groups:
+        raise EigenSolveError(f"modal.band_groups = {groups} must divide the number of ranks "
+                              f"({comm.size})")
+    done_modes = {"n": sum(min(r.n_modes, _band_estimate(r.band, s.f_max, n_total))
+                           for b in bands if (r := cache.find(b)) is not None)}
+    color = comm.rank * groups // comm.size
+    sub = comm.Split(color, comm.rank) if groups > 1 else comm
+    error = None
+    records: list[dict] = []
+    static = None
+    try:
+        Kg, Mg = (K, M) if groups == 1 else assemble(sub)
+        for i, band in enumerate(todo):
+            if i % groups != color:
+                continue
+            est = _band_estimate(band, s.f_max, n_total)
+
+            def band_monitor(nconv, nev, basis, band=band, est=est):
+                total = n_total or est
+                if monitor is not None:
+                    monitor(min(done_modes["n"] + min(nconv, est), total), total, basis,
+                            label=f"{band.label(n_bands)}: {nconv}/{nev} converged, "
+                                  f"basis {basis}")
+
+            rhs = static_rhs if (groups == 1 and band.shift_hz == 0.0) else None
+            result, n_below, st = solve_band(Kg, Mg, sub, band, est, s, band_monitor, rhs)
+            if rhs is not None:
+                static = result.static
+            done_modes["n"] += est
+            result = _trim(result, band)
+            name = _band_file(band)
+            _write_band(s.cache_dir / name, sub, band, result, n_below, st)
+            f = result.frequencies_hz
+            if sub.rank == 0:
+                records.append(BandRecord(           # (a band may hold no mode at all)
+                    band, name, n_below, len(f), float(f[0]) if len(f) else band.lo_hz,
+                    float(f[-1]) if len(f) else band.hi_hz, st).to_json())
+            del result
+            release_memory()
+        if groups > 1:
+            Kg.destroy()
+            Mg.destroy()
+    except Exception as exc:                          # reported collectively below
+        error = exc
+    errors = comm.allgather(None if error is None else
+                            (isinstance(error, EigenSolveError), f"{error}"))
+    if groups > 1:
+        sub.Free()
+    failed = [e for e in errors if e is not None]
+    if failed:
+        if error is not None and not isinstance(error, EigenSolveError):
+            raise error
+        raise EigenSolveError(failed[0][1]) if failed[0][0] else RuntimeError(failed[0][1])
+    for rec in (r for part in comm.allgather(records) for r in part):
+        r = BandRecord.from_json(rec)
+        cache.bands = [c for c in cache.bands if c.file != r.file] + [r]
+        if r.band.shift_hz > 0:
+            cache.counts[float(r.band.shift_hz)] = r.n_below
+    cache.save()
+    if s.band_only:
+        return None
+    result = _merge(K, M, comm, bands, cache, s, n_total)
+    result.static = static
+    computed = {b.index for b in todo}
+    for d in result.stats["bands"]:
+        d["reused"] = d["index"] not in computed
+    result.stats.update(time_count_fmax=t_count, time_bands_total=time.perf_counter() - t_start)
+    chain = {"f_hz": float(s.f_max), "bands": [
+        {"index": b.index, "lo_hz": b.lo_hz, "hi_hz": b.hi_hz, "shift_hz": b.shift_hz}
+        for b in bands]}
+    if cache.chain is None or float(cache.chain["f_hz"]) <= s.f_max:
+        cache.chain = chain
+        cache.save()
+    return result
+
+
+def merge_memory_gb(n_dofs: int, n_candidates: int, n_modes: int) -> float:
+    """Dense memory of the merge [GB, all ranks]: the candidates, the merged modes, and the
+    chunks of K Phi and M Phi in :func:`~railvib_hpc.modal.eigen.normalise_and_check` and
+    of the Gram products (8 bytes each); the matrices and the mesh are already there."""
+    from .ritz import NORMALISE_CHUNK
+
+    return 8.0 * n_dofs * (n_candidates + n_modes + 4 * NORMALISE_CHUNK) / 1e9
+
+
+def _gram(A, Phi: np.ndarray, comm, chunk: int = 256) -> np.ndarray:
+    """``Phi^T A Phi`` (all ranks), A applied ``chunk`` columns at a time."""
+    from mpi4py import MPI
+
+    from .block_lanczos import sparse_times_block
+
+    m = Phi.shape[1]
+    G = np.empty((m, m))
+    for j in range(0, m, chunk):
+        G[:, j:j + chunk] = Phi.T @ sparse_times_block(A, Phi[:, j:j + chunk], comm)
+    comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
+    return 0.5 * (G + G.T)
+
+
+def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
+           n_total: int) -> ModalResult:
+    """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
+    counted against the inertia of every stretch."""
+    from scipy.linalg import eigh
+
+    from .block_lanczos import available_memory_gb
+    from .ritz import normalise_and_check
+
+    t0 = time.perf_counter()
+    r0, r1 = K.getOwnershipRange()
+    n_global = K.getSize()[0]
+    lam_max = float(omega2(s.f_max))
+    m_c = sum(cache.find(b).n_modes for b in bands)
+    need = merge_memory_gb(n_global, m_c, n_total)
+    avail = available_memory_gb(comm)
+    if need > 0.9 * avail:
+        raise EigenSolveError(
+            f"merging {len(bands)} bands ({m_c} candidate modes of {n_global:,} DOFs) needs "
+            f"~{need:.1f} GB, {avail:.1f} GB are available on {comm.size} rank(s); use more "
+            "nodes or a lower modal.f_max")
+    import h5py
+
+    per_band = [cache.find(b) for b in bands]
+    keeps = []
+    for rec in per_band:
+        with h5py.File(s.cache_dir / rec.file, "r") as f:
+            # the band's own modes and its margin, but nothing far above f_max
+            keeps.append(np.flatnonzero(f["eigenvalue"][()] <= lam_max * (1.0 + 0.05)))
+    Phi = np.empty((r1 - r0, sum(len(k) for k in keeps)))
+    col = 0
+    for rec, keep in zip(per_band, keeps):
+        _, rows = _read_band(s.cache_dir / rec.file, r0, r1)
+        Phi[:, col:col + len(keep)] = rows[:, keep]
+        col += len(keep)
+        del rows
+    t_read = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    GM = _gram(M, Phi, comm)
+    GK = _gram(K, Phi, comm)
+    w, U = eigh(GM)
+    good = w > DUPLICATE_GRAM * w.max()
+    W = U[:, good] / np.sqrt(w[good])
+    lam, Y = eigh(W.T @ GK @ W)
+    n_dup = int((~good).sum())
+    # the counted points: 0, every positive shift below f_max, f_max
+    points = [0.0] + sorted(r.band.shift_hz for r in per_band
+                            if 0 < r.band.shift_hz < s.f_max) + [s.f_max]
+    counts = [0] + [r.n_below for r in sorted(per_band, key=lambda r: r.band.shift_hz)
+                    if 0 < r.band.shift_hz < s.f_max] + [n_total]
+    bad = check_counts(points, counts, hz(lam))
+    if bad or len(lam) < n_total:
+        lo, hi, expected, found = bad[0] if bad else (0.0, s.f_max, n_total, len(lam))
+        raise EigenSolveError(
+            f"band-sliced eigensolve: {found} distinct modes found in [{lo:.4f}, {hi:.4f}] Hz "
+            f"but the inertia counts say {expected}; use more bands (smaller "
+            "modal.band_modes) or a larger modal.block_size (repeated eigenvalues of a "
+            "multiplicity above the block size)")
+    Z = W @ Y[:, :n_total]
+    Phi = Phi @ Z
+    t_rr = time.perf_counter() - t1
+    stats = {"bands": [r.to_json() for r in per_band],
+             "n_bands": len(bands), "n_candidates": int(W.shape[0]), "n_duplicates": n_dup,
+             "inertia_points_hz": points, "inertia_counts": counts,
+             "merge_predicted_gb": need, "available_gb": avail,
+             "eps_type": "block_lanczos_bands", "st_type": "sinvert", "factor_solver": "mumps",
+             "tol": s.tol, "nconv": int(n_total), "time_merge_read": t_read,
+             "time_merge_rayleigh_ritz": t_rr,
+             "linear_solves": int(sum(r.stats.get("linear_solves", 0) for r in per_band)),
+             "time_factorization": float(sum(r.stats.get("time_factorization", 0.0)
+                                             for r in per_band)),
+             "time_solve": float(sum(r.stats.get("time_band", 0.0) for r in per_band)),
+             "time_extract": 0.0}
+    result = ModalResult(lam[:n_total], np.ascontiguousarray(Phi), stats)
+    normalise_and_check(result, K, M, comm, tol=s.tol)
+    result.warnings = convergence_verdict(result, s.tol)
+    return result
+
+
+def band_digest_exclude() -> tuple[str, ...]:
+    """[modal] keys that do not change the band files (the cache key leaves them out)."""
+    return ("f_max", "bands", "band_modes", "band_groups", "band_only", "n_modes",
+            "damping_ratio", "damping", "out_of_core", "max_basis", "shift_hz")
+
+
+def cache_key(case) -> str:
+    """Key of the band cache: the model and the solver settings that change the modes."""
+    import hashlib
+
+    from ..mesh.stage import MESH_INPUTS
+
+    skip = band_digest_exclude()
+    modal = {k: v for k, v in case["modal"].items() if k not in skip}
+    text = json.dumps({"mesh": case.digest(*MESH_INPUTS),
+                       "physics": case.digest("materials", "sections", "pads",
+                                              exclude=("damping_ratio", "damping")),
+                       "modal": modal}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()

@@ -1,0 +1,293 @@
+"""Band-sliced eigensolves (issue 14): the same modes as one shift, proved complete by
+Sylvester inertia counts, whatever the split, the rank count or the band groups.
+
+Comparisons use the derived tolerances of :mod:`railvib_hpc.tolerances`: eigenvalues to
+their componentwise round-off (both solves end with a Rayleigh-Ritz step with K and M),
+mode shapes by the principal angles of every cluster against the Davis-Kahan bound of the
+measured residuals. Orthonormality: the issue's target, max |Phi^T M Phi - I| <= 1e-12.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from modal_cases import (
+    assert_same_subspaces,
+    beam_mesh,
+    column_mesh,
+    copies,
+    eigen_rtol,
+    soil_case,
+    solve,
+    solve_banded,
+)
+from mpi4py import MPI
+
+from railvib_hpc.cli import run
+from railvib_hpc.modal.bands import check_counts, plan_bands, weyl_edges
+from railvib_hpc.modal.eigen import EigenSolveError
+
+BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
+comm = MPI.COMM_WORLD
+ORTHONORMAL = 1e-12                                  # issue 14: ||Phi^T M Phi - I||
+
+
+def _cut(f: np.ndarray, n: int) -> tuple[int, float]:
+    """The first count n' >= n at a gap of the spectrum, and a frequency inside the gap."""
+    while not f[n] > f[n - 1] * (1 + 1e-6):
+        n += 1
+    return n, 0.5 * (f[n - 1] + f[n])
+
+
+def _same_modes(res, ref, K, M, n: int, clusters_min: int) -> None:
+    lam = ref.eigenvalues[:n]
+    assert len(res.eigenvalues) == n
+    rtol = eigen_rtol(K, M, lam, phi=ref.phi[:, :n])
+    assert np.all(np.abs(res.eigenvalues / lam - 1) <= rtol)
+    assert assert_same_subspaces(K, M, lam, ref.phi[:, :n], res.phi, rtol) >= clusters_min
+    assert res.stats["max_orthonormality_error"] <= ORTHONORMAL
+
+
+# --- the plan ---------------------------------------------------------------------------
+
+def test_weyl_split_and_shifts():
+    bands = plan_bands(60.0, 1000, 250)
+    assert len(bands) == 4
+    assert [round(b.hi_hz**3 / 60.0**3, 6) for b in bands] == [0.25, 0.5, 0.75, 1.0]
+    assert bands[0].shift_hz == 0.0 and bands[0].lo_hz == 0.0
+    for b in bands[1:]:                       # eigenvalue midpoint: the band is a ball
+        assert (2 * np.pi * b.shift_hz) ** 2 == pytest.approx(
+            0.5 * ((2 * np.pi * b.lo_hz) ** 2 + (2 * np.pi * b.hi_hz) ** 2))
+    user = plan_bands(60.0, 1000, 250, edges=[20.0, 40.0])
+    assert [(b.lo_hz, b.hi_hz) for b in user] == [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0)]
+    assert weyl_edges(0.0, 2.0, 2) == pytest.approx([2 * 0.5 ** (1 / 3)])
+
+
+def test_check_counts_finds_missing_and_duplicate_modes():
+    pts, counts = [0.0, 10.0, 20.0], [0, 3, 5]
+    assert check_counts(pts, counts, np.array([1, 2, 3, 12, 15.0])) == []
+    assert check_counts(pts, counts, np.array([1, 2, 12, 15.0])) == [(0.0, 10.0, 3, 2)]
+    assert check_counts(pts, counts, np.array([1, 2, 3, 12, 12, 15.0])) == [(10.0, 20.0, 2, 3)]
+    # an eigenvalue on a counted point may count for either side
+    assert check_counts(pts, counts, np.array([1, 2, 10.0, 12, 15.0])) == []
+
+
+# --- the same modes as one shift -----------------------------------------------------------
+
+@pytest.mark.parametrize("band_modes", [1000, 9, 4])
+def test_column_bands_equal_single_shift(tmp_path, band_modes):
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=band_modes)
+    _same_modes(res, ref, K, M, n, 12)
+    st = res.stats
+    assert st["n_bands"] == (1 if band_modes == 1000 else int(np.ceil(n / band_modes)))
+    assert st["inertia_counts"][-1] == n and st["inertia_points_hz"][-1] == f_max
+    # every stretch between counted points holds exactly its inertia count
+    assert check_counts(st["inertia_points_hz"], st["inertia_counts"],
+                        res.frequencies_hz) == []
+
+
+def test_repeated_pair_exactly_at_a_band_edge(tmp_path):
+    """Square-section cantilever: every bending frequency is double; a user band edge is
+    put exactly on the second pair."""
+    case = soil_case(**{"sections.rail.izz": 2010e-8, "sections.rail.shear_coefficient_z": 0.34})
+    mesh = beam_mesh(40, 2.0)
+    rules = {"start": ("ux", "uy", "uz", "rx", "ry", "rz"), "all": ("ux", "rx")}
+    ref, K, M, _ = solve(mesh, case, rules, 12)
+    f = ref.frequencies_hz
+    assert f[2] == pytest.approx(f[3], rel=1e-9)
+    n, f_max = _cut(f, 8)
+    res, *_ = solve_banded(mesh, case, rules, f_max, tmp_path, edges=[f[2]])
+    _same_modes(res, ref, K, M, n, 3)
+    assert res.stats["n_duplicates"] >= 2            # both bands found the pair
+
+
+def test_planted_fourfold_cluster_at_a_band_edge(tmp_path):
+    """Four disconnected identical columns (u_y fixed: no double bending pairs): every
+    eigenvalue is fourfold. A band edge sits exactly on the third cluster; the block (8) is
+    wider than the multiplicity."""
+    mesh = copies(column_mesh(12, width=0.5), 4, 2.0)
+    rules = {"bottom": ("ux", "uy", "uz"), "all": ("uy",)}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 24)
+    f = ref.frequencies_hz
+    for start in (0, 4, 8, 12, 16):
+        assert np.allclose(f[start:start + 4], f[start], rtol=1e-9)
+        assert f[start + 4] > f[start] * 1.01
+    n, f_max = _cut(f, 20)
+    res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, edges=[f[8]])
+    _same_modes(res, ref, K, M, n, 4)
+    assert res.stats["n_duplicates"] >= 4
+
+
+def test_a_missed_mode_is_caught_by_the_inertia_count(tmp_path, monkeypatch):
+    """Every band loses the same mode (simulated: a Krylov method can miss one); the merge
+    fails and names the stretch."""
+    from railvib_hpc.modal import band_solve
+
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, *_ = solve(mesh, soil_case(), rules, 40)
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    second = plan_bands(f_max, n, 9)[1]
+    lost = ref.eigenvalues[np.searchsorted(ref.frequencies_hz, second.lo_hz) + 1]
+    real = band_solve._trim
+
+    def lose(result, band):
+        out = real(result, band)
+        keep = np.abs(out.eigenvalues / lost - 1) > 1e-6
+        out.eigenvalues, out.phi = out.eigenvalues[keep], out.phi[:, keep]
+        out.residuals, out.residual_floors = out.residuals[keep], out.residual_floors[keep]
+        return out
+
+    monkeypatch.setattr(band_solve, "_trim", lose)
+    with pytest.raises(EigenSolveError, match=r"distinct modes found in \[.*\] Hz but the "
+                                              r"inertia counts say"):
+        solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=9)
+
+
+# --- caching, array jobs, the command ------------------------------------------------------
+
+def _block_msh(path: Path) -> None:
+    """A 2 x 2 x 8 m block of 4 x 4 x 16 subgrade hexahedra as a user .msh."""
+    from fem_tools import box_mesh
+    from modal_cases import write_msh
+
+    from railvib_hpc.mesh.model import Mesh
+    from railvib_hpc.schema import PART_ID
+
+    pts, hexes = box_mesh(4, 4, 16, 2.0, 2.0, 8.0)
+    write_msh(Mesh(points=pts, hexes=hexes, hex_part=np.full(len(hexes), PART_ID["subgrade"],
+                                                             np.int32),
+                   lines=np.zeros((0, 2), np.int64), line_part=np.zeros(0, np.int32),
+                   node_sets={}), path)
+
+
+@pytest.fixture
+def block_case(shared_tmp):
+    msh = shared_tmp / "block.msh"
+    if comm.rank == 0:
+        _block_msh(msh)
+    comm.Barrier()
+    return ["--set", f"mesh.file='{msh}'", "--set", "modal.block_size=8"]
+
+
+def _modes(out: Path):
+    with h5py.File(out / "modes.h5", "r") as f:
+        return f["modes/eigenvalue"][()], json.loads(f.attrs["stats"])
+
+
+def test_raising_f_max_adds_bands_and_array_jobs_merge(shared_tmp, block_case, capsys):
+    modal = ["modal", str(BASELINE), *block_case, "--set", "modal.band_modes=12"]
+    out = shared_tmp / "grow"
+    assert run([*modal, "--set", "modal.f_max=90", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "band 1/" in printed and "ETA" in printed
+    lam40, st40 = _modes(out)
+    assert len(lam40) >= 20 and st40["n_bands"] >= 2
+    assert run([*modal, "--set", "modal.f_max=120", "--out", str(out)]) == 0
+    lam55, st55 = _modes(out)
+    reused = [b["reused"] for b in st55["bands"]]
+    assert reused[:st40["n_bands"]] == [True] * st40["n_bands"] and not any(
+        reused[st40["n_bands"]:])
+    assert np.allclose(lam55[:len(lam40)], lam40, rtol=1e-12)
+    fresh = shared_tmp / "fresh"
+    assert run([*modal, "--set", "modal.f_max=120", "--out", str(fresh)]) == 0
+    lam_f, _ = _modes(fresh)
+    assert len(lam_f) == len(lam55)
+    assert np.allclose(lam_f, lam55, rtol=1e-9)
+    # array jobs: one band per run, then the merge computes nothing
+    jobs = shared_tmp / "array"
+    n_bands = _modes(fresh)[1]["n_bands"]
+    for k in range(1, n_bands + 1):
+        assert run([*modal, "--set", "modal.f_max=120", "--set", f"modal.band_only={k}",
+                    "--out", str(jobs)]) == 0
+        assert not (jobs / "modes.h5").exists()
+    assert run([*modal, "--set", "modal.f_max=120", "--out", str(jobs)]) == 0
+    lam_a, st_a = _modes(jobs)
+    assert all(b["reused"] for b in st_a["bands"])
+    assert np.allclose(lam_a, lam_f, rtol=1e-12)
+    assert run([*modal, "--set", "modal.f_max=120", "--set", "modal.band_only=99",
+                "--out", str(shared_tmp / "bad")]) == 2
+    assert "modal.band_only = 99: the plan has" in capsys.readouterr().err
+
+
+@pytest.mark.mpi
+def test_bands_on_two_ranks_and_band_groups_equal_serial(shared_tmp):
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 40)        # serial on every rank
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    for groups in (1, comm.size):
+        res, *_ = solve_banded(mesh, soil_case(), rules, f_max,
+                                         shared_tmp / f"g{groups}", comm=comm, band_modes=8,
+                                         groups=groups)
+        res.phi = np.concatenate(comm.allgather(res.phi))
+        _same_modes(res, ref, K, M, n, 12)
+
+
+@pytest.mark.mpi
+def test_coarse_thesis_bands_with_static_correction_equal_single_shift(shared_tmp):
+    """The thesis model (refinement 0.5) on all ranks: 25 Hz by bands = the same number of
+    modes by one shift; the static correction reuses the lowest band's factor and equals
+    the single-shift one."""
+    base = ["modal", str(BASELINE), "--set", "mesh.refinement=0.5", "--set",
+            "mbs.static_correction=true"]
+    banded, single = shared_tmp / "banded", shared_tmp / "single"
+    assert run([*base, "--set", "modal.f_max=16", "--set", "modal.band_modes=5",
+                "--out", str(banded)]) == 0
+    lam_b, st_b = _modes(banded)
+    assert st_b["n_bands"] >= 2 and "time_static_solves" in st_b["bands"][0]["stats"]
+    assert run([*base, "--set", f"modal.n_modes={len(lam_b)}", "--out", str(single)]) == 0
+    lam_s, _ = _modes(single)
+    assert np.allclose(lam_b, lam_s, rtol=1e-9)
+    assert st_b["max_orthonormality_error"] <= ORTHONORMAL
+    with h5py.File(banded / "static.h5", "r") as fb, h5py.File(single / "static.h5", "r") as fs:
+        xb, xs = fb["static/rail_flexibility"][()], fs["static/rail_flexibility"][()]
+    assert np.allclose(xb, xs, rtol=1e-9, atol=1e-12 * np.abs(xs).max())
+
+
+def test_slurm_array_templates_run_the_bands_and_the_merge(tmp_path):
+    """jobs/slurm/submit_bands.sh with a fake sbatch that records the submissions; the
+    recorded array tasks and the merge then run here (srun -> plain command): the merged
+    modes equal a one-shot band-sliced run."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[2]
+    fake = tmp_path / "bin"
+    fake.mkdir()
+    log = tmp_path / "sbatch.log"
+    (fake / "sbatch").write_text(f'#!/bin/bash\necho "$@" >> {log}\necho $RANDOM\n')
+    (fake / "srun").write_text('#!/bin/bash\nexec "$@"\n')
+    for f in ("sbatch", "srun"):
+        (fake / f).chmod(0o755)
+    msh = tmp_path / "block.msh"
+    _block_msh(msh)
+    out = tmp_path / "out"
+    env = dict(os.environ, PATH=f"{fake}:{Path(sys.executable).parent}:{os.environ['PATH']}")
+    sets = [f"mesh.file='{msh}'", "modal.block_size=8"]
+    subprocess.run(["bash", str(root / "jobs/slurm/submit_bands.sh"), str(BASELINE),
+                    str(out), "100", "3", *sets], check=True, env=env, cwd=root)
+    calls = log.read_text().splitlines()
+    assert len(calls) == 2 and "--array=1-3" in calls[0] and "afterok:" in calls[1]
+    export = next(a for a in calls[0].split() if a.startswith("--export="))[len("--export="):]
+    fields = dict(kv.split("=", 1) for kv in export.split(",")[1:])
+    fields["SETS"] = " ".join(sets)            # the test's own quoting of the mesh path
+    for k in (1, 2, 3):
+        subprocess.run(["bash", str(root / "jobs/slurm/modes_band.sbatch")], check=True,
+                       cwd=root, env=dict(env, **fields, SLURM_ARRAY_TASK_ID=str(k)))
+    assert not (out / "modes.h5").exists()
+    subprocess.run(["bash", str(root / "jobs/slurm/modes_merge.sbatch")], check=True,
+                   cwd=root, env=dict(env, **fields))
+    lam, st = _modes(out)
+    assert st["n_bands"] == 3 and all(b["reused"] for b in st["bands"])
+    edges = [float(e) for e in fields["EDGES"].split(";")]
+    one = tmp_path / "one"
+    assert run(["modal", str(BASELINE), "--set", sets[0], "--set", sets[1], "--set",
+                "modal.f_max=100", "--set", f"modal.bands={edges}", "--out", str(one)]) == 0
+    assert np.allclose(lam, _modes(one)[0], rtol=1e-12)

@@ -1,0 +1,127 @@
+"""Eigensolver honesty: residuals above the tolerance are not called converged (issue 16, 3).
+
+Rule (:func:`railvib_hpc.modal.eigen.convergence_verdict`): a mode with relative residual
+``rho <= modal.tol`` is converged; ``tol < rho <= floor`` (its round-off floor) and
+``rho <= sqrt(tol)`` is accepted with a warning (ill-conditioned model); anything else is an
+error naming the count, the worst residual and its mode. The mesh check warns on extreme
+aspect ratios and tiny elements.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from modal_cases import column_mesh, soil_case, solve
+
+from railvib_hpc.cli import run
+from railvib_hpc.mesh.stage import ASPECT_RATIO_WARNING, quality_warnings
+from railvib_hpc.modal import block_lanczos, eigen
+from railvib_hpc.modal.eigen import EigenSolveError
+
+BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
+RULES = {"bottom": ("ux", "uy", "uz")}
+
+
+def _early_stop(monkeypatch, internal_tol: float) -> None:
+    """Make block Lanczos stop at a looser internal tolerance than the one checked."""
+    real = block_lanczos.block_lanczos
+
+    def loose(op, nev, r0, **kw):
+        kw["tol"] = internal_tol
+        return real(op, nev, r0, **kw)
+
+    monkeypatch.setattr(block_lanczos, "block_lanczos", loose)
+
+
+def test_unconverged_modes_are_an_error_naming_count_and_worst_residual(monkeypatch):
+    """Before: the true residuals (up to ~1e-3 here) were printed but the modes were
+    accepted as converged."""
+    _early_stop(monkeypatch, 1e-1)
+    monkeypatch.setattr(eigen, "EXTRA_PURIFICATIONS", 0)
+    with pytest.raises(EigenSolveError,
+                       match=r"(\d+) of 8 modes did not converge: worst relative residual "
+                             r"\S+ \(mode \d+, [\d.]+ Hz\) > modal.tol = 1.0e-10.*stopped "
+                             r"early") as err:
+        solve(column_mesh(40), soil_case(), RULES, 8)
+    assert int(str(err.value).split()[0]) >= 1
+
+
+def test_extra_purification_brings_the_true_residuals_below_the_tolerance(monkeypatch):
+    _early_stop(monkeypatch, 1e-6)
+    res, *_ = solve(column_mesh(40), soil_case(), RULES, 8)
+    assert res.stats["extra_purifications"] >= 1
+    assert np.all(res.residuals <= np.maximum(1e-10, res.residual_floors))
+
+
+def _column_with_sliver(thickness: float):
+    mesh = column_mesh(20)
+    z = mesh.points[:, 2]
+    levels = np.unique(z)
+    z[z > levels[10] + 1e-12] -= (levels[11] - levels[10]) - thickness
+    return mesh
+
+
+def test_round_off_limited_modes_are_a_warning_and_hopeless_ones_an_error():
+    # a 0.1 mm layer in a 5.5 m column: residuals ~1e-8 > tol = 1e-10, at the round-off floor
+    res, *_ = solve(_column_with_sliver(1e-4), soil_case(), RULES, 6)
+    assert res.warnings and "limited by round-off" in res.warnings[0]
+    limited = res.residuals > 1e-10
+    assert np.all(res.residuals[limited] <= res.residual_floors[limited])
+    # a 1e-9 m layer: residuals ~1e-3 > sqrt(tol): not even the frequencies can be trusted
+    with pytest.raises(EigenSolveError, match=r"did not converge.*round-off floor.*cause: "
+                                              r"round-off: the model is too ill-conditioned"):
+        solve(_column_with_sliver(1e-9), soil_case(), RULES, 6)
+
+
+def test_well_conditioned_model_has_no_warning_and_no_extra_work():
+    res, *_ = solve(column_mesh(16), soil_case(), {"bottom": ("ux", "uy", "uz"),
+                                                   "all": ("uy", "uz")}, 3)
+    assert res.warnings == [] and res.stats["extra_purifications"] == 0
+    assert np.all(res.residuals <= 1e-10) and res.stats["max_solve_residual"] < 1e-10
+
+
+def test_mesh_check_thresholds():
+    ok = {"max_aspect_ratio": 6.67, "min_edge": 0.1, "model_size": 50.0}
+    assert quality_warnings(ok, 1e-8) == []
+    flat = dict(ok, max_aspect_ratio=6e6)
+    assert "aspect ratio 6e+06" in quality_warnings(flat, 1e-8)[0]
+    assert quality_warnings(dict(ok, max_aspect_ratio=ASPECT_RATIO_WARNING), 1e-8) == []
+    # tiny: h < L sqrt(12 u / tol) = 2.6 cm at L = 50 m, tol = 1e-8
+    assert quality_warnings(dict(ok, min_edge=0.03), 1e-8) == []
+    assert "tiny elements: shortest edge 0.02 m" in quality_warnings(dict(ok, min_edge=0.02),
+                                                                      1e-8)[0]
+
+
+def test_sliver_in_the_model_warns_in_mesh_and_modal(tmp_path, capsys):
+    """A 1e-7 m slab: the mesh check names the aspect ratio and the tiny elements, the
+    modal stage the round-off-limited modes (the run still completes: the eigenvalues are
+    accurate to ~residual^2). Before: silent."""
+    code = run(["modal", str(BASELINE), "--set", "mesh.refinement=0.5", "--set",
+                "modal.n_modes=6", "--set", "building.slab_thickness=1e-7", "--out",
+                str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "WARNING (mesh check): max aspect ratio" in out
+    assert "WARNING (mesh check): tiny elements: shortest edge 1e-07 m" in out
+    assert "modes are limited by round-off" in out
+    import json
+
+    import h5py
+
+    with h5py.File(tmp_path / "modes.h5", "r") as f:
+        stats = json.loads(f.attrs["stats"])
+    assert stats["convergence_warnings"]
+
+
+def test_unconverged_stage_exits_2_with_one_line(tmp_path, capsys, monkeypatch):
+    _early_stop(monkeypatch, 1e-1)
+    monkeypatch.setattr(eigen, "EXTRA_PURIFICATIONS", 0)
+    code = run(["modal", str(BASELINE), "--set", "mesh.refinement=0.5", "--set",
+                "modal.n_modes=6", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "of 6 modes did not converge: worst relative residual" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "modes.h5").exists()

@@ -16,15 +16,16 @@ Layout of ``modes.h5``::
                                            rail-pad spring-dampers (rail node, sleeper node;
                                            0 = x, 1 = y, 2 = z; N/m; N s/m), kept for the
                                            dynamic stage (their damping is not in K or M)
-    attrs: inputs_sha256, complete, case_toml, railvib_version, petsc_version,
-           slepc_version, stats (JSON), timings (JSON), n_modes, n_dofs
+    attrs: the provenance of :func:`railvib_hpc.io.stage_files.provenance` (inputs_sha256,
+           upstream_sha256, case_toml, format_version, ...), complete, petsc_version,
+           slepc_version, stats (JSON), n_modes, n_dofs
 
 With more than one rank and an MPI-enabled h5py, every rank writes its own
 node slice collectively (``driver="mpio"``); otherwise slices are gathered to
-rank 0. The file is written under a temporary name, ``complete`` is set last
-and rank 0 renames it: an interrupted run never leaves a file that looks
-complete. ``modes.xdmf`` (rank 0, written after the rename) animates the mode
-shapes in ParaView: one time step per mode.
+rank 0. The file is written by :func:`railvib_hpc.io.stage_files.write_h5`
+(temporary name, space reserved, ``complete`` set last, renamed, recorded): an
+interrupted run never leaves a file that looks complete. ``modes.xdmf`` (rank 0,
+written after the rename) animates the mode shapes in ParaView: one time step per mode.
 """
 
 from __future__ import annotations
@@ -36,8 +37,9 @@ import numpy as np
 
 from ..mesh.model import Mesh
 from ..schema import PART_ID
-from .atomic import write_text_atomic
-from .parallel_h5 import h5py_parallel_ok, write_collective
+from .parallel_h5 import h5py_parallel_ok
+from .stage_checks import check_modes
+from .stage_files import write_h5, write_text
 from .xdmf import temporal_xdmf
 
 
@@ -55,12 +57,18 @@ def rail_nodes(mesh: Mesh) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
+def n_rail_nodes(mesh: Mesh) -> int:
+    """Flexible-rail nodes per rail (an upper bound: all rail nodes)."""
+    return int(np.unique(mesh.lines[mesh.line_part == PART_ID["rail"]]).size)
+
+
 def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
                 attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
-                energies: dict[str, np.ndarray] | None = None) -> None:
-    """Write ``modes.h5`` (collective: every rank calls it with its own slices).
+                energies: dict[str, np.ndarray] | None = None) -> str:
+    """Write ``modes.h5`` (collective: every rank calls it with its own slices); returns its
+    content digest.
 
     Parameters
     ----------
@@ -95,10 +103,20 @@ def write_modes(path: Path, comm, mesh: Mesh, node_range: slice, eigenvalues: np
                rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads or {},
                energies or {})
 
-    write_collective(path, comm, fill)
+    nr = len(rotation_nodes)
+    values = (m * (n + nr) * 3                          # translation, rotation
+              + n * (3 + 1 + 1 + 6)                     # points, node ids, masses, DOF index
+              + mesh.hexes.size + mesh.lines.size + nr + 2 * n_rail_nodes(mesh)
+              + sum(np.asarray(v).size for v in mesh.node_sets.values())
+              + m * (2 + len(energies or {})))          # frequencies, eigenvalues, energies
+    size = 8 * values + mesh.hex_part.nbytes + mesh.line_part.nbytes \
+        + sum(np.asarray(v).nbytes for v in (pads or {}).values())
+    sha = write_h5(path, comm, fill, size_hint=int(size), attrs=attrs, parallel=parallel,
+                   check=lambda tmp: check_modes(tmp, False))
     if comm.rank == 0:
-        write_text_atomic(path.with_suffix(".xdmf"), modes_xdmf(path.name, mesh, eigenvalues))
+        write_text(path.with_suffix(".xdmf"), modes_xdmf(path.name, mesh, eigenvalues))
     comm.Barrier()
+    return sha
 
 
 def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, rotation,

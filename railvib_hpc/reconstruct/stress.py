@@ -56,19 +56,13 @@ import numpy as np
 from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
-from ..io.atomic import write_text_atomic
-from ..io.parallel_h5 import h5py_parallel_ok
+from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
+from ..io.stage_files import final_name, write_text
 from ..log import Reporter
 from ..mesh.model import hex_shape_gradients
-from ..parallel import on_root
+from ..parallel import check_collective, on_root
 from ..schema import PART_ID
-from .fields import (
-    check_collective,
-    node_range,
-    open_h5,
-    read_slab,
-    write_slab,
-)
+from .fields import node_range
 
 #: Centre gradients of the reference shape functions, (8, 3).
 _DN0 = hex_shape_gradients(np.zeros(3))[0]
@@ -470,10 +464,8 @@ def stress_from_fields(fields_path: str | os.PathLike, comm, times: Sequence[flo
 
     def xdmf():
         # the XDMF refers to the final name, also when called on a temporary file
-        name = fields_path.name
-        if name.startswith(".") and ".part-" in name:
-            name = name[1:name.rindex(".part-")]
-        write_text_atomic(fields_path.with_name("stress.xdmf"),
+        name = final_name(fields_path.name)
+        write_text(fields_path.with_name("stress.xdmf"),
                           stress_xdmf(name, n, ne, t_sel, hdtype, pdtype))
 
     on_root(xdmf, comm)

@@ -150,7 +150,13 @@ def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Report
 def run(argv: list[str] | None = None) -> int:
     """Parse arguments and run a command; returns the exit code (raises nothing for user
     or internal errors: both are reported in one line)."""
-    from .petsc_env import check_option_words, clear_options, petsc_error_type, unused_options
+    from .petsc_env import (
+        check_option_words,
+        clear_options,
+        petsc_error_text,
+        petsc_error_type,
+        unused_options,
+    )
 
     argv = list(sys.argv[1:] if argv is None else argv)
     argv, petsc_options = _split_petsc(argv)
@@ -179,9 +185,9 @@ def run(argv: list[str] | None = None) -> int:
         petsc_error = petsc_error_type()
         if petsc_error is not None and isinstance(exc, petsc_error) and petsc_options:
             if comm.rank == 0:
-                print(f"railvib {args.command}: error: PETSc stopped with error code "
-                      f"{getattr(exc, 'ierr', '?')} (its message is above); check the options "
-                      f"after '--': {' '.join(petsc_options)}", file=sys.stderr, flush=True)
+                print(f"railvib {args.command}: error: PETSc stopped: {petsc_error_text(exc)}; "
+                      f"check the options after '--': {' '.join(petsc_options)}",
+                      file=sys.stderr, flush=True)
             return 2
         return _internal_error(args, out, comm, exc)
     finally:

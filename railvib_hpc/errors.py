@@ -33,9 +33,10 @@ class CaseError(UserError):
     def __init__(self, problems: list[tuple[str, object, str]]):
         self.problems = list(problems)
         lines = [f"{key} = {value!r}: {allowed}" for key, value, allowed in self.problems]
-        header = "invalid case file"
-        if len(lines) > 1:
-            header += f" ({len(lines)} problems)"
+        if len(lines) == 1:                       # one problem: one line
+            super().__init__(f"invalid case file: {lines[0]}")
+            return
+        header = f"invalid case file ({len(lines)} problems)"
         super().__init__(header + ":\n  " + "\n  ".join(lines))
 
     def __reduce__(self):  # picklable, so it can be broadcast to every MPI rank

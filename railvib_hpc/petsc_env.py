@@ -141,10 +141,12 @@ def unused_options(options: list[str]) -> list[str]:
     names = _option_names(options)
     if "petsc4py.PETSc" not in sys.modules:
         return [f"-{n}" for n in names]
+    from petsc4py import PETSc
+
     left = _left_options()
-    if left is None:
-        return []
-    return [f"-{n}" for n in names if n in left and not n.startswith(_READ_AT_FINALIZE)]
+    opts = PETSc.Options()
+    return [f"-{n}" for n in names if not n.startswith(_READ_AT_FINALIZE)
+            and (not opts.hasName(n) or (left is not None and n in left))]
 
 
 def clear_options(options: list[str]) -> None:
@@ -164,3 +166,21 @@ def petsc_error_type():
     """``petsc4py.PETSc.Error`` when petsc4py is loaded, else None."""
     mod = sys.modules.get("petsc4py.PETSc")
     return getattr(mod, "Error", None) if mod is not None else None
+
+
+def petsc_error_text(exc: BaseException) -> str:
+    """PETSc's own words for a ``PETSc.Error`` (the specific message of the last error, else
+    the generic text of its code)."""
+    import ctypes
+
+    ierr = int(getattr(exc, "ierr", 0) or 0)
+    lib = _petsc_library()
+    if lib is None or not ierr:
+        return f"error code {ierr}"
+    text, specific = ctypes.c_char_p(), ctypes.c_char_p()
+    lib.PetscErrorMessage.argtypes = [ctypes.c_int, ctypes.POINTER(ctypes.c_char_p),
+                                      ctypes.POINTER(ctypes.c_char_p)]
+    if lib.PetscErrorMessage(ierr, ctypes.byref(text), ctypes.byref(specific)) != 0:
+        return f"error code {ierr}"
+    words = (specific.value or text.value or b"").decode(errors="replace").strip()
+    return f"{words} (error code {ierr})" if words else f"error code {ierr}"

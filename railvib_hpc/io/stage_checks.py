@@ -79,8 +79,29 @@ def _need(f, names) -> list[str]:
 
 
 # ----------------------------------------------------------------------------- mesh.h5
+def inverted_hexes(points: np.ndarray, hexes: np.ndarray) -> int:
+    """Number of hexahedra (VTK order) with a non-positive corner Jacobian (inverted or
+    garbled; a valid mesh has none: the mesh stage refuses inverted elements)."""
+    if len(hexes) == 0:
+        return 0
+    x = np.asarray(points)[np.asarray(hexes)]               # (ne, 8, 3)
+    # the three edges leaving each corner, in the right-handed order of the VTK hexahedron
+    nbr = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
+                    [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
+    e = x[:, nbr, :] - x[:, :, None, :]                     # (ne, 8, 3, 3)
+    det = np.einsum("ijk,...i,...j,...k->...", _LEVI_CIVITA, e[..., 0, :], e[..., 1, :],
+                    e[..., 2, :])
+    return int(np.count_nonzero(~(det.min(axis=1) > 0)))
+
+
+_LEVI_CIVITA = np.zeros((3, 3, 3))
+_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
+_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
+
+
 def check_mesh_arrays(points, hexes, hex_part, lines, line_part, node_sets=None) -> list[str]:
-    """Mesh arrays: finite coordinates, connectivity within the nodes, known part ids."""
+    """Mesh arrays: finite coordinates, connectivity within the nodes, known part ids, no
+    inverted hexahedra."""
     from ..schema import PART_ID
 
     n = len(points)
@@ -105,6 +126,10 @@ def check_mesh_arrays(points, hexes, hex_part, lines, line_part, node_sets=None)
         nodes = np.asarray(nodes)
         if nodes.size and (nodes.min() < 0 or nodes.max() >= n):
             out.append(f"mesh/node_sets/{name} refers to nodes outside 0..{n - 1}")
+    if not out:
+        bad = inverted_hexes(points, hexes)
+        if bad:
+            out.append(f"mesh/hexes has {bad} inverted or degenerate hexahedra")
     return out
 
 

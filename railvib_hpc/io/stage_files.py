@@ -84,6 +84,20 @@ into the same folder refuses at once naming the holder, or waits with ``wait=Tru
 (``--wait``). Taking the lock removes the temporary files of dead processes. (``flock``
 works across the nodes of a cluster on NFSv4 and Lustre; on file systems without
 distributed locks, concurrent jobs must use different ``--out`` folders.)
+
+API
+---
+* digests: :func:`digest` (JSON objects), :func:`hash_file` (collective), :func:`file_digest`
+  (trusting a matching record), :func:`record_file`;
+* the table: :data:`STAGE_FILES`, :func:`spec`, :func:`inputs_hash`, :func:`provenance`,
+  :func:`case_differences`;
+* reuse: :func:`examine` -> :class:`Verdict`, :func:`require_inputs` (raises
+  :class:`~railvib_hpc.errors.StaleInputError`), :func:`forget`;
+* writes: :func:`write_h5` (collective HDF5), :func:`write_json`, :func:`write_text`,
+  :func:`atomic_file`, :func:`copy_file`, :func:`ensure_space`, :func:`reserve`,
+  :func:`temp_path`;
+* locks: :func:`output_lock` (collective context manager), :func:`acquire_lock`,
+  :func:`release_lock`, :func:`holds_lock`, :func:`remove_stale_temps`.
 """
 
 from __future__ import annotations
@@ -1022,6 +1036,10 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
                 tmp.unlink()
 
     def sync(error: BaseException | None) -> None:
+        if isinstance(error, OSError) and not error.errno and not isinstance(error, UserError):
+            with contextlib.suppress(OSError):    # MPI-IO reports no errno: name the cause
+                if free_bytes(path.parent) < SPACE_MARGIN[1]:
+                    error = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
         if comm is not None:
             check_collective(comm, error, what)
         elif error is not None:

@@ -52,6 +52,7 @@ from ..io.stage_checks import (
 )
 from ..io.stage_files import (
     atomic_file,
+    ensure_space,
     examine,
     forget,
     output_lock,
@@ -221,7 +222,7 @@ def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
 
 
 def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
-                    n_wheels: int, n_r: int) -> None:
+                    n_wheels: int, n_r: int, out_dir: Path) -> None:
     """An empty passage, too many steps or too little memory: one clear error first."""
     from .integrate import auto_time_step, wheel_rails
     from .results import kept_steps
@@ -256,6 +257,7 @@ def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
         + 2 * 8.0 * kept * (3 * m + 4 * n_wheels + 3 * n_dof + 3 * n_r + 3 * m * (n_r > 0))
     check_memory(need, f"the multibody run ({nt:.3g} steps, {kept:.3g} stored)",
                  "shorten vehicle.t_after, use a larger mbs.dt or mbs.store_every")
+    ensure_space(out_dir, need / 2, f"mbs.h5 ({kept:.3g} stored steps)")
 
 
 def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
@@ -317,7 +319,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     t_end = travel / speed + case["vehicle.t_after"]
     n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
     _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
-                    n_r)
+                    n_r, out_dir)
     residual = None
     if case["mbs.static_correction"]:
         residual = residual_flexibility(_read_static(out_dir, n_r), rm.rails, rm.omega)

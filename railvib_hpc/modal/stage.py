@@ -13,7 +13,7 @@ from ..config import Case
 from ..errors import DataError
 from ..io.modes_io import read_strain_energies, write_modes
 from ..io.stage_checks import check_eigenvalues, check_mode_shapes, check_modes, check_static
-from ..io.stage_files import examine, forget, output_lock, provenance
+from ..io.stage_files import ensure_space, examine, forget, output_lock, provenance
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
@@ -111,6 +111,7 @@ def _modal(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
                               case["modal.fix_rail_rotations_at_pads"])
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
+    on_root(lambda: _check_space(case, out_dir, mesh, dofmap, want_static), comm)
     with rep.stage("assembly"):
         K, M, ainfo = assemble(mesh, case, dofmap, comm)
     t_assembly = time.perf_counter() - t0
@@ -178,6 +179,20 @@ def _modal(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary
+
+
+def _check_space(case: Case, out_dir: Path, mesh, dofmap, want_static: bool) -> None:
+    """Before the eigensolve: room for ``modes.h5`` (and ``static.h5``)? (rank 0)"""
+    from ..io.modes_io import n_rail_nodes
+
+    n, nr = mesh.n_nodes, int(np.count_nonzero(dofmap.has_rotations))
+    m = case["modal.n_modes"]
+    size = 8 * (m * (n + nr) * 3 + 11 * n + mesh.hexes.size + mesh.lines.size)
+    what = f"modes.h5 ({m} modes)"
+    if want_static:
+        size += 8 * 4 * n_rail_nodes(mesh) * n * 3
+        what += " and static.h5"
+    ensure_space(out_dir, size, what)
 
 
 def h5py_file(path: Path):

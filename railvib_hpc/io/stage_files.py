@@ -1194,7 +1194,11 @@ def output_lock(out_dir: str | os.PathLike, comm, command: str, wait: bool = Fal
 
     out_dir = Path(out_dir)
     notify = rep.info if rep is not None else None
-    count, nbytes = on_root(lambda: acquire_lock(out_dir, command, wait, notify), comm)
+    if wait and comm is not None and comm.size > 1:
+        count, nbytes = _root_while_others_sleep(
+            lambda: acquire_lock(out_dir, command, wait, notify), comm)
+    else:
+        count, nbytes = on_root(lambda: acquire_lock(out_dir, command, wait, notify), comm)
     if count and rep is not None:
         rep.info(f"removed {count} temporary file(s) ({_size(nbytes)}) left in {out_dir} by "
                  "interrupted runs")
@@ -1203,6 +1207,43 @@ def output_lock(out_dir: str | os.PathLike, comm, command: str, wait: bool = Fal
     finally:
         if comm is None or comm.rank == 0:
             release_lock(out_dir)
+
+
+def _root_while_others_sleep(fn: Callable[[], Any], comm) -> Any:
+    """Like :func:`~railvib_hpc.parallel.on_root` for a call that may block for long (waiting
+    for a lock): the other ranks poll a non-blocking receive and sleep, instead of spinning
+    in a broadcast."""
+    import time
+
+    from ..parallel import RootFailure
+
+    tag = 7316
+    original = None
+    if comm.rank == 0:
+        try:
+            outcome = (True, fn())
+        except UserError as exc:
+            outcome = (False, exc)
+        except OSError as exc:
+            outcome = (False, OutputError(os_error_text(exc)))
+        except BaseException as exc:
+            original = exc
+            outcome = (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}"))
+        for r in range(1, comm.size):
+            comm.send(outcome, dest=r, tag=tag)
+    else:
+        req = comm.irecv(source=0, tag=tag)
+        while True:
+            done, outcome = req.test()
+            if done:
+                break
+            time.sleep(0.2)
+    ok, payload = outcome
+    if original is not None:
+        raise original
+    if not ok:
+        raise payload
+    return payload
 
 
 # ----------------------------------------------------------------------------- misc

@@ -1133,7 +1133,10 @@ def acquire_lock(out_dir: Path, command: str, wait: bool = False,
         lock = out_dir / RECORD_DIR / "lock"
         fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        raise OutputError(f"cannot use the output folder {out_dir}: {os_error_text(exc)}") \
+        reason = os.strerror(exc.errno) if exc.errno else os_error_text(exc)
+        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(out_dir) \
+            else ""
+        raise OutputError(f"cannot use the output folder {out_dir}: {reason}{where}") \
             from None
     try:
         try:

@@ -205,11 +205,13 @@ def extract_mesh(gmsh) -> Mesh:
                 node_sets=node_sets)
 
 
-def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False) -> tuple[Mesh, dict]:
+def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
+             msh_size: int = 0) -> tuple[Mesh, dict]:
     """Generate the model with gmsh; optionally write the ``.msh``. Returns mesh and timings.
 
     The ``.msh`` is written under a temporary name and renamed only after it was read
-    back (``gmsh.write`` reports no errors: a full disk leaves a truncated file).
+    back (``gmsh.write`` reports no errors: a full disk leaves a truncated file); with
+    ``msh_size`` (its predicted size) free space is checked first.
 
     Raises
     ------
@@ -223,8 +225,8 @@ def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False) -
     from ..io.stage_files import atomic_file
 
     timings = {}
-    target = (atomic_file(msh_path, suffix=True, check=check_msh) if msh_path is not None
-              else nullcontext(None))
+    target = (atomic_file(msh_path, suffix=True, check=check_msh, size_hint=msh_size)
+              if msh_path is not None else nullcontext(None))
     with target as tmp, gmsh_session(verbose) as gmsh:
         gmsh.model.add("railvib")
         t0 = time.perf_counter()

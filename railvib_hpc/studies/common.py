@@ -373,8 +373,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
     try:
         t0 = time.perf_counter()
         if v.shared:
-            if not on_root(lambda: (root / SHARED_DIR / "modes.h5").exists(), comm):
-                prepare_shared(plan, case, root, comm, rep)
+            prepare_shared(plan, case, root, comm, rep)       # reused when current
             on_root(lambda: link_shared(root / SHARED_DIR, vdir), comm)
             modal = {"reused": True}
         else:

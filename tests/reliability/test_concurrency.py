@@ -18,7 +18,6 @@ import pytest
 from faults import BASELINE, COARSE, ENV, cli, serial_only
 
 from railvib_hpc.cli import run
-from railvib_hpc.io.stage_files import RECORD_DIR, temp_path
 
 B = str(BASELINE)
 
@@ -29,7 +28,7 @@ def _start(args: list[str]) -> subprocess.Popen:
 
 
 def _wait_for_holder(out: Path, proc: subprocess.Popen, timeout: float = 60) -> dict:
-    lock = out / RECORD_DIR / "lock"
+    lock = out / ".railvib" / "lock"
     t0 = time.time()
     while time.time() - t0 < timeout:
         try:
@@ -93,7 +92,7 @@ def test_lock_is_reentrant_and_released(tmp_path):
     acquire_lock(out, "inner")
     release_lock(out)
     assert holds_lock(out)
-    fd = os.open(out / RECORD_DIR / "lock", os.O_RDWR)
+    fd = os.open(out / ".railvib" / "lock", os.O_RDWR)
     try:
         with pytest.raises(BlockingIOError):
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -107,6 +106,8 @@ def test_lock_is_reentrant_and_released(tmp_path):
 def test_temporary_files_of_dead_runs_are_removed(work, capsys, tally):
     """The issue: .part files were never cleaned (142 MB on the coarse model) and one
     blocked the next run."""
+    from railvib_hpc.io.stage_files import temp_path
+
     dead = 2**22 + 12345                      # above the default pid_max: never alive
     while True:
         try:

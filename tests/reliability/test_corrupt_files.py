@@ -21,7 +21,6 @@ import pytest
 from faults import BASELINE, COARSE, copy_results
 
 from railvib_hpc.cli import run
-from railvib_hpc.io.stage_files import record_path
 
 B = str(BASELINE)
 KINDS = ("nan", "nan-unrecorded", "garbage", "truncated")
@@ -35,6 +34,11 @@ READERS = {
 }
 
 
+def record_path(path: Path) -> Path:
+    """Where the stage-file layer keeps the record of ``path``."""
+    return path.parent / ".railvib" / f"{path.name}.json"
+
+
 def inject(path: Path, kind: str, dataset: str) -> None:
     """Corrupt ``path`` (see the module notes)."""
     if kind in ("nan", "nan-unrecorded"):
@@ -43,7 +47,7 @@ def inject(path: Path, kind: str, dataset: str) -> None:
             idx = tuple(s // 2 for s in d.shape)
             d[idx] = np.nan
         if kind == "nan-unrecorded":
-            record_path(path).unlink()
+            record_path(path).unlink(missing_ok=True)
     elif kind == "garbage":
         with h5py.File(path, "r") as f:
             d = f[dataset]
@@ -170,7 +174,7 @@ def test_huge_modal_coordinate_never_reaches_a_report(prepared, tmp_path, capsys
     out = copy_results(prepared, tmp_path / "o")
     with h5py.File(out / "mbs.h5", "r+") as f:
         f["modal/q"][400, 0] = 1e300
-    record_path(out / "mbs.h5").unlink()
+    record_path(out / "mbs.h5").unlink(missing_ok=True)
     code = run(["reconstruct", B, "--out", str(out), *COARSE])
     err = capsys.readouterr().err
     _record(tally, "1e300 in mbs.h5 read by reconstruct", code, err)

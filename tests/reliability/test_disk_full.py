@@ -17,10 +17,6 @@ import pytest
 from faults import BASELINE, COARSE, can_mount, cli, copy_results, serial_only
 from mpi4py import MPI
 
-from railvib_hpc.errors import OutputError
-from railvib_hpc.io.parallel_h5 import write_slab
-from railvib_hpc.io.stage_files import reserve, write_h5
-
 B = str(BASELINE)
 MESH = ("mesh.h5", "mesh.msh", "mesh.xdmf", "mesh_report.json")
 
@@ -68,6 +64,9 @@ def test_full_disk_at_the_mesh(tmpfs, tally):
 
 
 def test_reservation_fails_cleanly_on_a_full_disk(tmpfs):
+    from railvib_hpc.errors import OutputError
+    from railvib_hpc.io.stage_files import reserve
+
     out = tmpfs(1)
     f = out / "x"
     f.write_bytes(b"")
@@ -79,6 +78,10 @@ def test_reservation_fails_cleanly_on_a_full_disk(tmpfs):
 def test_write_failure_on_a_full_disk_is_collective(shared_tmp):
     """The data outgrow a (wrong) size prediction on a full tmpfs: every rank raises the
     same clear error (no hang), and no file or temporary file is left."""
+    from railvib_hpc.errors import OutputError
+    from railvib_hpc.io.parallel_h5 import write_slab
+    from railvib_hpc.io.stage_files import write_h5
+
     comm = MPI.COMM_WORLD
     ok = comm.bcast(can_mount() if comm.rank == 0 else None, root=0)
     if not ok:
@@ -111,3 +114,18 @@ def test_write_failure_on_a_full_disk_is_collective(shared_tmp):
 
             subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
             os.rmdir(mnt)
+
+
+def test_truncated_msh_is_never_renamed(tmpfs):
+    """Without the free-space check (no predicted size), gmsh.write fills the disk without
+    an error; reading the file back finds the truncation before the rename."""
+    from railvib_hpc.config import load_case
+    from railvib_hpc.errors import OutputError
+    from railvib_hpc.mesh.gmsh_model import generate
+    from railvib_hpc.mesh.layout import build_layout
+
+    out = tmpfs(2)
+    layout = build_layout(load_case(BASELINE, ["mesh.refinement=0.5"]))
+    with pytest.raises(OutputError, match="mesh.msh failed: gmsh cannot read it back"):
+        generate(layout, out / "mesh.msh")
+    assert sorted(os.listdir(out)) == []

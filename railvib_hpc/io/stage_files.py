@@ -355,10 +355,6 @@ STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
               (), ("mesh.file", "irregularity.file")),
 )}
 
-#: Order of the stages (for "run 'railvib <stage>' (or 'railvib run')").
-STAGE_ORDER = ("mesh", "modal", "mbs", "reconstruct", "assess")
-
-
 def spec(name: str) -> StageFile:
     """The table row of ``name`` (a file name, e.g. ``modes.h5``)."""
     try:

@@ -1,24 +1,38 @@
-"""Command line: ``railvib COMMAND CASE.toml [--out DIR] [--set key=value ...] [-- PETSc options]``.
+"""Command line: ``railvib COMMAND CASE.toml [--out DIR] [--set key=value ...] [--wait]
+[-- PETSc options]``.
 
-Exit codes: 0 success, 2 user error (bad case file, bad mesh), 3 a stage that is
-not implemented yet, 1 anything else (a bug: the traceback is printed).
+The CLI parses, loads the case, takes the output folder's lock and dispatches to the
+stages (:data:`railvib_hpc.pipeline.STAGES`); everything else lives in the stages.
+
+Exit codes (the same on every MPI rank):
+
+* 0 -- success (for ``run``: the pipeline completed; the verdict is in the table);
+* 2 -- a user or environment error: bad case file or value, a stale, foreign or corrupt
+  input file, an output folder in use by another run, a full disk, missing permissions,
+  a bad PETSc option; one line on stderr, no traceback;
+* 1 -- an internal error (a bug): one line asking to report it, naming a log file with
+  the traceback (``<out>/.railvib/crash-<time>-<pid>.log``).
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
+import os
 import sys
+import tempfile
+import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from . import __version__
-from .config import Case, load_case
+from .config import Case, load_case, results_folder_name
 from .errors import UserError
 from .log import Reporter
-from .parallel import on_root, world
+from .parallel import RootFailure, on_root, world
 
 if TYPE_CHECKING:
-    from mpi4py import MPI
+    pass
 
 STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed", "thesis")
@@ -30,7 +44,9 @@ def _parser() -> argparse.ArgumentParser:
         description="Train-induced vibration of buildings next to railway tracks "
                     "(gmsh + PETSc/SLEPc + reduced multibody dynamics).",
         epilog="Options after a bare '--' are passed to PETSc/SLEPc, e.g. "
-               "'-- -railvib_eig_eps_tol 1e-10 -log_view'.")
+               "'-- -railvib_eig_st_ksp_type preonly -log_view'; options that nothing used "
+               "are reported at the end. Exit codes: 0 success, 2 user or environment "
+               "error (one line), 1 internal error (please report; a log file is named).")
     p.add_argument("--version", action="version", version=f"railvib-hpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
     helps = {
@@ -66,6 +82,10 @@ def _parser() -> argparse.ArgumentParser:
         sp.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE",
                         help="override a case key, e.g. --set mesh.refinement=2 (repeatable)")
+        if name != "check":
+            sp.add_argument("--wait", action="store_true",
+                            help="wait for another railvib command that uses the same output "
+                                 "folder instead of stopping")
     return p
 
 
@@ -76,8 +96,14 @@ def _split_petsc(argv: list[str]) -> tuple[list[str], list[str]]:
     return argv, []
 
 
-def _out_dir(args: argparse.Namespace, case: Case) -> Path:
-    return args.out if args.out is not None else Path("results") / case["case.name"]
+def _out_dir(args: argparse.Namespace, case: Case, rep: Reporter) -> Path:
+    if args.out is not None:
+        return args.out
+    name = results_folder_name(case["case.name"])
+    if name != case["case.name"]:
+        rep.info(f"note: case.name = {case['case.name']!r} is not a plain folder name; the "
+                 f"results go to results/{name}")
+    return Path("results") / name
 
 
 def _cmd_check(case: Case, rep: Reporter) -> int:
@@ -93,127 +119,114 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     return 0
 
 
-def _cmd_mesh(case: Case, out: Path, rep: Reporter) -> int:
-    from .mesh.stage import format_report, run_mesh_stage
+def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Reporter,
+              petsc_options: list[str]) -> int:
+    from .io.stage_files import output_lock
+    from .pipeline import run_pipeline, stage_runner
 
-    def work():
-        with rep.stage("mesh"):
-            _, report = run_mesh_stage(case, out, rep)
-        rep.info(format_report(report))
-        rep.info("mesh timings: " + ", ".join(f"{k} {v:.2f} s"
-                                                for k, v in report["timings"].items()))
-        rep.info(f"wrote {out / 'mesh.xdmf'} (open in ParaView), {out / 'mesh.h5'}"
-                 + ("" if case["mesh.file"] else f", {out / 'mesh.msh'}"))
-        return report
+    if args.command == "check":
+        return _cmd_check(case, rep)
+    if args.command == "study":
+        from .studies import run_study
 
-    on_root(work, broadcast_result=False)
-    return 0
-
-
-def _cmd_modal(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    from .modal.stage import run_modal_stage
-
-    return run_modal_stage(case, out, comm, rep)
-
-
-def _cmd_mbs(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    from .mbs.stage import run_mbs_stage
-
-    return run_mbs_stage(case, out, comm, rep)
-
-
-def _reconstruct_options(case: Case, out: Path) -> dict:
-    """Stride, window, precision, stress times and user probes from ``[output]`` (rank 0)."""
-    import h5py
-    import numpy as np
-
-    mbs = out / "mbs.h5"
-    stride = 1
-    if mbs.exists() and case["output.dt"] > 0:
-        with h5py.File(mbs, "r") as f:
-            t = f["time"][:2]
-        if t.size == 2:
-            stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
-    w = case["output.window"]
-    probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
-    names = [f"user_{i + 1}" for i in range(len(probes))]
-    return {"stride": stride, "window": tuple(w) if w else None,
-            "float32": case["output.float32"], "stress_times": case["output.stress_times"],
-            "correction_rates": case["output.static_correction_rates"],
-            "user_probes": dict(zip(names, probes)),
-            "user_probe_roles": dict(zip(names, case["output.probe_roles"]))}
-
-
-def _cmd_reconstruct(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    from .reconstruct import run_reconstruct_stage
-
-    opts = on_root(lambda: _reconstruct_options(case, out), comm)
-    return run_reconstruct_stage(out / "modes.h5", out / "mbs.h5", out, comm, rep, **opts)
-
-
-def _cmd_assess(case: Case, out: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    from .assess.stage import run_assess_stage
-
-    return run_assess_stage(case, out, comm, rep)
+        return run_study(args.kind, case, out, comm, rep, variants=args.variant,
+                         merge_only=args.merge, prepare=args.prepare, list_only=args.list,
+                         study_set=args.study_set, petsc_options=petsc_options,
+                         wait=args.wait)
+    command = " ".join(["railvib", args.command, str(args.case)])
+    with output_lock(out, comm, command, wait=args.wait, rep=rep):
+        if args.command == "run":
+            _cmd_check(case, rep)
+            summary = run_pipeline(case, out, comm, rep, petsc_options)
+            rep.info("\n" + rep.timing_table())
+            verdict = summary["assess"]["verdict"]
+            failed = [k for k, v in verdict.items() if v is False]
+            rep.info(f"pipeline complete: {len(verdict)} probes assessed, "
+                     + (f"limits exceeded at {', '.join(failed)}" if failed
+                        else "no limit exceeded"))
+            return 0
+        stage_runner(args.command)(case, out, comm, rep, petsc_options)
+        if args.command != "mesh":
+            rep.info("\n" + rep.timing_table())
+        return 0
 
 
 def run(argv: list[str] | None = None) -> int:
-    """Parse arguments and run a command; returns the exit code (raises nothing for user errors)."""
+    """Parse arguments and run a command; returns the exit code (raises nothing for user
+    or internal errors: both are reported in one line)."""
+    from .petsc_env import (
+        check_option_words,
+        clear_options,
+        petsc_error_text,
+        petsc_error_type,
+        unused_options,
+    )
+
     argv = list(sys.argv[1:] if argv is None else argv)
     argv, petsc_options = _split_petsc(argv)
     args = _parser().parse_args(argv)
     comm = world()
     rep = Reporter(comm.rank)
+    out: Path | None = None
     try:
+        check_option_words(petsc_options)
         case = on_root(lambda: load_case(args.case, args.overrides))
         for note in case.notes:
             rep.info(f"note: {note}")
-        out = _out_dir(args, case)
-        if args.command in ("modal", "run"):
-            from .petsc_env import init_petsc
-
-            init_petsc(petsc_options)
-        if args.command == "check":
-            return _cmd_check(case, rep)
-        if args.command == "mesh":
-            return _cmd_mesh(case, out, rep)
-        if args.command == "modal":
-            _cmd_modal(case, out, comm, rep)
-            rep.info("\n" + rep.timing_table())
-            return 0
-        single = {"mbs": _cmd_mbs, "reconstruct": _cmd_reconstruct, "assess": _cmd_assess}
-        if args.command in single:
-            single[args.command](case, out, comm, rep)
-            rep.info("\n" + rep.timing_table())
-            return 0
-        if args.command == "study":
-            from .studies import run_study
-
-            return run_study(args.kind, case, out, comm, rep, variants=args.variant,
-                             merge_only=args.merge, prepare=args.prepare,
-                             list_only=args.list, study_set=args.study_set,
-                             petsc_options=petsc_options)
-        # run: every stage in order; report the ones that do not exist yet
-        _cmd_check(case, rep)
-        _cmd_mesh(case, out, rep)
-        _cmd_modal(case, out, comm, rep)
-        _cmd_mbs(case, out, comm, rep)
-        _cmd_reconstruct(case, out, comm, rep)
-        summary = _cmd_assess(case, out, comm, rep)
-        rep.info("\n" + rep.timing_table())
-        verdict = summary["verdict"]
-        failed = [k for k, v in verdict.items() if v is False]
-        rep.info(f"pipeline complete: {len(verdict)} probes assessed, "
-                 + (f"limits exceeded at {', '.join(failed)}" if failed
-                    else "no limit exceeded"))
-        return 0
+        out = _out_dir(args, case, rep)
+        code = _dispatch(args, case, out, comm, rep, petsc_options)
+        unused = unused_options(petsc_options)
+        if unused:
+            _warn(comm, f"railvib {args.command}: warning: PETSc options after '--' that "
+                        f"nothing used: {' '.join(unused)} (misspelt, or nothing was solved "
+                        "with PETSc)")
+        return code
     except UserError as exc:
         if comm.rank == 0:
             print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)
         return exc.exit_code
+    except Exception as exc:
+        petsc_error = petsc_error_type()
+        if petsc_error is not None and isinstance(exc, petsc_error) and petsc_options:
+            if comm.rank == 0:
+                print(f"railvib {args.command}: error: PETSc stopped: {petsc_error_text(exc)}; "
+                      f"check the options after '--': {' '.join(petsc_options)}",
+                      file=sys.stderr, flush=True)
+            return 2
+        return _internal_error(args, out, comm, exc)
     finally:
-        if petsc_options and args.command not in ("modal", "run"):
-            rep.info("PETSc options ignored by this command: " + " ".join(petsc_options))
+        clear_options(petsc_options)
+
+
+def _warn(comm, text: str) -> None:
+    if comm.rank == 0:
+        print(text, file=sys.stderr, flush=True)
+
+
+def _internal_error(args: argparse.Namespace, out: Path | None, comm, exc: Exception) -> int:
+    """One "please report" line naming a log file with the traceback; exit code 1."""
+    if isinstance(exc, RootFailure):        # rank 0 has the original and reports it
+        return 1
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    name = f"crash-{stamp}-{os.getpid()}" + (f"-rank{comm.rank}" if comm.rank else "") + ".log"
+    text = (f"railvib {__version__}, command: railvib {' '.join(sys.argv[1:]) or args.command}"
+            f"\nrank {comm.rank} of {comm.size}, python {sys.version.split()[0]}\n\n"
+            + "".join(traceback.format_exception(exc)))
+    log = None
+    candidates = ([out / ".railvib"] if out is not None else []) + [Path(tempfile.gettempdir())]
+    for folder in candidates:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / name).write_text(text)
+            log = folder / name
+            break
+        except OSError:
+            continue
+    where = f"the traceback is in {log}" if log else "the traceback follows:\n" + text
+    print(f"railvib {args.command}: internal error ({type(exc).__name__}: "
+          f"{(str(exc).splitlines() or [''])[0]}) on rank {comm.rank}: this is a bug, please "
+          f"report it with the log; {where}", file=sys.stderr, flush=True)
+    return 1
 
 
 def main() -> int:

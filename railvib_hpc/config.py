@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import copy
 import difflib
-import hashlib
 import json
 import math
+import os
 import re
 from collections.abc import Collection
 from dataclasses import dataclass
@@ -23,6 +23,7 @@ from typing import Any
 import tomllib
 
 from .errors import CaseError
+from .io.stage_files import digest, hash_file
 from .schema import PRESETS, SCHEMA, Param, iter_params
 
 ALL_KEYS: dict[str, Param] = dict(iter_params())
@@ -75,10 +76,8 @@ class Case:
 
         payload = {n: drop(self[n]) for n in names}
         if "mesh" in names and self["mesh.file"]:
-            mesh_file = self.resolve(self["mesh.file"])
-            payload["mesh_file_sha256"] = hashlib.sha256(mesh_file.read_bytes()).hexdigest()
-        text = json.dumps(payload, sort_keys=True, default=str)
-        return hashlib.sha256(text.encode()).hexdigest()
+            payload["mesh_file_sha256"] = hash_file(self.resolve(self["mesh.file"]))
+        return digest(payload)
 
     def resolve(self, relative: str) -> Path:
         """Resolve a path given in the case file relative to the file's folder."""
@@ -315,25 +314,59 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
 def load_case(path: str | Path | None, overrides: list[str] | None = None) -> Case:
     """Read a TOML case file (``None``: built-in defaults) and validate it.
 
+    A file that sets no key at all (empty, or only comments) is refused: it would
+    silently run the built-in thesis baseline, which is more likely a broken copy than
+    an intent (``jobs/thesis_baseline.toml`` lists every key for that).
+
     Raises
     ------
     CaseError
-        Missing or unreadable file, TOML syntax errors, or invalid entries.
+        Missing, unreadable, empty or too deeply nested file, a directory, TOML syntax
+        errors, or invalid entries.
     """
     raw: dict[str, Any] = {}
     p: Path | None = None
     if path is not None:
         p = Path(path)
+        if p.is_dir():
+            raise CaseError([("case file", str(path), "is a directory; give the TOML file, "
+                              "e.g. jobs/thesis_baseline.toml")])
         if not p.is_file():
             raise CaseError([("case file", str(path), "file not found")])
         try:
-            raw = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as exc:
-            raise CaseError([("case file", str(path), f"not valid TOML: {exc}")]) from None
+            text = p.read_text()
         except UnicodeDecodeError:
             raise CaseError([("case file", str(path), "not a text (UTF-8) file")]) from None
+        except OSError as exc:
+            reason = os.strerror(exc.errno) if exc.errno else str(exc)
+            raise CaseError([("case file", str(path), f"cannot be read ({reason})")]) from None
+        try:
+            raw = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise CaseError([("case file", str(path), f"not valid TOML: {exc}")]) from None
+        except RecursionError:
+            raise CaseError([("case file", str(path), "not valid TOML: nested too deeply")]) \
+                from None
+        if not raw:
+            raise CaseError([("case file", str(path), "sets no key (empty or only comments): "
+                              "it would run the built-in defaults; to run the thesis baseline "
+                              "use jobs/thesis_baseline.toml")])
         p = p.resolve()
     return build_case(raw, overrides, p)
+
+
+def results_folder_name(name: str) -> str:
+    """``case.name`` as a safe folder name for the default ``results/<name>``: anything but
+    letters, digits, ``.``, ``_``, ``-`` becomes ``_``, leading/trailing dots and
+    underscores are dropped (no ``..``, no absolute paths), at most 100 characters.
+
+    Examples
+    --------
+    >>> results_folder_name("../../x"), results_folder_name("/tmp/a b")
+    ('x', 'tmp_a_b')
+    """
+    safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._")[:100].strip("._")
+    return safe or "case"
 
 
 def _close(a: float, b: float, tol: float = 1e-6) -> bool:
@@ -470,6 +503,12 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     if case["modal.f_max"] == 0 and case["modal.n_modes"] < 1:
         out.append(("modal.n_modes", case["modal.n_modes"], "must be >= 1"))
     out.extend(_check_bands(case))
+    need = case["modal.n_modes"] + 2 * case["modal.block_size"]
+    if case["modal.method"] == "block_lanczos" and case["modal.f_max"] == 0 \
+            and 0 < case["modal.max_basis"] < need:
+        out.append(("modal.max_basis", case["modal.max_basis"],
+                    f"must be 0 (automatic) or at least modal.n_modes + 2 modal.block_size = "
+                    f"{need} (the Lanczos basis holds the wanted modes and two blocks)"))
     out.extend(_check_mbs(case))
     out.extend(check_studies(case["study"]))
     return out

@@ -1,12 +1,16 @@
 """Exceptions shared by all stages.
 
-User errors (bad case files, bad overrides, missing files) derive from
-:class:`UserError`; the CLI prints them without a traceback and exits with
-code 2. Everything else is a bug or an environment failure and keeps its
-traceback.
+User and environment errors (bad case files, bad overrides, missing, stale or
+corrupt files, a full disk, a locked output folder) derive from
+:class:`UserError`; the CLI prints them as one line without a traceback and
+exits with code 2, on every MPI rank together. Everything else is a bug: the
+CLI prints one "please report" line naming a log file with the traceback and
+exits with code 1.
 """
 
 from __future__ import annotations
+
+import os
 
 
 class UserError(Exception):
@@ -29,9 +33,10 @@ class CaseError(UserError):
     def __init__(self, problems: list[tuple[str, object, str]]):
         self.problems = list(problems)
         lines = [f"{key} = {value!r}: {allowed}" for key, value, allowed in self.problems]
-        header = "invalid case file"
-        if len(lines) > 1:
-            header += f" ({len(lines)} problems)"
+        if len(lines) == 1:                       # one problem: one line
+            super().__init__(f"invalid case file: {lines[0]}")
+            return
+        header = f"invalid case file ({len(lines)} problems)"
         super().__init__(header + ":\n  " + "\n  ".join(lines))
 
     def __reduce__(self):  # picklable, so it can be broadcast to every MPI rank
@@ -40,3 +45,42 @@ class CaseError(UserError):
 
 class MeshError(UserError):
     """A mesh that cannot be used (inverted elements, missing physical groups, ...)."""
+
+
+class OutputError(UserError, OSError):
+    """An operating-system error on railvib's files: disk full, permission denied, read-only
+    file system, a path below a file, a name too long. Raised on every rank together."""
+
+
+class StaleInputError(UserError):
+    """An input file of a stage is missing, incomplete, stale (computed for other case
+    values or from other upstream files), foreign or corrupt."""
+
+
+class OutputLockedError(UserError):
+    """The output folder is in use by another railvib process."""
+
+
+class ResourceError(UserError):
+    """A run that would exceed the memory, disk or step-count limits (checked before the
+    long arrays are allocated or the files written)."""
+
+
+def os_error_text(exc: OSError, action: str = "") -> str:
+    """One line for an operating-system error: ``action path: reason`` (no traceback text).
+
+    h5py's messages carry a multi-line dump of the failing write; the errno's standard
+    text is used instead when there is one.
+    """
+    if isinstance(exc, UserError):
+        return str(exc)
+    reason = os.strerror(exc.errno) if exc.errno else (str(exc).splitlines() or [""])[0]
+    if not reason:
+        reason = type(exc).__name__
+    name = exc.filename
+    head = " ".join(p for p in (action, str(name) if name else "") if p)
+    return f"{head}: {reason}" if head else reason
+
+
+class DataError(UserError):
+    """Computed or stored data that fail their data checks (non-finite or implausible values)."""

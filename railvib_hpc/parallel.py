@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, TypeVar
 
-from .errors import UserError
+from .errors import OutputError, UserError, os_error_text
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -45,7 +45,9 @@ def on_root(fn: Callable[[], T], comm: MPI.Comm | None = None,
     Raises
     ------
     UserError
-        On every rank, when ``fn`` raised a user error on rank 0.
+        On every rank, when ``fn`` raised a user error on rank 0; an ``OSError`` (disk
+        full, permissions, bad paths) arrives everywhere as
+        :class:`~railvib_hpc.errors.OutputError`.
     RootFailure
         On ranks > 0 when ``fn`` raised any other exception (rank 0 re-raises the original).
     """
@@ -57,6 +59,8 @@ def on_root(fn: Callable[[], T], comm: MPI.Comm | None = None,
             outcome = (True, fn())
         except UserError as exc:
             outcome = (False, exc)
+        except OSError as exc:
+            outcome = (False, OutputError(os_error_text(exc)))
         except BaseException as exc:
             original = exc
             outcome = (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}"))
@@ -73,3 +77,47 @@ def on_root(fn: Callable[[], T], comm: MPI.Comm | None = None,
             raise original
         raise payload
     return payload
+
+
+def check_collective(comm, error: BaseException | None, what: str) -> None:
+    """Raise on every rank when any rank had an error (call it before the next collective).
+
+    Parameters
+    ----------
+    comm
+        Communicator.
+    error
+        This rank's exception, or None.
+    what
+        What was being done, e.g. ``"writing /out/fields.h5"`` (prefix of the message).
+
+    Raises
+    ------
+    UserError
+        On every rank, the first (lowest rank) user error; an ``OSError`` arrives on every
+        rank as :class:`~railvib_hpc.errors.OutputError` ``"<what>: <reason>"``.
+    RuntimeError
+        On the other ranks when a rank had any other (internal) error; that rank
+        re-raises its own exception with its traceback.
+    """
+    def classify(exc: BaseException | None):
+        if exc is None:
+            return None
+        if isinstance(exc, UserError):
+            return ("user", exc)
+        if isinstance(exc, OSError):
+            return ("user", OutputError(f"{what}: {os_error_text(exc)}"))
+        return ("internal", f"{type(exc).__name__}: {exc}")
+
+    mine = classify(error)
+    outcomes = [mine] if comm.size == 1 else comm.allgather(mine)
+    bad = [(r, o) for r, o in enumerate(outcomes) if o is not None]
+    if not bad:
+        return
+    users = [o[1] for _, o in bad if o[0] == "user"]
+    if users:
+        raise users[0]
+    if error is not None:
+        raise error
+    rank, (_, text) = bad[0]
+    raise RuntimeError(f"{what} failed on rank {rank}: {text}")

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from ..io.atomic import atomic_path
+from ..io.stage_files import atomic_file
 from .standards import (
     STANDARDS,
     THESIS_LIMIT,
@@ -150,7 +150,7 @@ def _figure(**kwargs: Any) -> Any:
 
 
 def _save(fig: Any, path: Path) -> None:
-    with atomic_path(path) as tmp:
+    with atomic_file(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
 
 
@@ -488,7 +488,7 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
              "json": out / "report.json"}
     for key, text in (("json", text_json), ("markdown", "\n".join(md)),
                       ("html", "\n".join(parts))):
-        with atomic_path(paths[key]) as tmp:
+        with atomic_file(paths[key]) as tmp:
             tmp.write_text(text, encoding="utf-8")
     paths.update({fid: out / f["file"] for fid, f in figures.items()})
     return paths

@@ -32,7 +32,8 @@ import numpy as np
 
 from ..config import Case
 from ..errors import UserError
-from ..io.atomic import write_text_atomic
+from ..io.stage_checks import CHECKS
+from ..io.stage_files import forget, output_lock, provenance, require_inputs, write_json
 from ..log import Reporter
 from ..parallel import on_root
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
@@ -167,9 +168,9 @@ def peak_map(fields_path: Path, z_ground: float, png: Path) -> dict | None:
         ax.set_title(title)
     fig.colorbar(sc, ax=axes, label="peak velocity magnitude [m/s]")
     png.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.atomic import atomic_path
+    from ..io.stage_files import atomic_file
 
-    with atomic_path(png) as tmp:
+    with atomic_file(png) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
     plt.close(fig)
     return {"x": pts[nodes, 0].tolist(), "y": pts[nodes, 1].tolist(),
@@ -184,13 +185,42 @@ def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
     return np.setdiff1d(np.unique(top), np.unique(bottom))
 
 
+def verify_chain(case: Case, out_dir: Path) -> dict[str, str]:
+    """Verify every file the assessment rests on for this case (rank 0): ``modes.h5``
+    (``static.h5``), ``mbs.h5``, ``fields.h5``, ``probes.h5`` must exist, be complete, be
+    computed with the case's values from each other, be unchanged and sound.
+
+    Returns
+    -------
+    dict
+        Their content digests.
+
+    Raises
+    ------
+    StaleInputError
+        For the first file (in pipeline order) that is not, naming what differs.
+    """
+    from ..mbs.stage import check_context
+    from ..reconstruct.stage import input_files
+
+    names = (*input_files(out_dir), "fields.h5", "probes.h5")
+    verdicts = require_inputs(out_dir, names, case, CHECKS, context=check_context(case, out_dir))
+    return {n: v.sha256 for n, v in verdicts.items()}
+
+
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
-    """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary."""
+    """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary.
+
+    Nothing is labelled with the case before :func:`verify_chain` confirmed that every
+    input file belongs to it.
+    """
     from .report import write_report
     from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
 
     rep = rep or Reporter(0)
+    upstream = verify_chain(case, out_dir)
+    forget(out_dir / "assessment.json")
     hist = read_probes(out_dir / "probes.h5")
     a = case["assessment"]
     results = {}
@@ -243,7 +273,8 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                "thesis_table": rows,
                "verdict": {k: v["passed"] for k, v in results.items()},
                "report": {k: str(p) for k, p in files.items()}}
-    write_text_atomic(out_dir / "assessment.json", json.dumps(summary, indent=1, default=float))
+    write_json(out_dir / "assessment.json", json.loads(json.dumps(summary, default=float)),
+               provenance("assessment.json", case, upstream))
     rep.info(format_table(results))
     rep.info(format_thesis_table(rows))
     rep.info(format_comparison(comparison, arrivals, c_p, c_s))
@@ -317,7 +348,10 @@ def model_summary(case: Case, out_dir: Path) -> str:
     return "\n".join(lines)
 
 
-def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    """Collective: rank 0 assesses (:func:`assess_case`), every rank gets the summary."""
-    with rep.stage("assess"):
+def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
+                     petsc_options: list[str] | None = None) -> dict:
+    """``railvib assess`` (collective): rank 0 verifies the inputs and assesses
+    (:func:`assess_case`), every rank gets the summary; holds the output folder's lock."""
+    out_dir = Path(out_dir)
+    with output_lock(out_dir, comm, "assess", rep=rep), rep.stage("assess"):
         return on_root(lambda: assess_case(case, out_dir, rep), comm)

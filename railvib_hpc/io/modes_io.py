@@ -16,16 +16,17 @@ Layout of ``modes.h5``::
                                            rail-pad spring-dampers (rail node, sleeper node;
                                            0 = x, 1 = y, 2 = z; N/m; N s/m), kept for the
                                            dynamic stage (their damping is not in K or M)
-    attrs: inputs_sha256, complete, case_toml, railvib_version, petsc_version,
-           slepc_version, stats (JSON), timings (JSON), n_modes, n_dofs
+    attrs: the provenance of :func:`railvib_hpc.io.stage_files.provenance` (inputs_sha256,
+           upstream_sha256, case_toml, format_version, ...), complete, petsc_version,
+           slepc_version, stats (JSON), n_modes, n_dofs
 
 With more than one rank and an MPI-enabled h5py, every rank writes its own
 node slice collectively (``driver="mpio"``); otherwise slices are gathered to
-rank 0. The file is written under a temporary name, ``complete`` is set last
-and rank 0 renames it: an interrupted run never leaves a file that looks
-complete. ``modes.xdmf`` (rank 0, written after the rename, with its sidecar of per-step
-views ``modes_views.h5``, see :mod:`railvib_hpc.io.xdmf`) animates the mode shapes in
-ParaView: one time step per mode.
+rank 0. The file is written by :func:`railvib_hpc.io.stage_files.write_h5`
+(temporary name, space reserved, ``complete`` set last, renamed, recorded): an
+interrupted run never leaves a file that looks complete. ``modes.xdmf`` (rank 0,
+written after the rename, with its sidecar of per-step views ``modes_views.h5``, see
+:mod:`railvib_hpc.io.xdmf`) animates the mode shapes in ParaView: one time step per mode.
 """
 
 from __future__ import annotations
@@ -37,7 +38,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..schema import PART_ID
-from .parallel_h5 import h5py_parallel_ok, write_collective
+from .parallel_h5 import h5py_parallel_ok
+from .stage_checks import check_modes
+from .stage_files import write_h5
 from .xdmf import H5Array, Series, hex_mesh, write_series
 
 if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here
@@ -50,8 +53,9 @@ def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigen
                 translation: np.ndarray, rotation: np.ndarray, rotation_nodes: np.ndarray,
                 rot_range: slice, nodal_mass: np.ndarray, dof_index: np.ndarray,
                 attrs: dict[str, object], pads: dict[str, np.ndarray] | None = None,
-                energies: dict[str, np.ndarray] | None = None) -> None:
-    """Write ``modes.h5`` (collective: every rank calls it with its own slices).
+                energies: dict[str, np.ndarray] | None = None) -> str:
+    """Write ``modes.h5`` (collective: every rank calls it with its own slices); returns its
+    content digest.
 
     Parameters
     ----------
@@ -89,10 +93,20 @@ def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigen
                rotation_nodes, node_range, rot_range, nodal_mass, dof_index, attrs, pads or {},
                energies or {})
 
-    write_collective(path, comm, fill)
+    nr = len(rotation_nodes)
+    values = (m * (n + nr) * 3                          # translation, rotation
+              + n * (3 + 1 + 1 + 6)                     # points, node ids, masses, DOF index
+              + mesh.hexes.size + mesh.lines.size + nr + mesh.rail_nodes().size
+              + sum(np.asarray(v).size for v in mesh.node_sets.values())
+              + m * (2 + len(energies or {})))          # frequencies, eigenvalues, energies
+    size = 8 * values + mesh.hex_part.nbytes + mesh.line_part.nbytes \
+        + sum(np.asarray(v).nbytes for v in (pads or {}).values())
+    sha = write_h5(path, comm, fill, size_hint=int(size), attrs=attrs, parallel=parallel,
+                   check=lambda tmp: check_modes(tmp, False))
     if comm.rank == 0:
         write_modes_xdmf(path)
     comm.Barrier()
+    return sha
 
 
 def _write(f, root: bool, mesh: Mesh, m: int, n: int, eigenvalues, translation, rotation,

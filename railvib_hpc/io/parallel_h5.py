@@ -1,11 +1,16 @@
-"""Collective, atomic HDF5 files: every rank writes its slice, rank 0 renames when complete."""
+"""Parallel HDF5 helpers: the ``mpio`` driver, collective hyperslab reads and writes.
+
+Files are created and renamed by :func:`railvib_hpc.io.stage_files.write_h5`; this
+module only moves data in and out of open files.
+"""
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
+
+import numpy as np
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -15,41 +20,60 @@ def h5py_parallel_ok(comm: MPI.Comm) -> bool:
     """True when h5py can open files with the mpio driver on this communicator."""
     import h5py
 
-    return comm.size > 1 and bool(h5py.get_config().mpi)
+    return comm is not None and comm.size > 1 and bool(h5py.get_config().mpi)
 
 
-def write_collective(path: Path, comm: MPI.Comm, fill: Callable[[object, bool], None]) -> None:
-    """Create ``path`` collectively through ``fill(file, parallel)``; atomic.
-
-    With MPI-enabled h5py and several ranks the file is opened with the
-    ``mpio`` driver on every rank (``fill`` must then create the datasets
-    identically on all ranks and write each rank's slice); otherwise only rank 0
-    opens it (``fill`` must have gathered the data there). The file is written
-    under a temporary name with the attribute ``complete = 0``; when every rank
-    succeeded rank 0 sets ``complete = 1`` and renames it. Errors on any rank
-    raise ``OSError`` on every rank and leave no file behind.
-    """
+def open_h5(path: str | os.PathLike, mode: str, comm: MPI.Comm, parallel: bool):
+    """Open an HDF5 file with the mpio driver on ``comm`` (``parallel``) or the plain driver."""
     import h5py
 
-    tmp = comm.bcast(str(path.with_name(f".{path.name}.part-{os.getpid()}"))
-                     if comm.rank == 0 else None, root=0)
-    parallel = h5py_parallel_ok(comm)
-    error = None
-    if parallel or comm.rank == 0:
-        try:
-            kw = {"driver": "mpio", "comm": comm} if parallel else {}
-            with h5py.File(tmp, "w", **kw) as f:
-                f.attrs["complete"] = 0
-                fill(f, parallel)
-        except Exception as exc:
-            error = f"{type(exc).__name__}: {exc}"
-    errors = comm.allgather(error)
-    if any(errors):
-        if comm.rank == 0 and os.path.exists(tmp):
-            os.unlink(tmp)
-        raise OSError(f"writing {path} failed: {next(e for e in errors if e)}")
-    if comm.rank == 0:
-        with h5py.File(tmp, "a") as f:
-            f.attrs["complete"] = 1
-        os.replace(tmp, path)
-    comm.Barrier()
+    if parallel:
+        return h5py.File(path, mode, driver="mpio", comm=comm)
+    return h5py.File(path, mode)
+
+
+def _dxpl(collective: bool):
+    """Dataset transfer property list: collective MPI-IO, or the default."""
+    if not collective:
+        return None
+    from h5py import h5fd, h5p
+
+    dxpl = h5p.create(h5p.DATASET_XFER)
+    dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
+    return dxpl
+
+
+def _selection(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None):
+    """File and memory dataspaces for a hyperslab (an empty selection when ``count`` has a 0)."""
+    from h5py import h5s
+
+    fspace = ds.id.get_space()
+    if buf is None or 0 in tuple(count):
+        fspace.select_none()
+        mspace = h5s.create_simple((1,))
+        mspace.select_none()
+        return fspace, mspace, np.zeros(1, dtype=ds.dtype)
+    fspace.select_hyperslab(tuple(int(s) for s in start), tuple(int(c) for c in count))
+    return fspace, h5s.create_simple(tuple(int(c) for c in count)), buf
+
+
+def write_slab(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None,
+               collective: bool) -> None:
+    """Write ``buf`` (C-contiguous, shape ``count``) to the hyperslab at ``start``.
+
+    Unlike ``ds[...] = buf`` this takes part in a collective write even when this rank's
+    selection is empty (h5py skips empty selections, which would hang the other ranks).
+    """
+    if buf is not None:
+        buf = np.ascontiguousarray(buf)
+    fspace, mspace, data = _selection(ds, start, count, buf)
+    ds.id.write(mspace, fspace, data, dxpl=_dxpl(collective))
+
+
+def read_slab(ds, start: Sequence[int], count: Sequence[int], out: np.ndarray | None,
+              collective: bool) -> None:
+    """Read the hyperslab at ``start`` into ``out`` (C-contiguous, shape ``count``)."""
+    if out is not None and not out.flags.c_contiguous:
+        raise ValueError("read_slab needs a C-contiguous output array")
+    fspace, mspace, data = _selection(ds, start, count, out)
+    ds.id.read(mspace, fspace, data, dxpl=_dxpl(collective))

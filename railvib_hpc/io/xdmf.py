@@ -56,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path, write_text_atomic
+from .stage_files import atomic_file, write_text
 
 __all__ = [
     "CellBlock",
@@ -301,7 +301,7 @@ def _write_views(path: Path, series: Sequence[Series]) -> None:
     """Write the sidecar of per-step virtual datasets (atomic; sources are not opened)."""
     import h5py
 
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+    with atomic_file(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["about"] = ("per-step views (HDF5 virtual datasets) of the time series in "
                             "the data file, for ParaView's XDMF readers; no data of its own")
         for s in series:
@@ -339,7 +339,7 @@ def write_series(xdmf_path: str | os.PathLike, points: H5Array, block: CellBlock
     xdmf_path = Path(xdmf_path)
     sidecar = views_path(xdmf_path)
     _write_views(sidecar, series)
-    write_text_atomic(xdmf_path, series_document(xdmf_path.stem, points, block, times, series,
+    write_text(xdmf_path, series_document(xdmf_path.stem, points, block, times, series,
                                                  sidecar.name, grid_names))
     return sidecar
 

@@ -17,8 +17,17 @@ name, renamed when complete, reused when its inputs are unchanged):
   ``q_shift_dot``, ``q_shift_ddot`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` (and
   derivatives) when the static correction is on (attributes ``basis_file``,
   ``basis``): the fields are ``Phi (q + q_shift) + X g``;
-* attributes ``complete``, ``inputs_sha256``, ``modes_sha256``, ``case_toml``,
-  ``stats`` (JSON: time step, steps, wall time, contact-force summary).
+* the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance`
+  (``inputs_sha256``, ``upstream_sha256`` of ``modes.h5``/``static.h5``, ``case_toml``,
+  ...), ``complete`` and ``stats`` (JSON: time step, steps, wall time, contact-force
+  summary).
+
+Before it integrates, the stage verifies its inputs (``modes.h5``, ``static.h5``: current
+for the case, unchanged, sound; otherwise it refuses naming the file and what differs),
+checks that the passage is not empty, that the number of steps stays below
+:data:`MAX_MBS_STEPS` and that the histories fit in memory. The computed histories pass
+the data checks of :func:`railvib_hpc.io.stage_checks.check_mbs_arrays` before they are
+written.
 
 PNG plots next to it: ``mbs_contact_force.png`` (force vs position),
 ``mbs_wheel_displacement.png`` and ``mbs_rail_deflection.png``.
@@ -26,7 +35,6 @@ PNG plots next to it: ``mbs_contact_force.png`` (force vs position),
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from pathlib import Path
@@ -34,45 +42,41 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import __version__
 from ..config import Case
 from ..constants import STANDARD_GRAVITY
-from ..errors import UserError
-from ..io.atomic import atomic_path
+from ..errors import DataError, ResourceError, UserError
+from ..io.stage_checks import (
+    check_mbs,
+    check_mbs_arrays,
+    check_modes,
+    check_static,
+    rail_amplitude,
+)
+from ..io.stage_files import (
+    atomic_file,
+    ensure_space,
+    examine,
+    forget,
+    output_lock,
+    provenance,
+    require_inputs,
+    write_h5,
+)
 from ..log import Reporter
 from ..parallel import on_root
+from ..resources import check_memory
 from .vehicles import Vehicle
 
 if TYPE_CHECKING:
     from mpi4py import MPI
 
+#: Largest number of time steps of one passage: about 2 h at the 14,000 steps/s measured
+#: for the thesis wheelset (bench/mbs_thesis_bench.py), 9 h for a 4-car train.
+MAX_MBS_STEPS = 100_000_000
+
 
 class MBSInputError(UserError):
     """The modal input of the multibody simulation is missing or inconsistent."""
-
-
-def _file_digest(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def mbs_digest(case: Case, modes_sha: str) -> str:
-    """Hash of everything ``mbs.h5`` depends on."""
-    extra = ""
-    if case["irregularity.type"] == "file":
-        extra = _file_digest(case.resolve(case["irregularity.file"]))
-    text = json.dumps({"modes": modes_sha, "vehicle": case.digest("vehicle"),
-                       "irregularity": case.digest("irregularity"), "profile": extra,
-                       "mbs": case.digest("mbs"), "zeta": _damping_inputs(case)},
-                      sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def _damping_inputs(case: Case):
-    """What the modal damping ratios depend on (for the reuse key)."""
-    if case["modal.damping"] == "uniform":
-        return case["modal.damping_ratio"]
-    return {"ratio": case["modal.damping_ratio"], "damping": case["modal.damping"],
-            "materials": {k: v["damping_ratio"] for k, v in case["materials"].items()}}
 
 
 def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
@@ -175,22 +179,91 @@ def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.full(offs.size, force), offs, rails
 
 
-def _read_static(out_dir: Path, modes_sha: str, n_r: int) -> np.ndarray:
+def _read_static(out_dir: Path, n_r: int) -> np.ndarray:
     import h5py
 
     path = out_dir / "static.h5"
-    if not path.exists():
-        raise MBSInputError(f"mbs.static_correction = true needs {path}: run 'railvib modal' "
-                            "with mbs.static_correction = true first")
     with h5py.File(path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("modes_sha256") != modes_sha:
-            raise MBSInputError(f"{path} is incomplete or belongs to other modes; rerun "
-                                "'railvib modal' with mbs.static_correction = true")
         x_rr = f["static/rail_flexibility"][()]
     if x_rr.shape != (n_r, n_r):
         raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
                             f"({n_r}, {n_r})")
     return x_rr
+
+
+def static_wheel_load(case: Case) -> float:
+    """The largest static wheel (or moving) load of the case's vehicle [N]."""
+    vehicle = build_vehicle(case)
+    if vehicle is None:
+        return float(np.max(_moving_loads(case)[0]))
+    return float(np.max(vehicle.static_wheel_loads()))
+
+
+def check_context(case: Case, out_dir: Path) -> dict:
+    """What the data check of ``mbs.h5`` needs (see
+    :func:`railvib_hpc.io.stage_checks.check_mbs`)."""
+    return {"static_wheel_load": static_wheel_load(case), "modes_path": out_dir / "modes.h5"}
+
+
+def input_files(case: Case) -> tuple[str, ...]:
+    """The stage files ``mbs.h5`` is computed from."""
+    return ("modes.h5", "static.h5") if case["mbs.static_correction"] else ("modes.h5",)
+
+
+def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
+    """Verify ``modes.h5`` (and ``static.h5``) for this case (rank 0); returns their digests.
+
+    Raises
+    ------
+    StaleInputError, MBSInputError
+        Naming the file that is missing, stale or corrupt and the command to run.
+    """
+    if case["mbs.static_correction"] and (out_dir / "modes.h5").exists() \
+            and not (out_dir / "static.h5").exists():
+        raise MBSInputError(f"mbs.static_correction = true needs {out_dir / 'static.h5'}: "
+                            "run 'railvib modal' with mbs.static_correction = true first")
+    verdicts = require_inputs(out_dir, input_files(case), case,
+                              {"modes.h5": check_modes, "static.h5": check_static})
+    return {n: v.sha256 for n, v in verdicts.items()}
+
+
+def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
+                    n_wheels: int, n_r: int, out_dir: Path) -> None:
+    """An empty passage, too many steps or too little memory: one clear error first."""
+    from .integrate import auto_time_step, wheel_rails
+    from .results import kept_steps
+
+    if t_end <= 0:
+        raise MBSInputError(
+            f"vehicle.x_start = {case['vehicle.x_start']:g} m: the passage ends at x = "
+            f"{x_end:g} m (vehicle.x_end, 0 = the end of the rigid exit rail), so the vehicle "
+            "has nowhere to go; x_start must lie before the end")
+    if case["mbs.dt"]:
+        dt, how = case["mbs.dt"], f"mbs.dt = {case['mbs.dt']:g} s"
+    else:
+        if vehicle is None:
+            dt = auto_time_step(rm.omega)
+        else:
+            rails = rm.normal_rails(getattr(vehicle, "conicity", 0.0))
+            dt = auto_time_step(rm.omega, wheel_rails(rails, vehicle), vehicle,
+                                case["mbs.points_per_period"], case["vehicle.speed"])
+        how = f"the automatic step {dt:.3g} s"
+    nt = int(np.ceil(t_end / dt))
+    if nt > MAX_MBS_STEPS:
+        raise ResourceError(
+            f"the passage takes {t_end:.4g} s (vehicle.t_after = {case['vehicle.t_after']:g} s "
+            f"after the last wheel leaves) in steps of {how}: {nt:.3g} steps, more than the "
+            f"limit of {MAX_MBS_STEPS:.0e} (about 2 hours); shorten vehicle.t_after or use a "
+            "larger mbs.dt (0 = automatic)")
+    kept = kept_steps(nt, case["mbs.store_every"]).size
+    n_dof = getattr(vehicle, "n_dof", 0) if vehicle is not None else 0
+    # positions and shape functions of every step (1 + 5 values per wheel); the stored
+    # histories twice (the result and the file being written)
+    need = 8.0 * (nt + 1) * (1 + 6 * n_wheels) \
+        + 2 * 8.0 * kept * (3 * m + 4 * n_wheels + 3 * n_dof + 3 * n_r + 3 * m * (n_r > 0))
+    check_memory(need, f"the multibody run ({nt:.3g} steps, {kept:.3g} stored)",
+                 "shorten vehicle.t_after, use a larger mbs.dt or mbs.store_every")
+    ensure_space(out_dir, need / 2, f"mbs.h5 ({kept:.3g} stored steps)")
 
 
 def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
@@ -218,23 +291,23 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     from .static_correction import rail_dof_rows, residual_flexibility
 
     rep = rep or Reporter(0)
+    out_dir = Path(out_dir)
     modes_path = out_dir / "modes.h5"
-    if not modes_path.exists():
-        raise MBSInputError(f"{modes_path} not found: run 'railvib modal' first")
+    upstream = verify_inputs(case, out_dir)
     with h5py.File(modes_path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            raise MBSInputError(f"{modes_path} is incomplete: rerun 'railvib modal'")
-        modes_sha = str(f.attrs["inputs_sha256"])
         m_file = f["modes/eigenvalue"].shape[0]
     m = case["mbs.n_modes"] or m_file
     if m > m_file:
         raise MBSInputError(f"mbs.n_modes = {m}: {modes_path} has only {m_file} modes")
-    key = mbs_digest(case, modes_sha)
     path = out_dir / "mbs.h5"
-    old = _previous(path, key)
-    if old is not None:
+    context = check_context(case, out_dir)
+    verdict = examine(path, "mbs.h5", case, data_check=check_mbs, context=context)
+    if verdict.ok:
         rep.info(f"reusing {path} (same modes, vehicle and settings)")
-        return {**old, "reused": True}
+        return {**json.loads(verdict.attrs.get("stats", "{}")), "reused": True}
+    if verdict.kind != "missing":
+        rep.info(f"recomputing {path}: {verdict.reason}")
+    forget(path)
 
     t0 = time.perf_counter()
     rm = read_rail_modes(modes_path, m)
@@ -248,12 +321,14 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     else:
         offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
         wheel_rail = np.asarray(vehicle.wheel_rail)
-    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+    travel = x_end - x_start - float(np.min(offsets))
+    t_end = travel / speed + case["vehicle.t_after"]
+    n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
+    _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
+                    n_r, out_dir)
     residual = None
     if case["mbs.static_correction"]:
-        n_r = rail_dof_rows(rm.rails).shape[1]
-        residual = residual_flexibility(_read_static(out_dir, modes_sha, n_r), rm.rails,
-                                        rm.omega)
+        residual = residual_flexibility(_read_static(out_dir, n_r), rm.rails, rm.omega)
     dt = case["mbs.dt"] or None
     t_read = time.perf_counter() - t0
     t_run = time.perf_counter()
@@ -287,27 +362,34 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     stats = _summary(result, rm.rails, vehicle, wall, t_read, m)
     stats["static_correction"] = residual is not None
     rep.info(format_summary(stats))
-    with atomic_path(path) as tmp:
-        _write(tmp, case, result, rm, zeta, wheel_rail, vehicle, residual, key, modes_sha,
-               stats)
+    problems = check_mbs_arrays(result.t, result.contact_force, result.q, result.q_dot,
+                                result.q_ddot, rm.omega, context["static_wheel_load"],
+                                rail_amplitude(modes_path, m))
+    if problems:
+        raise DataError(f"the multibody results fail their data checks ({problems[0]}); "
+                        f"{path} was not written. Check the vehicle, irregularity and mbs "
+                        "settings")
+    attrs = provenance("mbs.h5", case, upstream)
+    attrs["stats"] = json.dumps(stats)
+
+    def fill(f, parallel: bool) -> None:
+        _write(f, case, result, rm, zeta, wheel_rail, vehicle, residual)
+
+    write_h5(path, None, fill, size_hint=_result_nbytes(result), attrs=attrs,
+             check=lambda tmp: check_mbs(tmp, True, context))
     rep.info(f"wrote {path}")
     plots = write_plots(out_dir, result, vehicle)
     rep.info("wrote " + ", ".join(str(p) for p in plots))
     return {**stats, "reused": False}
 
 
-def _previous(path: Path, key: str) -> dict | None:
-    import h5py
-
-    if not path.exists():
-        return None
-    try:
-        with h5py.File(path, "r") as f:
-            if int(f.attrs.get("complete", 0)) == 1 and f.attrs.get("inputs_sha256") == key:
-                return json.loads(f.attrs["stats"])
-    except (OSError, KeyError, ValueError):
-        return None
-    return None
+def _result_nbytes(result) -> int:
+    """Predicted size of ``mbs.h5`` (its arrays; the static correction adds six more)."""
+    arrays = (result.t, result.x, result.contact_force, result.penetration,
+              result.rail_displacement, result.q, result.q_dot, result.q_ddot, result.y,
+              result.y_dot, result.y_ddot, result.rail_loads)
+    extra = 3 * (result.rail_loads.nbytes + result.q.nbytes) if result.rail_loads.size else 0
+    return int(sum(a.nbytes for a in arrays) + extra)
 
 
 def _on_flexible(result, rails) -> np.ndarray:
@@ -359,49 +441,40 @@ def format_summary(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def _write(path: Path, case: Case, result, rm, zeta, wheel_rail, vehicle, residual,
-           key: str, modes_sha: str, stats: dict) -> None:
-    import h5py
+def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, residual) -> None:
+    """Fill an open ``mbs.h5`` (layout in the module notes)."""
+    f["time"] = result.t
+    w = f.create_group("wheels")
+    w["x"] = result.x
+    w["contact_force"] = result.contact_force
+    w["penetration"] = result.penetration
+    w["rail_displacement"] = result.rail_displacement
+    w["rail_index"] = np.asarray(wheel_rail, dtype=np.int64)
+    if vehicle is not None:
+        w["wheel_height"] = result.y @ vehicle.contact_matrix()
+    v = f.create_group("vehicle")
+    v["y"], v["y_dot"], v["y_ddot"] = result.y, result.y_dot, result.y_ddot
+    v.attrs["dof_names"] = json.dumps(list(result.dof_names))
+    v.attrs["type"] = case["vehicle.type"]
+    mg = f.create_group("modal")
+    mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
+    mg["omega"], mg["zeta"] = rm.omega, zeta
+    if residual is not None:
+        from .static_correction import rail_dof_rows
 
-    with h5py.File(path, "w") as f:
-        f["time"] = result.t
-        w = f.create_group("wheels")
-        w["x"] = result.x
-        w["contact_force"] = result.contact_force
-        w["penetration"] = result.penetration
-        w["rail_displacement"] = result.rail_displacement
-        w["rail_index"] = np.asarray(wheel_rail, dtype=np.int64)
-        if vehicle is not None:
-            w["wheel_height"] = result.y @ vehicle.contact_matrix()
-        v = f.create_group("vehicle")
-        v["y"], v["y_dot"], v["y_ddot"] = result.y, result.y_dot, result.y_ddot
-        v.attrs["dof_names"] = json.dumps(list(result.dof_names))
-        v.attrs["type"] = case["vehicle.type"]
-        mg = f.create_group("modal")
-        mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
-        mg["omega"], mg["zeta"] = rm.omega, zeta
-        if residual is not None:
-            from .static_correction import rail_dof_rows
-
-            s = f.create_group("static")
-            g = result.rail_loads
-            ts = result.t
-            s["g"] = g
-            s["g_dot"] = np.gradient(g, ts, axis=0) if ts.size > 2 else np.zeros_like(g)
-            s["g_ddot"] = (np.gradient(s["g_dot"][()], ts, axis=0) if ts.size > 2
-                           else np.zeros_like(g))
-            phi_r = rail_dof_rows(rm.rails)
-            s["q_shift"] = -(g @ phi_r.T) / rm.omega**2
-            s["q_shift_dot"] = -(s["g_dot"][()] @ phi_r.T) / rm.omega**2
-            s["q_shift_ddot"] = -(s["g_ddot"][()] @ phi_r.T) / rm.omega**2
-            s.attrs["basis_file"] = "static.h5"
-            s.attrs["basis"] = "static/translation"
-        f.attrs["inputs_sha256"] = key
-        f.attrs["modes_sha256"] = modes_sha
-        f.attrs["case_toml"] = case.to_toml()
-        f.attrs["railvib_version"] = __version__
-        f.attrs["stats"] = json.dumps(stats)
-        f.attrs["complete"] = 1
+        s = f.create_group("static")
+        g = result.rail_loads
+        ts = result.t
+        s["g"] = g
+        s["g_dot"] = np.gradient(g, ts, axis=0) if ts.size > 2 else np.zeros_like(g)
+        s["g_ddot"] = (np.gradient(s["g_dot"][()], ts, axis=0) if ts.size > 2
+                       else np.zeros_like(g))
+        phi_r = rail_dof_rows(rm.rails)
+        s["q_shift"] = -(g @ phi_r.T) / rm.omega**2
+        s["q_shift_dot"] = -(s["g_dot"][()] @ phi_r.T) / rm.omega**2
+        s["q_shift_ddot"] = -(s["g_ddot"][()] @ phi_r.T) / rm.omega**2
+        s.attrs["basis_file"] = "static.h5"
+        s.attrs["basis"] = "static/translation"
 
 
 def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
@@ -417,7 +490,7 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
 
     def save(fig, name):
         p = out_dir / name
-        with atomic_path(p) as tmp:
+        with atomic_file(p) as tmp:
             fig.savefig(tmp, dpi=120, format="png")
         plt.close(fig)
         paths.append(p)
@@ -448,8 +521,10 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
     return paths
 
 
-def run_mbs_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    """Collective: rank 0 simulates (see :func:`simulate_case`), every rank gets the summary."""
-
-    with rep.stage("mbs"):
+def run_mbs_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
+                  petsc_options: list[str] | None = None) -> dict:
+    """``railvib mbs``: rank 0 simulates (see :func:`simulate_case`), every rank gets the
+    summary; holds the output folder's lock."""
+    out_dir = Path(out_dir)
+    with output_lock(out_dir, comm, "mbs", rep=rep), rep.stage("mbs"):
         return on_root(lambda: simulate_case(case, out_dir, rep), comm)

@@ -213,28 +213,62 @@ def extract_mesh(gmsh) -> Mesh:
                 line_part=stack(line_part, 0, np.int32), node_sets=node_sets)
 
 
-def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False) -> tuple[Mesh, dict]:
-    """Generate the model with gmsh; optionally write the ``.msh``. Returns mesh and timings."""
+def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
+             msh_size: int = 0) -> tuple[Mesh, dict]:
+    """Generate the model with gmsh; optionally write the ``.msh``. Returns mesh and timings.
+
+    The ``.msh`` is written under a temporary name and renamed only after it was read
+    back (``gmsh.write`` reports no errors: a full disk leaves a truncated file); with
+    ``msh_size`` (its predicted size) free space is checked first.
+
+    Raises
+    ------
+    MeshError
+        When gmsh fails on the geometry (it raises a bare ``Exception``).
+    OutputError
+        When the ``.msh`` cannot be written.
+    """
+    from contextlib import nullcontext
+
+    from ..io.stage_files import atomic_file
+
     timings = {}
-    with gmsh_session(verbose) as gmsh:
+    target = (atomic_file(msh_path, suffix=True, check=check_msh, size_hint=msh_size)
+              if msh_path is not None else nullcontext(None))
+    with target as tmp, gmsh_session(verbose) as gmsh:
         gmsh.model.add("railvib")
         t0 = time.perf_counter()
-        build_geometry(gmsh, lay)
-        timings["geometry"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        gmsh.model.mesh.generate(3)
+        try:
+            build_geometry(gmsh, lay)
+            timings["geometry"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            gmsh.model.mesh.generate(3)
+        except MeshError:
+            raise
+        except Exception as exc:  # gmsh raises a bare Exception
+            raise MeshError(f"gmsh could not mesh the model ({exc}); check the [mesh] "
+                            "element counts and sizes and the geometry") from None
         timings["meshing"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         mesh = extract_mesh(gmsh)
         timings["extract"] = time.perf_counter() - t0
-        if msh_path is not None:
+        if tmp is not None:
             t0 = time.perf_counter()
             gmsh.option.setNumber("Mesh.Binary", 1)
-            tmp = msh_path.with_name(msh_path.name + ".part.msh")
             gmsh.write(str(tmp))
-            tmp.replace(msh_path)
             timings["write_msh"] = time.perf_counter() - t0
     return mesh, timings
+
+
+def check_msh(path: Path) -> list[str]:
+    """Problems of a written ``.msh`` (empty list: gmsh reads it back with nodes)."""
+    with gmsh_session() as gmsh:
+        try:
+            gmsh.open(str(path))
+            tags, _, _ = gmsh.model.mesh.getNodes()
+        except Exception as exc:  # gmsh raises a bare Exception
+            return [f"gmsh cannot read it back ({exc})"]
+    return [] if len(tags) else ["gmsh reads no nodes from it"]
 
 
 def read_msh(path: Path) -> Mesh:
@@ -244,4 +278,7 @@ def read_msh(path: Path) -> Mesh:
             gmsh.open(str(path))
         except Exception as exc:  # gmsh raises a bare Exception
             raise MeshError(f"mesh.file = '{path}': gmsh cannot read it ({exc})") from None
+        if not len(gmsh.model.mesh.getNodes()[0]):
+            raise MeshError(f"mesh.file = '{path}': it holds no nodes (an empty file or not a "
+                            "gmsh mesh)")
         return extract_mesh(gmsh)

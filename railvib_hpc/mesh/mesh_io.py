@@ -12,7 +12,8 @@ Layout of ``mesh.h5``::
     /mesh/probes/coords     (p, 3) float64
     /mesh/probes/nearest_node (p,) int64
     /mesh/probes/roles      (p,) str         role of each probe (schema.PROBE_ROLES)
-    attrs: part_names (JSON {id: name}), inputs_sha256, railvib_version, case_toml
+    attrs: part_names (JSON {id: name}) and the provenance of
+           :func:`railvib_hpc.io.stage_files.provenance` (inputs_sha256, case_toml, ...)
 
 The XDMF file (:mod:`railvib_hpc.io.xdmf`) holds two grids sharing the points: ``solids``
 (Hexahedron) and ``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell
@@ -26,17 +27,27 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path, write_text_atomic
+from ..io.stage_files import write_h5, write_text
 from ..io.xdmf import CellBlock, H5Array, mesh_document
 from ..schema import PART_ID
 from .model import Mesh
 
 
-def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
-    """Write ``mesh.h5`` atomically (serial, rank 0)."""
+def mesh_nbytes(mesh: Mesh) -> int:
+    """Predicted size of ``mesh.h5`` [bytes] (its arrays)."""
+    sets = sum(np.asarray(v).nbytes for v in mesh.node_sets.values())
+    return int(mesh.points.nbytes + mesh.hexes.nbytes + mesh.hex_part.nbytes + mesh.lines.nbytes
+               + mesh.line_part.nbytes + sets + 128 * len(mesh.probes))
+
+
+def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> str:
+    """Write ``mesh.h5`` atomically, checked and recorded (serial, rank 0); returns its
+    content digest."""
     import h5py
 
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+    from .stage_checks import check_mesh
+
+    def fill(f, parallel: bool) -> None:
         g = f.create_group("mesh")
         g.create_dataset("points", data=mesh.points)
         g.create_dataset("hexes", data=mesh.hexes)
@@ -56,8 +67,9 @@ def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> None:
         pr.create_dataset("nearest_node",
                           data=np.array([mesh.nearest_node(c) for c in coords], dtype=np.int64))
         f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
-        for k, v in attrs.items():
-            f.attrs[k] = v
+
+    return write_h5(path, None, fill, size_hint=mesh_nbytes(mesh), attrs=attrs,
+                    check=check_mesh)
 
 
 def read_mesh_h5(path: Path) -> tuple[Mesh, dict]:
@@ -95,10 +107,10 @@ def mesh_xdmf(h5_name: str, mesh: Mesh) -> str:
                   arr("line_part", mesh.line_part))])
 
 
-def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> dict[str, Path]:
-    """Write ``mesh.h5`` then ``mesh.xdmf`` (XDMF last: it never points at a partial file)."""
+def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> str:
+    """Write ``mesh.h5`` then ``mesh.xdmf`` (XDMF last: it never points at a partial file);
+    returns the content digest of ``mesh.h5``."""
     h5 = out_dir / "mesh.h5"
-    xdmf = out_dir / "mesh.xdmf"
-    write_mesh_h5(h5, mesh, attrs)
-    write_text_atomic(xdmf, mesh_xdmf(h5.name, mesh))
-    return {"h5": h5, "xdmf": xdmf}
+    sha = write_mesh_h5(h5, mesh, attrs)
+    write_text(out_dir / "mesh.xdmf", mesh_xdmf(h5.name, mesh))
+    return sha

@@ -5,23 +5,42 @@ from __future__ import annotations
 import json
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import __version__
 from ..config import Case
 from ..errors import MeshError
-from ..io.atomic import write_text_atomic
+from ..io.stage_checks import check_mesh
+from ..io.stage_files import examine, forget, output_lock, provenance, write_text
 from ..log import Reporter
+from ..parallel import on_root
+from ..resources import check_memory
 from ..schema import PART_ID, PARTS
 from .gmsh_model import generate, read_msh
-from .layout import build_layout
+from .layout import Layout, build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
 from .search import nonconformal_faces
 
-#: Case sections that determine the mesh (its reuse key).
+if TYPE_CHECKING:
+    from mpi4py import MPI
+
+#: Case sections that determine the mesh (see ``mesh.h5`` in
+#: :data:`railvib_hpc.io.stage_files.STAGE_FILES`).
 MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
+#: Memory per hexahedron while gmsh meshes and the mesh is extracted: 0.7 kB measured on the
+#: thesis model (52,056 hexahedra: +29 MB over 8,556), times 3 for the quality checks.
+MESH_BYTES_PER_HEX = 2.0e3
+#: Size of the binary ``mesh.msh`` per hexahedron: 3.57 MB for the 8,556 of refinement 0.5
+#: (417 B, with the nodes, beams, pads and boundary quads), rounded up.
+MSH_BYTES_PER_HEX = 450
+
+
+def predicted_hexes(layout: Layout) -> int:
+    """Number of hexahedra gmsh will make of a layout (exact: transfinite blocks)."""
+    return int(sum(int(layout.nx[b.i]) * int(layout.ny[b.j])
+                   * layout.zdiv[(round(b.z0, 9), round(b.z1, 9))] for b in layout.blocks))
 
 #: Aspect ratio (longest / shortest edge of a hexahedron) above which the mesh check warns:
 #: the default shape-check warning limit of ANSYS Mechanical APDL for solids (SHPP,
@@ -72,6 +91,12 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     t0 = time.perf_counter()
     layout = build_layout(case)
     derived, dropped = [], {}
+    n_hex = 0
+    if not case["mesh.file"]:
+        n_hex = predicted_hexes(layout)
+        check_memory(n_hex * MESH_BYTES_PER_HEX, f"the mesh ({n_hex:.3g} hexahedra at "
+                     f"mesh.refinement = {case['mesh.refinement']:g})",
+                     "check mesh.refinement and the [mesh] element counts and sizes")
     if case["mesh.file"]:
         mesh = read_msh(case.resolve(case["mesh.file"]))
         timings = {"read_msh": time.perf_counter() - t0}
@@ -79,7 +104,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         derived = complete_node_sets(mesh)
         mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
-        mesh, timings = generate(layout, msh_path)
+        mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex)
         source = "generated"
         mesh.probes = dict(layout.probes)
     mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
@@ -188,35 +213,68 @@ def format_report(report: dict) -> str:
     return "\n".join(lines)
 
 
-def run_mesh_stage(case: Case, out_dir: Path, reporter: Reporter) -> tuple[Mesh, dict]:
-    """Build or reuse the mesh in ``out_dir`` (rank 0 only). Returns mesh and report."""
+def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
+                        ) -> tuple[Mesh, dict, str]:
+    """Reuse ``mesh.h5`` of ``out_dir`` when it is current and sound, else build and write
+    it (rank 0 only).
+
+    Returns
+    -------
+    tuple
+        The mesh, its quality report (``reused`` set) and the content digest of
+        ``mesh.h5``.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
-    key = case.digest(*MESH_INPUTS)
     h5 = out_dir / "mesh.h5"
     report_path = out_dir / "mesh_report.json"
-    if h5.exists() and report_path.exists():
+    msh = None if case["mesh.file"] else out_dir / "mesh.msh"
+    verdict = examine(h5, "mesh.h5", case, data_check=check_mesh)
+    if verdict.ok and msh is not None and not msh.exists():
+        verdict.ok, verdict.reason = False, "it lacks mesh.msh, written with it"
+    if verdict.ok:
         try:
-            mesh, attrs = read_mesh_h5(h5)
-            if attrs.get("inputs_sha256") == key:
-                reporter.info(f"reusing {h5} (same mesh inputs)")
-                if not mesh.probe_roles:      # mesh.h5 written before probes had roles
-                    mesh.probe_roles = dict(build_layout(case).probe_roles)
-                report = json.loads(report_path.read_text())
-                report["reused"] = True
-                report["warnings"] = quality_warnings(report["quality"], case["modal.tol"])
-                _print_warnings(report, reporter)
-                return mesh, report
+            mesh, _ = read_mesh_h5(h5)
+            if not mesh.probe_roles:      # mesh.h5 written before probes had roles
+                mesh.probe_roles = dict(build_layout(case).probe_roles)
+            report = json.loads(report_path.read_text())
+            reporter.info(f"reusing {h5} (same mesh inputs)")
+            report["reused"] = True
+            report["warnings"] = quality_warnings(report["quality"], case["modal.tol"])
+            _print_warnings(report, reporter)
+            return mesh, report, verdict.sha256
         except (OSError, KeyError, ValueError) as exc:
-            reporter.info(f"ignoring unreadable {h5} ({exc}); rebuilding")
-    mesh, report = make_mesh(case, out_dir / "mesh.msh" if not case["mesh.file"] else None)
-    attrs = {"inputs_sha256": key, "railvib_version": __version__, "case_toml": case.to_toml()}
+            verdict.reason = f"it cannot be read ({exc})"
+    if verdict.kind != "missing":
+        reporter.info(f"recomputing {h5}: {verdict.reason}")
+    forget(h5)
+    mesh, report = make_mesh(case, msh)
     t0 = time.perf_counter()
-    write_mesh_files(out_dir, mesh, attrs)
+    sha = write_mesh_files(out_dir, mesh, provenance("mesh.h5", case, {}))
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0
     report["reused"] = False
-    write_text_atomic(report_path, json.dumps(report, indent=2))
+    write_text(report_path, json.dumps(report, indent=2))
     _print_warnings(report, reporter)
-    return mesh, report
+    return mesh, report, sha
+
+
+def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
+                   petsc_options: list[str] | None = None) -> dict:
+    """``railvib mesh``: build or reuse ``mesh.h5`` and print the quality report (collective;
+    gmsh runs on rank 0). Returns the report (every rank)."""
+    out_dir = Path(out_dir)
+
+    def work() -> dict:
+        with rep.stage("mesh"):
+            _, report, _ = build_or_reuse_mesh(case, out_dir, rep)
+        rep.info(format_report(report))
+        rep.info("mesh timings: " + ", ".join(f"{k} {v:.2f} s"
+                                                for k, v in report["timings"].items()))
+        rep.info(f"wrote {out_dir / 'mesh.xdmf'} (open in ParaView), {out_dir / 'mesh.h5'}"
+                 + ("" if case["mesh.file"] else f", {out_dir / 'mesh.msh'}"))
+        return report
+
+    with output_lock(out_dir, comm, "mesh", rep=rep):
+        return on_root(work, comm)
 
 
 def _print_warnings(report: dict, reporter: Reporter) -> None:

@@ -155,11 +155,11 @@ class BandCache:
     def save(self) -> None:
         """Rank 0 writes the index (call on every rank after the band files exist)."""
         if self.comm.rank == 0:
-            from ..io.atomic import write_text_atomic
+            from ..io.stage_files import write_text
 
             data = {"key": self.key, "counts": {repr(k): v for k, v in self.counts.items()},
                     "bands": [r.to_json() for r in self.bands], "chain": self.chain}
-            write_text_atomic(self.folder / "index.json", json.dumps(data, indent=1))
+            write_text(self.folder / "index.json", json.dumps(data, indent=1))
         self.comm.Barrier()
 
 
@@ -295,7 +295,8 @@ def _trim(result: ModalResult, band: Band) -> ModalResult:
 def _write_band(path: Path, comm, band: Band, result: ModalResult, n_below: int,
                 stats: dict) -> None:
     """The band's modes (n_dofs, m) by rows, eigenvalues and residuals (collective)."""
-    from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+    from ..io.parallel_h5 import h5py_parallel_ok
+    from ..io.stage_files import write_h5
 
     n_local, m = result.phi.shape
     # rank 0's statistics everywhere: parallel HDF5 needs identical attributes on all ranks
@@ -320,7 +321,8 @@ def _write_band(path: Path, comm, band: Band, result: ModalResult, n_below: int,
         if rows[0] is not None and rows[0].shape[0]:
             d[r0:r0 + rows[0].shape[0], :] = rows[0]
 
-    write_collective(path, comm, fill)
+    # a cache of one run (its key in index.json), not a stage file: no content record
+    write_h5(path, comm, fill, size_hint=8 * (n * m + 2 * m), parallel=parallel, record=False)
 
 
 def _read_band(path: Path, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:

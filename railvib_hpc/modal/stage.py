@@ -10,46 +10,25 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import __version__
 from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from ..io.modes_io import (
-    has_probe_roles,
-    read_modes_summary,
-    read_strain_energies,
-    write_modes,
-    write_modes_xdmf,
-)
+from ..errors import DataError
+from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
+from ..io.stage_checks import check_eigenvalues, check_mode_shapes, check_modes, check_static
+from ..io.stage_files import ensure_space, examine, forget, output_lock, provenance
 from ..io.xdmf import ensure_views
 from ..log import Reporter
-from ..mesh.stage import MESH_INPUTS, run_mesh_stage
+from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
 from .dofmap import build_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
-from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
+from .static import rail_load_dofs, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
     from mpi4py import MPI
-
-#: Keys of [modal] and of each material that do not change the modes (not in the reuse key);
-#: the band split and its parallel layout change them by round-off only.
-_NOT_MODAL_INPUTS = ("damping_ratio", "damping", "out_of_core", "bands", "band_modes",
-                     "band_groups", "band_only")
-
-
-def modal_digest(case: Case) -> str:
-    """Hash of everything the modes depend on (damping settings excluded, so changing them
-    reuses the modes)."""
-    import hashlib
-
-    modal = {k: v for k, v in case["modal"].items() if k not in _NOT_MODAL_INPUTS}
-    physics = case.digest("materials", "sections", "pads", exclude=_NOT_MODAL_INPUTS)
-    text = json.dumps({"mesh": case.digest(*MESH_INPUTS), "physics": physics,
-                       "modal": modal}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 #: Memory budget of the automatic Lanczos basis (all ranks together) [GB]: the basis holds
@@ -86,51 +65,75 @@ def _progress(rep: Reporter):
     return monitor
 
 
-def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    """Compute (or reuse) ``modes.h5`` in ``out_dir``; collective. Returns a summary dict."""
-    key = modal_digest(case)
+def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
+                    petsc_options: list[str] | None = None) -> dict:
+    """``railvib modal``: compute (or reuse) ``modes.h5`` (and ``static.h5``) in ``out_dir``.
+
+    Collective. Initialises PETSc with ``petsc_options`` (once per process), builds or
+    reuses ``mesh.h5`` when the modes are recomputed, and holds the output folder's lock.
+    Returns a summary dict (``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver
+    statistics).
+    """
+    from ..petsc_env import init_petsc
+
+    out_dir = Path(out_dir)
+    with output_lock(out_dir, comm, "modal", rep=rep):
+        init_petsc(petsc_options)
+        return _modal(case, out_dir, comm, rep)
+
+
+def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     path = out_dir / "modes.h5"
+    static_path = out_dir / "static.h5"
+    want_static = bool(case["mbs.static_correction"])
 
     def previous():
-        if not path.exists():
-            return None
-        summary = read_modes_summary(path)
-        if summary is None:
-            rep.info(f"ignoring incomplete or unreadable {path}; recomputing")
-            return None
-        if summary.get("inputs_sha256") != key:
-            return None
-        if case["modal.damping"] == "strain_energy" and read_strain_energies(path) is None:
-            rep.info(f"{path} has no per-material strain energies (modal.damping = "
-                     "'strain_energy' needs them); recomputing")
-            return None
-        if not has_probe_roles(path):
-            rep.info(f"{path} has no probe roles (written by an older version); recomputing")
-            return None
-        return summary
+        verdict = examine(path, "modes.h5", case, data_check=check_modes)
+        if verdict.ok and case["modal.damping"] == "strain_energy" \
+                and read_strain_energies(path) is None:
+            verdict.ok = False
+            verdict.reason = ("it has no per-material strain energies (modal.damping = "
+                              "'strain_energy' needs them)")
+        if verdict.ok and not has_probe_roles(path):
+            verdict.ok = False
+            verdict.reason = "it has no probe roles (written by an older version)"
+        if verdict.ok:
+            with h5py_file(path) as f:
+                return (f["modes/frequency_hz"][()], str(f.attrs.get("stats", "{}")),
+                        verdict.sha256)
+        if verdict.kind != "missing":
+            rep.info(f"recomputing {path}: {verdict.reason}")
+        forget(path)
+        return None
 
     old = on_root(previous, comm)
-    want_static = bool(case["mbs.static_correction"])
-    static_path = out_dir / "static.h5"
     if old is not None:
-        f = old["frequency_hz"]
+        f, stats, modes_sha = old
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
                  f"{f[0]:.3f} - {f[-1]:.3f} Hz")
         xdmf = path.with_suffix(".xdmf")
         if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
             rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
-        if want_static and not on_root(lambda: static_is_valid(static_path, key), comm):
-            _static_only(case, out_dir, comm, rep, key)
+        if want_static:
+            def static_ok() -> bool:
+                v = examine(static_path, "static.h5", case, data_check=check_static)
+                if not v.ok and v.kind != "missing":
+                    rep.info(f"recomputing {static_path}: {v.reason}")
+                return v.ok
+
+            if not on_root(static_ok, comm):
+                _static_only(case, out_dir, comm, rep, modes_sha)
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
-                **json.loads(old.get("stats", "{}"))}
+                **json.loads(stats)}
 
     with rep.stage("mesh (load/build + broadcast)"):
-        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):
         dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
                               case["modal.fix_rail_rotations_at_pads"])
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
+    on_root(lambda: _check_space(case, out_dir, mesh, dofmap, want_static), comm)
     with rep.stage("assembly"):
         K, M, ainfo = assemble(mesh, case, dofmap, comm)
     t_assembly = time.perf_counter() - t0
@@ -176,6 +179,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         mask = np.zeros(mesh.n_nodes, dtype=bool)
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
+        _check_modes_before_writing(comm, result.eigenvalues, translation, masses, path)
         stats = dict(result.stats)
         stats["convergence_warnings"] = list(result.warnings)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
@@ -187,12 +191,12 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
         stats["ranks"] = comm.size
         # rank 0's (timings differ per rank): parallel HDF5 needs identical attributes
         stats = comm.bcast(stats, root=0)
-        attrs = {"inputs_sha256": key, "case_toml": case.to_toml(), "railvib_version": __version__,
-                 "petsc_version": _versions()[0], "slepc_version": _versions()[1],
-                 "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}
-        write_modes(path, comm, mesh, nodes, result.eigenvalues, translation, rotation,
-                    rot_nodes, rot_range, masses, dofmap.index, attrs, pad_table(mesh, case),
-                    energies)
+        attrs = on_root(lambda: provenance("modes.h5", case, {"mesh.h5": mesh_sha}), comm)
+        attrs.update({"petsc_version": _versions()[0], "slepc_version": _versions()[1],
+                      "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs})
+        modes_sha = write_modes(path, comm, mesh, nodes, result.eigenvalues, translation,
+                                rotation, rot_nodes, rot_range, masses, dofmap.index, attrs,
+                                pad_table(mesh, case), energies)
     f = result.frequencies_hz
     summary = {"reused": False, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                **stats}
@@ -203,7 +207,11 @@ def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) ->
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
     if want_static:
         with rep.stage("write static.h5"):
-            write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, key)
+            sattrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
+                                                                   "modes.h5": modes_sha}), comm)
+            on_root(lambda: forget(static_path), comm)
+            write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table,
+                         sattrs)
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary
@@ -224,10 +232,40 @@ def band_settings(case: Case, out_dir: Path):
                         key=cache_key(case))
 
 
-def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str) -> None:
+def _check_space(case: Case, out_dir: Path, mesh, dofmap, want_static: bool) -> None:
+    """Before the eigensolve: room for ``modes.h5`` (and ``static.h5``)? (rank 0)"""
+    n, nr = mesh.n_nodes, int(np.count_nonzero(dofmap.has_rotations))
+    m = case["modal.n_modes"]
+    size = BYTES_PER_DOUBLE * (m * (n + nr) * 3 + 11 * n + mesh.hexes.size + mesh.lines.size)
+    what = f"modes.h5 ({m} modes)"
+    if want_static:
+        size += BYTES_PER_DOUBLE * 4 * mesh.rail_nodes().size * n * 3
+        what += " and static.h5"
+    ensure_space(out_dir, size, what)
+
+
+def h5py_file(path: Path):
+    """``h5py.File(path, "r")`` (imported lazily)."""
+    import h5py
+
+    return h5py.File(path, "r")
+
+
+def _check_modes_before_writing(comm: MPI.Comm, eigenvalues, translation, masses,
+                                path: Path) -> None:
+    """The data checks of ``modes.h5`` on the computed arrays (collective): a NaN or an
+    implausible mode never reaches the file."""
+    problems = check_eigenvalues(eigenvalues) + check_mode_shapes(translation, masses)
+    everywhere = [p for ps in comm.allgather(problems) for p in ps]
+    if everywhere:
+        raise DataError(f"the computed modes fail their data checks ({everywhere[0]}); "
+                        f"{path} was not written. Check the material values and supports")
+
+
+def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes_sha: str) -> None:
     """static.h5 for reused modes: assemble K again and factor it once."""
     with rep.stage("static correction: mesh + assembly"):
-        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
         dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
                               case["modal.fix_rail_rotations_at_pads"])
         K, M, _ = assemble(mesh, case, dofmap, comm)
@@ -239,11 +277,14 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: 
         finally:
             K.destroy()
             M.destroy()
+    static_path = out_dir / "static.h5"
     with rep.stage("write static.h5"):
-        write_static(out_dir / "static.h5", comm, mesh, dofmap, x_static, free, load_dofs,
-                     table, key)
-    rep.info(f"wrote {out_dir / 'static.h5'}: static solutions for {free.size} unit loads on "
-             "the rail DOFs (static correction)")
+        attrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
+                                                              "modes.h5": modes_sha}), comm)
+        on_root(lambda: forget(static_path), comm)
+        write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs)
+    rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
+             "rail DOFs (static correction)")
 
 
 def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:

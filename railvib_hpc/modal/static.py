@@ -11,7 +11,8 @@ with its own factorization. Written to ``static.h5`` (collective, like
   columns for constrained DOFs, e.g. rotations fixed at the pads);
 * ``/static/translation`` (n_r, n_nodes, 3): the static displacement fields;
 * ``/static/load_dofs`` (n_r, 3): rail index, node (global id), component (0 w, 1 ry);
-* attributes ``modes_sha256`` (the modes it belongs to), ``complete``.
+* the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance` (its
+  ``upstream_sha256`` names the ``modes.h5`` it belongs to) and ``complete``.
 
 Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static_correction`.
 """
@@ -24,7 +25,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+from ..io.parallel_h5 import h5py_parallel_ok
+from ..io.stage_checks import check_static
+from ..io.stage_files import write_h5
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -86,8 +89,11 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
 
 
 def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
-                 dofs: np.ndarray, table: np.ndarray, modes_sha: str) -> None:
-    """Write ``static.h5`` (collective; temporary name, renamed when complete)."""
+                 dofs: np.ndarray, table: np.ndarray, attrs: dict) -> str:
+    """Write ``static.h5`` (collective; checked, atomic, recorded); returns its digest.
+
+    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`).
+    """
     n_r = dofs.size
     r0 = dofmap.owned_dofs(comm.rank)[0]
     flex = rail_flexibility(x_local, dofs, free, r0, comm)
@@ -106,29 +112,15 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
         d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
         d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
         d_l = g.create_dataset("load_dofs", table.shape, "i8")
-        f.attrs["modes_sha256"] = modes_sha
-        f.attrs["inputs_sha256"] = "static:" + modes_sha
         if comm.rank == 0:
             d_f[...] = flex
             d_l[...] = table
         if nodes.stop > nodes.start:
             d_t[:, nodes, :] = translation
 
-    write_collective(path, comm, fill)
-
-
-def static_is_valid(path: Path, modes_sha: str) -> bool:
-    """True when ``static.h5`` exists, is complete and belongs to these modes."""
-    import h5py
-
-    if not path.exists():
-        return False
-    try:
-        with h5py.File(path, "r") as f:
-            return (int(f.attrs.get("complete", 0)) == 1
-                    and f.attrs.get("modes_sha256") == modes_sha)
-    except OSError:
-        return False
+    size = 8 * (n_r * mesh.n_nodes * 3 + n_r * n_r + table.size)
+    return write_h5(path, comm, fill, size_hint=size, attrs=attrs, parallel=parallel,
+                    check=lambda tmp: check_static(tmp, False))
 
 
 def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:

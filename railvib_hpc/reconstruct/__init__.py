@@ -10,8 +10,8 @@ the multibody simulation by superposition, ``u(t) = Phi q(t)``.
   moment of the rails (:func:`rail_bending_moment`);
 * :mod:`.probes` -- exact probe histories from interpolated mode shapes
   (:func:`probe_modes`, :func:`probe_histories`, CSV/HDF5 writers);
-* :mod:`.stage` -- the ``reconstruct`` stage (:func:`run_reconstruct_stage`) with input
-  validation and reuse.
+* :mod:`.stage` -- the ``reconstruct`` stage (:func:`run_reconstruct_stage` for a case,
+  :func:`reconstruct_outputs` for any modes/mbs pair) with input validation and reuse.
 """
 
 from .fields import (
@@ -31,7 +31,13 @@ from .probes import (
     write_probes_csv,
     write_probes_h5,
 )
-from .stage import ReconstructInputError, read_inputs, run_reconstruct_stage
+from .stage import (
+    ReconstructInputError,
+    read_inputs,
+    reconstruct_options,
+    reconstruct_outputs,
+    run_reconstruct_stage,
+)
 from .stress import (
     element_stress,
     hex_materials,
@@ -62,6 +68,8 @@ __all__ = [
     "rail_section",
     "read_inputs",
     "reconstruct_fields",
+    "reconstruct_options",
+    "reconstruct_outputs",
     "run_reconstruct_stage",
     "stress_from_fields",
     "write_fields_xdmf",

@@ -38,16 +38,18 @@ receive buffer is bounded by the same budget).
     /fields/velocity            (ns, n, 3)   [m/s]
     /fields/acceleration        (ns, n, 3)   [m/s^2]
     /mesh/points (n, 3), /mesh/hexes (ne, 8) (VTK order), /mesh/hex_part (ne,)
-    attrs: complete, n_modes, n_extra, float32, block_steps, modes_file,
-           modes_inputs_sha256, railvib_version (+ caller's attrs, e.g. inputs_sha256)
+    attrs: complete, n_modes, n_extra, float32, block_steps, modes_file, railvib_version
+           (+ the caller's attrs: the provenance of the reconstruct stage)
 
-The file is written under a hidden temporary name; ``complete`` is set and the file is
-renamed by rank 0 only after every rank finished (a failed or killed run never leaves a
-``fields.h5``). ``fields.xdmf`` (rank 0, after the rename) is a temporal collection with
-one grid per stored step, with the hexahedra and their part ids; its node attributes are
-per-step views of the three datasets in the sidecar ``fields_views.h5`` (HDF5 virtual
-datasets, no data copied; see :mod:`railvib_hpc.io.xdmf`): both of ParaView's XDMF
-readers open it directly.
+The file is written by :func:`railvib_hpc.io.stage_files.write_h5`: under a hidden
+temporary name with its space reserved, ``complete`` set and renamed by rank 0 only
+after every rank finished (a failed or killed run never leaves a ``fields.h5``), then
+recorded. Every block is checked for non-finite values before it is written.
+``fields.xdmf`` (rank 0, after the rename) is a temporal collection with one grid per
+stored step, with the hexahedra and their part ids; its node attributes are per-step
+views of the three datasets in the sidecar ``fields_views.h5`` (HDF5 virtual datasets,
+no data copied; see :mod:`railvib_hpc.io.xdmf`): both of ParaView's XDMF readers open it
+directly.
 """
 
 from __future__ import annotations
@@ -61,10 +63,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import __version__
-from ..io.parallel_h5 import h5py_parallel_ok
+from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
+from ..io.stage_checks import check_fields, nonfinite
+from ..io.stage_files import write_h5
 from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
-from ..parallel import on_root
+from ..parallel import check_collective, on_root
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -120,77 +124,6 @@ def block_steps_for_budget(n_local_values: int, float32: bool,
     return max(1, budget // per_step)
 
 
-# --------------------------------------------------------------------------- HDF5 helpers
-def _dxpl(collective: bool):
-    """Dataset transfer property list: collective MPI-IO, or the default."""
-    if not collective:
-        return None
-    from h5py import h5fd, h5p
-
-    dxpl = h5p.create(h5p.DATASET_XFER)
-    dxpl.set_dxpl_mpio(h5fd.MPIO_COLLECTIVE)
-    return dxpl
-
-
-def _selection(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None):
-    """File and memory dataspaces for a hyperslab (an empty selection when ``count`` has a 0)."""
-    from h5py import h5s
-
-    fspace = ds.id.get_space()
-    if buf is None or 0 in tuple(count):
-        fspace.select_none()
-        mspace = h5s.create_simple((1,))
-        mspace.select_none()
-        return fspace, mspace, np.zeros(1, dtype=ds.dtype)
-    fspace.select_hyperslab(tuple(int(s) for s in start), tuple(int(c) for c in count))
-    return fspace, h5s.create_simple(tuple(int(c) for c in count)), buf
-
-
-def write_slab(ds, start: Sequence[int], count: Sequence[int], buf: np.ndarray | None,
-               collective: bool) -> None:
-    """Write ``buf`` (C-contiguous, shape ``count``) to the hyperslab at ``start``.
-
-    Unlike ``ds[...] = buf`` this takes part in a collective write even when this rank's
-    selection is empty (h5py skips empty selections, which would hang the other ranks).
-    """
-    if buf is not None:
-        buf = np.ascontiguousarray(buf)
-    fspace, mspace, data = _selection(ds, start, count, buf)
-    ds.id.write(mspace, fspace, data, dxpl=_dxpl(collective))
-
-
-def read_slab(ds, start: Sequence[int], count: Sequence[int], out: np.ndarray | None,
-              collective: bool) -> None:
-    """Read the hyperslab at ``start`` into ``out`` (C-contiguous, shape ``count``)."""
-    if out is not None and not out.flags.c_contiguous:
-        raise ValueError("read_slab needs a C-contiguous output array")
-    fspace, mspace, data = _selection(ds, start, count, out)
-    ds.id.read(mspace, fspace, data, dxpl=_dxpl(collective))
-
-
-def open_h5(path: str | os.PathLike, mode: str, comm: MPI.Comm, parallel: bool):
-    """Open an HDF5 file with the mpio driver on ``comm`` (``parallel``) or the plain driver."""
-    import h5py
-
-    if parallel:
-        return h5py.File(path, mode, driver="mpio", comm=comm)
-    return h5py.File(path, mode)
-
-
-def check_collective(comm: MPI.Comm, error: BaseException | None, what: str) -> None:
-    """Raise on every rank when any rank had an error (call before the next collective)."""
-    if comm.size == 1:
-        if error is not None:
-            raise error
-        return
-    errors = comm.allgather(None if error is None else f"{type(error).__name__}: {error}")
-    if error is not None:
-        raise error
-    bad = [(r, e) for r, e in enumerate(errors) if e]
-    if bad:
-        raise RuntimeError(f"{what} failed on rank {bad[0][0]}: {bad[0][1]}")
-
-
 # --------------------------------------------------------------------------- main routine
 def _read_basis(comm: MPI.Comm, parallel: bool, modes_path: Path, m: int,
                 extra: Sequence[ExtraBasis], nodes: slice, n: int) -> np.ndarray:
@@ -221,7 +154,8 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
                        block_steps: int | None = None, extra: Sequence[ExtraBasis] | None = None,
                        rep: Reporter | None = None, attrs: dict | None = None,
                        step_numbers: Sequence[int] | np.ndarray | None = None,
-                       before_complete: Callable[[Path], object] | None = None) -> dict:
+                       before_complete: Callable[[Path], object] | None = None,
+                       record: bool = True, extra_bytes: int = 0) -> dict:
     """Write ``fields.h5`` and ``fields.xdmf`` from modal histories (collective).
 
     Parameters
@@ -256,6 +190,10 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
         Collective callback ``fn(temporary_path)`` run on every rank after the fields are
         written and before the file is marked complete and renamed (e.g. to add
         ``/stress``): if it raises, no ``fields.h5`` is produced.
+    record
+        Record the content digest of the new file (see :mod:`railvib_hpc.io.stage_files`).
+    extra_bytes
+        What ``before_complete`` adds (reserved with the fields).
 
     Returns
     -------
@@ -309,10 +247,9 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
         with h5py.File(modes_path, "r") as f:
             d = f["modes/translation"]
             return (int(f.attrs.get("complete", 0)), d.shape, f["mesh/hexes"].shape,
-                    f["mesh/hexes"].dtype.str, f["mesh/hex_part"].dtype.str,
-                    str(f.attrs.get("inputs_sha256", "")))
+                    f["mesh/hexes"].dtype.str, f["mesh/hex_part"].dtype.str)
 
-    complete, tshape, hshape, hdtype, pdtype, modes_key = on_root(shapes, comm)
+    complete, tshape, hshape, hdtype, pdtype = on_root(shapes, comm)
     if complete != 1:                       # the same decision on every rank
         raise ValueError(f"{modes_path} is not a complete modes file")
     n = tshape[1]
@@ -340,61 +277,41 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     buf = np.empty((nb, 3 * nl))
     buf32 = np.empty((nb, 3 * nl), dtype=np.float32) if float32 else None
     gather = comm.size > 1 and not parallel
-    writes = parallel or comm.rank == 0
 
-    tmp = Path(comm.bcast(str(out_path.with_name(f".{out_path.name}.part-{os.getpid()}"))
-                          if comm.rank == 0 else None, root=0))
-    if comm.rank == 0:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
     stats = {"t_gemm": 0.0, "t_write": 0.0}
-    f = None
-    try:
+
+    def fill(f, par: bool) -> None:
+        error = None
+        dsets: dict = {}
         try:
-            error = None
-            try:
-                dsets: dict = {}
-                if writes:
-                    f = open_h5(tmp, "w", comm, parallel)
-                    dsets = _create(f, ns, n, hshape, hdtype, pdtype, dtype)
-                    _set_attrs(f, m, n_basis - m, float32, nb, modes_path, modes_key, attrs)
-                if comm.rank == 0:
-                    _copy_mesh(modes_path, dsets, t[steps],
-                               steps if step_numbers is None else np.asarray(step_numbers))
-            except Exception as exc:   # re-raised on every rank
-                error = exc
-            check_collective(comm, error, f"creating {tmp}")
-            _stream(comm, dsets, hist, phi2, buf, buf32, nb, ns, nodes, parallel, gather,
-                    stats, rep)
-        finally:
             if f is not None:
-                f.close()
-        if before_complete is not None:
-            before_complete(tmp)
-    except BaseException:
-        if comm.rank == 0 and tmp.exists():
-            tmp.unlink()
-        raise
+                dsets = _create(f, ns, n, hshape, hdtype, pdtype, dtype)
+                _set_attrs(f, m, n_basis - m, float32, nb, modes_path)
+            if comm.rank == 0:
+                _copy_mesh(modes_path, dsets, t[steps],
+                           steps if step_numbers is None else np.asarray(step_numbers))
+        except Exception as exc:   # re-raised on every rank
+            error = exc
+        check_collective(comm, error, f"writing {out_path}")
+        _stream(comm, dsets, hist, phi2, buf, buf32, nb, ns, nodes, parallel, gather,
+                stats, rep, out_path)
 
-    def finish():
-        import h5py
+    nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
+    mesh_bytes = 8 * (3 * n + hshape[0] * 9) + 16 * ns
+    write_h5(out_path, comm, fill, size_hint=nbytes + mesh_bytes + int(extra_bytes), attrs=attrs,
+             parallel=parallel, before_complete=before_complete, fill_everywhere=True,
+             check=lambda tmp: check_fields(tmp, False), record=record)
 
-        try:
-            with h5py.File(tmp, "a") as f:
-                f.attrs["complete"] = 1
-            os.replace(tmp, out_path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+    def xdmf():
         write_fields_xdmf(out_path)
 
-    on_root(finish, comm)
+    on_root(xdmf, comm)
     t_gemm = comm.allreduce(stats["t_gemm"], op=_mpi_max()) if comm.size > 1 else stats["t_gemm"]
     t_write = comm.allreduce(stats["t_write"], op=_mpi_max()) if comm.size > 1 \
         else stats["t_write"]
     t_read = comm.allreduce(t_read, op=_mpi_max()) if comm.size > 1 else t_read
     t_total = time.perf_counter() - t_start
     t_total = comm.allreduce(t_total, op=_mpi_max()) if comm.size > 1 else t_total
-    nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
     flops = 2.0 * sum(h.shape[1] for h in hist) * 3 * n * ns
     return {"n_nodes": n, "n_steps": ns, "n_basis": n_basis, "n_modes": m,
             "n_extra": n_basis - m, "block_steps": nb, "bytes_written": nbytes,
@@ -431,18 +348,13 @@ def _create(f, ns: int, n: int, hshape, hdtype: str, pdtype: str, dtype) -> dict
     return out
 
 
-def _set_attrs(f, m: int, k: int, float32: bool, nb: int, modes_path: Path, modes_key: str,
-               attrs: dict | None) -> None:
-    f.attrs["complete"] = 0
+def _set_attrs(f, m: int, k: int, float32: bool, nb: int, modes_path: Path) -> None:
     f.attrs["n_modes"] = m
     f.attrs["n_extra"] = k
     f.attrs["float32"] = int(bool(float32))
     f.attrs["block_steps"] = nb
     f.attrs["modes_file"] = modes_path.name
-    f.attrs["modes_inputs_sha256"] = modes_key
     f.attrs["railvib_version"] = __version__
-    for key, value in (attrs or {}).items():
-        f.attrs[key] = value
 
 
 def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarray) -> None:
@@ -459,11 +371,13 @@ def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarr
 
 def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
             buf32: np.ndarray | None, nb: int, ns: int, nodes: slice, parallel: bool,
-            gather: bool, stats: dict, rep: Reporter | None) -> None:
+            gather: bool, stats: dict, rep: Reporter | None, out_path: Path) -> None:
     """GEMM + collective write of every block of steps and every field.
 
     Errors are checked on all ranks after every GEMM and every write, so that a failure
     on one rank makes every rank raise instead of waiting in the next collective call.
+    Every computed block is checked for non-finite values before it is written (the
+    data check of ``fields.h5`` on write).
     """
     nl = nodes.stop - nodes.start
     t_first = time.perf_counter()
@@ -478,13 +392,19 @@ def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarra
             out = buf[:b]
             try:
                 _gemm(h[s0:s1], phi2[:h.shape[1]], out)
+                bad = nonfinite(f"the {name} field", out)
+                if bad:
+                    from ..errors import DataError
+
+                    raise DataError(f"{bad[0]} (steps {s0}..{s1 - 1}); {out_path} was not "
+                                    "written: its inputs hold non-finite values")
                 if buf32 is not None:
                     np.copyto(buf32[:b], out, casting="same_kind")
                     out = buf32[:b]
             except Exception as exc:   # checked collectively
                 error = exc
             stats["t_gemm"] += time.perf_counter() - t0
-            check_collective(comm, error, f"computing the {name} field")
+            check_collective(comm, error, f"computing the {name} field of {out_path}")
             t0 = time.perf_counter()
             try:
                 block = out.reshape(b, nl, 3)
@@ -495,7 +415,7 @@ def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarra
             except Exception as exc:   # checked collectively
                 error = exc
             stats["t_write"] += time.perf_counter() - t0
-            check_collective(comm, error, f"writing the {name} field")
+            check_collective(comm, error, f"writing {out_path}")
         now = time.perf_counter()
         if rep is not None and (now - last > 2.0 or s1 == ns):
             last = now

@@ -41,7 +41,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..fem.reference import hex_shape_values
-from ..io.atomic import atomic_path, write_text_atomic
+from ..io.stage_files import write_h5, write_text
 from ..mesh.model import Mesh
 from ..mesh.search import locate
 from ..schema import DEFAULT_PROBE_ROLE, PROBE_ROLES
@@ -320,15 +320,16 @@ def write_probes_csv(directory: str | os.PathLike, histories: Mapping[str, Mappi
         buf = io.StringIO()
         np.savetxt(buf, table, delimiter=",", fmt="%.17g", header=CSV_HEADER, comments="")
         path = directory / f"{_file_name(name)}.csv"
-        write_text_atomic(path, buf.getvalue())
+        write_text(path, buf.getvalue())
         paths.append(path)
     return paths
 
 
 def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
                     attrs: Mapping[str, object] | None = None,
-                    groups: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> None:
-    """Write ``probes.h5`` atomically (serial, rank 0); layout in the module docstring.
+                    groups: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> str:
+    """Write ``probes.h5`` atomically, checked and recorded (serial, rank 0); layout in the
+    module docstring. Returns its content digest.
 
     Parameters
     ----------
@@ -341,10 +342,11 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
     groups
         Extra groups of datasets, e.g. ``{"rail": {"bending_moment": ..., "x": ...}}``.
     """
-    import h5py
+    from ..io.stage_checks import check_probes
 
     names = list(histories)
-    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+
+    def fill(f, parallel: bool) -> None:
         f.create_dataset("names", data=np.array(names, dtype="S64"))
         f.create_dataset("coords", data=np.array([histories[k]["coords"] for k in names],
                                                  dtype=float).reshape(-1, 3))
@@ -366,6 +368,8 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
             grp = f.create_group(gname)
             for key, value in data.items():
                 grp.create_dataset(key, data=value)
-        for key, value in (attrs or {}).items():
-            f.attrs[key] = value
-        f.attrs["complete"] = 1
+
+    size = sum(np.asarray(h[k]).nbytes for h in histories.values()
+               for k in ("t", "displacement", "velocity", "acceleration"))
+    size += sum(np.asarray(v).nbytes for d in (groups or {}).values() for v in d.values())
+    return write_h5(path, None, fill, size_hint=int(size), attrs=attrs, check=check_probes)

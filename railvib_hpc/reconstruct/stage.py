@@ -11,8 +11,7 @@ Inputs
     /static               optional static correction, attrs basis_file (path relative to
                           mbs.h5's folder) and basis (dataset name of a (k, n, 3) basis
                           there), datasets g, g_dot, g_ddot (nt, k)
-    attrs: complete = 1, inputs_sha256 (digest of the simulation inputs; when missing the
-           file's SHA-256 is used)
+    attrs: complete = 1
 
 Everything is validated on rank 0 and a :class:`ReconstructInputError` naming the file,
 dataset and shape is raised on every rank together.
@@ -38,15 +37,22 @@ Outputs (in ``out_dir``)
 
 Reuse
 -----
-Each product records the SHA-256 of what it depends on (``inputs_sha256`` of
-``modes.h5``, the digest of ``mbs.h5`` and of the static basis, and the options): a
-complete ``fields.h5`` (and ``/stress``, ``probes.h5``) with the same digest is reused and
-reported, anything else is recomputed.
+Each product records its provenance (:mod:`railvib_hpc.io.stage_files`): the inputs hash
+of the case keys and options it depends on and the content digests of ``modes.h5``,
+``mbs.h5`` and the static basis it was computed from. A complete ``fields.h5`` (and
+``/stress``, ``probes.h5``) with the same inputs and upstream digests whose content is
+unchanged and sound is reused and reported; anything else is recomputed, saying why.
+
+Entry points
+------------
+:func:`run_reconstruct_stage` (``railvib reconstruct``) takes the case: it verifies that
+``modes.h5``, ``mbs.h5`` (and ``static.h5``) are current for it (else it refuses, naming
+the file and what differs), derives the options from ``[output]`` and calls
+:func:`reconstruct_outputs`, which works on any pair of files (no case).
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -56,8 +62,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import __version__
 from ..errors import UserError
+from ..io.stage_checks import check_fields, check_mbs, check_modes, check_probes, check_static
+from ..io.stage_files import (
+    digest,
+    ensure_space,
+    examine,
+    file_digest,
+    forget,
+    output_lock,
+    provenance,
+    record_file,
+    require_inputs,
+)
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
@@ -81,26 +98,9 @@ from .stress import (
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: Bumped when the output format changes (part of every reuse digest).
-FORMAT_VERSION = 1
-#: Version of the probes.h5 layout (2: every probe carries its role).
-PROBE_FORMAT = 2
-
 
 class ReconstructInputError(UserError):
     """Missing, incomplete or inconsistent input of the reconstruct stage."""
-
-
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 22), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
-def _digest(payload: dict) -> str:
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
 
 
 def _attr(f, key: str, default=None):
@@ -167,7 +167,8 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
         n_modes, n = trans.shape[0], trans.shape[1]
         for name in ("mesh/points", "mesh/hexes", "mesh/hex_part"):
             _dataset(f, modes_path, name)
-        modes_key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(modes_path)
+        n_hexes = f["mesh/hexes"].shape[0]
+        modes_key = file_digest(modes_path).sha256
         rails = "mesh/rail_nodes" in f and f["mesh/rail_nodes"].size > 0 \
             and "case_toml" in f.attrs and "modes/rotation" in f
     with _open(mbs_path, "multibody results file") as f:
@@ -204,7 +205,7 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
             if not np.all(np.isfinite(h)):
                 raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has non-finite "
                                             "values")
-        mbs_key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(mbs_path)
+        mbs_key = file_digest(mbs_path).sha256
         extra, static_key, k = [], "", 0
         if "static" in f:
             extra, static_key, k = _read_static(f["static"], mbs_path, nt, n, i0, i1)
@@ -217,12 +218,12 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
             if not correction_rates:
                 file, basis, g, g_dot, g_ddot = extra[0]
                 extra = [(file, basis, g, np.zeros_like(g_dot), np.zeros_like(g_ddot))]
-            static_key = _digest({"basis": static_key, "rates": bool(correction_rates)})
     steps = np.arange(0, i1 - i0, int(stride))
     return {"t": t[i0:i1], "q": hist[0], "q_dot": hist[1], "q_ddot": hist[2], "first": i0,
             "steps": steps, "extra": extra, "m": m, "k": k, "n_nodes": n, "n_modes": n_modes,
             "modes_key": modes_key, "mbs_key": mbs_key, "static_key": static_key,
-            "rails": bool(rails)}
+            "static_file": extra[0][0] if extra else "", "rails": bool(rails),
+            "n_hexes": int(n_hexes)}
 
 
 def _read_histories(f, mbs_path: Path, names: tuple[str, ...], nt: int, i0: int,
@@ -260,21 +261,43 @@ def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[
             raise ReconstructInputError(f"{basis_file}: dataset '{basis}' has shape {ds.shape},"
                                         f" expected (k, n, 3) = ({k}, {n}, 3) to match "
                                         f"{mbs_path}:static/g and the modes")
-        key = str(_attr(f, "inputs_sha256", "")) or _sha256_file(basis_file)
-    return [(str(basis_file), basis, *hist)], _digest({"file": key, "dataset": basis}), k
+    return [(str(basis_file), basis, *hist)], file_digest(basis_file).sha256, k
 
 
-def _keys(info: dict, stride: int, window, float32: bool, stress_times, user_probes,
-          user_roles) -> dict:
-    base = {"modes": info["modes_key"], "mbs": info["mbs_key"], "static": info["static_key"],
-            "m": info["m"], "k": info["k"], "format": FORMAT_VERSION,
-            "window": None if window is None else [float(v) for v in window]}
-    fields = _digest({**base, "stride": int(stride), "float32": bool(float32)})
-    stress = _digest({"fields": fields, "times": [float(v) for v in stress_times]})
-    probes = _digest({**base, "probes": {k: v.tolist() for k, v in
-                                         user_probe_dict(user_probes).items()},
-                      "roles": dict(user_roles or {}), "probe_format": PROBE_FORMAT})
-    return {"fields": fields, "stress": stress, "probes": probes}
+def _upstream(info: dict) -> dict[str, str]:
+    """Content digests of the files the outputs are computed from."""
+    up = {"modes.h5": info["modes_key"], "mbs.h5": info["mbs_key"]}
+    if info["static_key"]:
+        up[Path(info["static_file"]).name] = info["static_key"]
+    return up
+
+
+def _options(info: dict, stride: int, window, float32: bool, stress_times, user_probes,
+             user_roles, correction_rates: bool) -> dict:
+    """The options of each product (part of its inputs hash)."""
+    base = {"m": info["m"], "k": info["k"],
+            "window": None if window is None else [float(v) for v in window],
+            "rates": bool(correction_rates) if info["k"] else False}
+    fields = {**base, "stride": int(stride), "float32": bool(float32)}
+    return {"fields": fields,
+            "stress": {"times": [float(v) for v in stress_times]},
+            "probes": {**base, "probes": {k: v.tolist() for k, v in
+                                          user_probe_dict(user_probes).items()},
+                       "roles": dict(user_roles or {})}}
+
+
+def _expected(case, options: dict) -> dict:
+    """Inputs hashes of fields.h5, its /stress and probes.h5 (with or without a case)."""
+    def one(name: str, opts: dict) -> str:
+        if case is None:
+            return digest({"file": name, "options": opts})
+        from ..io.stage_files import inputs_hash
+
+        return inputs_hash(case, name, opts)
+
+    fields = one("fields.h5", options["fields"])
+    return {"fields": fields, "stress": digest({"fields": fields, **options["stress"]}),
+            "probes": one("probes.h5", options["probes"])}
 
 
 def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
@@ -283,42 +306,110 @@ def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
         rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
 
 
-def _reusable(out_dir: Path, keys: dict, want_stress: bool) -> dict:
-    """Which outputs in ``out_dir`` are complete and have the wanted digests (rank 0)."""
+def _reusable(out_dir: Path, case, keys: dict, upstream: dict, want_stress: bool,
+              rep: Reporter) -> dict:
+    """Which outputs in ``out_dir`` are current and sound (rank 0); says why not."""
     import h5py
 
-    fields, stress, probes = out_dir / "fields.h5", False, False
     ok = {"fields": False, "stress": False, "probes": False}
-    try:
-        if fields.is_file() and (out_dir / "fields.xdmf").is_file():
-            with h5py.File(fields, "r") as f:
-                ok["fields"] = (int(_attr(f, "complete", 0)) == 1
-                                and _attr(f, "inputs_sha256") == keys["fields"])
-                if ok["fields"] and want_stress and "stress" in f:
-                    stress = (int(_attr(f, "stress_complete", 0)) == 1
-                              and _attr(f["stress"], "inputs_sha256") == keys["stress"]
-                              and (out_dir / "stress.xdmf").is_file())
-        ok["stress"] = bool(stress)
-    except (OSError, KeyError):
-        ok["fields"] = ok["stress"] = False
-    try:
-        if (out_dir / "probes.h5").is_file():
-            with h5py.File(out_dir / "probes.h5", "r") as f:
-                probes = (int(_attr(f, "complete", 0)) == 1
-                          and _attr(f, "inputs_sha256") == keys["probes"])
-        ok["probes"] = bool(probes)
-    except (OSError, KeyError):
-        ok["probes"] = False
+    fields = out_dir / "fields.h5"
+    v = examine(fields, "fields.h5", case, inputs_sha256=keys["fields"], upstream=upstream,
+                data_check=check_fields)
+    if v.ok:
+        ok["fields"] = True
+        if want_stress:
+            try:
+                with h5py.File(fields, "r") as f:
+                    ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
+                                    and _attr(f["stress"], "inputs_sha256") == keys["stress"]
+                                    and (out_dir / "stress.xdmf").is_file())
+            except (OSError, KeyError):
+                ok["stress"] = False
+    else:
+        if v.kind != "missing":
+            rep.info(f"recomputing {fields}: {v.reason}")
+        forget(fields)
+    probes = out_dir / "probes.h5"
+    v = examine(probes, "probes.h5", case, inputs_sha256=keys["probes"], upstream=upstream,
+                data_check=check_probes)
+    ok["probes"] = v.ok
+    if not v.ok:
+        if v.kind != "missing":
+            rep.info(f"recomputing {probes}: {v.reason}")
+        forget(probes)
     return ok
 
 
-def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
-                          out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter, *,
-                          stride: int = 1, window: tuple[float, float] | None = None,
-                          float32: bool = False,
-                          stress_times: Sequence[float] = (), user_probes: UserProbes = (),
-                          user_probe_roles: Mapping[str, str] | None = None,
-                          correction_rates: bool = False) -> dict:
+def reconstruct_options(case, out_dir: Path) -> dict:
+    """Stride, window, precision, stress times and user probes from ``[output]`` (rank 0;
+    the stride is ``output.dt`` over the step of ``mbs.h5``)."""
+    import h5py
+
+    mbs = out_dir / "mbs.h5"
+    stride = 1
+    if mbs.exists() and case["output.dt"] > 0:
+        with h5py.File(mbs, "r") as f:
+            t = f["time"][:2]
+        if t.size == 2:
+            stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
+    w = case["output.window"]
+    probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    names = [f"user_{i + 1}" for i in range(len(probes))]
+    return {"stride": stride, "window": tuple(w) if w else None,
+            "float32": case["output.float32"], "stress_times": case["output.stress_times"],
+            "correction_rates": case["output.static_correction_rates"],
+            "user_probes": dict(zip(names, probes)),
+            "user_probe_roles": dict(zip(names, case["output.probe_roles"]))}
+
+
+def input_files(out_dir: Path) -> tuple[str, ...]:
+    """The stage files the reconstruction reads (``static.h5`` when ``mbs.h5`` has a
+    static correction)."""
+    import h5py
+
+    names = ["modes.h5", "mbs.h5"]
+    try:
+        with h5py.File(out_dir / "mbs.h5", "r") as f:
+            if "static" in f:
+                names.insert(1, "static.h5")
+    except OSError:
+        pass
+    return tuple(names)
+
+
+def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,
+                          petsc_options: list[str] | None = None) -> dict:
+    """``railvib reconstruct``: fields, stresses and probes of the case (collective).
+
+    Verifies that ``modes.h5``, ``mbs.h5`` (and ``static.h5``) in ``out_dir`` are current
+    for the case and sound (else :class:`~railvib_hpc.errors.StaleInputError` naming the
+    file, what differs and the command to run), takes the options from ``[output]`` and
+    runs :func:`reconstruct_outputs`. Holds the output folder's lock.
+    """
+    from ..mbs.stage import check_context
+
+    out_dir = Path(out_dir)
+
+    def prepare() -> dict:
+        names = input_files(out_dir)
+        require_inputs(out_dir, names, case, {"modes.h5": check_modes, "static.h5": check_static,
+                                              "mbs.h5": check_mbs},
+                       context=check_context(case, out_dir))
+        return reconstruct_options(case, out_dir)
+
+    with output_lock(out_dir, comm, "reconstruct", rep=rep):
+        opts = on_root(prepare, comm)
+        return reconstruct_outputs(out_dir / "modes.h5", out_dir / "mbs.h5", out_dir, comm, rep,
+                                   case=case, **opts)
+
+
+def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
+                        out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter, *,
+                        stride: int = 1,
+                        window: tuple[float, float] | None = None, float32: bool = False,
+                        stress_times: Sequence[float] = (), user_probes: UserProbes = (),
+                        user_probe_roles: Mapping[str, str] | None = None,
+                        correction_rates: bool = False, case=None) -> dict:
     """Reconstruct fields, stresses and probe histories (collective; reuses what it can).
 
     Parameters
@@ -348,6 +439,9 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     correction_rates
         Add a static correction also to velocities and accelerations (see
         :func:`read_inputs`).
+    case
+        The case the outputs belong to (their provenance); None for files outside a case
+        (the inputs hash then covers the options only).
 
     Returns
     -------
@@ -372,10 +466,15 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         if user:
             locate_probes(modes_path, np.array(list(user.values())), list(user))
         full.update(info)
-        keys = _keys(info, stride, window, float32, stress_times, user_probes,
-                     user_probe_roles)
-        reuse = _reusable(out_dir, keys, bool(stress_times)) if out_dir.is_dir() else \
-            {"fields": False, "stress": False, "probes": False}
+        options = _options(info, stride, window, float32, stress_times, user_probes,
+                           user_probe_roles, correction_rates)
+        keys = _expected(case, options)
+        upstream = _upstream(info)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        reuse = _reusable(out_dir, case, keys, upstream, bool(stress_times), rep)
+        attrs = {n: provenance(f"{n}.h5", case, upstream, options[n],
+                               inputs_sha256=keys[n] if case is None else None)
+                 for n in ("fields", "probes")}
         if stress_times:
             t_sel = info["t"][info["steps"]]
             tol = 1e-9 * max(1.0, float(np.abs(t_sel).max()))
@@ -391,12 +490,18 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
                           "q_ddot": info["q_ddot"][s],
                           "extra": [(e[0], e[1], e[2][s], e[3][s], e[4][s])
                                     for e in info["extra"]]})
-        return small, keys, reuse
+        return small, keys, reuse, attrs
 
-    info, keys, reuse = on_root(load, comm)
-    if comm.rank == 0:
-        out_dir.mkdir(parents=True, exist_ok=True)
-    comm.Barrier()
+    with output_lock(out_dir, comm, "reconstruct", rep=rep):
+        return _reconstruct(load, modes_path, mbs_path, out_dir, comm, rep, stress_times,
+                            user_probes, user_probe_roles, float32, stride, window, full,
+                            t_start)
+
+
+def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MPI.Comm,
+                 rep: Reporter, stress_times, user_probes, user_probe_roles, float32: bool,
+                 stride: int, window, full: dict, t_start: float) -> dict:
+    info, keys, reuse, attrs = on_root(load, comm)
     fields_path = out_dir / "fields.h5"
     result: dict = {"reused": dict(reuse), "seconds": {}}
 
@@ -424,11 +529,11 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
             stats = reconstruct_fields(
                 modes_path, fields_path, comm, info["t"], info["q"], info["q_dot"],
                 info["q_ddot"], float32=float32, extra=info["extra"], rep=rep,
-                attrs={"inputs_sha256": keys["fields"], "mbs_file": mbs_path.name,
-                       "mbs_inputs_sha256": info["mbs_key"], "stride": int(stride),
+                attrs={**attrs["fields"], "mbs_file": mbs_path.name, "stride": int(stride),
                        "window": json.dumps(None if window is None else list(window))},
                 step_numbers=info["first"] + info["steps"],
-                before_complete=add_stress if stress_times else None)
+                before_complete=add_stress if stress_times else None,
+                extra_bytes=_stress_bytes(info, stress_times))
             result["seconds"]["fields"] = time.perf_counter() - t0
             result["fields"] = stats
             rep.info(f"  wrote {stats['bytes_written'] / 1e9:.3f} GB: GEMM "
@@ -452,8 +557,12 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         else:
             with rep.stage("reconstruct stress"):
                 t0 = time.perf_counter()
+                # rewritten in place: the record no longer matches until it is renewed
+                on_root(lambda: ensure_space(out_dir, _stress_bytes(info, stress_times),
+                                             "the stresses of fields.h5"), comm)
                 result["stress"] = _stress(fields_path, modes_path, comm, stress_times, rep,
                                            keys, False)
+                record_file(fields_path, comm)
                 result["seconds"]["stress"] = time.perf_counter() - t0
 
     # ---- probes and rail moments (rank 0)
@@ -463,7 +572,7 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
         with rep.stage("reconstruct probes"):
             t0 = time.perf_counter()
             result["probes"] = on_root(lambda: _probes(modes_path, out_dir, full, user_probes,
-                                                       user_probe_roles, keys["probes"]),
+                                                       user_probe_roles, attrs["probes"]),
                                        comm)
             result["seconds"]["probes"] = time.perf_counter() - t0
             rep.info(f"  {result['probes']['n_probes']} probes x {result['probes']['n_steps']}"
@@ -473,6 +582,11 @@ def run_reconstruct_stage(modes_path: str | os.PathLike, mbs_path: str | os.Path
     for key in ("gemm_gflops", "write_gb_per_s", "bytes_written"):
         result[key] = fstats.get(key)
     return result
+
+
+def _stress_bytes(info: dict, stress_times) -> int:
+    """Size of ``/stress`` (von Mises and equivalent strain per hexahedron and time)."""
+    return 16 * len(stress_times) * int(info.get("n_hexes", 0)) + 16 * len(stress_times)
 
 
 def _stress(path: Path, modes_path: Path, comm: MPI.Comm, stress_times, rep: Reporter, keys,
@@ -509,7 +623,7 @@ def _materials(modes_path: Path) -> dict:
 
 
 def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, user_roles,
-            key: str) -> dict:
+            prov: dict) -> dict:
     """Rank 0: probe histories (full resolution of the window) and rail moments."""
     t = info["t"]
     hist = probe_histories(modes_path, t, info["q"], info["q_dot"], info["q_ddot"],
@@ -522,8 +636,7 @@ def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, user_roles
                           "bending_moment": rail_moment_history(info["q"], rail["moment"]),
                           "bending_moment_ends": rail_moment_history(info["q"],
                                                                      rail["moment_ends"])}
-    attrs = {"inputs_sha256": key, "railvib_version": __version__,
-             "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
+    attrs = {**prov, "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
              "rail_moment_static_correction_included": 0}
     write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
     write_probes_csv(out_dir / "probes", hist)

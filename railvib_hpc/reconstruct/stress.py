@@ -58,17 +58,12 @@ from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
 from ..fem.reference import hex_centre_gradients
-from ..io.parallel_h5 import h5py_parallel_ok
+from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
+from ..io.stage_files import final_name
 from ..log import Reporter
-from ..parallel import on_root
+from ..parallel import check_collective, on_root
 from ..schema import PART_ID
-from .fields import (
-    check_collective,
-    node_range,
-    open_h5,
-    read_slab,
-    write_slab,
-)
+from .fields import node_range
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -454,10 +449,7 @@ def stress_from_fields(fields_path: str | os.PathLike, comm: MPI.Comm, times: Se
 
     def xdmf():
         # the XDMF refers to the final name, also when called on a temporary file
-        name = fields_path.name
-        if name.startswith(".") and ".part-" in name:
-            name = name[1:name.rindex(".part-")]
-        write_stress_xdmf(fields_path, name)
+        write_stress_xdmf(fields_path, final_name(fields_path.name))
 
     on_root(xdmf, comm)
     return {"n_times": n_sel, "n_hexes": ne, "seconds": time.perf_counter() - t_start,

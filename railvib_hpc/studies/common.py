@@ -17,9 +17,11 @@ the static-correction basis when it is on, for displacements only unless
 ``output.static_correction_rates``). That is exactly what the reconstruct stage
 writes to ``probes.h5`` for these points, without the full fields (GBs per variant).
 
-``result.json`` (schema ``railvib_hpc.study/1``)::
+``result.json`` (schema ``railvib_hpc.study/1``, a stage file of
+:mod:`railvib_hpc.io.stage_files`)::
 
-    study, variant, parameter {..}, overrides [..], inputs_sha256, complete = true,
+    study, variant, parameter {..}, overrides [..], inputs_sha256, provenance {..},
+    complete = true,
     model   {n_nodes, n_hexes, n_dofs, modes_in_file, modes_used, frequencies_hz [..],
              f_max_hz, modal {factor_memory_gb, time_factorization, time_solve,
              peak_rss_gb_total, ranks, ...}}
@@ -32,17 +34,21 @@ writes to ``probes.h5`` for these points, without the full fields (GBs per varia
     spectra {name: {bands_hz, acc_rms {x, y, z, total}}}    (one-third octaves, 1-80 Hz)
     timings {modal, mbs, response, total} [s], reused {modes, mbs}
 
-A variant is *finished* when its ``result.json`` is complete and its ``inputs_sha256``
-(the full variant case, the study and the result format) matches: reruns skip it.
+A variant is *finished* when its ``result.json`` is complete, its ``inputs_sha256``
+(the full variant case, the study and the result format) matches, the files it was
+computed from (``modes.h5``, ``mbs.h5``, ``probes.h5`` in the variant folder, where they
+still exist) are the ones it recorded, and its content is unchanged: reruns skip it.
+
+Locks: each variant folder is locked while its variant runs (array jobs on different
+variants run concurrently), the shared model folder while it is computed (other tasks
+wait for it), and the study folder while the report is merged.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
-import shutil
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -54,7 +60,16 @@ import numpy as np
 from .. import __version__
 from ..config import Case, build_case
 from ..errors import UserError
-from ..io.atomic import write_text_atomic
+from ..io.stage_files import (
+    copy_file,
+    digest,
+    examine,
+    file_digest,
+    output_lock,
+    provenance,
+    write_json,
+    write_text,
+)
 from ..log import Reporter
 from ..parallel import on_root
 
@@ -117,10 +132,8 @@ def variant_case(case: Case, overrides: Sequence[str]) -> Case:
 
 def variant_digest(kind: str, vcase: Case, settings: dict[str, Any]) -> str:
     """SHA-256 identifying a variant's result: its full case, the study, the format."""
-    text = json.dumps({"format": RESULT_FORMAT, "version": __version__, "study": kind,
-                       "case": vcase.digest(), "probes": settings.get("probes")},
-                      sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()
+    return digest({"format": RESULT_FORMAT, "version": __version__, "study": kind,
+                   "case": vcase.digest(), "probes": settings.get("probes")})
 
 
 def jsonable(x: Any) -> Any:
@@ -139,8 +152,12 @@ def jsonable(x: Any) -> Any:
 
 
 def read_result(vdir: Path, digest: str | None = None) -> dict | None:
-    """The complete ``result.json`` of a variant (None if missing, incomplete or stale)."""
+    """The complete ``result.json`` of a variant (None if missing, incomplete, stale or
+    corrupt; with ``digest`` also None for another variant case or other upstream files)."""
     path = vdir / RESULT_NAME
+    verdict = examine(path, RESULT_NAME, inputs_sha256=digest, companions=False)
+    if not verdict.ok and not (digest is None and verdict.kind == "inputs"):
+        return None
     try:
         res = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -160,9 +177,14 @@ def read_failure(vdir: Path) -> dict | None:
         return None
 
 
-def write_result(vdir: Path, result: dict) -> None:
-    """Write ``result.json`` atomically (and drop an old ``failed.json``)."""
-    write_text_atomic(vdir / RESULT_NAME, json.dumps(jsonable(result), indent=1))
+def write_result(vdir: Path, result: dict, vcase: Case | None = None) -> None:
+    """Write ``result.json`` atomically with its provenance (the digests of the variant's
+    ``modes.h5``, ``static.h5``, ``mbs.h5`` and ``probes.h5``) and drop an old
+    ``failed.json``."""
+    upstream = {n: file_digest(vdir / n).sha256 for n in ("modes.h5", "static.h5", "mbs.h5",
+                                                          "probes.h5") if (vdir / n).exists()}
+    prov = provenance(RESULT_NAME, vcase, upstream, inputs_sha256=result.get("inputs_sha256"))
+    write_json(vdir / RESULT_NAME, jsonable(result), prov)
     (vdir / FAILED_NAME).unlink(missing_ok=True)
 
 
@@ -187,9 +209,7 @@ def link_shared(shared: Path, vdir: Path) -> list[str]:
         try:
             os.symlink(target, dst)
         except OSError:
-            tmp = vdir / f".{name}.copy-{os.getpid()}"
-            shutil.copyfile(src, tmp)
-            os.replace(tmp, dst)
+            copy_file(src, dst)
         done.append(name)
     return done
 
@@ -265,8 +285,12 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
     if missing:
         raise StudyError(f"study setting probes = {list(probes)}: {missing} are not probes "
                          f"of the mesh; available: {', '.join(hist)}")
-    write_probes_h5(vdir / "probes.h5", hist,
-                    attrs={"railvib_version": __version__, "source": "study (from modes)"})
+    upstream = {n: file_digest(vdir / n).sha256 for n in ("modes.h5", "static.h5", "mbs.h5")
+                if (vdir / n).exists()}
+    attrs = provenance("probes.h5", case, upstream, {"source": "study (from modes)",
+                                                     "probes": "mesh"})
+    attrs["source"] = "study (from modes)"
+    write_probes_h5(vdir / "probes.h5", hist, attrs=attrs)
     t = info["t"]
     fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
     peaks, assessment, spectra = {}, {}, {}
@@ -313,12 +337,14 @@ def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep:
     if plan.shared_overrides is None:
         return {}
     mcase = on_root(lambda: variant_case(case, plan.shared_overrides), comm)
-    with rep.stage(f"{plan.kind}: shared model"):
-        return run_modal_stage(mcase, root / SHARED_DIR, comm, rep)
+    folder = root / SHARED_DIR
+    with output_lock(folder, comm, f"study {plan.kind}: shared model", wait=True, rep=rep), \
+            rep.stage(f"{plan.kind}: shared model"):
+        return run_modal_stage(mcase, folder, comm, rep)
 
 
 def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
-                settings: dict[str, Any]) -> dict:
+                settings: dict[str, Any], wait: bool = False) -> dict:
     """Run one variant (collective) unless it is finished; returns its result.
 
     Returns
@@ -328,10 +354,15 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
         ``{"failed": message}`` when a stage raised a user error (written to
         ``failed.json``; the study goes on with the other variants).
     """
+    vdir = root / v.name
+    with output_lock(vdir, comm, f"study {plan.kind} --variant {v.name}", wait=wait, rep=rep):
+        return _run_variant(plan, v, case, root, vdir, comm, rep, settings)
+
+
+def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path, comm,
+                 rep: Reporter, settings: dict[str, Any]) -> dict:
     from ..mbs.stage import run_mbs_stage
     from ..modal.stage import run_modal_stage
-
-    vdir = root / v.name
 
     def setup():
         vcase = variant_case(case, v.overrides)
@@ -348,8 +379,7 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
     try:
         t0 = time.perf_counter()
         if v.shared:
-            if not on_root(lambda: (root / SHARED_DIR / "modes.h5").exists(), comm):
-                prepare_shared(plan, case, root, comm, rep)
+            prepare_shared(plan, case, root, comm, rep)       # reused when current
             on_root(lambda: link_shared(root / SHARED_DIR, vdir), comm)
             modal = {"reused": True}
         else:
@@ -379,7 +409,7 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
                 "reused": {"modes": bool(modal.get("reused")), "mbs": bool(mbs.get("reused"))},
                 "complete": True,
             }
-            write_result(vdir, result)
+            write_result(vdir, result, vcase)
             return result
 
         with rep.stage(f"{plan.kind}/{v.name}: probes + metrics"):
@@ -389,7 +419,7 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
 
         def record() -> None:
             vdir.mkdir(parents=True, exist_ok=True)
-            write_text_atomic(vdir / FAILED_NAME, json.dumps(
+            write_text(vdir / FAILED_NAME, json.dumps(
                 {"study": plan.kind, "variant": v.name, "parameter": v.parameter,
                  "overrides": list(v.overrides), "inputs_sha256": digest, "error": msg},
                 indent=1))

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..io.atomic import atomic_path, write_text_atomic
+from ..io.stage_files import atomic_file, write_text
 from .common import jsonable
 
 REPORT_FORMAT = "railvib_hpc.study_report/1"
@@ -90,7 +90,7 @@ def figure(**kwargs: Any):
 def save(fig: Any, path: Path) -> Path:
     """Save a figure as PNG atomically; returns the path."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    with atomic_path(path) as tmp:
+    with atomic_file(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
     return path
 
@@ -152,7 +152,7 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
         lines += [f"![{p.stem}](figures/{p.name})" for p in figures]
         lines.append("")
     md = root / "report.md"
-    write_text_atomic(md, "\n".join(lines))
+    write_text(md, "\n".join(lines))
     payload = {"schema": REPORT_FORMAT, "study": kind, "case": case_info,
                "settings": settings, "generated": now, "variants": status,
                "complete": complete, "verdict": analysis["verdict"],
@@ -161,5 +161,5 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
                "tables": analysis.get("tables", []),
                "figures": [f"figures/{p.name}" for p in figures]}
     js = root / "report.json"
-    write_text_atomic(js, json.dumps(jsonable(payload), indent=1))
+    write_text(js, json.dumps(jsonable(payload), indent=1))
     return {"markdown": md, "json": js}

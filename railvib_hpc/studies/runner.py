@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..config import Case
+from ..io.stage_files import output_lock
 from ..log import Reporter
 from ..parallel import on_root
 from . import convergence, modes, reflection, speed, thesis
@@ -154,7 +155,7 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
               variants: Sequence[str] = (), merge_only: bool = False, prepare: bool = False,
               list_only: bool = False, study_set: Sequence[str] = (),
               settings: dict[str, Any] | None = None,
-              petsc_options: list[str] | None = None) -> int:
+              petsc_options: list[str] | None = None, wait: bool = False) -> int:
     """Run a study (collective); returns the exit code.
 
     Parameters
@@ -183,8 +184,10 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
     settings
         Study settings given programmatically (merged before ``study_set``).
     petsc_options
-        PETSc/SLEPc options (after ``--``); the list is emptied once they are passed to
-        PETSc, so the command line does not report them as ignored.
+        PETSc/SLEPc options (after ``--``), passed to PETSc when a model is computed.
+    wait
+        Wait for another command that holds a variant folder (``--wait``) instead of
+        failing that variant.
 
     Returns
     -------
@@ -213,8 +216,6 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
         from ..petsc_env import init_petsc
 
         init_petsc(list(petsc_options or []))
-        if petsc_options:
-            petsc_options.clear()
         todo = chosen or ([] if prepare else list(plan.variants))
         if prepare and plan.shared_overrides is None:
             rep.info(f"the {kind} study has no shared model: every variant builds its own "
@@ -223,11 +224,12 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
             prepare_shared(plan, case, root, comm, rep)
         for v in todo:
             with rep.stage(f"{kind}/{v.name}"):
-                res = run_variant(plan, v, case, root, comm, rep, cfg)
+                res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait)
             if "failed" in res:
                 failed.append(v.name)
     if merge_only or not (chosen or prepare):
-        on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
+        with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):
+            on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
     rep.info(f"{kind} study command finished in {time.perf_counter() - t0:.1f} s"
              + (f"; failed variants: {', '.join(failed)} (see their {FAILED_NAME})"
                 if failed else ""))

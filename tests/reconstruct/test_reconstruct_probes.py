@@ -134,7 +134,7 @@ def test_csv_and_h5_writers(linear_modes, tmp_path):
         for key in ("displacement", "velocity", "acceleration"):
             assert np.array_equal(g[key][()], hist["a/b"][key])
         assert np.array_equal(f["rail/x"][()], np.arange(3.0))
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["probes", "probes.h5"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".railvib", "probes", "probes.h5"]
 
 
 def test_probe_histories_are_q_times_phi(linear_modes):

@@ -207,6 +207,8 @@ def _check_value(key: str, param: Param, value: Any, problems: list) -> Any:
         problems.append((key, value, "Poisson's ratio must satisfy 0 <= nu < 0.5"))
     elif check == "fraction" and not (0.0 <= value < 1.0):
         problems.append((key, value, "must satisfy 0 <= value < 1"))
+    elif check == "unit" and not (0.0 <= value <= 1.0):
+        problems.append((key, value, "must satisfy 0 <= value <= 1"))
     return value
 
 
@@ -401,6 +403,24 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     if case["modal.f_max"] == 0 and case["modal.n_modes"] < 1:
         out.append(("modal.n_modes", case["modal.n_modes"], "must be >= 1"))
     out.extend(_check_mbs(case))
+    out.extend(_check_dynamics(case))
+    return out
+
+
+def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of [damping] and [transient]."""
+    out: list[tuple[str, Any, str]] = []
+    d, tr = case["damping"], case["transient"]
+    if not d["f1"] < d["f2"]:
+        out.append(("damping.f2", d["f2"], f"must be greater than damping.f1 = {d['f1']:g} Hz "
+                    "(the two frequencies of the Rayleigh damping)"))
+    odt = case["output.dt"]
+    if tr["dt"] > 0 and odt > 0:
+        ratio = odt / tr["dt"]
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+            out.append(("transient.dt", tr["dt"],
+                        f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
+                        "automatic)"))
     return out
 
 

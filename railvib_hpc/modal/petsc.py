@@ -88,6 +88,8 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
     the stiffness of one material; ``mass=False`` assembles K only (M is returned as None).
+    The whole model's K (``parts=None``) includes the springs of absorbing faces with
+    ``boundary.virtual_thickness > 0`` (:mod:`.boundary`).
     """
     from petsc4py import PETSc
 
@@ -121,6 +123,10 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
             M.setValuesRCV(rows, cols, np.ascontiguousarray(batch.M), addv=add)
         t_k = time.perf_counter()
         t_insert += t_k - t_b
+    if parts is None:
+        from .boundary import boundary_node_blocks
+
+        insert_node_blocks(K, dofmap, comm.rank, *boundary_node_blocks(mesh, case, "spring"))
     t2 = time.perf_counter()
     for A in mats:
         A.assemble()
@@ -132,3 +138,94 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str
             "local_elements": int(hex_mask.sum() + line_mask.sum()),
             "local_hexes": int(hex_mask.sum()), "local_nnz": int(len(ix))}
     return K, M, info
+
+
+def insert_node_blocks(A, dofmap: DofMap, rank: int, nodes: np.ndarray, blocks: np.ndarray
+                       ) -> None:
+    """Add 3 x 3 blocks on the translations of single nodes to A (owned rows only).
+
+    The blocks lie on the diagonal node blocks, which every pattern of
+    :func:`local_pattern` holds; eliminated DOFs are skipped.
+    """
+    from petsc4py import PETSc
+
+    if len(nodes) == 0:
+        return
+    r0, r1 = dofmap.owned_dofs(rank)
+    cols = dofmap.index[nodes, :3]
+    rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+    A.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                   np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                   np.ascontiguousarray(blocks, dtype=float), addv=PETSc.InsertMode.ADD_VALUES)
+
+
+def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
+    """The damping matrix C of the full-order model (distributed, K's pattern).
+
+    ``C = C_material + C_dashpots (+ C_pads)`` from ``[damping]`` and ``[boundary]``
+    (:mod:`.damping`):
+
+    * ``damping.model = 'rayleigh'``: ``alpha M + beta K`` (the whole K, boundary springs
+      included, so that ``Phi^T C Phi = diag(alpha + beta omega^2)`` exactly);
+    * ``'per_material'``: ``sum_g alpha_g M_g + beta_g K_g`` over the material groups of
+      :func:`.energy.material_groups` (each assembled with its own elements; the rail pads
+      take ``modal.damping_ratio``);
+    * the Lysmer-Kuhlemeyer dashpots of the absorbing faces (lumped node blocks);
+    * ``damping.pads``: the rail pads' dashpots ``pads.cx, cy, cz``.
+
+    Entries depend on global DOF numbers only, so C is the same on any number of ranks.
+    Returns ``(C, info)`` with the coefficients used.
+    """
+    from petsc4py import PETSc
+
+    from .boundary import boundary_node_blocks
+    from .damping import material_rayleigh, rayleigh_coefficients
+    from .elements import PAD_DIRECTION
+
+    C = K.duplicate(copy=False)
+    C.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    subset = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
+    same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+    info: dict = {"model": case["damping.model"]}
+    model = case["damping.model"]
+    if model == "rayleigh":
+        alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
+                                            case["damping.f2"])
+        C.axpy(beta, K, structure=same)
+        C.axpy(alpha, M, structure=same)
+        info["alpha"], info["beta"] = alpha, beta
+    elif model == "per_material":
+        from .energy import material_groups
+
+        coeffs = material_rayleigh(case, list(material_groups(mesh)))
+        info["groups"] = coeffs
+        for group, parts in material_groups(mesh).items():
+            alpha, beta = coeffs[group]
+            Kg, Mg, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=alpha != 0.0)
+            C.axpy(beta, Kg, structure=subset)
+            if Mg is not None:
+                C.axpy(alpha, Mg, structure=subset)
+                Mg.destroy()
+            Kg.destroy()
+    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
+    info["dashpot_nodes"] = len(nodes)
+    if case["damping.pads"]:
+        from ..fem.spring import spring_matrices
+
+        r0, r1 = dofmap.owned_dofs(comm.rank)
+        for part, (key, direction) in PAD_DIRECTION.items():
+            conn = mesh.lines[mesh.line_part == PART_ID[part]]
+            if not len(conn):
+                continue
+            c = case[f"pads.c{key[1]}"]
+            cols = dofmap.index[conn, direction]
+            rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+            C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                           np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                           spring_matrices(c, np.full(len(conn), direction)),
+                           addv=PETSc.InsertMode.ADD_VALUES)
+    C.assemble()
+    C.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    C.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
+    return C, info

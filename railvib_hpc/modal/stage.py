@@ -15,7 +15,7 @@ from ..io.modes_io import read_modes_summary, read_strain_energies, write_modes
 from ..log import Reporter
 from ..mesh.stage import MESH_INPUTS, run_mesh_stage
 from ..parallel import on_root
-from .dofmap import build_dofmap
+from .boundary import case_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
@@ -34,7 +34,7 @@ def modal_digest(case: Case) -> str:
     modal = {k: v for k, v in case["modal"].items() if k not in _NOT_MODAL_INPUTS}
     physics = case.digest("materials", "sections", "pads", exclude=_NOT_MODAL_INPUTS)
     text = json.dumps({"mesh": case.digest(*MESH_INPUTS), "physics": physics,
-                       "modal": modal}, sort_keys=True)
+                       "modal": modal, "boundary": case.digest("boundary")}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -98,8 +98,7 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):
-        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
-                              case["modal.fix_rail_rotations_at_pads"])
+        dofmap = case_dofmap(mesh, case, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
     with rep.stage("assembly"):
         K, M, ainfo = assemble(mesh, case, dofmap, comm)
@@ -169,8 +168,7 @@ def _static_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> No
     """static.h5 for reused modes: assemble K again and factor it once."""
     with rep.stage("static correction: mesh + assembly"):
         mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
-        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
-                              case["modal.fix_rail_rotations_at_pads"])
+        dofmap = case_dofmap(mesh, case, comm.size)
         K, M, _ = assemble(mesh, case, dofmap, comm)
     load_dofs, table = rail_load_dofs(mesh, dofmap)
     rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))

@@ -37,6 +37,8 @@ def _parser() -> argparse.ArgumentParser:
         "reconstruct": "rebuild displacement/velocity/acceleration fields of every node",
         "assess": "evaluate the building response against vibration standards",
         "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
+        "transient": "direct time integration of the full FE model (absorbing faces, "
+                     "causal waves), then assess; results in <out>/transient",
         "study": "convergence / modes / reflection / speed studies",
     }
     for name, text in helps.items():
@@ -73,7 +75,10 @@ def _split_petsc(argv: list[str]) -> tuple[list[str], list[str]]:
 
 
 def _out_dir(args: argparse.Namespace, case: Case) -> Path:
-    return args.out if args.out is not None else Path("results") / case["case.name"]
+    if args.out is not None:
+        return args.out
+    default = Path("results") / case["case.name"]
+    return default / "transient" if args.command == "transient" else default
 
 
 def _cmd_check(case: Case, rep: Reporter) -> int:
@@ -163,7 +168,7 @@ def run(argv: list[str] | None = None) -> int:
         for note in case.notes:
             rep.info(f"note: {note}")
         out = _out_dir(args, case)
-        if args.command in ("modal", "run"):
+        if args.command in ("modal", "run", "transient"):
             from .petsc_env import init_petsc
 
             init_petsc(petsc_options)
@@ -179,6 +184,18 @@ def run(argv: list[str] | None = None) -> int:
         if args.command in single:
             single[args.command](case, out, comm, rep)
             rep.info("\n" + rep.timing_table())
+            return 0
+        if args.command == "transient":
+            from .transient.stage import run_transient_stage
+
+            _cmd_check(case, rep)
+            run_transient_stage(case, out, comm, rep)
+            summary = _cmd_assess(case, out, comm, rep)
+            rep.info("\n" + rep.timing_table())
+            failed = [k for k, v in summary["verdict"].items() if v is False]
+            rep.info(f"transient complete: {len(summary['verdict'])} probes assessed, "
+                     + (f"limits exceeded at {', '.join(failed)}" if failed
+                        else "no limit exceeded"))
             return 0
         if args.command == "study":
             from .studies import run_study
@@ -206,7 +223,7 @@ def run(argv: list[str] | None = None) -> int:
             print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)
         return exc.exit_code
     finally:
-        if petsc_options and args.command not in ("modal", "run"):
+        if petsc_options and args.command not in ("modal", "run", "transient"):
             rep.info("PETSc options ignored by this command: " + " ".join(petsc_options))
 
 

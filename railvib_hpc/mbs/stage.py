@@ -160,13 +160,45 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
     return Irregularity(profile=profile, flats=flats, wheel_rail=wheel_rail)
 
 
-def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
     v = case["vehicle"]
     force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * 9.81
     offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
     rails = np.tile([0, 1], len(v["axle_offsets"]))
     return np.full(offs.size, force), offs, rails
+
+
+def passage(case: Case, vehicle, flexible_end: float) -> dict:
+    """The run of ``[vehicle]``: loads or wheel layout, start and end, simulated time.
+
+    Parameters
+    ----------
+    case
+        The case.
+    vehicle
+        :func:`build_vehicle`'s vehicle (None: moving forces).
+    flexible_end
+        x of the end of the flexible rail [m] (the rigid exit rail follows).
+
+    Returns
+    -------
+    dict
+        ``forces`` (moving forces, else None), ``offsets``, ``wheel_rail`` (n_wheels,),
+        ``x_start``, ``x_end``, ``t_end`` [s].
+    """
+    x_end = case["vehicle.x_end"] or flexible_end + case["track.rigid_length"]
+    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
+    forces = None
+    if vehicle is None:
+        forces, offsets, wheel_rail = moving_loads(case)
+    else:
+        offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(vehicle.n_wheels)))
+        wheel_rail = np.asarray(getattr(vehicle, "wheel_rail", np.arange(vehicle.n_wheels) % 2))
+    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+    return {"forces": forces, "offsets": np.asarray(offsets, dtype=float),
+            "wheel_rail": np.asarray(wheel_rail, dtype=np.int64), "x_start": x_start,
+            "x_end": x_end, "t_end": t_end}
 
 
 def _read_static(out_dir: Path, modes_sha: str, n_r: int) -> np.ndarray:
@@ -234,15 +266,10 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     rm = read_rail_modes(modes_path, m)
     zeta = modal_damping(case, m, modes_path)
     vehicle = build_vehicle(case)
-    x_rigid_end = float(max(r.x_nodes[-1] for r in rm.rails)) + case["track.rigid_length"]
-    x_end = case["vehicle.x_end"] or x_rigid_end
-    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
-    if vehicle is None:
-        forces, offsets, wheel_rail = _moving_loads(case)
-    else:
-        offsets = np.asarray(getattr(vehicle, "wheel_offsets", np.zeros(vehicle.n_wheels)))
-        wheel_rail = np.asarray(getattr(vehicle, "wheel_rail", np.arange(vehicle.n_wheels) % 2))
-    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+    run = passage(case, vehicle, float(max(r.x_nodes[-1] for r in rm.rails)))
+    forces, offsets, wheel_rail = run["forces"], run["offsets"], run["wheel_rail"]
+    x_start, x_end, t_end = run["x_start"], run["x_end"], run["t_end"]
+    speed = case["vehicle.speed"]
     residual = None
     if case["mbs.static_correction"]:
         n_r = rail_dof_rows(rm.rails).shape[1]

@@ -11,7 +11,9 @@ name, renamed when complete, reused when its inputs are unchanged):
   ``wheel_height`` (the wheel's contact point, ``B^T y``), ``rail_index``
   (n_wheels,), all (nt, n_wheels);
 * ``/vehicle/y``, ``y_dot``, ``y_ddot`` (nt, n_dof), attribute ``dof_names``;
-* ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,);
+* ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,); with
+  ``modal.damping = 'full'`` also ``damping_matrix`` (m, m) (``zeta`` is then its diagonal
+  as ratios, ``D_ii / (2 omega_i)``);
 * ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads (derivatives by
   finite differences of the stored steps) and ``/static/q_shift``,
   ``q_shift_dot``, ``q_shift_ddot`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` (and
@@ -65,23 +67,40 @@ def _damping_inputs(case: Case):
     """What the modal damping ratios depend on (for the reuse key)."""
     if case["modal.damping"] == "uniform":
         return case["modal.damping_ratio"]
-    return {"ratio": case["modal.damping_ratio"], "damping": case["modal.damping"],
-            "materials": {k: v["damping_ratio"] for k, v in case["materials"].items()}}
+    out = {"ratio": case["modal.damping_ratio"], "damping": case["modal.damping"],
+           "materials": {k: v["damping_ratio"] for k, v in case["materials"].items()}}
+    if case["modal.damping"] in ("rayleigh", "full"):
+        out["rayleigh"] = case.digest("damping")
+    return out
 
 
 def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
-    """(m,) damping ratios with the ``mbs.damping_*`` overrides applied.
+    """(m,) damping ratios, or the (m, m) modal damping matrix, with the ``mbs.damping_*``
+    overrides applied.
 
     ``modal.damping = 'uniform'``: ``modal.damping_ratio`` for every mode;
     ``'strain_energy'``: per material from the strain energies stored in ``modes_path``
-    (:func:`railvib_hpc.modal.energy.damping_from_energies`).
+    (:func:`railvib_hpc.modal.energy.damping_from_energies`); ``'rayleigh'``:
+    ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.modal.damping`); ``'full'``:
+    the matrix ``D = Phi^T C Phi`` from ``modal_damping.h5`` next to ``modes_path``
+    (:func:`railvib_hpc.modal.projection.compose_damping`), whose diagonal the overrides set
+    to ``2 zeta omega``.
 
     Raises
     ------
     MBSInputError
-        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies.
+        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies, ``full``
+        damping without a matching ``modal_damping.h5``.
     """
-    if case["modal.damping"] == "strain_energy":
+    kind = case["modal.damping"]
+    omega = None
+    if kind in ("rayleigh", "full"):
+        import h5py
+
+        with h5py.File(modes_path, "r") as f:
+            omega = np.sqrt(np.maximum(f["modes/eigenvalue"][:m], 0.0))
+            modes_sha = str(f.attrs.get("inputs_sha256", ""))
+    if kind == "strain_energy":
         from ..io.modes_io import read_strain_energies
         from ..modal.energy import damping_from_energies
 
@@ -91,6 +110,23 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
                                 "per-material strain energies (written by an older version); "
                                 "rerun 'railvib modal' to recompute it")
         zeta = damping_from_energies(energies, case)[:m].copy()
+    elif kind == "rayleigh":
+        from ..modal.damping import case_rayleigh, rayleigh_ratio
+
+        zeta = rayleigh_ratio(*case_rayleigh(case), omega)
+    elif kind == "full":
+        from ..modal.projection import compose_damping, read_damping_parts
+
+        path = Path(modes_path).with_name("modal_damping.h5")
+        parts = read_damping_parts(path, modes_sha)
+        if parts is None:
+            raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
+                                "'railvib modal' with modal.damping = 'full'")
+        d = compose_damping(case, parts, omega)
+        for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
+            if int(k) <= m:
+                d[int(k) - 1, int(k) - 1] = 2.0 * r * omega[int(k) - 1]
+        return d
     else:
         zeta = np.full(m, case["modal.damping_ratio"])
     for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
@@ -400,6 +436,9 @@ def _write(path: Path, case: Case, result, rm, zeta, wheel_rail, vehicle, residu
         v.attrs["type"] = case["vehicle.type"]
         mg = f.create_group("modal")
         mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
+        if np.ndim(zeta) == 2:                 # coupled modes: the matrix and its diagonal
+            mg["damping_matrix"] = zeta
+            zeta = np.diag(zeta) / (2.0 * np.where(rm.omega > 0, rm.omega, 1.0))
         mg["omega"], mg["zeta"] = rm.omega, zeta
         if residual is not None:
             from .static_correction import rail_dof_rows

@@ -180,7 +180,6 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
 
     from .boundary import boundary_node_blocks
     from .damping import material_rayleigh, rayleigh_coefficients
-    from .elements import PAD_DIRECTION
 
     C = K.duplicate(copy=False)
     C.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
@@ -211,21 +210,48 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
     insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
     info["dashpot_nodes"] = len(nodes)
     if case["damping.pads"]:
-        from ..fem.spring import spring_matrices
-
-        r0, r1 = dofmap.owned_dofs(comm.rank)
-        for part, (key, direction) in PAD_DIRECTION.items():
-            conn = mesh.lines[mesh.line_part == PART_ID[part]]
-            if not len(conn):
-                continue
-            c = case[f"pads.c{key[1]}"]
-            cols = dofmap.index[conn, direction]
-            rows = np.where((cols >= r0) & (cols < r1), cols, -1)
-            C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
-                           np.ascontiguousarray(cols, dtype=PETSc.IntType),
-                           spring_matrices(c, np.full(len(conn), direction)),
-                           addv=PETSc.InsertMode.ADD_VALUES)
+        insert_pad_dashpots(C, mesh, case, dofmap, comm.rank)
     C.assemble()
     C.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     C.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
     return C, info
+
+
+def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> None:
+    """Add the rail pads' dashpots ``pads.cx, cy, cz`` to C (owned rows; K's pattern)."""
+    from petsc4py import PETSc
+
+    from ..fem.spring import spring_matrices
+    from .elements import PAD_DIRECTION
+
+    r0, r1 = dofmap.owned_dofs(rank)
+    for part, (key, direction) in PAD_DIRECTION.items():
+        conn = mesh.lines[mesh.line_part == PART_ID[part]]
+        if not len(conn):
+            continue
+        c = case[f"pads.c{key[1]}"]
+        cols = dofmap.index[conn, direction]
+        rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+        C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                       np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                       spring_matrices(c, np.full(len(conn), direction)),
+                       addv=PETSc.InsertMode.ADD_VALUES)
+
+
+def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, which: str):
+    """A matrix with K's pattern holding only the absorbing faces' dashpots
+    (``which = 'dashpots'``) or the rail pads' dashpots (``'pads'``); assembled."""
+    from petsc4py import PETSc
+
+    from .boundary import boundary_node_blocks
+
+    A = K.duplicate(copy=False)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    if which == "dashpots":
+        insert_node_blocks(A, dofmap, rank, *boundary_node_blocks(mesh, case, "dashpot"))
+    elif which == "pads":
+        insert_pad_dashpots(A, mesh, case, dofmap, rank)
+    else:
+        raise ValueError(f"which must be 'dashpots' or 'pads', got {which!r}")
+    A.assemble()
+    return A

@@ -20,6 +20,12 @@ from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
+from .projection import (
+    project_damping_parts,
+    read_damping_parts,
+    read_phi_rows,
+    write_damping_parts,
+)
 from .static import rail_load_dofs, solve_static, static_is_valid, unit_loads, write_static
 
 #: Keys of [modal] and of each material that do not change the modes (not in the reuse key).
@@ -85,12 +91,17 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     old = on_root(previous, comm)
     want_static = bool(case["mbs.static_correction"])
     static_path = out_dir / "static.h5"
+    want_damping = case["modal.damping"] == "full"
+    damping_path = out_dir / "modal_damping.h5"
     if old is not None:
         f = old["frequency_hz"]
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
                  f"{f[0]:.3f} - {f[-1]:.3f} Hz")
         if want_static and not on_root(lambda: static_is_valid(static_path, key), comm):
             _static_only(case, out_dir, comm, rep, key)
+        if want_damping and not on_root(
+                lambda: read_damping_parts(damping_path, key) is not None, comm):
+            _damping_only(case, out_dir, comm, rep, key, len(f))
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                 **json.loads(old.get("stats", "{}"))}
 
@@ -122,6 +133,10 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
                  f"'{case['modal.out_of_core']}')")
     with rep.stage("strain energies"):
         energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
+    parts = None
+    if want_damping:
+        with rep.stage("projected damping"):
+            parts = project_damping_parts(mesh, case, dofmap, comm, K, result.phi)
     x_static = result.static
     if want_static and x_static is None:
         with rep.stage("static solves"):
@@ -156,6 +171,10 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
              f"{stats['max_relative_residual']:.2e}; {stats['linear_solves']} right-hand sides "
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
+    if parts is not None:
+        on_root(lambda: write_damping_parts(damping_path, parts, key), comm)
+        rep.info(f"wrote {damping_path}: Phi^T C Phi of the dashpots, pads and materials "
+                 "(modal.damping = 'full')")
     if want_static:
         with rep.stage("write static.h5"):
             write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, key)
@@ -183,6 +202,19 @@ def _static_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> No
                      table, key)
     rep.info(f"wrote {out_dir / 'static.h5'}: static solutions for {free.size} unit loads on "
              "the rail DOFs (static correction)")
+
+
+def _damping_only(case: Case, out_dir: Path, comm, rep: Reporter, key: str, m: int) -> None:
+    """modal_damping.h5 for reused modes: assemble again, read the modes' rows, project."""
+    with rep.stage("projected damping (reused modes)"):
+        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+        dofmap = case_dofmap(mesh, case, comm.size)
+        K, _, _ = assemble(mesh, case, dofmap, comm, mass=False)
+        phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, m)
+        parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
+        K.destroy()
+    on_root(lambda: write_damping_parts(out_dir / "modal_damping.h5", parts, key), comm)
+    rep.info(f"wrote {out_dir / 'modal_damping.h5'} (modal.damping = 'full')")
 
 
 def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:

@@ -157,6 +157,9 @@ def run_modal_stage(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         stats["peak_rss_gb_total"] = float(sum(rss))
         stats["n_dofs"] = dofmap.n_dofs
         stats["ranks"] = comm.size
+        # attributes are written collectively: every rank must pass the same text (the
+        # assembly timings and counts differ per rank; rank 0's are kept)
+        stats = comm.bcast(stats, root=0)
         attrs = {"inputs_sha256": key, "case_toml": case.to_toml(), "railvib_version": __version__,
                  "petsc_version": _versions()[0], "slepc_version": _versions()[1],
                  "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs}

@@ -67,12 +67,15 @@ class Setting:
         What it means (shown in errors and in ``jobs/README.md``).
     check
         ``pos`` (> 0), ``nonneg`` (>= 0), ``refinement`` (0 < value <= 6), or empty.
+    choices
+        Allowed values of a ``str`` setting (or of the entries of a ``strs`` setting).
     """
 
     default: Any
     kind: str
     doc: str
     check: str = ""
+    choices: tuple[str, ...] = ()
 
 
 _PROBES = Setting(list(BUILDING_PROBES), "strs",
@@ -116,6 +119,15 @@ SETTINGS: dict[str, dict[str, Setting]] = {
         "band_hz": Setting(0.0, "float", "0: every domain uses modal.n_modes of the case; "
                            "> 0: every domain uses all its modes below this frequency "
                            "(the same band for all domains)", "nonneg"),
+        "boundaries": Setting(["case"], "strs",
+                              "boundary conditions of the truncation faces, each run on every "
+                              "domain: case (the case file's [boundary]), thesis (rollers, "
+                              "fixed base), absorbing (all five faces absorbing)",
+                              choices=("case", "thesis", "absorbing")),
+        "solver": Setting("modal", "str",
+                          "modal (modes + mbs, the thesis's method) or direct (railvib "
+                          "transient: the full model in the time domain, causal; band_hz "
+                          "does not apply)", choices=("modal", "direct")),
         "probes": _PROBES,
     },
     "speed": {
@@ -159,6 +171,10 @@ def _check(key: str, s: Setting, value: Any, problems: list) -> Any:
     """Type-check and convert one setting; append problems; return the converted value."""
     if s.kind in ("float", "int"):
         return _check_scalar(key, s, value, problems)
+    if s.kind == "str":
+        if not isinstance(value, str) or (s.choices and value not in s.choices):
+            problems.append((key, value, "allowed: " + ", ".join(s.choices)))
+        return value
     if not isinstance(value, list) or not value:
         problems.append((key, value, f"expected a non-empty list ({s.doc})"))
         return value
@@ -183,6 +199,10 @@ def _check(key: str, s: Setting, value: Any, problems: list) -> Any:
                              f"'_.+-'); bad entries: {bad}"))
         elif len(set(value)) != len(value):
             problems.append((key, value, "entries must be distinct"))
+        elif s.choices and any(v not in s.choices for v in value):
+            unknown = [v for v in value if v not in s.choices]
+            problems.append((key, value, f"unknown entries {unknown}; allowed: "
+                             + ", ".join(s.choices)))
         return value
     # triples
     ok = all(isinstance(t, list) and len(t) == 3 and all(_number(x) for x in t)

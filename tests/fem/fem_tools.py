@@ -75,3 +75,18 @@ def node_dofs(nodes, comps, per_node: int) -> np.ndarray:
     """Global DOF indices of components ``comps`` of ``nodes``."""
     nodes = np.atleast_1d(nodes)
     return (per_node * nodes[:, None] + np.asarray(comps)[None, :]).ravel()
+
+
+def frequency_rtol(K, M, f, computations: int = 2, solver_tol: float = 0.0,
+                   rel_gap=np.inf) -> np.ndarray:
+    """Relative tolerance for frequencies ``f`` (Hz) of the pencil (K, M).
+
+    :func:`railvib_hpc.tolerances.eigenvalue_rtol` with the normwise condition
+    ``lambda_max / lambda`` (round-off of a backward-stable solver). A frequency's relative
+    error is half its eigenvalue's; the eigenvalue tolerance is used as it is (factor 2 of
+    margin)."""
+    from railvib_hpc import tolerances
+
+    lam = (2 * np.pi * np.asarray(f, dtype=float)) ** 2
+    cond = tolerances.normwise_condition(lam, tolerances.lambda_max(K, M))
+    return tolerances.eigenvalue_rtol(cond, K.shape[0], solver_tol, rel_gap, computations)

@@ -65,3 +65,145 @@ def strip_mesh(nx: int, length: float, width: float, thickness: float,
     return Mesh(points=pts, hexes=hexes, hex_part=np.full(nx, PART_ID[part], np.int32),
                 lines=np.zeros((0, 2), np.int64), line_part=np.zeros(0, np.int32),
                 node_sets={"root": np.flatnonzero(np.isclose(pts[:, 0], 0.0))})
+
+
+def to_scipy(A):
+    """A serial PETSc AIJ matrix as scipy CSR (for reference computations)."""
+    import scipy.sparse as sp
+
+    ip, ix, v = A.getValuesCSR()
+    n, m = A.getSize()
+    return sp.csr_matrix((v, ix, ip), shape=(n, m))
+
+
+def eigen_rtol(K, M, lam, solver_tol: float = 1e-10, computations: int = 2, phi=None):
+    """Relative tolerance for comparing the eigenvalues ``lam`` of the serial PETSc pencil
+    (K, M) computed ``computations`` times (:mod:`railvib_hpc.tolerances`).
+
+    Round-off ``sqrt(n) u cond_i`` plus the Kato-Temple term ``tol^2 / relgap`` of a solver
+    stopped at the relative residual ``solver_tol``, with the gap of each eigenvalue's
+    cluster (eigenvalues closer than their round-off form one cluster). ``cond``: normwise
+    ``lambda_max / lambda`` (any backward-stable solver), or, given the M-normalised modes
+    ``phi``, componentwise (eigenvalues that are Rayleigh quotients of the computed vectors,
+    as block Lanczos's final Rayleigh-Ritz step makes them, of matrices that differ
+    componentwise, as on 1 and N ranks) plus ``max(lam) / lam`` for the dense projected
+    eigenproblem.
+    """
+    from railvib_hpc import tolerances
+
+    lam = np.asarray(lam, dtype=float)
+    Ks, Ms = to_scipy(K), to_scipy(M)
+    if phi is None:
+        cond = tolerances.normwise_condition(lam, tolerances.lambda_max(Ks, Ms))
+    else:
+        cond = tolerances.componentwise_condition(Ks, phi, lam) + lam.max() / np.abs(lam)
+    n = Ks.shape[0]
+    roundoff = tolerances.eigenvalue_rtol(cond, n, computations=computations)
+    gaps = tolerances.cluster_gaps(lam, roundoff)
+    return tolerances.eigenvalue_rtol(cond, n, solver_tol, gaps, computations)
+
+
+def assert_same_subspaces(K, M, lam, phi_a, phi_b, rtol) -> int:
+    """Each cluster of eigenvalues (closer than ``rtol``) spans the same subspace in both
+    solutions: the principal angles are at most the sum of their Davis-Kahan bounds
+    (measured residuals / gap to the neighbouring clusters). The last cluster is skipped
+    (its gap to the next, uncomputed eigenvalue is unknown). Returns the clusters checked.
+    """
+    from railvib_hpc import tolerances
+
+    Ks, Ms = to_scipy(K), to_scipy(M)
+    lam = np.asarray(lam, dtype=float)
+    res_a = tolerances.residual_norms(Ks, Ms, phi_a, lam)
+    res_b = tolerances.residual_norms(Ks, Ms, phi_b, lam)
+    labels = tolerances.clusters(lam, rtol)
+    checked = 0
+    for c in np.unique(labels)[:-1]:
+        idx = np.flatnonzero(labels == c)
+        lo = lam[idx[0] - 1] if idx[0] > 0 else -np.inf
+        gap = min(lam[idx[0]] - lo, lam[idx[-1] + 1] - lam[idx[-1]])
+        bound = tolerances.davis_kahan(res_a[idx], gap) + tolerances.davis_kahan(res_b[idx], gap)
+        sines = tolerances.subspace_sines(phi_a[:, idx], phi_b[:, idx], Ms)
+        assert sines.max() <= bound, (c, sines.max(), bound)
+        checked += 1
+    return checked
+
+
+def modes_from_file(path, dofmap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eigenvalues, the (n_dofs, m) mode matrix in ``dofmap``'s numbering and the strain
+    energies (m, groups) read back from ``modes.h5``."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        lam = f["modes/eigenvalue"][()]
+        trans = f["modes/translation"][()]
+        rot = f["modes/rotation"][()]
+        rot_nodes = f["mesh/rotation_nodes"][()]
+        energy = f["modes/strain_energy"][()]
+    phi = np.zeros((dofmap.n_dofs, len(lam)))
+    for comps, values, nodes in ((slice(0, 3), trans, np.arange(trans.shape[1])),
+                                 (slice(3, 6), rot, rot_nodes)):
+        idx = dofmap.index[nodes, comps]
+        ok = idx >= 0
+        phi[idx[ok]] = values[:, ok].T
+    return lam, phi, energy
+
+
+def energy_tolerance(groups, K, M, lam, phi_a, phi_b, e_a, e_b, rtol) -> np.ndarray:
+    """Allowed difference of per-material strain energies ``e = phi^T K_g phi`` (m, g) of
+    two solutions, per cluster of eigenvalues (``rtol``), excluding the last cluster.
+
+    Within a cluster only the sum over its modes is defined (a trace over the invariant
+    subspace). For bases whose principal angles to the exact subspace have ``||sin||_F <=
+    s`` (Davis-Kahan, measured residuals), ``|trace(Phi~^T A Phi~) - trace(Phi^T A Phi)| <=
+    2 sqrt(T a) s + 2 a s^2`` with ``T`` the trace and ``a = lambda_max(K_g, M) <=
+    lambda_max(K, M)`` (K_g <= K), plus the round-off of the products, ``gamma_k |phi|^T
+    |K_g| |phi|``. Returns (n_clusters - 1, g) bounds and asserts them.
+    """
+    from railvib_hpc import tolerances
+
+    Ks, Ms = to_scipy(K), to_scipy(M)
+    a = tolerances.lambda_max(Ks, Ms)
+    res = [tolerances.residual_norms(Ks, Ms, p, lam) for p in (phi_a, phi_b)]
+    labels = tolerances.clusters(lam, rtol)
+    rounds = [np.stack([np.diag(tolerances.product_error(to_scipy(Kg), p, computations=1))
+                        for Kg in groups], axis=1) for p in (phi_a, phi_b)]
+    out = []
+    for c in np.unique(labels)[:-1]:
+        idx = np.flatnonzero(labels == c)
+        lo = lam[idx[0] - 1] if idx[0] > 0 else -np.inf
+        gap = min(lam[idx[0]] - lo, lam[idx[-1] + 1] - lam[idx[-1]])
+        bound = 0.0
+        for r, e, ro in zip(res, (e_a, e_b), rounds):
+            s = tolerances.davis_kahan(r[idx], gap)
+            T = e[idx].sum(axis=0)
+            bound = bound + 2 * np.sqrt(np.abs(T) * a) * s + 2 * a * s**2 + ro[idx].sum(axis=0)
+        diff = np.abs(e_a[idx].sum(axis=0) - e_b[idx].sum(axis=0))
+        assert np.all(diff <= bound), (c, diff, bound)
+        out.append(bound)
+    return np.array(out)
+
+
+def energy_sum_allowance(mesh, case, dofmap, phi, comm=None):
+    """Round-off allowances of the per-material strain energies ``E_ig = phi_i^T K_g phi_i``
+    (:mod:`railvib_hpc.tolerances`, ``product_error``).
+
+    Returns ``(per_group, total)``: (m, g) allowances of each group's energy (how far below
+    0 a PSD group may appear) and (m,) of ``sum_g E_ig - lambda_i`` — the groups' products
+    and the Rayleigh quotient ``phi^T K phi`` that makes ``lambda`` (two computations).
+    """
+    from mpi4py import MPI
+
+    from railvib_hpc import tolerances
+    from railvib_hpc.modal.energy import material_groups
+    from railvib_hpc.modal.petsc import assemble
+
+    comm = comm or MPI.COMM_SELF
+    per_group = []
+    for parts in material_groups(mesh).values():
+        Kg = assemble(mesh, case, dofmap, comm, parts=parts, mass=False)[0]
+        per_group.append(np.diag(tolerances.product_error(to_scipy(Kg), phi, computations=1)))
+        Kg.destroy()
+    K = assemble(mesh, case, dofmap, comm, mass=False)[0]
+    whole = np.diag(tolerances.product_error(to_scipy(K), phi))
+    per_group = np.stack(per_group, axis=1)
+    return per_group, per_group.sum(axis=1) + whole

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from modal_cases import column_mesh, soil_case, solve
+from modal_cases import column_mesh, energy_sum_allowance, soil_case, solve
 
 from railvib_hpc.modal.energy import damping_from_energies, group_strain_energies
 from railvib_hpc.schema import PART_ID
@@ -30,7 +30,7 @@ def _two_layer(nz: int, **extra):
     from mpi4py import MPI
 
     energies = group_strain_energies(mesh, case, dofmap, MPI.COMM_SELF, res.phi)
-    return res, energies, case
+    return res, energies, case, (mesh, dofmap)
 
 
 def _exact_lower_share(n: int) -> float:
@@ -38,16 +38,17 @@ def _exact_lower_share(n: int) -> float:
 
 
 def test_energies_add_up_to_the_eigenvalues():
-    res, energies, _ = _two_layer(32)
+    res, energies, case, (mesh, dofmap) = _two_layer(32)
     assert set(energies) == {"subgrade", "ballast"}
     total = energies["subgrade"] + energies["ballast"]
-    assert total == pytest.approx(res.eigenvalues, rel=1e-9)
+    _, allowed = energy_sum_allowance(mesh, case, dofmap, res.phi)
+    assert np.all(np.abs(total - res.eigenvalues) <= allowed)
 
 
 def test_layer_shares_converge_to_the_analytic_ones_at_rate_two():
     sizes, errors = [], []
     for nz in (16, 32, 64):
-        _, e, _ = _two_layer(nz)
+        _, e, _, _ = _two_layer(nz)
         share = e["subgrade"] / (e["subgrade"] + e["ballast"])
         err = np.abs(share - [_exact_lower_share(n) for n in (1, 2, 3)])
         # linear elements: energy errors ~ (k h)^2 / 12 relative; the share moves less
@@ -60,7 +61,7 @@ def test_layer_shares_converge_to_the_analytic_ones_at_rate_two():
 
 
 def test_strain_energy_damping():
-    _, e, case = _two_layer(64, **{"materials.subgrade.damping_ratio": 0.05,
+    _, e, case, _ = _two_layer(64, **{"materials.subgrade.damping_ratio": 0.05,
                                    "materials.ballast.damping_ratio": 0.01})
     zeta = damping_from_energies(e, case)
     share = np.array([_exact_lower_share(n) for n in (1, 2, 3)])

@@ -411,6 +411,11 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
     """Cross-key checks of [damping] and [transient]."""
     out: list[tuple[str, Any, str]] = []
     d, tr = case["damping"], case["transient"]
+    faces = [f for f in ("x_min", "x_max", "y_min", "y_max", "base")
+             if case[f"boundary.{f}"] == "caughey"]
+    if faces and not case["boundary.layer_thickness"] > 0:
+        out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
+                    f"must be > 0 m for the caughey face(s) {', '.join(faces)}"))
     if not d["f1"] < d["f2"]:
         out.append(("damping.f2", d["f2"], f"must be greater than damping.f1 = {d['f1']:g} Hz "
                     "(the two frequencies of the Rayleigh damping)"))

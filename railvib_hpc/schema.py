@@ -75,7 +75,7 @@ PAD_PARTS = ("pad_x", "pad_y", "pad_z")
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
 #: Conditions of a truncation face of the soil box (``[boundary]``).
-BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing")
+BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey")
 #: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
 BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
 
@@ -83,8 +83,10 @@ BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
 def _face(default: str, where: str) -> Param:
     return Param(default, "str", "-",
                  f"{where}: fixed (all displacements 0), roller (normal displacement 0), free, "
-                 "or absorbing (Lysmer-Kuhlemeyer dashpots rho c_P normal, rho c_S tangential "
-                 "per unit area, from the soil behind the face)", choices=BOUNDARY_TYPES)
+                 "absorbing (Lysmer-Kuhlemeyer dashpots rho c_P normal, rho c_S tangential "
+                 "per unit area, from the soil behind the face) or caughey (fixed, with a "
+                 "graded Caughey absorbing layer inside the mesh, boundary.layer_*)",
+                 choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "case": {
@@ -243,6 +245,14 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "soil lay behind the face; they give the truncated model "
                                    "static support (0: dashpots only, the model may drift under "
                                    "a static load)", "nonneg"),
+        "layer_thickness": Param(0.0, "float", "m",
+                                 "caughey faces: thickness of the absorbing layer, measured "
+                                 "into the mesh from the face (part of the model: enlarge the "
+                                 "domain by it, [domain])", "nonneg"),
+        "layer_damping": Param(0.3, "float", "-",
+                               "caughey faces: Rayleigh damping ratio at the face (at "
+                               "damping.f1 and f2), decreasing quadratically to 0 at the inner "
+                               "edge of the layer", "fraction"),
     },
     "damping": {
         "model": Param("rayleigh", "str", "-",
@@ -454,9 +464,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "steps_per_period": Param(20, "int", "-",
                                   "automatic time step: steps per period of transient.f_max "
                                   "(20: period error 0.8 % with the trapezoidal rule)", "pos"),
-        "steps_per_element": Param(10, "int", "-",
-                                   "automatic time step with a vehicle: steps while a wheel "
-                                   "crosses one rail element", "pos"),
+        "steps_per_element": Param(8, "int", "-",
+                                   "automatic time step: steps while a wheel crosses one rail "
+                                   "element (8: peak contact force within 0.3 % of half the "
+                                   "step on the coarse thesis model)", "pos"),
         "rho_inf": Param(1.0, "float", "-",
                          "generalized-alpha (Chung-Hulbert) spectral radius at infinite "
                          "frequency: 1 = Newmark average acceleration (trapezoidal rule, no "

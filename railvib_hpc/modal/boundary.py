@@ -14,7 +14,11 @@ Each face is
 * ``absorbing``: free, plus Lysmer-Kuhlemeyer dashpots (``rho c_P`` normal, ``rho c_S``
   tangential per unit area, lumped to the nodes, :mod:`railvib_hpc.fem.boundary`) with the
   material of the element behind each face, and optionally springs
-  (``boundary.virtual_thickness``).
+  (``boundary.virtual_thickness``);
+* ``caughey``: fixed, with a graded Caughey absorbing layer (CALM, Semblat et al. 2011): the
+  elements within ``boundary.layer_thickness`` of the face get Rayleigh damping whose ratio
+  grows quadratically from 0 at the layer's inner edge to ``boundary.layer_damping`` at the
+  face (:func:`layer_weights`; assembled by :func:`~.petsc.assemble_damping`).
 
 The thesis defaults (rollers, fixed base) give exactly the constraint rules of
 :data:`railvib_hpc.modal.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
@@ -82,7 +86,7 @@ def constraint_rules(case: Case) -> dict[str, tuple[str, ...]]:
     """
     rules: dict[str, tuple[str, ...]] = {}
     for face, kind in face_types(case).items():
-        if kind == "fixed":
+        if kind in ("fixed", "caughey"):
             rules[face] = COMPONENTS
         elif kind == "roller":
             rules[face] = (_NORMAL[face],)
@@ -239,3 +243,29 @@ def case_dofmap(mesh: Mesh, case: Case, size: int = 1):
     return build_dofmap(mesh, size, case["modal.fix_sleeper_rotations"],
                         case["modal.fix_rail_rotations_at_pads"], rules=constraint_rules(case),
                         node_sets=face_node_sets(mesh))
+
+
+def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None) -> np.ndarray:
+    """Weight of hexahedra in the Caughey layers, in [0, 1].
+
+    ``w = (1 - d / L)^2`` for an element centroid at distance ``d < L`` from a ``caughey``
+    face (``L = boundary.layer_thickness``), the largest over the faces; 0 elsewhere.
+    ``centres`` (k, 3): the centroids to weigh (default: every hexahedron's).
+    """
+    if centres is None:
+        centres = mesh.points[mesh.hexes].mean(axis=1)
+    out = np.zeros(len(centres))
+    faces = [f for f, kind in face_types(case).items() if kind == "caughey"]
+    if not faces:
+        return out
+    thickness = case["boundary.layer_thickness"]
+    sets = face_node_sets(mesh)
+    axis = {"x_min": 0, "x_max": 0, "y_min": 1, "y_max": 1, "base": 2}
+    for face in faces:
+        nodes = sets[face]
+        if nodes.size == 0:
+            raise BoundaryError(f"boundary.{face} = 'caughey': the mesh has no nodes on it")
+        plane = float(mesh.points[nodes, axis[face]].mean())
+        d = np.abs(centres[:, axis[face]] - plane)
+        out = np.maximum(out, np.where(d < thickness, (1.0 - d / thickness) ** 2, 0.0))
+    return out

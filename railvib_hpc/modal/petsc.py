@@ -209,6 +209,7 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
     nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
     insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
     info["dashpot_nodes"] = len(nodes)
+    info["layer_elements"] = insert_layer_damping(C, mesh, case, dofmap, comm.rank)
     if case["damping.pads"]:
         insert_pad_dashpots(C, mesh, case, dofmap, comm.rank)
     C.assemble()
@@ -255,3 +256,32 @@ def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, whic
         raise ValueError(f"which must be 'dashpots' or 'pads', got {which!r}")
     A.assemble()
     return A
+
+
+def insert_layer_damping(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> int:
+    """Add the graded Caughey layers' damping ``sum_e w_e (alpha M_e + beta K_e)`` to C
+    (:func:`.boundary.layer_weights`; ``alpha, beta`` from ``boundary.layer_damping`` at
+    ``damping.f1``, ``f2``). Returns the number of elements in the layers."""
+    from petsc4py import PETSc
+
+    from .boundary import layer_weights
+    from .damping import rayleigh_coefficients
+
+    weights = layer_weights(mesh, case)
+    if not weights.any():
+        return 0
+    alpha, beta = rayleigh_coefficients(case["boundary.layer_damping"], case["damping.f1"],
+                                        case["damping.f2"])
+    r0, r1 = dofmap.owned_dofs(rank)
+    own = np.zeros(mesh.n_nodes, dtype=bool)
+    own[dofmap.owned_nodes(rank)] = True
+    mask = (weights > 0) & own[mesh.hexes].any(axis=1)
+    for batch in element_batches(mesh, case, mask, np.zeros(len(mesh.lines), bool)):
+        w = layer_weights(mesh, case, mesh.points[batch.conn].mean(axis=1))
+        local = w[:, None, None] * (alpha * batch.M + beta * batch.K)
+        cols = batch.dofs(dofmap.index)
+        rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+        C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                       np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                       np.ascontiguousarray(local), addv=PETSc.InsertMode.ADD_VALUES)
+    return int((weights > 0).sum())

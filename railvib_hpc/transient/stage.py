@@ -260,10 +260,10 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
     def record(n: int, info=None) -> None:
         part = np.concatenate([probes.sample(state.u, state.v, state.a).ravel(),
                                rails_s.sample(state.u).ravel()])
-        total = np.zeros_like(part) if comm.rank == 0 else None
-        comm.Reduce(part, total, root=0) if comm.size > 1 else None
-        if comm.size == 1:
-            total = part
+        total = part
+        if comm.size > 1:
+            total = np.zeros_like(part) if comm.rank == 0 else None
+            comm.Reduce(part, total, root=0)
         if comm.rank == 0:
             npb = 9 * probes.n
             recorder.put(n, probes=total[:npb].reshape(3, probes.n, 3),
@@ -377,7 +377,7 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> dict:
         K, M, _ = assemble(mesh, case, dofmap, comm)
         C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
         if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
-                and not case["damping.pads"]:
+                and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
             C.destroy()
             C = None
     n_wheels = run["wheel_rail"].size

@@ -242,3 +242,22 @@ def test_rayleigh_damping_matrix_is_alpha_m_plus_beta_k_plus_dashpots(coarse):
             both = ok[:, i] & ok[:, j]
             np.add.at(expected, idx[both, i], blocks[both, i, j] * xv[idx[both, j]])
     assert np.abs(diff - expected).max() < 1e-9 * np.abs(y.getArray()).max()
+
+
+def test_caughey_face_needs_a_layer_and_is_fixed(coarse):
+    with pytest.raises(CaseError, match=r"boundary.layer_thickness = 0.0: must be > 0 m for "
+                                        r"the caughey face\(s\) base"):
+        load_case(BASELINE, ["boundary.base=caughey"])
+    from railvib_hpc.modal.boundary import layer_weights
+
+    _, mesh = coarse
+    calm = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.y_min=caughey",
+                                "boundary.layer_thickness=6"])
+    fixed = case_dofmap(mesh, calm).index[face_node_sets(mesh)["y_min"]]
+    assert (fixed[:, :3] < 0).all()
+    w = layer_weights(mesh, calm)
+    y = mesh.points[mesh.hexes].mean(axis=1)[:, 1]
+    y0 = mesh.points[np.unique(mesh.hexes), 1].min()
+    inside = y - y0 < 6.0
+    assert np.all(w[~inside] == 0) and np.all(w[inside] > 0)
+    assert w == pytest.approx(np.where(inside, (1 - (y - y0) / 6.0) ** 2, 0.0))

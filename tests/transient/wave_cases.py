@@ -57,6 +57,14 @@ def smooth_pulse(t, duration: float):
     return np.where((t >= 0) & (t <= duration), np.sin(np.pi * t / duration) ** 4, 0.0)
 
 
+def zero_mean_pulse(t, duration: float):
+    """``sin^3 cos(pi t / T)`` for ``0 <= t <= T`` (the derivative of sin^4: no net impulse,
+    so no quasi-static part; content 20-50 Hz for T = 0.04 s)."""
+    t = np.asarray(t, dtype=float)
+    th = np.pi * t / duration
+    return np.where((t >= 0) & (t <= duration), np.sin(th) ** 3 * np.cos(th), 0.0)
+
+
 def soil_case(*overrides: str):
     """The default case (thesis soil) with overrides."""
     return load_case(None, list(overrides))
@@ -80,7 +88,7 @@ class Model:
         self.K, self.M, _ = assemble(mesh, case, self.dofmap, comm)
         self.C = None
         if case["damping.model"] != "none" or any(
-                case[f"boundary.{f}"] == "absorbing"
+                case[f"boundary.{f}"] in ("absorbing", "caughey")
                 for f in ("x_min", "x_max", "y_min", "y_max", "base")):
             self.C, _ = assemble_damping(mesh, case, self.dofmap, comm, self.K, self.M)
         self.scheme = GeneralizedAlpha.from_radius(dt, rho_inf)
@@ -130,7 +138,8 @@ class Model:
 
 def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0,
                  duration: float = 0.04, depth: float = 15.0, t_end: float | None = None,
-                 energy: bool = False) -> dict:
+                 energy: bool = False, base: tuple[str, ...] = ("boundary.base=absorbing",),
+                 shape=smooth_pulse) -> dict:
     """A force pulse on the top of a 1-D soil column with an absorbing base.
 
     Parameters
@@ -149,6 +158,10 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
         End time (default: the pulse has passed the receiver).
     energy
         Record the energy every step.
+    base
+        Overrides of the base condition (default: Lysmer-Kuhlemeyer dashpots).
+    shape
+        The pulse ``shape(t, duration)``.
 
     Returns
     -------
@@ -161,9 +174,12 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
     free = {"P": ("ux", "uy"), "S": ("uy", "uz")}[kind]
     nz = int(round(height / h))
     mesh = column_mesh(nz, height)
-    case = soil_case("boundary.base=absorbing", "damping.model=none")
+    case = soil_case(*base, "damping.model=none")
     dt = courant * h / c
-    model = Model(mesh, case, {"all": free}, comm, dt)
+    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+
+    model = Model(mesh, case, {**constraint_rules(case), "all": free}, comm, dt,
+                  node_sets=face_node_sets(mesh))
     top = np.flatnonzero(np.isclose(mesh.points[:, 2], height))
     top_dofs = model.dofs(top, comp)
     rec_node = np.flatnonzero(np.isclose(mesh.points[:, 2], height - depth))[:1]
@@ -173,8 +189,7 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
     nt = int(math.ceil(t_end / dt))
 
     def load(n):
-        return top_dofs, np.full(top.size, amplitude / top.size) * smooth_pulse(n * dt,
-                                                                                duration)
+        return top_dofs, np.full(top.size, amplitude / top.size) * shape(n * dt, duration)
 
     solver = model.solver(load)
     st = model.state()
@@ -186,7 +201,7 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
             e.append(model.energy(st))
     t = np.arange(nt + 1) * dt
     out = {"t": t, "v": np.array(v), "c": c, "dt": dt, "nt": nt,
-           "v_exact": amplitude / (RHO * c) * smooth_pulse(t - depth / c, duration),
+           "v_exact": amplitude / (RHO * c) * shape(t - depth / c, duration),
            "energy": np.array(e), "rho_c_area": RHO * c}
     solver.destroy()
     model.destroy()

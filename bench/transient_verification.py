@@ -259,10 +259,11 @@ def section_de(path: Path, label: str) -> list[str]:
             "starts with the wheel at x = 0, i.e. 0.06 s and 0.10 s after the entry, for 20.2 m "
             "(the far end of the track-side basement wall).", "",
             "| probe | r [m] | r/c_P [s] | r/c_S [s] | detected, 2 % of the peak [s] | "
-            "detected, 10 % [s] |", "|---|---|---|---|---|---|"]
+            "detected, 10 % [s] | largest acceleration [s] |", "|---|---|---|---|---|---|---|"]
     for name, a in data["arrivals"].items():
         out.append(f"| {name} | {a['r']:.2f} | {a['r_over_cP']:.4f} | {a['r_over_cS']:.4f} | "
-                   f"{a['detected_2pct']:.4f} | {a['detected_10pct']:.4f} |")
+                   f"{a['detected_2pct']:.4f} | {a['detected_10pct']:.4f} | "
+                   f"{a.get('peak', float('nan')):.4f} |")
     out.append("")
     return out
 

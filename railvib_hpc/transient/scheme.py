@@ -188,12 +188,15 @@ def choose_time_step(f_max: float, steps_per_period: int, output_dt: float = 0.0
 
     >>> choose_time_step(80.0, 20, 1e-3, 0.12 / 30.0, 10)
     0.0003333333333333333
+    >>> choose_time_step(80.0, 20, 1e-3, 0.11999999999 / 30.0, 8)   # round-off: 5e-4
+    0.0005
     """
     dt = steps_for_band(f_max, steps_per_period)
     if element_time > 0.0:
         dt = min(dt, element_time / steps_per_element)
     if output_dt > 0.0:
-        dt = output_dt / math.ceil(output_dt / dt * (1.0 - 1e-12))
+        # tolerant to round-off in the node coordinates (0.11999999999 m elements)
+        dt = output_dt / math.ceil(output_dt / dt * (1.0 - 1e-6))
     return dt
 
 

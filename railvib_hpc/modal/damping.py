@@ -32,7 +32,7 @@ def rayleigh_coefficients(zeta: float, f1: float, f2: float) -> tuple[float, flo
     """``(alpha, beta)`` with ``zeta(2 pi f1) = zeta(2 pi f2) = zeta``.
 
     >>> a, b = rayleigh_coefficients(0.03, 8.0, 40.0)
-    >>> round(rayleigh_ratio(a, b, 2 * math.pi * 8.0), 12)
+    >>> round(float(rayleigh_ratio(a, b, 2 * math.pi * 8.0)), 12)
     0.03
     """
     w1, w2 = 2.0 * math.pi * f1, 2.0 * math.pi * f2

@@ -10,7 +10,8 @@ Usage (heavy: run under the lock)::
    ``modal.damping_ratio`` at ``damping.f1``, ``f2`` by default) into ``OUT/direct``, with
    three extra probes on the track-side basement wall (near end, middle, far end);
 2. ``railvib study modes`` with ``modal.damping = 'rayleigh'`` (the same damping, diagonal:
-   exactly the direct solver's C in modal coordinates when no face absorbs) for the mode
+   exactly the direct solver's C in modal coordinates when no face absorbs; ``--modal-damping
+   full`` for absorbing faces: the coupled modal equations with ``Phi^T C Phi``) for the mode
    counts, without and with the static correction, into ``OUT/modes``;
 3. prints (markdown) the probe peaks of both and their differences, how much of the direct
    solution's building acceleration lies below each modal band, and the arrivals at the wall
@@ -105,6 +106,9 @@ def main() -> None:
     p.add_argument("--ranks", type=int, default=2)
     p.add_argument("--modes", default="100,300,600")
     p.add_argument("--set", dest="overrides", action="append", default=[])
+    p.add_argument("--modal-damping", default="rayleigh", choices=("rayleigh", "full"),
+                   help="modal.damping of the modal runs: rayleigh (diagonal, exact without "
+                        "absorbing faces) or full (Phi^T C Phi: absorbing faces)")
     args = p.parse_args()
     out = args.out
     out.mkdir(parents=True, exist_ok=True)
@@ -116,7 +120,7 @@ def main() -> None:
                           *direct_sets], out / "direct.log")
     modes = [int(x) for x in args.modes.split(",")]
     wall_m, rss_m = _run([*mpi, "study", "modes", args.case, "--out", str(out), *sets,
-                          "--set", "modal.damping=rayleigh", "--study-set",
+                          "--set", f"modal.damping={args.modal_damping}", "--study-set",
                           f"n_modes={json.dumps(modes)}", "--study-set",
                           "static_correction=[false,true]"], out / "modes.log")
 

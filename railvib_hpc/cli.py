@@ -57,6 +57,8 @@ def _parser() -> argparse.ArgumentParser:
         "reconstruct": "rebuild displacement/velocity/acceleration fields of every node",
         "assess": "evaluate the building response against vibration standards",
         "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
+        "transient": "direct time integration of the full FE model (absorbing faces, "
+                     "causal waves), then assess; results in <out>/transient",
         "study": "convergence / modes / reflection / speed / thesis-comparison studies",
     }
     for name, text in helps.items():
@@ -103,7 +105,8 @@ def _out_dir(args: argparse.Namespace, case: Case, rep: Reporter) -> Path:
     if name != case["case.name"]:
         rep.info(f"note: case.name = {case['case.name']!r} is not a plain folder name; the "
                  f"results go to results/{name}")
-    return Path("results") / name
+    default = Path("results") / name
+    return default / "transient" if args.command == "transient" else default
 
 
 def _cmd_check(case: Case, rep: Reporter) -> int:

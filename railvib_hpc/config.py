@@ -184,6 +184,8 @@ def _range_problem(param: Param, value: Any) -> str | None:
         return "Poisson's ratio must satisfy 0 <= nu < 0.5"
     if check == "fraction" and not (0.0 <= value < 1.0):
         return "must satisfy 0 <= value < 1"
+    if check == "unit" and not (0.0 <= value <= 1.0):
+        return "must satisfy 0 <= value <= 1"
     if check == "refinement" and not (0.0 < value <= 6.0):
         return f"must satisfy 0 < value <= 6 ({param.doc})"
     if check == "name" and not _NAME.match(value):
@@ -511,6 +513,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"{need} (the Lanczos basis holds the wanted modes and two blocks)"))
     out.extend(_check_mbs(case))
     out.extend(check_studies(case["study"]))
+    out.extend(_check_dynamics(case))
     return out
 
 
@@ -557,6 +560,28 @@ def _check_bands(case: Case) -> list[tuple[str, Any, str]]:
     if (md["bands"] or md["band_only"] or md["band_groups"] > 1) and \
             md["method"] != "block_lanczos":
         out.append(("modal.method", md["method"], "band settings need 'block_lanczos'"))
+    return out
+
+
+def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of [damping] and [transient]."""
+    out: list[tuple[str, Any, str]] = []
+    d, tr = case["damping"], case["transient"]
+    faces = [f for f in ("x_min", "x_max", "y_min", "y_max", "base")
+             if case[f"boundary.{f}"] == "caughey"]
+    if faces and not case["boundary.layer_thickness"] > 0:
+        out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
+                    f"must be > 0 m for the caughey face(s) {', '.join(faces)}"))
+    if not d["f1"] < d["f2"]:
+        out.append(("damping.f2", d["f2"], f"must be greater than damping.f1 = {d['f1']:g} Hz "
+                    "(the two frequencies of the Rayleigh damping)"))
+    odt = case["output.dt"]
+    if tr["dt"] > 0 and odt > 0:
+        ratio = odt / tr["dt"]
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6 * ratio:
+            out.append(("transient.dt", tr["dt"],
+                        f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
+                        "automatic)"))
     return out
 
 

@@ -44,8 +44,8 @@ class Param:
         One-line meaning (shown in the README reference and in errors).
     check
         ``"pos"`` (> 0), ``"nonneg"`` (>= 0), ``"poisson"`` (0 <= nu < 0.5),
-        ``"fraction"`` (0 <= x < 1), ``"refinement"`` (0 < x <= 6), ``"name"`` (letters,
-        digits and ``_.+-``) or ``None``; applied to every entry of a list.
+        ``"fraction"`` (0 <= x < 1), ``"unit"`` (0 <= x <= 1), ``"refinement"`` (0 < x <= 6),
+        ``"name"`` (letters, digits and ``_.+-``) or ``None``; applied to every entry of a list.
     choices
         Allowed values for strings (or list items).
     unique
@@ -99,6 +99,19 @@ PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
 PROBE_ROLES = ("floor", "wall", "foundation", "ground")
 #: Role of a user probe without one.
 DEFAULT_PROBE_ROLE = "ground"
+#: Conditions of a truncation face of the soil box (``[boundary]``).
+BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey")
+#: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
+BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
+
+
+def _face(default: str, where: str) -> Param:
+    return Param(default, "str", "-",
+                 f"{where}: fixed (all displacements 0), roller (normal displacement 0), free, "
+                 "absorbing (Lysmer-Kuhlemeyer dashpots rho c_P normal, rho c_S tangential "
+                 "per unit area, from the soil behind the face) or caughey (fixed, with a "
+                 "graded Caughey absorbing layer inside the mesh, boundary.layer_*)",
+                 choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {
     "case": {
@@ -249,6 +262,49 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "extra soil length before X1 and after X4 (track unchanged)",
                               "nonneg"),
     },
+    "boundary": {
+        "x_min": _face("roller", "soil face at the start of the domain (x = min; the thesis: "
+                       "roller)"),
+        "x_max": _face("roller", "soil face at the end of the domain (x = max; the thesis: "
+                       "roller)"),
+        "y_min": _face("roller", "soil face beyond the building (y = min; the thesis: roller)"),
+        "y_max": _face("roller", "soil face on the other side of the track (y = max; the "
+                       "thesis: roller)"),
+        "base": _face("fixed", "bottom of the subgrade (z = min; the thesis: fixed)"),
+        "virtual_thickness": Param(0.0, "float", "m",
+                                   "absorbing faces: add springs (lambda + 2 G) / t normal and "
+                                   "G / t tangential per unit area, as if t metres of the same "
+                                   "soil lay behind the face; they give the truncated model "
+                                   "static support (0: dashpots only, the model may drift under "
+                                   "a static load)", "nonneg"),
+        "layer_thickness": Param(0.0, "float", "m",
+                                 "caughey faces: thickness of the absorbing layer, measured "
+                                 "into the mesh from the face (part of the model: enlarge the "
+                                 "domain by it, [domain])", "nonneg"),
+        "layer_damping": Param(0.3, "float", "-",
+                               "caughey faces: Rayleigh damping ratio at the face (at "
+                               "damping.f1 and f2), decreasing quadratically to 0 at the inner "
+                               "edge of the layer", "fraction"),
+    },
+    "damping": {
+        "model": Param("rayleigh", "str", "-",
+                       "damping matrix C of the full-order model (railvib transient, and "
+                       "modal.damping = 'full'): rayleigh = alpha M + beta K with "
+                       "modal.damping_ratio at damping.f1 and damping.f2; per_material = the "
+                       "same per material with materials.*.damping_ratio (the rail pads: "
+                       "modal.damping_ratio); none. Absorbing faces add their dashpots",
+                       choices=("rayleigh", "per_material", "none")),
+        "f1": Param(8.0, "float", "Hz",
+                    "lower frequency at which the Rayleigh damping equals the damping ratio "
+                    "(default: below the first soil mode of the thesis model, 9.1 Hz)", "pos"),
+        "f2": Param(40.0, "float", "Hz",
+                    "upper frequency at which the Rayleigh damping equals the damping ratio "
+                    "(default: the 300-mode band of the thesis model, 42.7 Hz; above it the "
+                    "damping grows in proportion to the frequency)", "pos"),
+        "pads": Param(False, "bool", "-",
+                      "add the rail pads' dashpots (pads.cx, cy, cz) to C (the thesis's 3 % "
+                      "modal damping does not use them)"),
+    },
     "modal": {
         "n_modes": Param(300, "int", "-", "number of modes to extract", "pos"),
         "f_max": Param(0.0, "float", "Hz",
@@ -274,8 +330,14 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "damping": Param("uniform", "str", "-",
                          "modal damping: the same ratio for every mode (the thesis), or per "
                          "material from each mode's strain-energy shares, zeta_i = sum_g "
-                         "zeta_g E_ig / sum_g E_ig (ANSYS MP,DMPR; materials.*.damping_ratio)",
-                         choices=("uniform", "strain_energy")),
+                         "zeta_g E_ig / sum_g E_ig (ANSYS MP,DMPR; materials.*.damping_ratio), "
+                         "Rayleigh (zeta_i = alpha / (2 omega_i) + beta omega_i / 2 with "
+                         "modal.damping_ratio at damping.f1, damping.f2: exactly the damping "
+                         "of the full-order model with damping.model = 'rayleigh' and no "
+                         "absorbing faces), or full (the projected damping matrix Phi^T C Phi "
+                         "of [damping] and the absorbing faces' dashpots, coupled modal "
+                         "equations)",
+                         choices=("uniform", "strain_energy", "rayleigh", "full")),
         "lumped_mass": Param(False, "bool", "-", "use lumped instead of consistent mass"),
         "hex_formulation": Param("bbar", "str", "-",
                                  "stiffness of the 8-node hexahedra: B-bar (ANSYS SOLID185 "
@@ -445,6 +507,34 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "kept (mode-acceleration method; needs static.h5 from the "
                                    "modal stage)"),
     },
+    "transient": {
+        "dt": Param(0.0, "float", "s",
+                    "time step of the full-order time integration (0: automatic, the largest "
+                    "step that divides output.dt and resolves transient.f_max with "
+                    "transient.steps_per_period steps and, with a vehicle, crosses a rail "
+                    "element in transient.steps_per_element steps)", "nonneg"),
+        "f_max": Param(80.0, "float", "Hz",
+                       "highest frequency of the analysis band (80 Hz: the top one-third-octave "
+                       "band of the assessment); a coarser time step is warned about", "pos"),
+        "steps_per_period": Param(20, "int", "-",
+                                  "automatic time step: steps per period of transient.f_max "
+                                  "(20: period error 0.8 % with the trapezoidal rule)", "pos"),
+        "steps_per_element": Param(8, "int", "-",
+                                   "automatic time step: steps while a wheel crosses one rail "
+                                   "element (8: peak contact force within 0.3 % of half the "
+                                   "step on the coarse thesis model)", "pos"),
+        "rho_inf": Param(1.0, "float", "-",
+                         "generalized-alpha (Chung-Hulbert) spectral radius at infinite "
+                         "frequency: 1 = Newmark average acceleration (trapezoidal rule, no "
+                         "numerical damping, energy conserving), < 1 damps the highest "
+                         "frequencies (0.8: period error 0.86 % instead of 0.82 % at 20 steps "
+                         "per period)",
+                         "unit"),
+        "checkpoint_interval": Param(120.0, "float", "s",
+                                     "wall-clock time between checkpoints of the state (an "
+                                     "interrupted run resumes from the last one; 0: none)",
+                                     "nonneg"),
+    },
     "output": {
         "dt": Param(0.001, "float", "s",
                     "time step of the reconstructed fields (a multiple of the MBS step; 0: every "
@@ -534,6 +624,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
             "band_hz": Param(0.0, "float", "Hz", "0: every domain uses modal.n_modes of the "
                              "case; > 0: every domain uses all its modes below this frequency "
                              "(the same band for all domains)", "nonneg"),
+            "boundaries": Param(["case"], "strs", "-",
+                                "boundary conditions of the truncation faces, each run on every "
+                                "domain: case (the case file's [boundary]), thesis (rollers, "
+                                "fixed base), absorbing (all five faces absorbing)",
+                                choices=("case", "thesis", "absorbing"), unique=True),
+            "solver": Param("modal", "str", "-",
+                            "modal (modes + mbs, the thesis's method) or direct (railvib "
+                            "transient: the full model in the time domain, causal; band_hz "
+                            "does not apply)", choices=("modal", "direct")),
             "probes": _study_probes(),
         },
         "speed": {

@@ -74,12 +74,15 @@ def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
 
 
 def _contact(mbs_path: Path):
+    """Wheel positions and contact forces of ``mbs.h5``, or of the full-order solution's
+    ``transient.h5`` next to it."""
     import h5py
 
-    if not mbs_path.exists():
-        return None, None
-    with h5py.File(mbs_path, "r") as f:
-        return f["wheels/x"][()], f["wheels/contact_force"][()]
+    for path in (mbs_path, mbs_path.with_name("transient.h5")):
+        if path.exists():
+            with h5py.File(path, "r") as f:
+                return f["wheels/x"][()], f["wheels/contact_force"][()]
+    return None, None
 
 
 def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
@@ -325,6 +328,10 @@ def model_summary(case: Case, out_dir: Path) -> str:
                          f"PETSc {f.attrs.get('petsc_version', '?')}, SLEPc "
                          f"{f.attrs.get('slepc_version', '?')}")
             lines.append(f"modes.h5 inputs      sha256 {f.attrs.get('inputs_sha256', '?')}")
+    transient = out_dir / "transient.h5"
+    if transient.exists():
+        lines.extend(_transient_summary(case, transient))
+        return "\n".join(lines)
     if case["modal.damping"] == "uniform":
         damping = f"uniform {100 * case['modal.damping_ratio']:g} %"
     else:
@@ -346,6 +353,34 @@ def model_summary(case: Case, out_dir: Path) -> str:
                      f"{'on' if case['mbs.static_correction'] else 'off'}, dt {dt:.2e} s, "
                      f"irregularity {case['irregularity.type']}")
     return "\n".join(lines)
+
+
+def _transient_summary(case: Case, path: Path) -> list[str]:
+    """Report lines of a full-order (``railvib transient``) solution."""
+    import h5py
+
+    with h5py.File(path, "r") as f:
+        stats = json.loads(f.attrs.get("stats", "{}"))
+        key = f.attrs.get("inputs_sha256", "?")
+    faces = ", ".join(f"{k} {case[f'boundary.{k}']}" for k in
+                      ("x_min", "x_max", "y_min", "y_max", "base"))
+    d = case["damping"]
+    damping = {"rayleigh": f"Rayleigh {100 * case['modal.damping_ratio']:g} % at "
+                           f"{d['f1']:g} and {d['f2']:g} Hz",
+               "per_material": f"per-material Rayleigh at {d['f1']:g} and {d['f2']:g} Hz",
+               "none": "none"}[d["model"]]
+    return [f"model                {stats.get('n_nodes', 0):,} nodes, "
+            f"{stats.get('n_dofs', 0):,} free DOFs, solved on {stats.get('ranks', '?')} rank(s)",
+            f"solver               full-order time integration (railvib transient), "
+            f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, "
+            f"dt {stats.get('dt', 0):.3e} s, {stats.get('n_steps', '?')} steps",
+            f"boundaries           {faces}"
+            + (f", virtual thickness {case['boundary.virtual_thickness']:g} m"
+               if case["boundary.virtual_thickness"] > 0 else ""),
+            f"damping              {damping}" + (", rail-pad dashpots" if d["pads"] else ""),
+            f"multibody            {case['vehicle.type']} at {case['vehicle.speed']:g} m/s, "
+            f"irregularity {case['irregularity.type']}",
+            f"transient.h5 inputs  sha256 {key}"]
 
 
 def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -17,10 +17,10 @@ mesh.h5          mesh         geometry, track, building, mesh, domain,    --
                               the content of ``mesh.file``
 modes.h5         modal        + materials, sections, pads, modal (without  mesh.h5
                               damping settings, ``modal.out_of_core``
-                              and the band split)
+                              and the band split), boundary
 static.h5        modal        as modes.h5                                 mesh.h5, modes.h5
-mbs.h5           mbs          + damping settings, vehicle, irregularity   modes.h5
-                              (and its file), mbs                         (static.h5)
+mbs.h5           mbs          + damping settings, [damping], vehicle,     modes.h5
+                              irregularity (and its file), mbs            (static.h5)
 fields.h5        reconstruct  + output.dt, window, float32,               modes.h5, mbs.h5
                               static_correction_rates                     (static.h5)
 probes.h5        reconstruct  + output.window, probes,                    modes.h5, mbs.h5
@@ -298,9 +298,10 @@ MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "ban
 #: Damping settings and the solver layout do not change the modes.
 MODAL_ONLY_EXCLUDED = ("damping_ratio", "damping", *MODAL_SOLVER_LAYOUT)
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
-                  ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED))
+                  ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
+                  ("boundary", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
-                ("modal", MODAL_SOLVER_LAYOUT),
+                ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
                 ("vehicle", ()), ("irregularity", ()), ("mbs", ()))
 _FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
                   ("output.static_correction_rates", ()))

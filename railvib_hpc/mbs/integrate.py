@@ -42,12 +42,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 from .contact import hertz_energy, hertz_linear_stiffness
 from .coupling import RailCoupling
-from .propagator import modal_propagator
+from .propagator import make_propagator
 from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
 from .static_correction import ContactResidual
 from .vehicles import Vehicle, missing_members, static_equilibrium
@@ -140,7 +141,7 @@ def simulate_moving_force(
     x0a = np.broadcast_to(np.asarray(x0, dtype=float), p.shape)
     rl = rails_tuple(rails, p.size) if residual is None else None
     dt = float(dt) if dt is not None else auto_time_step(omega)
-    prop = modal_propagator(omega, zeta, dt)
+    prop = make_propagator(omega, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     x = x0a[None, :] + speed * t[:, None]
@@ -187,14 +188,18 @@ def _hertz_scalar(d: float, d_old: float, kh: float, c: float, dt: float) -> tup
     return f, 1.5 * kh * s + c * (2.0 * d - d_old) / dt
 
 
-def _solve_contact(
+def solve_contact(
     delta_hat: np.ndarray, a: np.ndarray, delta_old: np.ndarray, kh: float, c: float,
     dt: float, tol: float, max_iter: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Solve ``delta = delta_hat - A h(delta)`` for the Hertz law h; return (delta, F).
 
-    Newton's method on ``delta`` from ``delta_hat``. One or two wheels: plain
-    Python floats (faster than numpy calls for 2x2); more wheels: vectorised.
+    ``delta_hat`` (n_wheels,) are the penetrations at zero contact force and ``A``
+    (n_wheels, n_wheels) the flexibility of the penetrations to the end-of-step
+    forces (rail plus vehicle); the modal MBS and the full-order solver
+    (:mod:`railvib_hpc.transient`) both reduce their implicit step to this. Newton's
+    method on ``delta`` from ``delta_hat``. One or two wheels: plain Python floats
+    (faster than numpy calls for 2x2); more wheels: vectorised.
     """
     if delta_hat.size > 2:
         return _solve_contact_many(delta_hat, a, delta_old, kh, c, dt, tol, max_iter)
@@ -246,6 +251,59 @@ def _solve_contact_many(delta_hat, a, delta_old, kh, c, dt, tol, max_iter):
         if np.abs(step).max() <= tol:
             return d, _hertz_vector(d, delta_old, kh, c, dt)[0]
     raise RuntimeError("contact Newton iteration did not converge; reduce dt")
+
+
+class VehiclePrediction(NamedTuple):
+    """Predictor of one vehicle step (Newmark average acceleration)."""
+
+    y: np.ndarray
+    y_dot: np.ndarray
+    a0: np.ndarray
+    heights: np.ndarray
+
+
+class VehicleNewmark:
+    """Newmark average-acceleration step of a linear vehicle loaded by contact forces.
+
+    ``M y'' + C y' + K y = f_0 + B F`` is linear in the end-of-step contact forces
+    ``F``: :meth:`predict` gives everything at ``F = 0`` (and the wheel heights
+    ``B^T y``), ``a_veh`` is the flexibility ``dt^2/4 B^T S^-1 B`` of the heights to ``F``
+    (``S = M + dt/2 C + dt^2/4 K``), and :meth:`correct` completes the step once ``F``
+    is known. Shared by the modal MBS and the full-order solver.
+    """
+
+    def __init__(self, vehicle, dt: float):
+        self.dt = float(dt)
+        self.mv, self.cv = vehicle.mass_matrix(), vehicle.damping_matrix()
+        self.kv = vehicle.stiffness_matrix()
+        self.b, self.f0 = vehicle.contact_matrix(), vehicle.external_force()
+        self.s_inv = np.linalg.inv(self.mv + 0.5 * dt * self.cv + 0.25 * dt * dt * self.kv)
+        self.a_veh = 0.25 * dt * dt * self.b.T @ self.s_inv @ self.b
+
+    def predict(self, y: np.ndarray, yd: np.ndarray, ydd: np.ndarray) -> VehiclePrediction:
+        """State at the step end for zero contact force, and its wheel heights."""
+        dt = self.dt
+        y_p = y + dt * yd + 0.25 * dt * dt * ydd
+        yd_p = yd + 0.5 * dt * ydd
+        a0 = self.s_inv @ (self.f0 - self.cv @ yd_p - self.kv @ y_p)
+        return VehiclePrediction(y_p, yd_p, a0, self.b.T @ (y_p + 0.25 * dt * dt * a0))
+
+    def correct(self, pred: VehiclePrediction, f: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(y, y_dot, y_ddot)`` at the step end with contact forces ``f``."""
+        dt = self.dt
+        ydd = pred.a0 + self.s_inv @ (self.b @ f)
+        return pred.y + 0.25 * dt * dt * ydd, pred.y_dot + 0.5 * dt * ydd, ydd
+
+    def acceleration(self, y: np.ndarray, yd: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """``y''`` from the equations of motion with contact forces ``f``."""
+        return np.linalg.solve(self.mv, self.f0 + self.b @ f - self.cv @ yd - self.kv @ y)
+
+
+def contact_tolerance(vehicle, newton_tol: float = 1e-10) -> float:
+    """Absolute Newton tolerance: ``newton_tol`` times the largest static Hertz penetration."""
+    kh = vehicle.hertz_constant
+    return newton_tol * float(np.max((vehicle.static_wheel_loads() / kh) ** (2.0 / 3.0)))
 
 
 def wheel_rails(rails: RailCoupling | Sequence[RailCoupling], vehicle) -> tuple:
@@ -352,7 +410,7 @@ def simulate_vehicle(
     if dt is None:
         dt = auto_time_step(om, rl, vehicle, points_per_period, speed)
     dt = float(dt)
-    prop = modal_propagator(om, zeta, dt)
+    prop = make_propagator(om, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     nw = vehicle.n_wheels
@@ -366,11 +424,9 @@ def simulate_vehicle(
         res = ContactResidual(residual, uniq if len(uniq) > 1 else rl, wr, x)
     irr = (lambda xs: np.zeros(nw)) if irregularity is None else irregularity
     kh, cc = vehicle.hertz_constant, vehicle.contact_damping
-    mv, cv, kv = vehicle.mass_matrix(), vehicle.damping_matrix(), vehicle.stiffness_matrix()
-    b, f0 = vehicle.contact_matrix(), vehicle.external_force()
-    s_inv = np.linalg.inv(mv + 0.5 * dt * cv + 0.25 * dt * dt * kv)
-    a_veh = 0.25 * dt * dt * b.T @ s_inv @ b
-    tol = newton_tol * float(np.max((vehicle.static_wheel_loads() / kh) ** (2.0 / 3.0)))
+    veh = VehicleNewmark(vehicle, dt)
+    mv, cv, kv, b, f0 = veh.mv, veh.cv, veh.kv, veh.b, veh.f0
+    tol = contact_tolerance(vehicle, newton_tol)
 
     psi = rows.rows(0)
     c_res = res.matrix(0) if res is not None else 0.0
@@ -413,23 +469,19 @@ def simulate_vehicle(
     for n in range(1, nt + 1):
         qf, vf = prop.free(q, v, Q)
         psi = rows.rows(n)
-        bpsi = prop.b_q1[:, None] * psi
+        bpsi = prop.q1(psi)
         r = np.asarray(irr(x[n]), dtype=float)
-        y_p = y + dt * yd + 0.25 * dt * dt * ydd
-        yd_p = yd + 0.5 * dt * ydd
-        a0 = s_inv @ (f0 - cv @ yd_p - kv @ y_p)
-        delta_hat = psi.T @ qf + r - b.T @ (y_p + 0.25 * dt * dt * a0)
-        a_mat = psi.T @ bpsi + a_veh
+        pred = veh.predict(y, yd, ydd)
+        delta_hat = psi.T @ qf + r - pred.heights
+        a_mat = psi.T @ bpsi + veh.a_veh
         if res is not None:
             c_res = res.matrix(n)
             a_mat = a_mat + c_res
-        delta, f = _solve_contact(delta_hat, a_mat, delta, kh, cc, dt, tol, max_iter)
+        delta, f = solve_contact(delta_hat, a_mat, delta, kh, cc, dt, tol, max_iter)
         Q = -psi @ f
-        q = qf + prop.b_q1 * Q
-        v = vf + prop.b_v1 * Q
-        ydd = a0 + s_inv @ (b @ f)
-        y = y_p + 0.25 * dt * dt * ydd
-        yd = yd_p + 0.5 * dt * ydd
+        q = qf + prop.q1(Q)
+        v = vf + prop.v1(Q)
+        y, yd, ydd = veh.correct(pred, f)
         no_contact = f <= 0.0
         lost[0] += bool(no_contact.any())
         lost[1:] += no_contact
@@ -514,12 +566,15 @@ def coupled_energy(
 
 __all__ = [
     "MBSResult",
+    "VehicleNewmark",
     "auto_time_step",
+    "contact_tolerance",
     "coupled_energy",
     "drop_state",
     "rigid_lift",
     "simulate_moving_force",
     "simulate_vehicle",
     "simulate_wheelset",
+    "solve_contact",
     "wheel_rails",
 ]

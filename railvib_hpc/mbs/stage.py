@@ -11,7 +11,9 @@ name, renamed when complete, reused when its inputs are unchanged):
   ``wheel_height`` (the wheel's contact point, ``B^T y``), ``rail_index``
   (n_wheels,), all (nt, n_wheels);
 * ``/vehicle/y``, ``y_dot``, ``y_ddot`` (nt, n_dof), attribute ``dof_names``;
-* ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,);
+* ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,); with
+  ``modal.damping = 'full'`` also ``damping_matrix`` (m, m) (``zeta`` is then its diagonal
+  as ratios, ``D_ii / (2 omega_i)``);
 * ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads (derivatives by
   finite differences of the stored steps) and ``/static/q_shift``,
   ``q_shift_dot``, ``q_shift_ddot`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` (and
@@ -80,18 +82,32 @@ class MBSInputError(UserError):
 
 
 def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
-    """(m,) damping ratios with the ``mbs.damping_*`` overrides applied.
+    """(m,) damping ratios, or the (m, m) modal damping matrix, with the ``mbs.damping_*``
+    overrides applied.
 
     ``modal.damping = 'uniform'``: ``modal.damping_ratio`` for every mode;
     ``'strain_energy'``: per material from the strain energies stored in ``modes_path``
-    (:func:`railvib_hpc.modal.energy.damping_from_energies`).
+    (:func:`railvib_hpc.modal.energy.damping_from_energies`); ``'rayleigh'``:
+    ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.modal.damping`); ``'full'``:
+    the matrix ``D = Phi^T C Phi`` from ``modal_damping.h5`` next to ``modes_path``
+    (:func:`railvib_hpc.modal.projection.compose_damping`), whose diagonal the overrides set
+    to ``2 zeta omega``.
 
     Raises
     ------
     MBSInputError
-        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies.
+        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies, ``full``
+        damping without a matching ``modal_damping.h5``.
     """
-    if case["modal.damping"] == "strain_energy":
+    kind = case["modal.damping"]
+    omega = None
+    if kind in ("rayleigh", "full"):
+        import h5py
+
+        with h5py.File(modes_path, "r") as f:
+            omega = np.sqrt(np.maximum(f["modes/eigenvalue"][:m], 0.0))
+            modes_sha = str(f.attrs.get("inputs_sha256", ""))
+    if kind == "strain_energy":
         from ..io.modes_io import read_strain_energies
         from ..modal.energy import damping_from_energies
 
@@ -101,6 +117,23 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
                                 "per-material strain energies (written by an older version); "
                                 "rerun 'railvib modal' to recompute it")
         zeta = damping_from_energies(energies, case)[:m].copy()
+    elif kind == "rayleigh":
+        from ..modal.damping import case_rayleigh, rayleigh_ratio
+
+        zeta = rayleigh_ratio(*case_rayleigh(case), omega)
+    elif kind == "full":
+        from ..modal.projection import compose_damping, read_damping_parts
+
+        path = Path(modes_path).with_name("modal_damping.h5")
+        parts = read_damping_parts(path, modes_sha)
+        if parts is None:
+            raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
+                                "'railvib modal' with modal.damping = 'full'")
+        d = compose_damping(case, parts, omega)
+        for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
+            if int(k) <= m:
+                d[int(k) - 1, int(k) - 1] = 2.0 * r * omega[int(k) - 1]
+        return d
     else:
         zeta = np.full(m, case["modal.damping_ratio"])
     for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
@@ -170,13 +203,45 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
     return Irregularity(profile=profile, flats=flats, wheel_rail=wheel_rail)
 
 
-def _moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
     v = case["vehicle"]
     force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
     offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
     rails = np.tile([0, 1], len(v["axle_offsets"]))
     return np.full(offs.size, force), offs, rails
+
+
+def passage(case: Case, vehicle, flexible_end: float) -> dict:
+    """The run of ``[vehicle]``: loads or wheel layout, start and end, simulated time.
+
+    Parameters
+    ----------
+    case
+        The case.
+    vehicle
+        :func:`build_vehicle`'s vehicle (None: moving forces).
+    flexible_end
+        x of the end of the flexible rail [m] (the rigid exit rail follows).
+
+    Returns
+    -------
+    dict
+        ``forces`` (moving forces, else None), ``offsets``, ``wheel_rail`` (n_wheels,),
+        ``x_start``, ``x_end``, ``t_end`` [s].
+    """
+    x_end = case["vehicle.x_end"] or flexible_end + case["track.rigid_length"]
+    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
+    forces = None
+    if vehicle is None:
+        forces, offsets, wheel_rail = moving_loads(case)
+    else:
+        offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
+        wheel_rail = np.asarray(vehicle.wheel_rail)
+    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+    return {"forces": forces, "offsets": np.asarray(offsets, dtype=float),
+            "wheel_rail": np.asarray(wheel_rail, dtype=np.int64), "x_start": x_start,
+            "x_end": x_end, "t_end": t_end}
 
 
 def _read_static(out_dir: Path, n_r: int) -> np.ndarray:
@@ -195,7 +260,7 @@ def static_wheel_load(case: Case) -> float:
     """The largest static wheel (or moving) load of the case's vehicle [N]."""
     vehicle = build_vehicle(case)
     if vehicle is None:
-        return float(np.max(_moving_loads(case)[0]))
+        return float(np.max(moving_loads(case)[0]))
     return float(np.max(vehicle.static_wheel_loads()))
 
 
@@ -313,16 +378,11 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     rm = read_rail_modes(modes_path, m)
     zeta = modal_damping(case, m, modes_path)
     vehicle = build_vehicle(case)
-    x_rigid_end = float(max(r.x_nodes[-1] for r in rm.rails)) + case["track.rigid_length"]
-    x_end = case["vehicle.x_end"] or x_rigid_end
-    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
-    if vehicle is None:
-        forces, offsets, wheel_rail = _moving_loads(case)
-    else:
-        offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
-        wheel_rail = np.asarray(vehicle.wheel_rail)
+    run = passage(case, vehicle, float(max(r.x_nodes[-1] for r in rm.rails)))
+    forces, offsets, wheel_rail = run["forces"], run["offsets"], run["wheel_rail"]
+    x_start, x_end, t_end = run["x_start"], run["x_end"], run["t_end"]
+    speed = case["vehicle.speed"]
     travel = x_end - x_start - float(np.min(offsets))
-    t_end = travel / speed + case["vehicle.t_after"]
     n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
     _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
                     n_r, out_dir)
@@ -458,6 +518,9 @@ def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, residual) -> No
     v.attrs["type"] = case["vehicle.type"]
     mg = f.create_group("modal")
     mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
+    if np.ndim(zeta) == 2:                 # coupled modes: the matrix and its diagonal
+        mg["damping_matrix"] = zeta
+        zeta = np.diag(zeta) / (2.0 * np.where(rm.omega > 0, rm.omega, 1.0))
     mg["omega"], mg["zeta"] = rm.omega, zeta
     if residual is not None:
         from .static_correction import rail_dof_rows

@@ -593,5 +593,5 @@ def cache_key(case) -> str:
     text = json.dumps({"mesh": case.digest(*MESH_INPUTS),
                        "physics": case.digest("materials", "sections", "pads",
                                               exclude=("damping_ratio", "damping")),
-                       "modal": modal}, sort_keys=True)
+                       "modal": modal, "boundary": case.digest("boundary")}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()

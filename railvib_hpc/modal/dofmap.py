@@ -109,11 +109,13 @@ DEFAULT_RULES: dict[str, tuple[str, ...]] = {
 
 def constraint_mask(mesh: Mesh, fix_sleeper_rotations: bool = True,
                     fix_rail_rotations_at_pads: bool = True,
-                    rules: dict[str, tuple[str, ...]] | None = None
+                    rules: dict[str, tuple[str, ...]] | None = None,
+                    node_sets: dict[str, np.ndarray] | None = None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Boolean (n_nodes, 6) mask of constrained components, and the beam-node mask.
 
-    ``rules`` maps a node-set name of the mesh to the components fixed on it
+    ``rules`` maps a node-set name of the mesh (or of ``node_sets``, extra named sets
+    such as the truncation faces of :mod:`.boundary`) to the components fixed on it
     (default :data:`DEFAULT_RULES`); the set name ``"all"`` means every node.
     """
     n = mesh.n_nodes
@@ -126,7 +128,7 @@ def constraint_mask(mesh: Mesh, fix_sleeper_rotations: bool = True,
     used[mesh.hexes.ravel()] = True                     # leftovers) carry no DOF
     used[mesh.lines.ravel()] = True
     fixed[~used] = True
-    ns = dict(mesh.node_sets, all=np.arange(n))
+    ns = dict(mesh.node_sets, **(node_sets or {}), all=np.arange(n))
     for name, comps in (DEFAULT_RULES if rules is None else rules).items():
         if name in ns:
             fixed[np.ix_(ns[name], [COMPONENTS.index(c) for c in comps])] = True
@@ -142,13 +144,15 @@ def constraint_mask(mesh: Mesh, fix_sleeper_rotations: bool = True,
 
 def build_dofmap(mesh: Mesh, size: int = 1, fix_sleeper_rotations: bool = True,
                  fix_rail_rotations_at_pads: bool = True,
-                 rules: dict[str, tuple[str, ...]] | None = None) -> DofMap:
+                 rules: dict[str, tuple[str, ...]] | None = None,
+                 node_sets: dict[str, np.ndarray] | None = None) -> DofMap:
     """Number the free DOFs in node order and split nodes into ``size`` contiguous ranges.
 
-    The split balances the number of DOFs per rank. ``rules``: see :func:`constraint_mask`.
+    The split balances the number of DOFs per rank. ``rules``, ``node_sets``: see
+    :func:`constraint_mask`.
     """
     fixed, beam_nodes = constraint_mask(mesh, fix_sleeper_rotations, fix_rail_rotations_at_pads,
-                                        rules)
+                                        rules, node_sets)
     free = ~fixed
     index = np.full(fixed.shape, -1, dtype=np.int64)
     index[free] = np.arange(int(free.sum()))           # row-major: node by node

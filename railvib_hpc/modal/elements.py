@@ -167,3 +167,20 @@ def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
             out += np.bincount(conn.ravel(), weights=np.repeat(m / 2, 2), minlength=len(out))
     out[~node_mask] = 0.0
     return out
+
+
+#: Name of the rail-pad group (its damping ratio is ``modal.damping_ratio``).
+PADS = "pads"
+
+
+def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:
+    """Material group -> the mesh parts it holds (groups without elements are left out)."""
+    groups: dict[str, list[str]] = {}
+    for part, mat in SOLID_MATERIAL.items():
+        groups.setdefault(mat, []).append(part)
+    for part, (mat, _) in BEAM_MATERIAL.items():
+        groups.setdefault(mat, []).append(part)
+    groups[PADS] = list(PAD_DIRECTION)
+    present = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
+    return {g: tuple(parts) for g, parts in groups.items()
+            if any(PART_ID[p] in present for p in parts)}

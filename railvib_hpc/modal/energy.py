@@ -20,30 +20,12 @@ import numpy as np
 
 from ..config import Case
 from ..mesh.model import Mesh
-from ..schema import PART_ID
 from .dofmap import DofMap
-from .elements import BEAM_MATERIAL, PAD_DIRECTION, SOLID_MATERIAL
+from .elements import PADS, material_groups
 from .petsc import assemble
 
 if TYPE_CHECKING:
     from mpi4py import MPI
-
-#: Name of the rail-pad group (its damping ratio is ``modal.damping_ratio``).
-PADS = "pads"
-
-
-def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:
-    """Material group -> the mesh parts it holds (groups without elements are left out)."""
-    groups: dict[str, list[str]] = {}
-    for part, mat in SOLID_MATERIAL.items():
-        groups.setdefault(mat, []).append(part)
-    for part, (mat, _) in BEAM_MATERIAL.items():
-        groups.setdefault(mat, []).append(part)
-    groups[PADS] = list(PAD_DIRECTION)
-    present = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
-    return {g: tuple(parts) for g, parts in groups.items()
-            if any(PART_ID[p] in present for p in parts)}
-
 
 def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
                           phi: np.ndarray) -> dict[str, np.ndarray]:

@@ -94,6 +94,8 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
     the stiffness of one material; ``mass=False`` assembles K only (M is returned as None).
+    The whole model's K (``parts=None``) includes the springs of absorbing faces with
+    ``boundary.virtual_thickness > 0`` (:mod:`.boundary`).
     """
     from petsc4py import PETSc
 
@@ -137,6 +139,10 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
             A.destroy()
         raise MeshError(f"the mesh cannot be assembled: {errors[0]}; check mesh.file or "
                         "the geometry (mesh_report.json lists the element quality)")
+    if parts is None:
+        from .boundary import boundary_node_blocks
+
+        insert_node_blocks(K, dofmap, comm.rank, *boundary_node_blocks(mesh, case, "spring"))
     t2 = time.perf_counter()
     for A in mats:
         A.assemble()
@@ -148,3 +154,150 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
             "local_elements": int(hex_mask.sum() + line_mask.sum()),
             "local_hexes": int(hex_mask.sum()), "local_nnz": int(len(ix))}
     return K, M, info
+
+
+def insert_node_blocks(A, dofmap: DofMap, rank: int, nodes: np.ndarray, blocks: np.ndarray
+                       ) -> None:
+    """Add 3 x 3 blocks on the translations of single nodes to A (owned rows only).
+
+    The blocks lie on the diagonal node blocks, which every pattern of
+    :func:`local_pattern` holds; eliminated DOFs are skipped.
+    """
+    from petsc4py import PETSc
+
+    if len(nodes) == 0:
+        return
+    r0, r1 = dofmap.owned_dofs(rank)
+    cols = dofmap.index[nodes, :3]
+    rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+    A.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                   np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                   np.ascontiguousarray(blocks, dtype=float), addv=PETSc.InsertMode.ADD_VALUES)
+
+
+def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
+    """The damping matrix C of the full-order model (distributed, K's pattern).
+
+    ``C = C_material + C_dashpots (+ C_pads)`` from ``[damping]`` and ``[boundary]``
+    (:mod:`.damping`):
+
+    * ``damping.model = 'rayleigh'``: ``alpha M + beta K`` (the whole K, boundary springs
+      included, so that ``Phi^T C Phi = diag(alpha + beta omega^2)`` exactly);
+    * ``'per_material'``: ``sum_g alpha_g M_g + beta_g K_g`` over the material groups of
+      :func:`.energy.material_groups` (each assembled with its own elements; the rail pads
+      take ``modal.damping_ratio``);
+    * the Lysmer-Kuhlemeyer dashpots of the absorbing faces (lumped node blocks);
+    * ``damping.pads``: the rail pads' dashpots ``pads.cx, cy, cz``.
+
+    Entries depend on global DOF numbers only, so C is the same on any number of ranks.
+    Returns ``(C, info)`` with the coefficients used.
+    """
+    from petsc4py import PETSc
+
+    from .boundary import boundary_node_blocks
+    from .damping import material_rayleigh, rayleigh_coefficients
+
+    C = K.duplicate(copy=False)
+    C.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    subset = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
+    same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+    info: dict = {"model": case["damping.model"]}
+    model = case["damping.model"]
+    if model == "rayleigh":
+        alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
+                                            case["damping.f2"])
+        C.axpy(beta, K, structure=same)
+        C.axpy(alpha, M, structure=same)
+        info["alpha"], info["beta"] = alpha, beta
+    elif model == "per_material":
+        from .elements import material_groups
+
+        coeffs = material_rayleigh(case, list(material_groups(mesh)))
+        info["groups"] = coeffs
+        for group, parts in material_groups(mesh).items():
+            alpha, beta = coeffs[group]
+            Kg, Mg, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=alpha != 0.0)
+            C.axpy(beta, Kg, structure=subset)
+            if Mg is not None:
+                C.axpy(alpha, Mg, structure=subset)
+                Mg.destroy()
+            Kg.destroy()
+    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
+    info["dashpot_nodes"] = len(nodes)
+    info["layer_elements"] = insert_layer_damping(C, mesh, case, dofmap, comm.rank)
+    if case["damping.pads"]:
+        insert_pad_dashpots(C, mesh, case, dofmap, comm.rank)
+    C.assemble()
+    C.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    C.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
+    return C, info
+
+
+def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> None:
+    """Add the rail pads' dashpots ``pads.cx, cy, cz`` to C (owned rows; K's pattern)."""
+    from petsc4py import PETSc
+
+    from ..fem.spring import spring_matrices
+    from .elements import PAD_DIRECTION
+
+    r0, r1 = dofmap.owned_dofs(rank)
+    for part, (key, direction) in PAD_DIRECTION.items():
+        conn = mesh.lines[mesh.line_part == PART_ID[part]]
+        if not len(conn):
+            continue
+        c = case[f"pads.c{key[1]}"]
+        cols = dofmap.index[conn, direction]
+        rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+        C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                       np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                       spring_matrices(c, np.full(len(conn), direction)),
+                       addv=PETSc.InsertMode.ADD_VALUES)
+
+
+def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, which: str):
+    """A matrix with K's pattern holding only the absorbing faces' dashpots
+    (``which = 'dashpots'``) or the rail pads' dashpots (``'pads'``); assembled."""
+    from petsc4py import PETSc
+
+    from .boundary import boundary_node_blocks
+
+    A = K.duplicate(copy=False)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    if which == "dashpots":
+        insert_node_blocks(A, dofmap, rank, *boundary_node_blocks(mesh, case, "dashpot"))
+    elif which == "pads":
+        insert_pad_dashpots(A, mesh, case, dofmap, rank)
+    else:
+        raise ValueError(f"which must be 'dashpots' or 'pads', got {which!r}")
+    A.assemble()
+    return A
+
+
+def insert_layer_damping(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> int:
+    """Add the graded Caughey layers' damping ``sum_e w_e (alpha M_e + beta K_e)`` to C
+    (:func:`.boundary.layer_weights`; ``alpha, beta`` from ``boundary.layer_damping`` at
+    ``damping.f1``, ``f2``). Returns the number of elements in the layers."""
+    from petsc4py import PETSc
+
+    from .boundary import layer_weights
+    from .damping import rayleigh_coefficients
+
+    weights = layer_weights(mesh, case)
+    if not weights.any():
+        return 0
+    alpha, beta = rayleigh_coefficients(case["boundary.layer_damping"], case["damping.f1"],
+                                        case["damping.f2"])
+    r0, r1 = dofmap.owned_dofs(rank)
+    own = np.zeros(mesh.n_nodes, dtype=bool)
+    own[dofmap.owned_nodes(rank)] = True
+    mask = (weights > 0) & own[mesh.hexes].any(axis=1)
+    for batch in element_batches(mesh, case, mask, np.zeros(len(mesh.lines), bool)):
+        w = layer_weights(mesh, case, mesh.points[batch.conn].mean(axis=1))
+        local = w[:, None, None] * (alpha * batch.M + beta * batch.K)
+        cols = batch.dofs(dofmap.index)
+        rows = np.where((cols >= r0) & (cols < r1), cols, -1)
+        C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
+                       np.ascontiguousarray(cols, dtype=PETSc.IntType),
+                       np.ascontiguousarray(local), addv=PETSc.InsertMode.ADD_VALUES)
+    return int((weights > 0).sum())

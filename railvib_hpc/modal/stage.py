@@ -20,11 +20,17 @@ from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
-from .dofmap import build_dofmap
+from .boundary import case_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
+from .projection import (
+    project_damping_parts,
+    read_damping_parts,
+    read_phi_rows,
+    write_damping_parts,
+)
 from .static import rail_load_dofs, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
@@ -107,6 +113,8 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         return None
 
     old = on_root(previous, comm)
+    want_damping = case["modal.damping"] == "full"
+    damping_path = out_dir / "modal_damping.h5"
     if old is not None:
         f, stats, modes_sha = old
         rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
@@ -123,6 +131,10 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
 
             if not on_root(static_ok, comm):
                 _static_only(case, out_dir, comm, rep, modes_sha)
+        if want_damping and not on_root(
+                lambda: read_damping_parts(damping_path, damping_key(case, modes_sha))
+                is not None, comm):
+            _damping_only(case, out_dir, comm, rep, damping_key(case, modes_sha), len(f))
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                 **json.loads(stats)}
 
@@ -130,8 +142,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):
-        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
-                              case["modal.fix_rail_rotations_at_pads"])
+        dofmap = case_dofmap(mesh, case, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
     on_root(lambda: _check_space(case, out_dir, mesh, dofmap, want_static), comm)
     with rep.stage("assembly"):
@@ -150,8 +161,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
             bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
-                mesh, case, build_dofmap(mesh, sub.size, case["modal.fix_sleeper_rotations"],
-                                         case["modal.fix_rail_rotations_at_pads"]), sub)[:2])
+                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2])
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
         M.destroy()
@@ -167,6 +177,10 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
                  f"'{case['modal.out_of_core']}')")
     with rep.stage("strain energies"):
         energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
+    parts = None
+    if want_damping:
+        with rep.stage("projected damping"):
+            parts = project_damping_parts(mesh, case, dofmap, comm, K, result.phi)
     x_static = result.static
     if want_static and x_static is None:
         with rep.stage("static solves"):
@@ -205,6 +219,11 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
              f"{stats['max_relative_residual']:.2e}; {stats['linear_solves']} right-hand sides "
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
+    if parts is not None:
+        on_root(lambda: write_damping_parts(damping_path, parts, damping_key(case, modes_sha)),
+                comm)
+        rep.info(f"wrote {damping_path}: Phi^T C Phi of the dashpots, pads and materials "
+                 "(modal.damping = 'full')")
     if want_static:
         with rep.stage("write static.h5"):
             sattrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
@@ -266,8 +285,7 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
     """static.h5 for reused modes: assemble K again and factor it once."""
     with rep.stage("static correction: mesh + assembly"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
-        dofmap = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
-                              case["modal.fix_rail_rotations_at_pads"])
+        dofmap = case_dofmap(mesh, case, comm.size)
         K, M, _ = assemble(mesh, case, dofmap, comm)
     load_dofs, table = rail_load_dofs(mesh, dofmap)
     rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
@@ -285,6 +303,29 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
         write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs)
     rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
              "rail DOFs (static correction)")
+
+
+def damping_key(case: Case, modes_sha: str) -> str:
+    """Key of ``modal_damping.h5``: the content of the modes it projects on and the case keys
+    of the damping matrix's parts (faces, pads, materials, [damping])."""
+    from ..io.stage_files import digest
+
+    return digest({"modes.h5": modes_sha,
+                   "case": case.digest("boundary", "pads", "materials", "damping")})
+
+
+def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str,
+                  m: int) -> None:
+    """modal_damping.h5 for reused modes: assemble again, read the modes' rows, project."""
+    with rep.stage("projected damping (reused modes)"):
+        mesh = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[0], comm)
+        dofmap = case_dofmap(mesh, case, comm.size)
+        K, _, _ = assemble(mesh, case, dofmap, comm, mass=False)
+        phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, m)
+        parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
+        K.destroy()
+    on_root(lambda: write_damping_parts(out_dir / "modal_damping.h5", parts, key), comm)
+    rep.info(f"wrote {out_dir / 'modal_damping.h5'} (modal.damping = 'full')")
 
 
 def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:

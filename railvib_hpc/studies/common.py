@@ -132,8 +132,11 @@ def variant_case(case: Case, overrides: Sequence[str]) -> Case:
 
 def variant_digest(kind: str, vcase: Case, settings: dict[str, Any]) -> str:
     """SHA-256 identifying a variant's result: its full case, the study, the format."""
-    return digest({"format": RESULT_FORMAT, "version": __version__, "study": kind,
-                   "case": vcase.digest(), "probes": settings.get("probes")})
+    payload = {"format": RESULT_FORMAT, "version": __version__, "study": kind,
+               "case": vcase.digest(), "probes": settings.get("probes")}
+    if settings.get("solver", "modal") != "modal":
+        payload["solver"] = settings["solver"]
+    return digest(payload)
 
 
 def jsonable(x: Any) -> Any:
@@ -272,8 +275,6 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
         ``duration``.
     """
-    from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
-    from ..assess.weighting import third_octave_rms
     from ..reconstruct.probes import probe_histories, write_probes_h5
     from ..reconstruct.stage import read_inputs
 
@@ -291,7 +292,21 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
                                                      "probes": "mesh"})
     attrs["source"] = "study (from modes)"
     write_probes_h5(vdir / "probes.h5", hist, attrs=attrs)
-    t = info["t"]
+    return response_metrics(hist, case, probes)
+
+
+def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
+    """Peaks of every probe, assessment and spectra of ``probes`` (see :func:`probe_response`)
+    from probe histories ``{name: {t, displacement, velocity, acceleration, coords}}``."""
+    from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
+    from ..assess.weighting import third_octave_rms
+    from ..schema import DEFAULT_PROBE_ROLE
+
+    missing = [p for p in probes if p not in hist]
+    if missing:
+        raise StudyError(f"study setting probes = {list(probes)}: {missing} are not probes "
+                         f"of the mesh; available: {', '.join(hist)}")
+    t = next(iter(hist.values()))["t"]
     fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
     peaks, assessment, spectra = {}, {}, {}
     a_cfg = case["assessment"]
@@ -312,7 +327,8 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
             continue
         res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],
                            period=a_cfg["period"], fta_events=a_cfg["fta_events"],
-                           din4150_3_location=DIN4150_3_LOCATION_OF_ROLE[h["role"]],
+                           din4150_3_location=DIN4150_3_LOCATION_OF_ROLE[
+                               h.get("role") or DEFAULT_PROBE_ROLE],
                            din4150_2_events=a_cfg["din4150_2_events"] or None)
         utils = {s: b.get("utilisation") for s, b in res["standards"].items()}
         binding = [u for s, u in utils.items()
@@ -374,6 +390,8 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
         rep.info(f"[{plan.kind}/{v.name}] finished earlier: skipping ({vdir / RESULT_NAME})")
         return {**done, "reused_result": True}
     rep.info(f"[{plan.kind}/{v.name}] running: " + (", ".join(v.overrides) or "the case"))
+    if settings.get("solver") == "direct":
+        return _run_direct_variant(plan, v, vcase, digest, vdir, comm, rep, settings)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
     try:
@@ -415,18 +433,62 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
         with rep.stage(f"{plan.kind}/{v.name}: probes + metrics"):
             result = on_root(finish, comm)
     except UserError as exc:
-        msg = str(exc)
+        return _record_failure(plan, v, digest, vdir, comm, rep, exc)
+    return {**result, "reused_result": False}
 
-        def record() -> None:
-            vdir.mkdir(parents=True, exist_ok=True)
-            write_text(vdir / FAILED_NAME, json.dumps(
-                {"study": plan.kind, "variant": v.name, "parameter": v.parameter,
-                 "overrides": list(v.overrides), "inputs_sha256": digest, "error": msg},
-                indent=1))
 
-        on_root(record, comm)
-        rep.info(f"[{plan.kind}/{v.name}] FAILED: {msg}")
-        return {"failed": msg, "variant": v.name}
+def _record_failure(plan: StudyPlan, v: Variant, digest: str, vdir: Path, comm, rep: Reporter,
+                    exc: UserError) -> dict:
+    """Write ``failed.json`` for a variant that stopped with a user error."""
+    msg = str(exc)
+
+    def record() -> None:
+        vdir.mkdir(parents=True, exist_ok=True)
+        write_text(vdir / FAILED_NAME, json.dumps(
+            {"study": plan.kind, "variant": v.name, "parameter": v.parameter,
+             "overrides": list(v.overrides), "inputs_sha256": digest, "error": msg},
+            indent=1))
+
+    on_root(record, comm)
+    rep.info(f"[{plan.kind}/{v.name}] FAILED: {msg}")
+    return {"failed": msg, "variant": v.name}
+
+
+def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str, vdir: Path,
+                        comm, rep: Reporter, settings: dict[str, Any]) -> dict:
+    """A variant solved by the full-order time integration (``railvib transient``)."""
+    from ..assess.stage import read_probes
+    from ..transient.stage import run_transient_stage
+
+    t_start = time.perf_counter()
+    try:
+        stats = run_transient_stage(vcase, vdir, comm, rep)
+        timings = {"transient": time.perf_counter() - t_start}
+
+        def finish() -> dict:
+            t1 = time.perf_counter()
+            resp = response_metrics(read_probes(vdir / "probes.h5"), vcase, settings["probes"])
+            timings["response"] = time.perf_counter() - t1
+            timings["total"] = time.perf_counter() - t_start
+            model = {"n_nodes": stats["n_nodes"], "n_dofs": stats["n_dofs"],
+                     "n_hexes": None, "modes_in_file": None, "modes_used": None,
+                     "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
+                     "solver": "direct", "dt": stats["dt"], "n_steps": stats["n_steps"],
+                     "time_integration": stats["time_integration"],
+                     "peak_rss_gb_total": stats["peak_rss_gb_total"]}
+            result = {
+                "schema": RESULT_FORMAT, "study": plan.kind, "variant": v.name,
+                "parameter": v.parameter, "overrides": list(v.overrides),
+                "inputs_sha256": digest, "railvib_version": __version__, "ranks": comm.size,
+                "model": model, "mbs": mbs_metrics(stats), **resp, "timings": timings,
+                "reused": {"transient": bool(stats.get("reused"))}, "complete": True}
+            write_result(vdir, result)
+            return result
+
+        with rep.stage(f"{plan.kind}/{v.name}: probes + metrics"):
+            result = on_root(finish, comm)
+    except UserError as exc:
+        return _record_failure(plan, v, digest, vdir, comm, rep, exc)
     return {**result, "reused_result": False}
 
 

@@ -11,6 +11,12 @@ subgrade (``geometry.z0`` up by 1.8 m: 0.6 m below the 2.4 m-deep building base)
 fixed base and the roller sides move). A negative first entry of a domain (its depth
 change) raises the base; a positive one deepens the subgrade (``domain.extra_depth``).
 
+``boundaries`` adds the condition of the truncation faces as a dimension: every domain is run
+with each setting (``case``: the case file's ``[boundary]``; ``thesis``: rollers and a fixed
+base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces) and compared with the
+largest domain of the same setting. ``solver = direct`` runs every variant with the
+full-order time integration (``railvib transient``) instead of modes + multibody.
+
 Compared: the building peak accelerations (vertical and total) and their one-third-octave
 spectra (1–80 Hz, total acceleration). Verdict: boundary reflections matter when the case's
 own domain (the one with no change; otherwise the first) differs from the reference by more
@@ -66,12 +72,25 @@ def domain_overrides(case: Case, change: tuple[float, float, float]) -> list[str
                   f"domain.extra_width={base['extra_width'] + w!r}"]
 
 
+#: Overrides of each boundary setting of the study (``boundaries``).
+BOUNDARY_OVERRIDES = {
+    "case": (),
+    "thesis": ("boundary.x_min=roller", "boundary.x_max=roller", "boundary.y_min=roller",
+               "boundary.y_max=roller", "boundary.base=fixed"),
+    "absorbing": tuple(f"boundary.{f}=absorbing" for f in
+                       ("x_min", "x_max", "y_min", "y_max", "base")),
+}
+
+
 def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
-    """One variant per domain (own mesh and modes)."""
+    """One variant per boundary setting and domain (own mesh and modes, or the direct
+    solution with ``solver = direct``). With one boundary setting the variants are named
+    after the domains, otherwise ``<boundary>-<domain>``."""
     from .settings import StudySettingsError
 
     variants = []
-    band = settings["band_hz"]
+    direct = settings.get("solver", "modal") == "direct"
+    band = 0.0 if direct else settings["band_hz"]
     lowest = -(case["geometry.zbb"] - case["geometry.z0"]) - case["domain.extra_depth"]
     bad = [dom for dom in settings["domains"] if dom[0] <= lowest]
     if bad:
@@ -80,14 +99,18 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
             f"the depth changes {[dom[0] for dom in bad]} m raise the fixed base to or above "
             f"the building base (z = {case['geometry.zbb']:g} m): a depth change must be "
             f"> {lowest:g} m")])
-    for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
-        ov = domain_overrides(case, (d, ln, w))
-        if band > 0:
-            # every mode below the band, proved by the inertia counts of the band solve
-            ov += [f"modal.f_max={float(band)!r}"]
-        variants.append(Variant(name=name, overrides=tuple(ov),
-                                parameter={"extra_depth": d, "extra_length": ln,
-                                           "extra_width": w}, band_hz=band))
+    boundaries = settings.get("boundaries", ["case"])
+    for b in boundaries:
+        for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
+            ov = [*domain_overrides(case, (d, ln, w)), *BOUNDARY_OVERRIDES[b]]
+            if band > 0:
+                # every mode below the band, proved by the inertia counts of the band solve
+                ov += [f"modal.f_max={float(band)!r}"]
+            variants.append(Variant(name=name if len(boundaries) == 1 else f"{b}-{name}",
+                                    overrides=tuple(ov),
+                                    parameter={"boundary": b, "extra_depth": d,
+                                               "extra_length": ln, "extra_width": w},
+                                    band_hz=band))
     return StudyPlan("reflection", tuple(variants))
 
 
@@ -112,62 +135,88 @@ def spectrum_difference_db(spec: dict, ref: dict, floor: float = 0.1) -> float |
 
 
 def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]) -> dict:
-    """Peaks and spectra of every domain against the reference (the last domain)."""
-    done = [v for v in plan_.variants if v.name in results]
-    if len(done) < 2:
-        return {"title": TITLE, "verdict": {"text": f"{len(done)} domain(s) finished; need 2",
-                                            "ok": None}, "tables": [], "rows": []}
-    ref = done[-1]
-    complete_ref = ref.name == plan_.variants[-1].name
-    qref = response_quantities(results[ref.name], settings["probes"])
-    names = list(_only_acc(qref))
-    data = []
-    for i, v in enumerate(done):
-        r = results[v.name]
-        q = response_quantities(r, settings["probes"])
-        prev = done[i - 1] if i else None
-        qprev = response_quantities(results[prev.name], settings["probes"]) if prev else None
-        dev = {k: relative(q[k], qref[k]) for k in names}
-        step = {k: relative(q[k], qprev[k]) for k in names} if qprev else {}
-        sdb = {p: spectrum_difference_db(r["spectra"].get(p), results[ref.name]["spectra"]
-                                         .get(p)) for p in settings["probes"]}
-        data.append({"variant": v.name, **v.parameter, "n_nodes": r["model"]["n_nodes"],
-                     "n_dofs": r["model"]["n_dofs"], "modes": r["model"]["modes_used"],
-                     "band_hz": r["model"]["f_max_hz"], "f1_hz": r["model"]["frequencies_hz"][0],
-                     "quantities": q, "deviation": dev, "step": step,
-                     "max_deviation": max((x for x in dev.values() if x is not None),
-                                          default=None),
-                     "max_step": max((x for x in step.values() if x is not None), default=None),
-                     "spectrum_db": sdb, "wall_s": r["timings"]["total"]})
-    head = ["domain", "+depth [m]", "+length [m]", "+width [m]", "nodes", "DOFs", "modes",
-            "band [Hz]", "f1 [Hz]", *names, "peak contact force"]
-    rows = [[d["variant"], fmt(d["extra_depth"]), fmt(d["extra_length"]),
+    """Peaks and spectra of every domain against the reference (the last domain of the same
+    boundary setting)."""
+    groups: dict[str, list] = {}
+    for v in plan_.variants:
+        groups.setdefault(v.parameter.get("boundary", "case"), []).append(v)
+    data, dtables, verdicts = [], [], []
+    names = None
+    for boundary, variants in groups.items():
+        done = [v for v in variants if v.name in results]
+        if len(done) < 2:
+            continue
+        ref = done[-1]
+        qref = response_quantities(results[ref.name], settings["probes"])
+        names = list(_only_acc(qref))
+        rows = []
+        for i, v in enumerate(done):
+            r = results[v.name]
+            q = response_quantities(r, settings["probes"])
+            qprev = response_quantities(results[done[i - 1].name], settings["probes"]) \
+                if i else None
+            dev = {k: relative(q[k], qref[k]) for k in names}
+            step = {k: relative(q[k], qprev[k]) for k in names} if qprev else {}
+            sdb = {p: spectrum_difference_db(r["spectra"].get(p), results[ref.name]["spectra"]
+                                             .get(p)) for p in settings["probes"]}
+            rows.append({"variant": v.name, "boundary": boundary, **v.parameter,
+                         "n_nodes": r["model"]["n_nodes"], "n_dofs": r["model"]["n_dofs"],
+                         "modes": r["model"]["modes_used"], "band_hz": r["model"]["f_max_hz"],
+                         "f1_hz": r["model"]["frequencies_hz"][0], "quantities": q,
+                         "deviation": dev, "step": step,
+                         "max_deviation": max((x for x in dev.values() if x is not None),
+                                              default=None),
+                         "max_step": max((x for x in step.values() if x is not None),
+                                         default=None),
+                         "spectrum_db": sdb, "wall_s": r["timings"]["total"]})
+        data.extend(rows)
+        complete_ref = ref.name == variants[-1].name
+        verdicts.append(_verdict(rows, ref, settings, complete_ref, boundary,
+                                 len(groups) > 1))
+        drows = [[d["variant"], *(pct(d["deviation"][k]) for k in names),
+                  pct(d["max_deviation"]), pct(d["max_step"])] for d in rows]
+        dtables.append({"title": f"Difference from the reference domain {ref.name}",
+                        **dict(zip(("head", "rows"), transpose(
+                            ["domain", *names, "max vs reference", "max vs previous domain"],
+                            drows)))})
+    if not verdicts:
+        return {"title": TITLE, "verdict": {"text": "fewer than 2 domains of any boundary "
+                                            "setting finished; need 2", "ok": None},
+                "tables": [], "rows": []}
+    head = ["domain", "boundary", "+depth [m]", "+length [m]", "+width [m]", "nodes", "DOFs",
+            "modes", "band [Hz]", "f1 [Hz]", *names, "peak contact force"]
+    rows = [[d["variant"], d["boundary"], fmt(d["extra_depth"]), fmt(d["extra_length"]),
              fmt(d["extra_width"]), fmt(d["n_nodes"]), fmt(d["n_dofs"]), fmt(d["modes"]),
              fmt(d["band_hz"]), fmt(d["f1_hz"]), *(fmt(d["quantities"][k]) for k in names),
              fmt(d["quantities"]["peak contact force"])] for d in data]
-    drows = [[d["variant"], *(pct(d["deviation"][k]) for k in names),
-              pct(d["max_deviation"]), pct(d["max_step"])] for d in data]
     srows = [[d["variant"], *(fmt(d["spectrum_db"][p], 3) for p in settings["probes"])]
              for d in data]
-    verdict = _verdict(data, ref, settings, complete_ref)
+    direct = settings.get("solver", "modal") == "direct"
     tables = [
         {"title": "Domains and peak responses",
          **dict(zip(("head", "rows"), transpose(head, rows))),
          "note": "Accelerations in m/s² (a_z vertical, |a| total peak), contact force in N; "
-                 "band: frequency of the highest mode used, f1: lowest natural frequency."},
-        {"title": f"Difference from the reference domain {ref.name}",
-         **dict(zip(("head", "rows"), transpose(
-             ["domain", *names, "max vs reference", "max vs previous domain"], drows)))},
+                 + ("solver: direct time integration of the full model (band: "
+                    "transient.f_max, no modes)." if direct else
+                    "band: frequency of the highest mode used, f1: lowest natural "
+                    "frequency.")},
+        *dtables,
         {"title": "One-third-octave spectra: largest band difference from the reference [dB]",
          "head": ["domain", *settings["probes"]], "rows": srows,
          "note": "Total acceleration, bands 1–80 Hz where the reference exceeds 10 % of its "
                  "largest band."},
     ]
+    verdict = dict(verdicts[0])
+    if len(verdicts) > 1:
+        verdict["text"] = "; ".join(v["text"] for v in verdicts)
+        verdict["ok"] = all(v["ok"] for v in verdicts)
+        verdict["groups"] = verdicts
     return {"title": TITLE, "verdict": verdict, "tables": tables, "rows": data,
-            "reference": ref.name}
+            "reference": verdicts[0]["reference"]}
 
 
-def _verdict(data: list, ref: Variant, settings: dict, complete_ref: bool) -> dict:
+def _verdict(data: list, ref: Variant, settings: dict, complete_ref: bool,
+             boundary: str = "case", named: bool = False) -> dict:
     thr = settings["threshold"] / 100.0
     own = [d for d in data[:-1] if (d["extra_depth"], d["extra_length"], d["extra_width"])
            == (0.0, 0.0, 0.0)]
@@ -175,7 +224,8 @@ def _verdict(data: list, ref: Variant, settings: dict, complete_ref: bool) -> di
     dev = first["max_deviation"]
     worst = max(first["deviation"], key=lambda k: first["deviation"][k] or 0.0)
     matters = dev is not None and dev > thr
-    text = (f"boundary reflections {'MATTER' if matters else 'do not matter'} for the "
+    text = ((f"with {boundary} boundaries: " if named else "")
+            + f"boundary reflections {'MATTER' if matters else 'do not matter'} for the "
             f"{first['variant']} domain: its building peak accelerations differ from the "
             f"reference domain {ref.name} by up to {100 * (dev or 0):.2f} % ({worst}; "
             f"threshold {settings['threshold']:g} %)")
@@ -188,7 +238,7 @@ def _verdict(data: list, ref: Variant, settings: dict, complete_ref: bool) -> di
         text += " [the planned reference domain has not finished]"
     return {"text": text, "ok": not matters, "reflections_matter": matters,
             "max_deviation": dev, "governing": worst, "threshold_percent": settings["threshold"],
-            "within_threshold_from": ok_from}
+            "within_threshold_from": ok_from, "boundary": boundary, "reference": ref.name}
 
 
 def figures(analysis: dict, results: dict[str, dict], settings: dict[str, Any],

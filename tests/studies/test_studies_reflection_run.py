@@ -61,3 +61,39 @@ def test_reflection_study_with_a_band_uses_band_sliced_modes(shared_tmp, capsys)
             counts[name] = len(f)
         assert counts["big"] >= counts["small"] >= 1
     comm.Barrier()
+
+
+def test_reflection_study_with_boundary_types_and_the_direct_solver(shared_tmp, capsys):
+    """Boundary type as a dimension, every variant by the full-order time integration."""
+    short = ["--set", "vehicle.x_start=2.7", "--set", "vehicle.x_end=4.2", "--set",
+             "output.dt=0.002", "--set", "output.stress_times=[]", "--set",
+             "transient.checkpoint_interval=0"]
+    args = ["study", "reflection", str(BASELINE), *TINY, *short, "--out", str(shared_tmp),
+            "--study-set", "domains=[[0, 0, 0], [1.2, 1.2, 3]]",
+            "--study-set", "names=[small, big]", "--study-set", "boundaries=[thesis,absorbing]",
+            "--study-set", "solver=direct"]
+    assert run(args) == 0
+    out = capsys.readouterr().out
+    if comm.rank == 0:
+        root = shared_tmp / "reflection"
+        report = json.loads((root / "report.json").read_text())
+        rows = {r["variant"]: r for r in report["analysis"]["rows"]}
+        assert set(rows) == {"thesis-small", "thesis-big", "absorbing-small", "absorbing-big"}
+        groups = report["verdict"]["groups"]
+        assert [g["boundary"] for g in groups] == ["thesis", "absorbing"]
+        assert [g["reference"] for g in groups] == ["thesis-big", "absorbing-big"]
+        assert "with thesis boundaries" in out and "with absorbing boundaries" in out
+        res = json.loads((root / "absorbing-small" / "result.json").read_text())
+        assert res["model"]["solver"] == "direct"
+        assert "boundary.base=absorbing" in res["overrides"]
+        assert (root / "absorbing-small" / "transient.h5").exists()
+    comm.Barrier()
+
+
+def test_reflection_settings_reject_unknown_boundaries_and_solvers():
+    from railvib_hpc.studies.settings import StudySettingsError, study_settings
+
+    with pytest.raises(StudySettingsError, match=r"boundaries.*unknown entries \['sponge'\]"):
+        study_settings("reflection", ["boundaries=[thesis,sponge]"])
+    with pytest.raises(StudySettingsError, match=r"solver = 'fast': allowed: modal, direct"):
+        study_settings("reflection", ["solver=fast"])

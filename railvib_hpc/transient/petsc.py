@@ -1,0 +1,168 @@
+"""The full-order system on PETSc: effective matrix, one MUMPS factor, right-hand sides.
+
+:class:`TransientSystem` holds the distributed K, M, C of the model, builds the effective
+matrix ``K_eff = c_m M + c_c C + c_k K`` of :class:`~.scheme.GeneralizedAlpha` (the same
+sparsity pattern as K), factors it once with MUMPS Cholesky (through
+:class:`~railvib_hpc.modal.block_lanczos.BlockOperator`: memory check, automatic out of
+core, options prefix ``railvib_tr_st_``) and reuses the factor at every step. The history
+part of the right-hand side is precombined into at most three matrices
+``H_u = m_u M + c_u C - alpha_f K``, ``H_v = m_v M + c_v C``, ``H_a = m_a M + c_a C``
+(``H_a`` vanishes for the trapezoidal rule), so a step costs one solve and two or three
+sparse products.
+
+State vectors are numpy arrays of this rank's rows (global DOF numbers of
+:class:`~railvib_hpc.modal.dofmap.DofMap`, independent of the number of ranks) wrapped as
+PETSc vectors without copies.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .scheme import GeneralizedAlpha
+
+#: Options prefix of the effective-matrix factorization (``-railvib_tr_st_mat_mumps_...``).
+PREFIX = "railvib_tr_"
+
+
+class TransientSystem:
+    """``K_eff`` factored once; products with K, M, C; energies.
+
+    Parameters
+    ----------
+    K, M, C
+        Distributed AIJ matrices with one pattern (C may be None: undamped).
+    scheme
+        The time-integration scheme (step and parameters).
+    comm
+        MPI communicator.
+    extra_gb
+        Memory the caller will need besides the factor (e.g. the rail columns), for the
+        memory check.
+    """
+
+    def __init__(self, K, M, C, scheme: GeneralizedAlpha, comm, extra_gb: float = 0.0):
+        from petsc4py import PETSc
+
+        from ..modal.block_lanczos import BlockOperator
+
+        self.K, self.M, self.C, self.scheme, self.comm = K, M, C, scheme, comm
+        self.n_global = K.getSize()[0]
+        self.r0, self.r1 = K.getOwnershipRange()
+        self.n_local = self.r1 - self.r0
+        same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+        t0 = time.perf_counter()
+        k_eff = K.duplicate(copy=True)
+        k_eff.scale(scheme.c_stiffness)
+        k_eff.axpy(scheme.c_mass, M, structure=same)
+        if C is not None:
+            k_eff.axpy(scheme.c_damping, C, structure=same)
+        k_eff.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        k_eff.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
+        self.k_eff = k_eff
+        self.history_matrices = self._history(PETSc)
+        self.time_setup = time.perf_counter() - t0
+        self.op = BlockOperator(k_eff, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
+        self.time_factorization = self.op.time_factorization
+        self.factor_memory_gb = self.op.factor_memory_gb
+        self.out_of_core = self.op.out_of_core
+        self._work = [self.vector() for _ in range(2)]
+        self.n_solves = 0
+        self.time_solves = 0.0
+        self.time_products = 0.0
+
+    def _history(self, PETSc) -> list:
+        """``[(matrix, which state)]`` of the right-hand side's history part."""
+        h = self.scheme.history()
+        same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
+        out = []
+        for slot in range(3):
+            cm, cc = h["M"][slot], h["C"][slot] if self.C is not None else 0.0
+            ck = h["K"][slot]
+            if cm == 0.0 and cc == 0.0 and ck == 0.0:
+                continue
+            A = self.M.duplicate(copy=True)
+            A.scale(cm)
+            if cc != 0.0:
+                A.axpy(cc, self.C, structure=same)
+            if ck != 0.0:
+                A.axpy(ck, self.K, structure=same)
+            out.append((A, slot))
+        return out
+
+    # ---------------------------------------------------------------- vectors
+    def vector(self, array: np.ndarray | None = None):
+        """A distributed PETSc vector on ``array`` (this rank's rows; zeros if None)."""
+        from petsc4py import PETSc
+
+        if array is None:
+            array = np.zeros(self.n_local)
+        return PETSc.Vec().createWithArray(array, size=(self.n_local, self.n_global),
+                                           comm=self.comm)
+
+    def local(self, vec) -> np.ndarray:
+        """The numpy view of a vector created by :meth:`vector`."""
+        return vec.getArray(readonly=False)
+
+    # ---------------------------------------------------------------- one step
+    def history_rhs(self, u, v, a, out) -> None:
+        """``out = H_u u + H_v v + H_a a`` (PETSc vectors)."""
+        t0 = time.perf_counter()
+        out.zeroEntries()
+        state = (u, v, a)
+        tmp = self._work[0]
+        for A, slot in self.history_matrices:
+            A.mult(state[slot], tmp)
+            out.axpy(1.0, tmp)
+        self.time_products += time.perf_counter() - t0
+
+    def solve(self, rhs, out) -> None:
+        """``out = K_eff^-1 rhs`` with the stored factor."""
+        t0 = time.perf_counter()
+        self.op.ksp.solve(rhs, out)
+        self.time_solves += time.perf_counter() - t0
+        self.n_solves += 1
+
+    def solve_block(self, B: np.ndarray) -> np.ndarray:
+        """``K_eff^-1 B`` for this rank's rows of a block of right-hand sides (n_local, k)."""
+        t0 = time.perf_counter()
+        out = self.op.solve(B)
+        self.time_solves += time.perf_counter() - t0
+        self.n_solves += B.shape[1]
+        return out
+
+    # ---------------------------------------------------------------- energies
+    def quadratic(self, A, x) -> float:
+        """``x^T A x`` (collective)."""
+        if A is None:
+            return 0.0
+        tmp = self._work[1]
+        A.mult(x, tmp)
+        return tmp.dot(x)
+
+    def energy(self, u, v) -> float:
+        """Kinetic plus strain energy ``1/2 v^T M v + 1/2 u^T K u`` (collective)."""
+        return 0.5 * self.quadratic(self.M, v) + 0.5 * self.quadratic(self.K, u)
+
+    # ---------------------------------------------------------------- other solves
+    def solve_matrix(self, A, B: np.ndarray) -> np.ndarray:
+        """``A^-1 B`` for a block B with a separate MUMPS Cholesky factor of A (e.g. K for a
+        static start, M for a consistent initial acceleration); the factor is freed."""
+        from ..modal.block_lanczos import BlockOperator
+
+        op = BlockOperator(A, self.M, 0.0, self.comm, PREFIX + "aux_",
+                           extra_gb=16.0 * B.size / 1e9)
+        try:
+            return op.solve(np.ascontiguousarray(B, dtype=float))
+        finally:
+            op.destroy()
+
+    def destroy(self) -> None:
+        self.op.destroy()
+        self.k_eff.destroy()
+        for A, _ in self.history_matrices:
+            A.destroy()
+        for w in self._work:
+            w.destroy()

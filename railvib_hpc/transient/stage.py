@@ -1,0 +1,599 @@
+"""The ``transient`` stage: direct time integration of the full finite-element model.
+
+``railvib transient CASE`` (collective) builds the same model as the modal stage (mesh,
+DOFs with the ``[boundary]`` conditions, K and M), adds the damping matrix C of
+``[damping]`` and the absorbing faces' dashpots, and integrates ``M u'' + C u' + K u = f``
+with the generalized-alpha scheme (:mod:`.scheme`; ``transient.rho_inf = 1``: Newmark
+average acceleration) on one MUMPS factor of the effective matrix. The loads are the
+moving forces or the vehicle of ``[vehicle]`` with the Hertz contact and the
+irregularities of ``[irregularity]``, exactly as in the ``mbs`` stage (same vehicle models
+and contact solver, :mod:`.integrate`), but on the full model: a causal solution whose
+waves travel at the speeds of the mesh, with no truncation of a modal basis.
+
+Outputs in the output folder (the files of ``reconstruct``, so ``assess`` and the studies
+read them unchanged):
+
+* ``fields.h5`` + ``fields.xdmf`` (every node at the steps of ``output.dt`` within
+  ``output.window``), ``/stress`` + ``stress.xdmf`` at ``output.stress_times``;
+* ``probes.h5`` + ``probes/<name>.csv``: the mesh probes and ``output.probes`` at every step,
+  and ``/rail`` with the rail bending moments (full model: nothing left out);
+* ``transient.h5``: ``/time``; ``/wheels/x, contact_force, penetration,
+  rail_displacement, wheel_height, rail_index``; ``/vehicle/y, y_dot, y_ddot``;
+  ``/rail/x, uz, ry``; attributes ``complete``, ``inputs_sha256``, ``case_toml``, ``stats``.
+
+A rerun with the same inputs reuses the results. A run that is interrupted resumes from its
+last checkpoint (``transient_checkpoint.h5``, every ``transient.checkpoint_interval``
+seconds) and gives the same answer: the state is stored exactly, the factor is recomputed
+deterministically.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..config import Case
+from ..errors import UserError
+from ..log import Reporter
+from ..parallel import on_root
+from .integrate import (
+    DirectSolver,
+    RailColumns,
+    State,
+    VehicleDriver,
+    gather_values,
+    initial_acceleration,
+)
+from .output import (
+    FORMAT_VERSION,
+    FieldWriter,
+    PointSampler,
+    RailSampler,
+    partial_fields_ok,
+    read_checkpoint,
+    write_checkpoint,
+)
+from .rail import RailDofs, WheelCoupling
+from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
+
+#: Case sections the full-order solution depends on.
+TRANSIENT_INPUTS = ("geometry", "track", "building", "mesh", "domain", "materials", "sections",
+                    "pads", "boundary", "damping", "vehicle", "irregularity", "transient")
+#: Keys of [modal] that change the full-order model (the rest is about the eigensolver).
+MODAL_KEYS = ("lumped_mass", "hex_formulation", "fix_sleeper_rotations",
+              "fix_rail_rotations_at_pads", "damping_ratio")
+#: Keys of [output] that change the transient outputs.
+OUTPUT_KEYS = ("dt", "window", "float32", "stress_times", "probes")
+CHECKPOINT = "transient_checkpoint.h5"
+PARTIAL_FIELDS = ".fields.h5.transient-partial"
+#: Output steps buffered per collective write of fields.h5.
+FIELD_BLOCK = 16
+#: Rail nodes ahead of each wheel whose columns are computed in one block.
+LOOKAHEAD_NODES = 12
+
+
+class TransientInputError(UserError):
+    """A case the full-order solver cannot run (no rails for a vehicle, probes outside...)."""
+
+
+class Interrupted(RuntimeError):
+    """Raised by the ``stop_after`` test hook after a checkpoint (simulates a killed run)."""
+
+
+# --------------------------------------------------------------------------- files
+def transient_digest(case: Case) -> str:
+    """SHA-256 of everything the transient results depend on."""
+    extra = ""
+    if case["irregularity.type"] == "file":
+        extra = hashlib.sha256(case.resolve(case["irregularity.file"]).read_bytes()).hexdigest()
+    payload = {"format": FORMAT_VERSION, "sections": case.digest(*TRANSIENT_INPUTS),
+               "modal": {k: case[f"modal.{k}"] for k in MODAL_KEYS},
+               "output": {k: case[f"output.{k}"] for k in OUTPUT_KEYS}, "profile": extra}
+    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def previous_result(out_dir: Path, key: str) -> dict | None:
+    """The summary of complete transient results with digest ``key`` in ``out_dir`` (rank 0).
+
+    All three products must be there: ``transient.h5``, ``fields.h5`` and ``probes.h5``,
+    each complete and with the same digest.
+    """
+    import h5py
+
+    try:
+        for name in ("fields.h5", "probes.h5", "transient.h5"):
+            path = out_dir / name
+            if not path.exists():
+                return None
+            with h5py.File(path, "r") as f:
+                if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("inputs_sha256") != key:
+                    return None
+                if name == "transient.h5":
+                    return json.loads(f.attrs["stats"])
+    except (OSError, KeyError, ValueError):
+        return None
+    return None
+
+
+# --------------------------------------------------------------------------- setup
+def time_step(case: Case, element_time: float, rep: Reporter) -> float:
+    """``transient.dt`` or the automatic step; warns when it is too coarse for the band."""
+    tr = case["transient"]
+    if tr["dt"] > 0:
+        dt = tr["dt"]
+    else:
+        dt = choose_time_step(tr["f_max"], tr["steps_per_period"], case["output.dt"],
+                              element_time, tr["steps_per_element"])
+    warning = coarse_step_warning(dt, tr["f_max"], tr["steps_per_period"], tr["rho_inf"])
+    if warning:
+        rep.info(warning)
+    return dt
+
+
+def output_steps(case: Case, dt: float, nt: int) -> np.ndarray:
+    """Steps written to ``fields.h5``: every ``output.dt`` within ``output.window``."""
+    stride = max(1, int(round(case["output.dt"] / dt))) if case["output.dt"] > 0 else 1
+    steps = np.arange(0, nt + 1, stride)
+    w = case["output.window"]
+    if w:
+        t = steps * dt
+        tol = 1e-9 * max(1.0, w[1])
+        steps = steps[(t >= w[0] - tol) & (t <= w[1] + tol)]
+    if steps.size == 0:
+        raise TransientInputError(f"output.window = {w} contains no output step of the run "
+                                  f"(0 .. {nt * dt:.4g} s)")
+    return steps
+
+
+def probe_points(mesh, case: Case) -> tuple[list[str], np.ndarray]:
+    """Names and coordinates: the mesh probes, then ``output.probes`` (``user_1``, ...)."""
+    names = list(mesh.probes)
+    coords = [mesh.probes[k] for k in names]
+    user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    for i, p in enumerate(user):
+        names.append(f"user_{i + 1}")
+        coords.append(p)
+    return names, np.asarray(coords, dtype=float).reshape(-1, 3)
+
+
+class Recorder:
+    """Rank 0's histories of the run (every step)."""
+
+    def __init__(self, nt: int, n_wheels: int, n_dof: int, n_probes: int, rail_shape):
+        self.arrays = {
+            "contact_force": np.zeros((nt + 1, n_wheels)),
+            "penetration": np.zeros((nt + 1, n_wheels)),
+            "rail_displacement": np.zeros((nt + 1, n_wheels)),
+            "wheel_height": np.zeros((nt + 1, n_wheels)),
+            "y": np.zeros((nt + 1, n_dof)), "y_dot": np.zeros((nt + 1, n_dof)),
+            "y_ddot": np.zeros((nt + 1, n_dof)),
+            "probes": np.zeros((nt + 1, 3, n_probes, 3)),
+            "rail": np.zeros((nt + 1,) + tuple(rail_shape)),
+        }
+
+    def put(self, n: int, **values) -> None:
+        for k, v in values.items():
+            if v is not None:
+                self.arrays[k][n] = v
+
+
+# --------------------------------------------------------------------------- the stage
+def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
+                        checkpoint_steps: int | None = None, stop_after: int | None = None
+                        ) -> dict:
+    """Direct time integration of the full model (collective); see the module notes.
+
+    Parameters
+    ----------
+    case
+        The validated case.
+    out_dir
+        Output folder.
+    comm
+        MPI communicator.
+    rep
+        Reporter (progress, timings).
+    checkpoint_steps
+        Also checkpoint every this many steps (tests; the case's interval still applies).
+    stop_after
+        Test hook: raise :class:`Interrupted` after the first checkpoint at or after this
+        step, as if the run had been killed.
+
+    Returns
+    -------
+    dict
+        Summary (time step, steps, timings, contact forces, peak memory, ...).
+    """
+    from ..io.stage_files import atomic_file
+
+    out_dir = Path(out_dir)
+    key = transient_digest(case)
+    old = on_root(lambda: previous_result(out_dir, key), comm)
+    if old is not None:
+        rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
+                 "settings)")
+        return {**old, "reused": True}
+    t_wall = time.perf_counter()
+    init = _setup(case, out_dir, comm, rep, key)
+    mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
+    nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
+    recorder = Recorder(nt, init["n_wheels"], init["n_dof"], len(init["probe_names"]),
+                        init["rails"].dofs.shape[:2] + (2,)) if comm.rank == 0 else None
+    out_index = np.full(nt + 1, -1, dtype=np.int64)
+    out_index[steps_out] = np.arange(steps_out.size)
+    partial = out_dir / PARTIAL_FIELDS
+    ckpt_path = out_dir / CHECKPOINT
+
+    # ---- initial state or resume
+    resume_ok = on_root(lambda: read_checkpoint(ckpt_path, key, dofmap, 0) is not None
+                        and partial_fields_ok(partial, key), comm)
+    if resume_ok:
+        ck = read_checkpoint(ckpt_path, key, dofmap, comm.rank)
+        state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
+                      ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
+        if comm.rank == 0:
+            for k, v in ck["history"].items():
+                recorder.arrays[k][...] = v
+        fields_written = ck["fields_written"]
+        rep.info(f"resuming from the checkpoint at step {state.step} of {nt} "
+                 f"(t = {state.step * dt:.4f} s)")
+    else:
+        with rep.stage("transient: initial state"):
+            state = _initial_state(init, comm, rep)
+        fields_written = 0
+    writer = FieldWriter(partial, comm, mesh, dofmap, steps_out * dt, steps_out,
+                         case["output.float32"],
+                         {"inputs_sha256": key, "railvib_version": __version__,
+                          "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1
+                          else 1, "window": json.dumps(case["output.window"] or None)},
+                         resume=resume_ok, block=FIELD_BLOCK)
+    solver.start(state)
+    probes, rails_s = init["probe_sampler"], init["rail_sampler"]
+
+    def record(n: int, info=None) -> None:
+        part = np.concatenate([probes.sample(state.u, state.v, state.a).ravel(),
+                               rails_s.sample(state.u).ravel()])
+        total = part
+        if comm.size > 1:
+            total = np.zeros_like(part) if comm.rank == 0 else None
+            comm.Reduce(part, total, root=0)
+        if comm.rank == 0:
+            npb = 9 * probes.n
+            recorder.put(n, probes=total[:npb].reshape(3, probes.n, 3),
+                         rail=total[npb:].reshape(recorder.arrays["rail"].shape[1:]))
+            if init["driver"] is not None:
+                recorder.put(n, contact_force=state.force, penetration=state.penetration,
+                             y=state.y, y_dot=state.y_dot, y_ddot=state.y_ddot)
+                if info is not None and info.rail_displacement is not None:
+                    recorder.put(n, rail_displacement=info.rail_displacement,
+                                 wheel_height=info.wheel_height)
+            elif init["forces"] is not None:
+                recorder.put(n, contact_force=init["forces"])
+        k = out_index[n]
+        if k >= fields_written_box[0]:
+            writer.put(int(k), state.u, state.v, state.a)
+
+    fields_written_box = [fields_written]
+    if not resume_ok:
+        record(0, init.get("info0"))
+    interval = case["transient.checkpoint_interval"]
+    t_run = time.perf_counter()
+    last_progress = last_ckpt = t_run
+    first_step = state.step
+    with rep.stage("transient: time integration"):
+        while state.step < nt:
+            info = solver.step(state)
+            record(state.step, info)
+            now = time.perf_counter()
+            if comm.rank == 0 and (now - last_progress >= 2.0 or state.step == nt):
+                last_progress = now
+                done = state.step - first_step
+                rep.progress(f"transient: step {state.step}/{nt} (t = {state.step * dt:.4f} s, "
+                             f"{done / max(now - t_run, 1e-9):.1f} steps/s)",
+                             done, nt - first_step, t_run)
+            want = (interval > 0 and now - last_ckpt >= interval) or \
+                (checkpoint_steps is not None and state.step % checkpoint_steps == 0)
+            want = comm.bcast(want, root=0) if comm.size > 1 else want
+            if want and state.step < nt:
+                writer.flush()
+                fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
+                write_checkpoint(ckpt_path, comm, key, state.step, fields_written_box[0], state,
+                                 dofmap, recorder.arrays if comm.rank == 0 else None)
+                last_ckpt = time.perf_counter()
+                if stop_after is not None and state.step >= stop_after:
+                    writer.close()
+                    raise Interrupted(f"stopped after the checkpoint at step {state.step}")
+    t_integration = time.perf_counter() - t_run
+
+    # ---- outputs
+    with rep.stage("transient: fields, stresses"):
+        stress = None
+        if case["output.stress_times"]:
+            stress = _stress_writer(case, comm, rep, key)
+        writer.finish(out_dir / "fields.h5", stress)
+        if not case["output.stress_times"] and comm.rank == 0:
+            (out_dir / "stress.xdmf").unlink(missing_ok=True)
+    rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+    stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
+                   recorder, nt - first_step, comm)
+    with rep.stage("transient: probes, histories"):
+        def write_rank0() -> None:
+            _write_probes(out_dir, init, recorder, key, case)
+            with atomic_file(out_dir / "transient.h5") as tmp:
+                _write_histories(tmp, case, init, recorder, key, stats)
+            ckpt_path.unlink(missing_ok=True)
+
+        on_root(write_rank0, comm)
+    solver.destroy()
+    system.destroy()
+    for A in (init["K"], init["M"], init["C"]):
+        if A is not None:
+            A.destroy()
+    rep.info(format_summary(stats))
+    rep.info(f"wrote {out_dir / 'fields.h5'}, {out_dir / 'probes.h5'}, "
+             f"{out_dir / 'transient.h5'}")
+    return {**stats, "reused": False}
+
+
+def _setup(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> dict:
+    """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
+    from ..mbs.results import n_steps
+    from ..mbs.stage import build_irregularity, build_vehicle, passage
+    from ..mesh.stage import run_mesh_stage
+    from ..modal.boundary import boundary_summary, case_dofmap
+    from ..modal.petsc import assemble, assemble_damping
+    from .petsc import TransientSystem
+
+    with rep.stage("transient: mesh"):
+        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+    with rep.stage("transient: dofs"):
+        dofmap = case_dofmap(mesh, case, comm.size)
+        rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "
+                 "faces: " + ", ".join(f"{k} {v['type']}" for k, v in
+                                       boundary_summary(mesh, case).items()))
+    try:
+        rails = RailDofs.from_mesh(mesh, dofmap.index)
+    except ValueError as exc:
+        raise TransientInputError(f"railvib transient: {exc}") from None
+    vehicle = build_vehicle(case)
+    run = passage(case, vehicle, float(rails.x.max()))
+    speed = case["vehicle.speed"]
+    h_min = float(np.diff(rails.x, axis=1).min())
+    dt = time_step(case, h_min / speed, rep)
+    nt = n_steps(run["t_end"], dt)
+    times = np.arange(nt + 1) * dt
+    x = run["x_start"] + run["offsets"][None, :] + speed * times[:, None]
+    steps_out = output_steps(case, dt, nt)
+    rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
+             f"steps; generalized-alpha rho_inf = {case['transient.rho_inf']:g}")
+    with rep.stage("transient: assembly"):
+        K, M, _ = assemble(mesh, case, dofmap, comm)
+        C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
+        if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
+                and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
+            C.destroy()
+            C = None
+    n_wheels = run["wheel_rail"].size
+    col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
+    with rep.stage("transient: factorization"):
+        scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
+        system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
+        rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
+                 f"~{system.factor_memory_gb:.2f} GB" + (" (out of core)" if system.out_of_core
+                                                          else ""))
+    driver = columns = prescribed = None
+    forces = run["forces"]
+    if vehicle is None:
+        coupling = WheelCoupling(rails, run["wheel_rail"])
+
+        def prescribed(n: int):
+            dofs, coef, _ = coupling.at(x[n])
+            return dofs, -coef * forces[:, None]
+    else:
+        coupling = WheelCoupling(rails, run["wheel_rail"], getattr(vehicle, "conicity", 0.0))
+        x_lo = float(x[0].min()) - 1.0
+        irregularity = build_irregularity(case, run["wheel_rail"],
+                                          (x_lo, run["x_end"] + speed * case["vehicle.t_after"]
+                                           + 1.0))
+        driver = VehicleDriver(vehicle, coupling, x, irregularity, dt)
+        columns = RailColumns(system, rails, LOOKAHEAD_NODES)
+    solver = DirectSolver(system, prescribed, driver, columns)
+    names, coords = probe_points(mesh, case)
+    return {"mesh": mesh, "dofmap": dofmap, "rails": rails, "vehicle": vehicle, "run": run,
+            "dt": dt, "nt": nt, "times": times, "x": x, "steps_out": steps_out, "K": K, "M": M,
+            "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
+            "columns": columns, "coupling": coupling, "forces": forces,
+            "prescribed": prescribed, "n_wheels": n_wheels,
+            "n_dof": 0 if vehicle is None else vehicle.n_dof,
+            "probe_names": names, "probe_coords": coords,
+            "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),
+            "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme}
+
+
+def _initial_state(init: dict, comm, rep: Reporter) -> State:
+    """At rest; a vehicle in static equilibrium on the (possibly deflected) rail."""
+    from ..mbs.vehicles import static_equilibrium
+
+    system = init["system"]
+    n_local = system.n_local
+    state = State(0, np.zeros(n_local), np.zeros(n_local), np.zeros(n_local))
+    vehicle, driver = init["vehicle"], init["driver"]
+    if vehicle is None:
+        if init["prescribed"] is not None:
+            initial_acceleration(system, state, [init["prescribed"](0)])
+        return state
+    dofs, coef, _ = driver.coupling.at(driver.x[0])
+    r = driver.heights(0)
+    nw = coef.shape[0]
+    flat = dofs.ravel()
+    if np.all(flat < 0):
+        flex = np.zeros((nw, nw))
+        xcols = None
+    else:
+        rep.info("  a wheel starts on the flexible rail: static equilibrium with K")
+        rhs = np.zeros((n_local, flat.size))
+        own = (flat >= system.r0) & (flat < system.r1)
+        rhs[flat[own] - system.r0, np.flatnonzero(own)] = 1.0
+        xcols = system.solve_matrix(system.K, rhs)
+        xdd = np.zeros((flat.size, flat.size))
+        for j in range(flat.size):
+            if flat[j] >= 0:
+                xdd[:, j] = gather_values(comm, xcols[:, j], system.r0, flat)
+        g = np.zeros((nw, flat.size))
+        for j in range(nw):
+            g[j, 8 * j:8 * j + 8] = coef[j]
+        flex = g @ (0.5 * (xdd + xdd.T)) @ g.T
+    y, force = static_equilibrium(vehicle, flex, r)
+    if xcols is not None:
+        state.u[:] = -(xcols @ (coef * force[:, None]).ravel())
+    state.y, state.y_dot = y, np.zeros(vehicle.n_dof)
+    state.y_ddot = driver.newmark.acceleration(y, state.y_dot, force)
+    state.force = force
+    w = flex @ (-force) if xcols is not None else np.zeros(nw)
+    state.penetration = w + r - vehicle.contact_matrix().T @ y
+    return state
+
+
+def _stress_writer(case: Case, comm, rep: Reporter, key: str):
+    from ..reconstruct.stress import hex_materials, stress_from_fields
+
+    materials = hex_materials(case)
+
+    def write(path: Path) -> None:
+        stats = stress_from_fields(path, comm, case["output.stress_times"], materials, rep=rep,
+                                   attrs={"inputs_sha256": key}, require_complete=False)
+        rep.info(f"  stresses at {stats['n_times']} time(s), max von Mises "
+                 f"{stats['max_von_mises'] / 1e3:.3f} kPa")
+
+    return write
+
+
+def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, comm) -> dict:
+    nt = init["nt"]
+    stats = {"solver": "transient", "dt": init["dt"], "n_steps": nt, "steps_run": n_done,
+             "t_end": nt * init["dt"], "n_dofs": init["dofmap"].n_dofs,
+             "n_nodes": init["mesh"].n_nodes, "ranks": comm.size,
+             "rho_inf": init["scheme"].rho_inf, "damping": init["damping"],
+             "time_integration": t_integration, "time_total": t_wall,
+             "steps_per_second": n_done / max(t_integration, 1e-9),
+             "time_factorization": system.time_factorization,
+             "time_solves": system.time_solves, "time_products": system.time_products,
+             "time_contact": solver.time_contact, "solves": system.n_solves,
+             "factor_memory_gb": system.factor_memory_gb, "out_of_core": system.out_of_core,
+             "peak_rss_gb_per_rank": rss, "peak_rss_gb_total": float(sum(rss))}
+    if init["columns"] is not None:
+        stats["rail_columns"] = init["columns"].n_computed
+        stats["time_rail_columns"] = init["columns"].time
+    if comm.rank == 0 and init["n_wheels"]:
+        f = recorder.arrays["contact_force"]
+        x = init["x"]
+        lo, hi = float(init["rails"].x.min()), float(init["rails"].x.max())
+        on = (x >= lo) & (x <= hi)
+        stats["static_wheel_load"] = (init["vehicle"].static_wheel_loads().tolist()
+                                      if init["vehicle"] is not None else f[0].tolist())
+        stats["mean_contact_force"] = [float(f[on[:, j], j].mean()) if on[:, j].any()
+                                       else math.nan for j in range(f.shape[1])]
+        stats["peak_contact_force"] = f.max(axis=0).tolist()
+        stats["min_contact_force"] = f.min(axis=0).tolist()
+        stats["loss_of_contact_steps"] = (int(np.any(f <= 0.0, axis=1)[1:].sum())
+                                          if init["vehicle"] is not None else 0)
+        stats["max_rail_deflection"] = float(-recorder.arrays["rail_displacement"].min())
+    return comm.bcast(stats if comm.rank == 0 else None, root=0) if comm.size > 1 else stats
+
+
+def format_summary(stats: dict) -> str:
+    """Printable run statistics and contact forces."""
+    lines = [f"transient: {stats['n_dofs']:,} DOFs, dt = {stats['dt']:.3e} s, "
+             f"{stats['steps_run']} steps in {stats['time_integration']:.1f} s "
+             f"({stats['steps_per_second']:.1f} steps/s; solves {stats['time_solves']:.1f} s, "
+             f"products {stats['time_products']:.1f} s, contact {stats['time_contact']:.1f} s),"
+             f" factorization {stats['time_factorization']:.1f} s, peak memory "
+             f"{stats['peak_rss_gb_total']:.2f} GB (all ranks)"]
+    if "peak_contact_force" in stats:
+        lines.append("  wheel  static [kN]  mean on flexible rail [kN]  peak [kN]  min [kN]")
+        for j, (s, mu, pk, lo) in enumerate(zip(stats["static_wheel_load"],
+                                                stats["mean_contact_force"],
+                                                stats["peak_contact_force"],
+                                                stats["min_contact_force"])):
+            lines.append(f"  {j:5d}  {s / 1e3:11.3f}  {mu / 1e3:26.3f}  {pk / 1e3:9.3f}  "
+                         f"{lo / 1e3:8.3f}")
+        lines.append(f"  steps with a wheel off the rail: {stats['loss_of_contact_steps']}; "
+                     f"max rail deflection under a wheel "
+                     f"{stats['max_rail_deflection'] * 1e3:.4f} mm")
+    return "\n".join(lines)
+
+
+def _write_probes(out_dir: Path, init: dict, recorder: Recorder, key: str, case: Case) -> None:
+    """probes.h5 + probes/*.csv (layout of reconstruct) with the rail bending moments."""
+    from ..fem.beam import shear_deformation_factors
+    from ..reconstruct.probes import write_probes_csv, write_probes_h5
+    from ..reconstruct.stress import rail_bending_moment, rail_section
+
+    t = init["times"]
+    pr = recorder.arrays["probes"]
+    hist = {}
+    sampler = init["probe_sampler"]
+    for i, name in enumerate(init["probe_names"]):
+        hist[name] = {"t": t, "displacement": pr[:, 0, i], "velocity": pr[:, 1, i],
+                      "acceleration": pr[:, 2, i], "coords": init["probe_coords"][i],
+                      "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i]}
+    rails, mesh = init["rails"], init["mesh"]
+    sec = rail_section(case)
+    rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
+    moments, ends = [], []
+    for r in range(2):
+        seg = np.stack([mesh.points[rails.nodes[r, :-1]], mesh.points[rails.nodes[r, 1:]]],
+                       axis=1)
+        phi_y, _ = shear_deformation_factors(seg, sec["E"], sec["G"], sec["A"], sec["I"],
+                                             sec["I"], sec["k"], sec["k"])
+        m_el = rail_bending_moment(rails.x[r], rail[:, r, :, 0], rail[:, r, :, 1], sec["EI"],
+                                   phi_y, per_element=True)
+        ends.append(m_el)
+        moments.append(rail_bending_moment(rails.x[r], rail[:, r, :, 0], rail[:, r, :, 1],
+                                           sec["EI"], phi_y))
+    groups = {"rail": {"time": t, "x": rails.x, "y": rails.y, "nodes": rails.nodes,
+                       "bending_moment": np.stack(moments, axis=1),
+                       "bending_moment_ends": np.stack(ends, axis=1)}}
+    attrs = {"inputs_sha256": key, "railvib_version": __version__, "solver": "transient",
+             "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
+             "rail_moment_static_correction_included": 1}
+    write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
+    write_probes_csv(out_dir / "probes", hist)
+
+
+def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, key: str,
+                     stats: dict) -> None:
+    import h5py
+
+    a = recorder.arrays
+    with h5py.File(path, "w") as f:
+        f["time"] = init["times"]
+        w = f.create_group("wheels")
+        w["x"] = init["x"]
+        w["contact_force"] = a["contact_force"]
+        w["penetration"] = a["penetration"]
+        w["rail_displacement"] = a["rail_displacement"]
+        w["wheel_height"] = a["wheel_height"]
+        w["rail_index"] = init["run"]["wheel_rail"]
+        v = f.create_group("vehicle")
+        v["y"], v["y_dot"], v["y_ddot"] = a["y"], a["y_dot"], a["y_ddot"]
+        vehicle = init["vehicle"]
+        v.attrs["dof_names"] = json.dumps(list(vehicle.dof_names) if vehicle is not None else [])
+        v.attrs["type"] = case["vehicle.type"]
+        r = f.create_group("rail")
+        r["x"] = init["rails"].x
+        r["uz"] = a["rail"][..., 0]
+        r["ry"] = a["rail"][..., 1]
+        f.attrs["inputs_sha256"] = key
+        f.attrs["case_toml"] = case.to_toml()
+        f.attrs["railvib_version"] = __version__
+        f.attrs["stats"] = json.dumps(stats, default=float)
+        f.attrs["solver"] = "transient"
+        f.attrs["complete"] = 1

@@ -1,0 +1,157 @@
+"""``railvib transient``: end to end, resume, reuse, ranks, bad input (issue 12, step 2)."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+from mpi4py import MPI
+from transient_cases import BASELINE, TINY, tiny_case
+
+from railvib_hpc.cli import run
+from railvib_hpc.log import Reporter
+from railvib_hpc.petsc_env import init_petsc
+
+comm = MPI.COMM_WORLD
+SETS = [arg for s in TINY for arg in ("--set", s)]
+
+
+def _run(case, out, c=None, **kw):
+    init_petsc([])
+    from railvib_hpc.transient.stage import run_transient_stage
+
+    c = c or MPI.COMM_SELF
+    return run_transient_stage(case, out, c, Reporter(c.rank), **kw)
+
+
+def _histories(out):
+    with h5py.File(out / "transient.h5", "r") as f:
+        h = {k: f[f"wheels/{k}"][()] for k in ("contact_force", "penetration",
+                                                  "rail_displacement")}
+        h["y"] = f["vehicle/y"][()]
+        h["uz"] = f["rail/uz"][()]
+    with h5py.File(out / "probes.h5", "r") as f:
+        for name in f["probes"]:
+            h[name] = f[f"probes/{name}/acceleration"][()]
+        h["moment"] = f["rail/bending_moment"][()]
+    with h5py.File(out / "fields.h5", "r") as f:
+        h["fields"] = f["fields/velocity"][()]
+        h["stress"] = f["stress/von_mises"][()]
+    return h
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The tiny wheelset run, serial, uninterrupted."""
+    out = tmp_path_factory.mktemp("ref")
+    stats = _run(tiny_case(), out)
+    return out, stats
+
+
+def test_wheelset_run_writes_the_reconstruct_files(reference):
+    out, stats = reference
+    for name in ("fields.h5", "fields.xdmf", "stress.xdmf", "probes.h5", "transient.h5",
+                 "probes/slab1.csv"):
+        assert (out / name).exists(), name
+    assert not (out / "transient_checkpoint.h5").exists()
+    with h5py.File(out / "fields.h5", "r") as f:
+        assert f.attrs["complete"] == 1
+        d = f["fields/displacement"]
+        assert d.shape[1:] == (f["mesh/points"].shape[0], 3)
+        t = f["time"][()]
+        assert np.allclose(np.diff(t), 0.002)
+    # the wheel rests on the rigid rail first (static wheel load, rail at rest), then
+    # pushes the flexible rail down
+    h = _histories(out)
+    f0 = h["contact_force"]
+    assert f0[0] == pytest.approx([7691.0, 7691.0], rel=1e-3)
+    assert np.all(f0 > 0.5 * 7691.0)
+    assert h["rail_displacement"][0] == pytest.approx([0.0, 0.0], abs=1e-15)
+    assert h["rail_displacement"][-1].max() < -1e-5
+    assert stats["steps_run"] == stats["n_steps"]
+
+
+def test_rerun_reuses_the_results(reference, tmp_path):
+    out, _ = reference
+    before = (out / "transient.h5").stat().st_mtime_ns
+    again = _run(tiny_case(), out)
+    assert again["reused"] is True
+    assert (out / "transient.h5").stat().st_mtime_ns == before
+
+
+def test_interrupted_run_resumes_to_the_same_answer(reference, tmp_path):
+    from railvib_hpc.transient.stage import Interrupted
+
+    out = tmp_path / "resume"
+    with pytest.raises(Interrupted):
+        _run(tiny_case(), out, checkpoint_steps=30, stop_after=60)
+    assert (out / "transient_checkpoint.h5").exists()
+    assert not (out / "transient.h5").exists() and not (out / "fields.h5").exists()
+    stats = _run(tiny_case(), out)
+    assert stats["steps_run"] < stats["n_steps"]
+    ref = _histories(reference[0])
+    new = _histories(out)
+    for k in ref:
+        # same state, same factor, same operations: the same numbers
+        np.testing.assert_array_equal(new[k], ref[k], err_msg=k)
+
+
+@pytest.mark.mpi
+def test_two_ranks_give_the_serial_answer(tmp_path_factory):
+    init_petsc([])                 # collective: before rank 0 works alone on COMM_SELF
+    base = tmp_path_factory.mktemp("ranks") if comm.rank == 0 else None
+    base = comm.bcast(str(base) if base else None, root=0)
+    from pathlib import Path
+
+    base = Path(base)
+    if comm.rank == 0:
+        _run(tiny_case(), base / "serial")
+    comm.Barrier()
+    _run(tiny_case(), base / "parallel", comm)
+    if comm.rank == 0:
+        a, b = _histories(base / "serial"), _histories(base / "parallel")
+        for k in a:
+            scale = np.abs(a[k]).max()
+            # K and M agree to their kernels' round-off (test_boundary) and MUMPS orders
+            # the factorization by rank: differences at the round-off of the solves
+            assert np.abs(b[k] - a[k]).max() <= 1e-8 * scale, k
+
+
+def test_moving_force_run(tmp_path):
+    stats = _run(tiny_case("vehicle.type=moving_force"), tmp_path)
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        force = f["wheels/contact_force"][()]
+        assert np.all(force == force[0])
+        assert json.loads(f.attrs["stats"])["n_steps"] == stats["n_steps"]
+
+
+def test_coarse_time_step_is_warned_with_the_numbers(tmp_path, capsys):
+    init_petsc([])
+    from railvib_hpc.transient.stage import time_step
+
+    dt = time_step(tiny_case("transient.dt=0.002", "transient.f_max=80"), 0.0,
+                   Reporter(0))
+    assert dt == 0.002
+    out = capsys.readouterr().out
+    assert "transient.dt = 0.002 s resolves transient.f_max = 80 Hz with 6.2 steps per " \
+           "period (period error 7.9" in out
+    assert "dt <= 0.000625 s" in out
+
+
+def test_time_step_must_divide_the_output_step(capsys):
+    assert run(["check", str(BASELINE), *SETS, "--set", "transient.dt=0.0015"]) == 2
+    err = capsys.readouterr().err
+    assert "transient.dt = 0.0015: must divide output.dt = 0.002 s" in err
+
+
+def test_cli_transient_runs_and_assesses(tmp_path, capsys):
+    code = run(["transient", str(BASELINE), "--out", str(tmp_path),
+                *SETS, "--set", "vehicle.type=moving_force"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "transient complete: 9 probes assessed" in text
+    report = (tmp_path / "report.md").read_text()
+    assert "full-order time integration" in report
+    assert (tmp_path / "assessment.json").exists()

@@ -1,0 +1,21 @@
+"""Small full-order cases for the transient tests (coarse thesis model, short runs)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from railvib_hpc.config import load_case
+
+ROOT = Path(__file__).resolve().parents[2]
+BASELINE = ROOT / "jobs" / "thesis_baseline.toml"
+
+#: Coarse thesis model, the wheelset entering the flexible rail at 10 ms and 50 ms later
+#: at x_end; output every 2 ms, stresses at 40 ms, no wall-clock checkpoints.
+TINY = ["mesh.refinement=0.25", "vehicle.x_start=2.7", "vehicle.x_end=4.2",
+        "output.dt=0.002", "output.stress_times=[0.04]", "transient.checkpoint_interval=0",
+        "transient.f_max=100"]
+
+
+def tiny_case(*extra: str):
+    """The tiny case with extra overrides."""
+    return load_case(BASELINE, [*TINY, *extra])

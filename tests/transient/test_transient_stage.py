@@ -151,7 +151,17 @@ def test_cli_transient_runs_and_assesses(tmp_path, capsys):
                 *SETS, "--set", "vehicle.type=moving_force"])
     assert code == 0
     text = capsys.readouterr().out
-    assert "transient complete: 9 probes assessed" in text
+    assert "transient complete: 10 probes assessed" in text
+    assert "assessed the results of the full-order time integration (railvib transient)" in text
     report = (tmp_path / "report.md").read_text()
-    assert "full-order time integration" in report
-    assert (tmp_path / "assessment.json").exists()
+    assert "solver               full-order time integration (railvib transient)" in report
+    doc = json.loads((tmp_path / "assessment.json").read_text())
+    assert doc["solver"] == "transient"
+    assert set(json.loads(doc["provenance"]["upstream_sha256"])) == {
+        "transient.h5", "fields.h5", "probes.h5"}
+    # the XDMF of the fields has its per-step views (both ParaView XDMF readers)
+    assert (tmp_path / "fields_views.h5").exists() and (tmp_path / "stress_views.h5").exists()
+    # a rerun reuses everything and assesses again
+    assert run(["transient", str(BASELINE), "--out", str(tmp_path),
+                *SETS, "--set", "vehicle.type=moving_force"]) == 0
+    assert "reusing the transient results" in capsys.readouterr().out

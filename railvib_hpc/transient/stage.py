@@ -234,8 +234,7 @@ def _resumable(case: Case, out_dir: Path, mesh_sha: str, n_fields: tuple, nt: in
     if why is None:
         return run_id
     if why:
-        rep.info(f"not resuming from {ckpt}: {_why(ckpt, why).split(' ', 1)[1]}; starting "
-                 "at t = 0")
+        rep.info(f"not resuming from {ckpt}: {why}; starting at t = 0")
     forget(ckpt)
     partial.unlink(missing_ok=True)
     return None

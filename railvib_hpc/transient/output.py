@@ -178,12 +178,19 @@ class FieldWriter:
         check_collective(comm, error, f"writing {self.final}")
 
     def _create(self, mesh: Mesh, attrs: dict) -> None:
+        import h5py
+
         f = self.file
         f.create_dataset("time", (self.ns,), "f8")
         f.create_dataset("steps", (self.ns,), "i8")
         g = f.create_group("fields")
+        # storage allocated now (no fill written): after the first :meth:`sync` the file's
+        # metadata on disk does not change any more, so a killed run leaves a readable file
+        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
+        dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
         for name in ("displacement", "velocity", "acceleration"):
-            g.create_dataset(name, (self.ns, self.n, 3), self.dtype)
+            g.create_dataset(name, (self.ns, self.n, 3), self.dtype, dcpl=dcpl)
         gm = f.create_group("mesh")
         gm.create_dataset("points", (self.n, 3), "f8")
         gm.create_dataset("hexes", mesh.hexes.shape, mesh.hexes.dtype)
@@ -250,6 +257,29 @@ class FieldWriter:
             error = exc
         check_collective(self.comm, error, f"writing {self.final}")
         self.pending = []
+
+    def sync(self) -> None:
+        """Write what is buffered and make the partial file on disk complete up to here
+        (collective: ``H5Fflush`` of the data and metadata, then ``fsync``), so that a
+        checkpoint written next can trust it even if the process is killed."""
+        import os
+
+        from ..parallel import check_collective
+
+        self.flush()
+        error = None
+        try:
+            if self.file is not None:
+                self.file.flush()
+            if self.comm.rank == 0:
+                fd = os.open(self.path, os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        except Exception as exc:         # raised on every rank
+            error = exc
+        check_collective(self.comm, error, f"writing {self.final}")
 
     def close(self) -> None:
         """Write what is buffered and close the partial file (collective)."""

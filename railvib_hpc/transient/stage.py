@@ -444,7 +444,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                 (checkpoint_steps is not None and state.step % checkpoint_steps == 0)
             want = comm.bcast(want, root=0) if comm.size > 1 else want
             if want and state.step < nt:
-                writer.flush()
+                writer.sync()          # the fields on disk up to this step, then the state
                 fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
                 write_checkpoint(ckpt_path, comm,
                                  checkpoint_attrs() if comm.rank == 0 else None, state.step,

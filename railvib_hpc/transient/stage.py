@@ -86,9 +86,9 @@ from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
 
 #: Table names of the products (:data:`railvib_hpc.io.stage_files.STAGE_FILES`), in the
-#: order they are checked and written.
+#: order they are checked (the solution first; it is written last).
 FIELDS, PROBES, HISTORIES = "transient:fields.h5", "transient:probes.h5", "transient.h5"
-PRODUCTS = (FIELDS, PROBES, HISTORIES)
+PRODUCTS = (HISTORIES, FIELDS, PROBES)
 CHECKPOINT = "transient_checkpoint.h5"
 #: Output steps buffered per collective write of fields.h5.
 FIELD_BLOCK = 16

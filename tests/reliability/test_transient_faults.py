@@ -121,8 +121,8 @@ def test_stale_input_recomputes_all_three_with_the_reason(twork, capsys, tally):
     tally.add("stale input: transient after vehicle.speed changed",
               "recomputed" if code == 0 else "unclear", line)
     assert code == 0, err
-    assert line == (f"recomputing the transient results in {twork}: fields.h5 was computed "
-                    "with vehicle.speed = 30, the case says 20")
+    assert line == (f"recomputing the transient results in {twork}: transient.h5 was "
+                    "computed with vehicle.speed = 30, the case says 20")
     for name in ("fields.h5", "probes.h5", "transient.h5"):
         with h5py.File(twork / name, "r") as f:
             assert "speed = 20" in f.attrs["case_toml"].replace("20.0", "20"), name

@@ -125,7 +125,7 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
 def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Reporter,
               petsc_options: list[str]) -> int:
     from .io.stage_files import output_lock
-    from .pipeline import run_pipeline, stage_runner
+    from .pipeline import TRANSIENT_PIPELINE, run_pipeline, stage_runner
 
     if args.command == "check":
         return _cmd_check(case, rep)
@@ -138,13 +138,15 @@ def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Report
                          wait=args.wait)
     command = " ".join(["railvib", args.command, str(args.case)])
     with output_lock(out, comm, command, wait=args.wait, rep=rep):
-        if args.command == "run":
+        if args.command in ("run", "transient"):
             _cmd_check(case, rep)
-            summary = run_pipeline(case, out, comm, rep, petsc_options)
+            summary = run_pipeline(case, out, comm, rep, petsc_options,
+                                   TRANSIENT_PIPELINE if args.command == "transient" else None)
             rep.info("\n" + rep.timing_table())
             verdict = summary["assess"]["verdict"]
             failed = [k for k, v in verdict.items() if v is False]
-            rep.info(f"pipeline complete: {len(verdict)} probes assessed, "
+            what = "pipeline" if args.command == "run" else "transient"
+            rep.info(f"{what} complete: {len(verdict)} probes assessed, "
                      + (f"limits exceeded at {', '.join(failed)}" if failed
                         else "no limit exceeded"))
             return 0

@@ -7,11 +7,17 @@ or recomputes its outputs through :mod:`railvib_hpc.io.stage_files`) and returns
 summary dict on every rank. User and environment errors raise
 :class:`~railvib_hpc.errors.UserError` on every rank.
 
+The full-order solution (``railvib transient``) is a stage with the same entry point
+that ``run`` does not include (:data:`OPTIONAL_STAGES`); the ``transient`` command runs
+:data:`TRANSIENT_PIPELINE`.
+
 Example
 -------
->>> from railvib_hpc.pipeline import STAGES
+>>> from railvib_hpc.pipeline import STAGES, TRANSIENT_PIPELINE
 >>> list(STAGES)
 ['mesh', 'modal', 'mbs', 'reconstruct', 'assess']
+>>> TRANSIENT_PIPELINE
+('transient', 'assess')
 """
 
 from __future__ import annotations
@@ -29,12 +35,19 @@ STAGES: dict[str, tuple[str, str]] = {
     "assess": ("railvib_hpc.assess.stage", "run_assess_stage"),
 }
 
+#: Stages with the same entry point that ``railvib run`` does not run.
+OPTIONAL_STAGES: dict[str, tuple[str, str]] = {
+    "transient": ("railvib_hpc.transient.stage", "run_transient_stage"),
+}
+#: ``railvib transient``: the full-order solution, then its assessment.
+TRANSIENT_PIPELINE = ("transient", "assess")
+
 StageRunner = Callable[..., dict]
 
 
 def stage_runner(name: str) -> StageRunner:
     """The entry point of stage ``name`` (imported on first use)."""
-    module, func = STAGES[name]
+    module, func = STAGES[name] if name in STAGES else OPTIONAL_STAGES[name]
     return getattr(importlib.import_module(module), func)
 
 

@@ -6,6 +6,12 @@ forces for the report), evaluates every probe against the standards of
 ``[assessment]`` and writes ``assessment.json`` plus the report
 (``report.md``, ``report.html``, ``report.json``, ``figures/*.png``).
 
+In the folder of the full-order solution (``railvib transient``: its ``probes.h5`` was
+written by that stage, :func:`solver_of`) it verifies and reads ``transient.h5`` and the
+transient ``fields.h5`` and ``probes.h5`` instead of ``modes.h5``, ``mbs.h5`` and the
+reconstruction; the report and ``assessment.json`` (``solver``) say which solver produced
+the numbers.
+
 DIN 4150-3 location per probe, from the role it carries (set where the probe is
 defined: the mesh layout, ``output.probe_roles``): ``floor`` probes get the vertical
 floor-slab limit, every other role (foundation, wall, ground) is assessed as a
@@ -73,15 +79,15 @@ def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
     return out
 
 
-def _contact(mbs_path: Path):
+def _contact(out_dir: Path, solver: str):
     """Wheel positions and contact forces of ``mbs.h5``, or of the full-order solution's
-    ``transient.h5`` next to it."""
+    ``transient.h5``."""
     import h5py
 
-    for path in (mbs_path, mbs_path.with_name("transient.h5")):
-        if path.exists():
-            with h5py.File(path, "r") as f:
-                return f["wheels/x"][()], f["wheels/contact_force"][()]
+    path = out_dir / ("transient.h5" if solver == "transient" else "mbs.h5")
+    if path.exists():
+        with h5py.File(path, "r") as f:
+            return f["wheels/x"][()], f["wheels/contact_force"][()]
     return None, None
 
 
@@ -188,27 +194,53 @@ def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
     return np.setdiff1d(np.unique(top), np.unique(bottom))
 
 
-def verify_chain(case: Case, out_dir: Path) -> dict[str, str]:
+#: The files of the full-order solution the assessment rests on (table names).
+TRANSIENT_INPUTS = ("transient.h5", "transient:fields.h5", "transient:probes.h5")
+
+
+def solver_of(out_dir: Path) -> str:
+    """Which solver's results ``out_dir`` holds (rank 0): ``transient`` when its
+    ``probes.h5`` was written by ``railvib transient`` (or, without a readable
+    ``probes.h5``, when there is a ``transient.h5`` and no ``modes.h5``), else ``modal``."""
+    from ..io.stage_files import read_provenance
+
+    probes = out_dir / "probes.h5"
+    if probes.exists():
+        try:
+            return "transient" if read_provenance(probes).get("stage") == "transient" \
+                else "modal"
+        except (OSError, ValueError, KeyError):
+            pass
+    return "transient" if (out_dir / "transient.h5").exists() \
+        and not (out_dir / "modes.h5").exists() else "modal"
+
+
+def verify_chain(case: Case, out_dir: Path, solver: str = "modal") -> dict[str, str]:
     """Verify every file the assessment rests on for this case (rank 0): ``modes.h5``
-    (``static.h5``), ``mbs.h5``, ``fields.h5``, ``probes.h5`` must exist, be complete, be
-    computed with the case's values from each other, be unchanged and sound.
+    (``static.h5``), ``mbs.h5``, ``fields.h5``, ``probes.h5`` (with ``solver =
+    "transient"``: ``transient.h5`` and the transient ``fields.h5``, ``probes.h5``) must
+    exist, be complete, be computed with the case's values from each other, be unchanged
+    and sound.
 
     Returns
     -------
     dict
-        Their content digests.
+        Their content digests by file name.
 
     Raises
     ------
     StaleInputError
-        For the first file (in pipeline order) that is not, naming what differs.
+        For the first file (in pipeline order) that is not, naming what differs and the
+        command to run.
     """
+    from ..io.stage_files import spec
     from ..mbs.stage import check_context
     from ..reconstruct.stage import input_files
 
-    names = (*input_files(out_dir), "fields.h5", "probes.h5")
+    names = TRANSIENT_INPUTS if solver == "transient" else (*input_files(out_dir), "fields.h5",
+                                                             "probes.h5")
     verdicts = require_inputs(out_dir, names, case, CHECKS, context=check_context(case, out_dir))
-    return {n: v.sha256 for n, v in verdicts.items()}
+    return {spec(n).filename: v.sha256 for n, v in verdicts.items()}
 
 
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
@@ -222,7 +254,8 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
 
     rep = rep or Reporter(0)
-    upstream = verify_chain(case, out_dir)
+    solver = solver_of(out_dir)
+    upstream = verify_chain(case, out_dir, solver)
     forget(out_dir / "assessment.json")
     hist = read_probes(out_dir / "probes.h5")
     a = case["assessment"]
@@ -259,19 +292,19 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
             comparison[key] = {"thesis": THESIS[key],
                                "railvib": arrival["detected"] if key[0] == "p" else None,
                                "analytic": arrival["t_entry"] + arrival["distance"] / c}
-    rows = thesis_rows(case, out_dir, hist, ours, arrival)
-    x, force = _contact(out_dir / "mbs.h5")
+    rows = thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
+    x, force = _contact(out_dir, solver)
     extra = []
     pm = peak_map(out_dir / "fields.h5", case["geometry.z1"], out_dir / "figures" / "peak_map.png")
     if pm is not None:
         extra.append({"id": "peak_map", "file": "figures/peak_map.png",
                       "title": "Peak velocity map: ground surface and slab tops", "data": pm})
-    text = [("Model and settings", model_summary(case, out_dir)),
+    text = [("Model and settings", model_summary(case, out_dir, solver)),
             ("Comparison with the thesis", format_thesis_table(rows)),
             ("Wave arrivals", format_comparison(comparison, arrivals, c_p, c_s))]
     files = write_report(out_dir, results, hist, None if x is None else (x, force),
                          extra_figures=extra, extra_text=text)
-    summary = {"results": results, "wave_speeds": {"c_P": c_p, "c_S": c_s},
+    summary = {"solver": solver, "results": results, "wave_speeds": {"c_P": c_p, "c_S": c_s},
                "wave_arrivals": arrivals, "thesis_comparison": comparison,
                "thesis_table": rows,
                "verdict": {k: v["passed"] for k, v in results.items()},
@@ -281,6 +314,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     rep.info(format_table(results))
     rep.info(format_thesis_table(rows))
     rep.info(format_comparison(comparison, arrivals, c_p, c_s))
+    rep.info(f"assessed the results of the {SOLVER_TEXT[solver]}")
     rep.info(f"wrote {out_dir / 'assessment.json'}, {files.get('html')}, {files.get('markdown')}")
     return summary
 
@@ -305,14 +339,24 @@ def format_comparison(comparison: dict, arrivals: dict, c_p: float, c_s: float) 
     return "\n".join(lines)
 
 
-def model_summary(case: Case, out_dir: Path) -> str:
-    """What an assessment rests on, for the report: model size, element and damping
-    formulation, modes and band, MBS settings, versions and input hashes (rank 0)."""
+#: How the report names the solver that produced the numbers.
+SOLVER_TEXT = {"modal": "modal solution (railvib modal + mbs + reconstruct)",
+               "transient": "full-order time integration (railvib transient)"}
+
+
+def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
+    """What an assessment rests on, for the report: the solver, model size, element and
+    damping formulation, modes and band (or the time integration), MBS settings, versions
+    and input hashes (rank 0)."""
     import h5py
 
     lines = [f"case                 {case['case.name']} (preset {case['case.preset']})",
              f"mesh                 refinement {case['mesh.refinement']}, hexahedra: "
              f"{case['modal.hex_formulation']}"]
+    if solver == "transient":
+        lines.extend(_transient_summary(case, out_dir / "transient.h5"))
+        return "\n".join(lines)
+    lines.append(f"solver               {SOLVER_TEXT['modal']}")
     modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
     if modes_path.exists():
         with h5py.File(modes_path, "r") as f:
@@ -328,10 +372,6 @@ def model_summary(case: Case, out_dir: Path) -> str:
                          f"PETSc {f.attrs.get('petsc_version', '?')}, SLEPc "
                          f"{f.attrs.get('slepc_version', '?')}")
             lines.append(f"modes.h5 inputs      sha256 {f.attrs.get('inputs_sha256', '?')}")
-    transient = out_dir / "transient.h5"
-    if transient.exists():
-        lines.extend(_transient_summary(case, transient))
-        return "\n".join(lines)
     if case["modal.damping"] == "uniform":
         damping = f"uniform {100 * case['modal.damping_ratio']:g} %"
     else:
@@ -371,7 +411,7 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
                "none": "none"}[d["model"]]
     return [f"model                {stats.get('n_nodes', 0):,} nodes, "
             f"{stats.get('n_dofs', 0):,} free DOFs, solved on {stats.get('ranks', '?')} rank(s)",
-            f"solver               full-order time integration (railvib transient), "
+            f"solver               {SOLVER_TEXT['transient']}, "
             f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, "
             f"dt {stats.get('dt', 0):.3e} s, {stats.get('n_steps', '?')} steps",
             f"boundaries           {faces}"

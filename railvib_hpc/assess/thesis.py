@@ -149,7 +149,7 @@ def _row(quantity: str, thesis: str, railvib: str, explanation: str) -> dict:
 
 
 def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
-                arrival: dict | None) -> list[dict]:
+                arrival: dict | None, modal: bool = True) -> list[dict]:
     """The rows of the thesis comparison (see the module notes).
 
     Parameters
@@ -165,6 +165,9 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
     arrival
         Wave arrival at ``basement_wall_far`` on the thesis's clock (see
         :func:`thesis_clock_arrival`), or None.
+    modal
+        The numbers come from the modal solution (False: the full-order solution; the
+        rows of the modes and of ``mbs.h5`` are left out even when the folder holds them).
 
     Returns
     -------
@@ -177,7 +180,7 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
 
     rows = []
     modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
-    have_modes = modes_path.exists()
+    have_modes = modal and modes_path.exists()
     freq = np.zeros(0)
     counts: dict[str, int] = {}
     n_nodes = 0

@@ -29,7 +29,47 @@ assessment.json  assess       the whole case                              modes.
                                                                           fields.h5, probes.h5
 result.json      study        the whole variant case, study, probes       modes.h5, mbs.h5,
                                                                           probes.h5 (static.h5)
+                                                                          or transient.h5,
+                                                                          probes.h5
 ===============  ===========  ==========================================  ===================
+
+The full-order solution (``railvib transient``, its own folder, by default
+``results/<name>/transient``) has its own rows. It writes ``fields.h5`` and ``probes.h5``
+in the layout of ``reconstruct`` (``assess`` and the studies read them unchanged), but
+they are other results with other inputs, so they have their own table names,
+``transient:fields.h5`` and ``transient:probes.h5`` (:attr:`StageFile.file` is the file
+name on disk). A file records its table name (``railvib_file``) and stage, so a
+``fields.h5`` of one stage is foreign to the other: it is never reused for it and
+``assess`` refuses it as the other's input. No ``[mbs]`` key enters: the full-order
+solver has its own time step and contact loop (the contact settings are in
+``[vehicle]``); of ``[modal]`` only the keys that change K, M and C do:
+
+========================  ===========  ======================================  =============
+table name (file)         written by   case keys (inputs)                      upstream files
+========================  ===========  ======================================  =============
+transient.h5              transient    mesh keys (as mesh.h5), materials,      mesh.h5
+                                       sections, pads, boundary, damping,
+                                       vehicle, irregularity (and its file),
+                                       transient (without
+                                       ``checkpoint_interval``),
+                                       modal.lumped_mass, hex_formulation,
+                                       fix_sleeper_rotations,
+                                       fix_rail_rotations_at_pads,
+                                       damping_ratio, output.dt (the
+                                       automatic step divides it)
+transient:fields.h5       transient    + output.window, float32                mesh.h5
+(fields.h5)                            (``/stress`` records its own hash with
+                                       output.stress_times)
+transient:probes.h5       transient    + output.probes, probe_roles            mesh.h5
+(probes.h5)
+transient_checkpoint.h5   transient    the union of the three above (it        mesh.h5
+                                       resumes all of them)
+========================  ===========  ======================================  =============
+
+The three products come from one time integration: they are reused only together, and
+one stale or missing product recomputes all three. The checkpoint is resumed only when
+it is current and sound by the same rules as a result, and the partial ``fields.h5``
+(:func:`resume_path`) carries the same run id.
 
 Provenance
 ----------
@@ -94,9 +134,10 @@ API
   :func:`case_differences`;
 * reuse: :func:`examine` -> :class:`Verdict`, :func:`require_inputs` (raises
   :class:`~railvib_hpc.errors.StaleInputError`), :func:`forget`;
-* writes: :func:`write_h5` (collective HDF5), :func:`write_json`, :func:`write_text`,
-  :func:`atomic_file`, :func:`copy_file`, :func:`ensure_space`, :func:`reserve`,
-  :func:`temp_path`;
+* writes: :func:`write_h5` (collective HDF5), :func:`start_h5` + :func:`commit_h5` (the
+  same steps around a file filled over a long computation, e.g. under its
+  :func:`resume_path`), :func:`write_json`, :func:`write_text`, :func:`atomic_file`,
+  :func:`copy_file`, :func:`ensure_space`, :func:`reserve`, :func:`temp_path`;
 * locks: :func:`output_lock` (collective context manager), :func:`acquire_lock`,
   :func:`release_lock`, :func:`holds_lock`, :func:`remove_stale_temps`.
 """
@@ -341,6 +382,26 @@ class StageFile:
     upstream: tuple[str, ...] = ()
     companions: tuple[str, ...] = ()
     input_files: tuple[str, ...] = ()
+    file: str = ""
+
+    @property
+    def filename(self) -> str:
+        """The file name in the output folder (``file``, or the table name)."""
+        return self.file or self.name
+
+
+#: The full-order solution (``railvib transient``): everything that changes K, M, C, the
+#: loads and the time step; ``transient.checkpoint_interval`` is how it runs, not what.
+_TRANSIENT = _MESH + (("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()),
+                      ("damping", ()), ("vehicle", ()), ("irregularity", ()),
+                      ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
+                      ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
+                      ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
+                      ("output.dt", ()))
+_TRANSIENT_FIELDS = _TRANSIENT + (("output.window", ()), ("output.float32", ()))
+_TRANSIENT_PROBES = _TRANSIENT + (("output.probes", ()), ("output.probe_roles", ()))
+_TRANSIENT_STATE = _TRANSIENT_FIELDS + (("output.probes", ()), ("output.probe_roles", ()))
+_FILES = ("mesh.file", "irregularity.file")
 
 
 STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
@@ -357,9 +418,18 @@ STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
     StageFile("assessment.json", "assess", 2, _ALL,
               ("modes.h5", "static.h5", "mbs.h5", "fields.h5", "probes.h5"),
               ("report.md", "report.html", "report.json"), ("mesh.file", "irregularity.file")),
-    StageFile("result.json", "study", 2, _ALL, ("modes.h5", "static.h5", "mbs.h5", "probes.h5"),
+    StageFile("result.json", "study", 2, _ALL, ("modes.h5", "static.h5", "mbs.h5", "probes.h5",
+                                                  "transient.h5"),
               (), ("mesh.file", "irregularity.file")),
+    StageFile("transient.h5", "transient", 2, _TRANSIENT, ("mesh.h5",), (), _FILES),
+    StageFile("transient:fields.h5", "transient", 2, _TRANSIENT_FIELDS, ("mesh.h5",),
+              ("fields.xdmf",), _FILES, file="fields.h5"),
+    StageFile("transient:probes.h5", "transient", 2, _TRANSIENT_PROBES, ("mesh.h5",), (),
+              _FILES, file="probes.h5"),
+    StageFile("transient_checkpoint.h5", "transient", 2, _TRANSIENT_STATE, ("mesh.h5",), (),
+              _FILES),
 )}
+
 
 def spec(name: str) -> StageFile:
     """The table row of ``name`` (a file name, e.g. ``modes.h5``)."""
@@ -592,6 +662,11 @@ def examine(path: str | os.PathLike, name: str | None = None, case=None, *,
     if int(attrs.get("complete", 0) or 0) != 1:
         return Verdict(False, "it is incomplete (an interrupted write)", "incomplete", "", attrs)
     if attrs.get("railvib_file") not in (None, name) or attrs.get("stage") not in (None, s.stage):
+        other = attrs.get("stage")
+        if other and other != s.stage and attrs.get("railvib_file") in (name, s.filename,
+                                                                        f"{other}:{s.filename}"):
+            return Verdict(False, f"it was written by 'railvib {other}', not by 'railvib "
+                           f"{s.stage}'", "foreign", "", attrs)
         return Verdict(False, f"it is not a railvib {name} (it says "
                        f"{attrs.get('railvib_file')})", "foreign", "", attrs)
     version = attrs.get("format_version")
@@ -671,17 +746,23 @@ def _short(exc: BaseException) -> str:
 
 
 def rerun_hint(name: str) -> str:
-    """``run 'railvib modal' (or 'railvib run')`` for the command that writes ``name``."""
+    """``run 'railvib modal' (or 'railvib run')`` for the command that writes ``name``
+    (``run 'railvib transient'`` for the full-order solution: not part of ``run``)."""
     stage = spec(name).stage
     if stage == "study":
         return "rerun the study"
+    if stage == "transient":
+        return "run 'railvib transient'"
     return f"run 'railvib {stage}' (or 'railvib run')"
 
 
-def refuse(path: Path, verdict: Verdict) -> StaleInputError:
-    """The one-line error of a single-stage command whose input ``path`` is unusable."""
-    name = spec(path.name).name if path.name in STAGE_FILES else path.name
+def refuse(path: Path, verdict: Verdict, name: str | None = None) -> StaleInputError:
+    """The one-line error of a single-stage command whose input ``path`` (table name
+    ``name``, default its file name) is unusable."""
+    name = name or (spec(path.name).name if path.name in STAGE_FILES else path.name)
     if verdict.kind == "missing":
+        if name in STAGE_FILES and spec(name).stage == "transient":
+            return StaleInputError(f"{path} not found: run 'railvib transient' first")
         stage = spec(name).stage if name in STAGE_FILES else "run"
         return StaleInputError(f"{path} not found: run 'railvib {stage}' first (or 'railvib "
                                "run')")
@@ -700,7 +781,8 @@ def require_inputs(out_dir: Path, names: Sequence[str], case, checks: Mapping[st
     out_dir
         Output folder holding them.
     names
-        Their table names, upstream first (e.g. ``("modes.h5", "mbs.h5")``).
+        Their table names, upstream first (e.g. ``("modes.h5", "mbs.h5")``); each is looked
+        for under its file name (:attr:`StageFile.filename`).
     case
         The current case (None: compare no inputs hash).
     checks
@@ -721,11 +803,11 @@ def require_inputs(out_dir: Path, names: Sequence[str], case, checks: Mapping[st
     """
     out = {}
     for name in names:
-        path = out_dir / name
+        path = out_dir / spec(name).filename
         v = examine(path, name, case, data_check=(checks or {}).get(name), context=context,
                     companions=False)
         if not v.ok:
-            raise refuse(path, v)
+            raise refuse(path, v, name)
         out[name] = v
     return out
 
@@ -748,8 +830,26 @@ def final_name(name: str) -> str:
     """The final file name of a temporary name of :func:`temp_path` (others unchanged)."""
     m = _TEMP_RE.match(name)
     if not m:
+        if name.startswith(".") and name.endswith(_RESUME_SUFFIX):
+            return name[1:-len(_RESUME_SUFFIX)]
         return name
     return name[1:name.rindex(".part-" if ".part-" in name else ".copy-")]
+
+
+_RESUME_SUFFIX = ".resume"
+
+
+def resume_path(path: str | os.PathLike) -> Path:
+    """The temporary name of a result that is written over several runs: ``.<name>.resume``
+    (a resumable run's partial file, e.g. the fields of an interrupted ``railvib
+    transient``).
+
+    Unlike :func:`temp_path` it names no process, and :func:`remove_stale_temps` leaves it:
+    a later run continues it when the provenance it carries matches its checkpoint, and
+    deletes it otherwise. Complete it with :func:`start_h5` ... :func:`commit_h5`.
+    """
+    path = Path(path)
+    return path.with_name(f".{path.name}{_RESUME_SUFFIX}")
 
 
 _TEMP_RE = re.compile(r"^\..+\.(?:part|copy)-(?:(?P<host>.+)-)?(?P<pid>\d+)(?:\.[A-Za-z0-9]+)?$")
@@ -991,6 +1091,96 @@ def _reread(check: Callable[[Path], Sequence[str]] | None, tmp: Path, path: Path
                           "system?)")
 
 
+def _sync_h5(comm, error: BaseException | None, what: str, folder: Path) -> None:
+    """Raise ``error`` of any rank on every rank (an ``OSError`` as :class:`OutputError`)."""
+    from ..parallel import check_collective
+
+    if isinstance(error, OSError) and not error.errno and not isinstance(error, UserError):
+        with contextlib.suppress(OSError):        # MPI-IO reports no errno: name the cause
+            if free_bytes(folder) < SPACE_MARGIN[1]:
+                error = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+    if comm is not None:
+        check_collective(comm, error, what)
+    elif error is not None:
+        if isinstance(error, OSError) and not isinstance(error, UserError):
+            raise OutputError(f"{what}: {os_error_text(error)}") from None
+        raise error
+
+
+def _remove(comm, tmp: Path) -> None:
+    if comm is None or comm.rank == 0:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+
+
+def start_h5(tmp: str | os.PathLike, comm, *, size_hint: int, what: str) -> None:
+    """Create the temporary HDF5 file ``tmp`` of a stage file (collective over ``comm``).
+
+    Rank 0 checks the free space for ``size_hint`` bytes (plus margin), creates the file
+    with ``complete = 0`` and reserves the space, so that the data writes that follow
+    cannot hit a full disk. The caller then opens it (``r+``, every rank with ``mpio`` or
+    rank 0) and fills it; :func:`commit_h5` completes it. An error on any rank raises on
+    every rank and removes the file. ``what`` names the final file in the messages.
+    """
+    import h5py
+
+    tmp = Path(tmp)
+    error = None
+    if comm is None or comm.rank == 0:
+        try:
+            tmp.parent.mkdir(parents=True, exist_ok=True)
+            ensure_space(tmp.parent, size_hint, what)
+            with h5py.File(tmp, "w") as f:
+                f.attrs["complete"] = 0
+            reserve(tmp, needed_bytes(size_hint))
+        except BaseException as exc:
+            error = exc
+    try:
+        _sync_h5(comm, error, f"writing {tmp.parent / what}", tmp.parent)
+    except BaseException:
+        _remove(comm, tmp)
+        raise
+
+
+def commit_h5(tmp: str | os.PathLike, path: str | os.PathLike, comm, *,
+              check: Callable[[Path], Sequence[str]] | None = None,
+              record: bool = True) -> str:
+    """Complete a filled temporary HDF5 file and make it ``path`` (collective over ``comm``).
+
+    Rank 0 sets ``complete = 1``, runs ``check(tmp)`` (re-read), fsyncs and renames; the
+    content digest is computed on every rank and recorded. Call it after every rank closed
+    the file. An error on any rank raises on every rank, and the temporary file is
+    removed.
+
+    Returns
+    -------
+    str
+        The content digest of ``path`` ("" with ``record=False``).
+    """
+    import h5py
+
+    tmp, path = Path(tmp), Path(path)
+    error = None
+    if comm is None or comm.rank == 0:
+        try:
+            with h5py.File(tmp, "r+") as f:
+                f.attrs["complete"] = 1
+            _reread(check, tmp, path)
+            _fsync_path(tmp)
+            os.replace(tmp, path)
+            _fsync_dir(path.parent)
+        except BaseException as exc:
+            error = exc
+    try:
+        _sync_h5(comm, error, f"writing {path}", path.parent)
+    except BaseException:
+        _remove(comm, tmp)
+        raise
+    if not record:
+        return ""
+    return record_file(path, comm)
+
+
 def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *,
              size_hint: int, attrs: Mapping[str, Any] | None = None,
              parallel: bool | None = None,
@@ -1000,13 +1190,14 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
     """Write an HDF5 stage file atomically; collective over ``comm`` (None: serial).
 
     Steps: free space checked (rank 0); the file is created under its temporary name
-    and ``size_hint`` bytes reserved (so data writes cannot hit a full disk); it is
-    opened on every rank with the ``mpio`` driver (``parallel``) or on rank 0, the
+    and ``size_hint`` bytes reserved (so data writes cannot hit a full disk; :func:`start_h5`);
+    it is opened on every rank with the ``mpio`` driver (``parallel``) or on rank 0, the
     provenance ``attrs`` and ``complete = 0`` are written and ``fill(file, parallel)``
     writes the data; ``before_complete(tmp)`` may add more (collective); rank 0 sets
     ``complete = 1``, runs ``check(tmp)`` (re-read), fsyncs and renames; the content
-    digest is computed on every rank and recorded. An error on any rank raises on every
-    rank (``OSError`` as :class:`OutputError`), and no file is left behind.
+    digest is computed on every rank and recorded (:func:`commit_h5`). An error on any
+    rank raises on every rank (``OSError`` as :class:`OutputError`), and no file is left
+    behind.
 
     ``fill_everywhere``: call ``fill(None, False)`` on the ranks that do not open the
     file (without parallel HDF5 they send their data to rank 0 inside ``fill``).
@@ -1018,7 +1209,6 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
     """
     import h5py
 
-    from ..parallel import check_collective
     from .parallel_h5 import h5py_parallel_ok
 
     path = Path(path)
@@ -1028,39 +1218,10 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
     tmp = temp_path(path)
     if comm is not None and comm.size > 1:
         tmp = Path(comm.bcast(str(tmp) if rank == 0 else None, root=0))
-    what = f"writing {path}"
     if comm is not None and comm.size > 1:
         attrs = comm.bcast(dict(attrs or {}) if rank == 0 else None, root=0)
-
-    def cleanup() -> None:
-        if rank == 0:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-
-    def sync(error: BaseException | None) -> None:
-        if isinstance(error, OSError) and not error.errno and not isinstance(error, UserError):
-            with contextlib.suppress(OSError):    # MPI-IO reports no errno: name the cause
-                if free_bytes(path.parent) < SPACE_MARGIN[1]:
-                    error = OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        if comm is not None:
-            check_collective(comm, error, what)
-        elif error is not None:
-            if isinstance(error, OSError) and not isinstance(error, UserError):
-                raise OutputError(f"{what}: {os_error_text(error)}") from None
-            raise error
-
-    error = None
-    if rank == 0:
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            ensure_space(path.parent, size_hint, path.name)
-            with h5py.File(tmp, "w") as f:
-                f.attrs["complete"] = 0
-            reserve(tmp, needed_bytes(size_hint))
-        except BaseException as exc:
-            error = exc
+    start_h5(tmp, comm, size_hint=size_hint, what=path.name)
     try:
-        sync(error)
         error = None
         try:
             if parallel or rank == 0:
@@ -1074,27 +1235,13 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
                 fill(None, False)
         except BaseException as exc:
             error = exc
-        sync(error)
+        _sync_h5(comm, error, f"writing {path}", path.parent)
         if before_complete is not None:
             before_complete(tmp)
-        error = None
-        if rank == 0:
-            try:
-                with h5py.File(tmp, "r+") as f:
-                    f.attrs["complete"] = 1
-                _reread(check, tmp, path)
-                _fsync_path(tmp)
-                os.replace(tmp, path)
-                _fsync_dir(path.parent)
-            except BaseException as exc:
-                error = exc
-        sync(error)
     except BaseException:
-        cleanup()
+        _remove(comm, tmp)
         raise
-    if not record:
-        return ""
-    return record_file(path, comm)
+    return commit_h5(tmp, path, comm, check=check, record=record)
 
 
 # ----------------------------------------------------------------------------- locks

@@ -106,7 +106,6 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
 
         with h5py.File(modes_path, "r") as f:
             omega = np.sqrt(np.maximum(f["modes/eigenvalue"][:m], 0.0))
-            modes_sha = str(f.attrs.get("inputs_sha256", ""))
     if kind == "strain_energy":
         from ..io.modes_io import read_strain_energies
         from ..modal.energy import damping_from_energies
@@ -122,10 +121,12 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
 
         zeta = rayleigh_ratio(*case_rayleigh(case), omega)
     elif kind == "full":
-        from ..modal.projection import compose_damping, read_damping_parts
+        from ..io.stage_files import file_digest
+        from ..modal.projection import compose_damping, damping_key, read_damping_parts
 
         path = Path(modes_path).with_name("modal_damping.h5")
-        parts = read_damping_parts(path, modes_sha)
+        # the key the modal stage wrote: the modes' content digest and the damping keys
+        parts = read_damping_parts(path, damping_key(case, file_digest(modes_path).sha256))
         if parts is None:
             raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
                                 "'railvib modal' with modal.damping = 'full'")

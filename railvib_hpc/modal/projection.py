@@ -103,6 +103,15 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
     return out
 
 
+def damping_key(case: Case, modes_sha: str) -> str:
+    """Key of ``modal_damping.h5``: the content digest of the modes it projects on and the
+    case keys of the damping matrix's parts (faces, pads, materials, [damping])."""
+    from ..io.stage_files import digest
+
+    return digest({"modes.h5": modes_sha,
+                   "case": case.digest("boundary", "pads", "materials", "damping")})
+
+
 def write_damping_parts(path: Path, parts: dict[str, np.ndarray], modes_sha: str) -> None:
     """Write ``modal_damping.h5`` atomically (rank 0)."""
     import h5py

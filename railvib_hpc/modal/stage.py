@@ -26,6 +26,7 @@ from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
 from .projection import (
+    damping_key,
     project_damping_parts,
     read_damping_parts,
     read_phi_rows,
@@ -303,15 +304,6 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
         write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs)
     rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
              "rail DOFs (static correction)")
-
-
-def damping_key(case: Case, modes_sha: str) -> str:
-    """Key of ``modal_damping.h5``: the content of the modes it projects on and the case keys
-    of the damping matrix's parts (faces, pads, materials, [damping])."""
-    from ..io.stage_files import digest
-
-    return digest({"modes.h5": modes_sha,
-                   "case": case.digest("boundary", "pads", "materials", "damping")})
 
 
 def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str,

@@ -182,10 +182,11 @@ def read_failure(vdir: Path) -> dict | None:
 
 def write_result(vdir: Path, result: dict, vcase: Case | None = None) -> None:
     """Write ``result.json`` atomically with its provenance (the digests of the variant's
-    ``modes.h5``, ``static.h5``, ``mbs.h5`` and ``probes.h5``) and drop an old
-    ``failed.json``."""
+    ``modes.h5``, ``static.h5``, ``mbs.h5`` and ``probes.h5``, or of the full-order
+    solution's ``transient.h5`` and ``probes.h5``) and drop an old ``failed.json``."""
     upstream = {n: file_digest(vdir / n).sha256 for n in ("modes.h5", "static.h5", "mbs.h5",
-                                                          "probes.h5") if (vdir / n).exists()}
+                                                          "transient.h5", "probes.h5")
+                if (vdir / n).exists()}
     prov = provenance(RESULT_NAME, vcase, upstream, inputs_sha256=result.get("inputs_sha256"))
     write_json(vdir / RESULT_NAME, jsonable(result), prov)
     (vdir / FAILED_NAME).unlink(missing_ok=True)
@@ -456,7 +457,8 @@ def _record_failure(plan: StudyPlan, v: Variant, digest: str, vdir: Path, comm, 
 
 def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str, vdir: Path,
                         comm, rep: Reporter, settings: dict[str, Any]) -> dict:
-    """A variant solved by the full-order time integration (``railvib transient``)."""
+    """A variant solved by the full-order time integration (``railvib transient``'s entry
+    point: reused when current, resumed from a current checkpoint)."""
     from ..assess.stage import read_probes
     from ..transient.stage import run_transient_stage
 
@@ -482,7 +484,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str, v
                 "inputs_sha256": digest, "railvib_version": __version__, "ranks": comm.size,
                 "model": model, "mbs": mbs_metrics(stats), **resp, "timings": timings,
                 "reused": {"transient": bool(stats.get("reused"))}, "complete": True}
-            write_result(vdir, result)
+            write_result(vdir, result, vcase)
             return result
 
         with rep.stage(f"{plan.kind}/{v.name}: probes + metrics"):

@@ -5,23 +5,27 @@ them unchanged:
 
 * ``fields.h5`` (:class:`FieldWriter`): ``/time``, ``/steps``, ``/fields/displacement``,
   ``velocity``, ``acceleration`` (ns, n, 3) of every node at the output steps, ``/mesh``,
-  and ``/stress`` at ``output.stress_times``; ``fields.xdmf``, ``stress.xdmf``. Written
-  collectively while the run goes on (each rank its contiguous node range), under a
-  hidden name that a resumed run continues, renamed when complete;
+  and ``/stress`` at ``output.stress_times``; ``fields.xdmf``, ``stress.xdmf`` (with their
+  per-step views). Written collectively while the run goes on (each rank its contiguous
+  node range) under :func:`~railvib_hpc.io.stage_files.resume_path` (created with its
+  space reserved by :func:`~railvib_hpc.io.stage_files.start_h5`), which a resumed run
+  continues, and completed, checked, renamed and recorded by
+  :func:`~railvib_hpc.io.stage_files.commit_h5`;
 * probe histories (:class:`PointSampler`): the nodal solution interpolated with the
   trilinear shape functions of the containing hexahedron at every step;
 * rail histories (:class:`RailSampler`): ``uz``, ``ry`` of every flexible-rail node at every
   step (rail bending moments, rail displacement under the wheels).
 
 Checkpoints (:func:`write_checkpoint`, :func:`read_checkpoint`) hold the state vectors by
-global DOF number (so a run may resume on another number of ranks) and rank 0's
-histories.
+global DOF number (the numbering does not depend on the number of ranks, so a run may
+resume on another number of ranks) and rank 0's histories. They are stage files
+(``transient_checkpoint.h5``, written by :func:`~railvib_hpc.io.stage_files.write_h5` with
+their provenance); whether one may be resumed is decided by the stage
+(:mod:`.stage`).
 """
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +33,6 @@ import numpy as np
 from ..mesh.model import Mesh
 from ..mesh.search import hex_shape_values, locate
 from ..modal.dofmap import DofMap
-
-#: Bumped when the content of the transient outputs changes (part of the reuse digest).
-FORMAT_VERSION = 1
 
 
 # --------------------------------------------------------------------------- sampling
@@ -119,7 +120,8 @@ class FieldWriter:
     Parameters
     ----------
     path
-        The hidden file written while running (renamed by :meth:`finish`).
+        The final file; the data go to its :func:`~railvib_hpc.io.stage_files.resume_path`
+        until :meth:`finish`.
     comm
         MPI communicator.
     mesh, dofmap
@@ -129,23 +131,28 @@ class FieldWriter:
     float32
         Store single precision.
     attrs
-        Root attributes (``inputs_sha256`` among them).
+        Root attributes (the provenance, the run id).
     resume
-        Continue an existing file with the same ``inputs_sha256`` instead of creating it.
+        Continue the existing partial file (the stage checked that it belongs to the
+        checkpoint) instead of creating it.
     block
         Output steps buffered before a collective write.
+    extra_bytes
+        Space reserved for what is added before completion (the stresses).
     """
 
     def __init__(self, path: Path, comm, mesh: Mesh, dofmap: DofMap, times: np.ndarray,
                  steps: np.ndarray, float32: bool, attrs: dict, resume: bool = False,
-                 block: int = 16):
-        from ..io.parallel_h5 import h5py_parallel_ok
-        from ..reconstruct.fields import open_h5
+                 block: int = 16, extra_bytes: int = 0):
+        from ..io.parallel_h5 import h5py_parallel_ok, open_h5
+        from ..io.stage_files import resume_path, start_h5
+        from ..parallel import check_collective
 
-        self.path, self.comm, self.dofmap = Path(path), comm, dofmap
+        self.final = Path(path)
+        self.path = resume_path(self.final)
+        self.comm, self.dofmap = comm, dofmap
         self.times, self.steps = np.asarray(times, float), np.asarray(steps, np.int64)
         self.ns, self.n = len(self.times), mesh.n_nodes
-        self.ne = len(mesh.hexes)
         self.float32 = bool(float32)
         self.dtype = np.float32 if float32 else np.float64
         self.parallel = h5py_parallel_ok(comm)
@@ -154,38 +161,43 @@ class FieldWriter:
         self.block = max(1, int(block))
         self.buf = np.zeros((3, self.block, nl, 3), dtype=self.dtype)
         self.pending: list[int] = []
-        self.hex_dtype, self.part_dtype = mesh.hexes.dtype.str, mesh.hex_part.dtype.str
+        if not resume:
+            size = (3 * self.ns * self.n * 3 * np.dtype(self.dtype).itemsize
+                    + 8 * (3 * self.n + 9 * len(mesh.hexes)) + 16 * self.ns + int(extra_bytes))
+            start_h5(self.path, comm, size_hint=size, what=self.final.name)
         writes = self.parallel or comm.rank == 0
         self.file = None
         error = None
         if writes:
             try:
-                if resume:
-                    self.file = open_h5(self.path, "r+", comm, self.parallel)
-                else:
-                    self.file = open_h5(self.path, "w", comm, self.parallel)
+                self.file = open_h5(self.path, "r+", comm, self.parallel)
+                if not resume:
                     self._create(mesh, attrs)
             except Exception as exc:     # raised on every rank below
                 error = exc
-        from ..reconstruct.fields import check_collective
-
-        check_collective(comm, error, f"opening {self.path}")
+        check_collective(comm, error, f"writing {self.final}")
 
     def _create(self, mesh: Mesh, attrs: dict) -> None:
+        import h5py
+
         f = self.file
-        f.attrs["complete"] = 0
         f.create_dataset("time", (self.ns,), "f8")
         f.create_dataset("steps", (self.ns,), "i8")
         g = f.create_group("fields")
+        # storage allocated now (no fill written): after the first :meth:`sync` the file's
+        # metadata on disk does not change any more, so a killed run leaves a readable file
+        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
+        dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
         for name in ("displacement", "velocity", "acceleration"):
-            g.create_dataset(name, (self.ns, self.n, 3), self.dtype)
+            g.create_dataset(name, (self.ns, self.n, 3), self.dtype, dcpl=dcpl)
         gm = f.create_group("mesh")
         gm.create_dataset("points", (self.n, 3), "f8")
         gm.create_dataset("hexes", mesh.hexes.shape, mesh.hexes.dtype)
         gm.create_dataset("hex_part", mesh.hex_part.shape, mesh.hex_part.dtype)
-        f.attrs.update({"n_modes": 0, "n_extra": 0, "float32": int(self.float32),
+        f.attrs.update({**attrs, "n_modes": 0, "n_extra": 0, "float32": int(self.float32),
                         "block_steps": self.block, "solver": "transient",
-                        "modes_file": "", **attrs})
+                        "modes_file": "", "complete": 0})
         if self.comm.rank == 0:
             f["time"][...] = self.times
             f["steps"][...] = self.steps
@@ -203,16 +215,31 @@ class FieldWriter:
             self.flush()
 
     def flush(self) -> None:
-        """Write the buffered steps (collective; consecutive indices)."""
-        from ..reconstruct.fields import check_collective, write_slab
+        """Write the buffered steps (collective; consecutive indices). Non-finite values
+        (a diverged integration) stop the run on every rank: nothing is written."""
+        from ..io.parallel_h5 import write_slab
+        from ..io.stage_checks import nonfinite
+        from ..parallel import check_collective
 
         if not self.pending:
-            # every rank must still agree that nothing is pending
-            return
+            return                       # the same on every rank: they buffer the same steps
         k0, b = self.pending[0], len(self.pending)
         nl = self.nodes.stop - self.nodes.start
         names = ("displacement", "velocity", "acceleration")
         error = None
+        try:
+            for i, name in enumerate(names):
+                bad = nonfinite(f"the {name} field", self.buf[i, :b])
+                if bad:
+                    from ..errors import DataError
+
+                    raise DataError(f"{bad[0]} at t = {self.times[k0]:.6g} .. "
+                                    f"{self.times[k0 + b - 1]:.6g} s: the time integration "
+                                    f"diverged; {self.final} was not written (check "
+                                    "transient.dt and the vehicle and contact settings)")
+        except Exception as exc:         # raised on every rank
+            error = exc
+        check_collective(self.comm, error, f"writing {self.final}")
         try:
             if self.parallel:
                 for i, name in enumerate(names):
@@ -228,61 +255,72 @@ class FieldWriter:
                                                             + data.shape[2]] = data[i]
         except Exception as exc:     # raised on every rank
             error = exc
-        check_collective(self.comm, error, f"writing {self.path}")
+        check_collective(self.comm, error, f"writing {self.final}")
         self.pending = []
 
-    def close(self) -> None:
-        self.flush()
-        if self.file is not None:
-            self.file.close()
-            self.file = None
+    def sync(self) -> None:
+        """Write what is buffered and make the partial file on disk complete up to here
+        (collective: ``H5Fflush`` of the data and metadata, then ``fsync``), so that a
+        checkpoint written next can trust it even if the process is killed."""
+        import os
 
-    def finish(self, final: Path, stress) -> None:
-        """Close, add the stresses (``stress(tmp_path)``, collective), mark complete, rename,
-        write ``fields.xdmf`` (rank 0)."""
-        from ..io.stage_files import write_text
+        from ..parallel import check_collective
+
+        self.flush()
+        error = None
+        try:
+            if self.file is not None:
+                self.file.flush()
+            if self.comm.rank == 0:
+                fd = os.open(self.path, os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        except Exception as exc:         # raised on every rank
+            error = exc
+        check_collective(self.comm, error, f"writing {self.final}")
+
+    def close(self) -> None:
+        """Write what is buffered and close the partial file (collective)."""
+        try:
+            self.flush()
+        finally:
+            if self.file is not None:
+                self.file.close()
+                self.file = None
+
+    def finish(self, stress) -> str:
+        """Close, add the stresses (``stress(partial_path)``, collective), complete, check,
+        rename and record ``fields.h5``; write ``fields.xdmf`` (rank 0). Returns the content
+        digest."""
+        from ..io.stage_checks import check_fields
+        from ..io.stage_files import commit_h5
         from ..parallel import on_root
-        from ..reconstruct.fields import fields_xdmf
+        from ..reconstruct.fields import write_fields_xdmf
 
         self.close()
         self.comm.Barrier()
         if stress is not None:
             stress(self.path)
-
-        def rename() -> None:
-            import h5py
-
-            with h5py.File(self.path, "a") as f:
-                f.attrs["complete"] = 1
-            os.replace(self.path, final)
-            write_text(final.with_suffix(".xdmf"),
-                              fields_xdmf(final.name, self.n, self.ne, self.times, self.float32,
-                                          self.hex_dtype, self.part_dtype))
-
-        on_root(rename, self.comm)
-
-
-def partial_fields_ok(path: Path, key: str) -> bool:
-    """True when a hidden fields file of an interrupted run with digest ``key`` exists."""
-    import h5py
-
-    if not path.exists():
-        return False
-    try:
-        with h5py.File(path, "r") as f:
-            return f.attrs.get("inputs_sha256") == key and "fields/displacement" in f
-    except OSError:
-        return False
+        sha = commit_h5(self.path, self.final, self.comm,
+                        check=lambda tmp: check_fields(tmp, False))
+        on_root(lambda: write_fields_xdmf(self.final), self.comm)
+        return sha
 
 
 # --------------------------------------------------------------------------- checkpoints
-def write_checkpoint(path: Path, comm, key: str, step: int, fields_written: int,
+def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_written: int,
                      state, dofmap: DofMap, history: dict | None) -> None:
-    """Store the state after ``step`` (collective, atomic; the previous one is replaced).
+    """Store the state after ``step`` (collective, atomic, recorded; the previous checkpoint
+    is replaced by the rename).
 
-    ``history`` (rank 0: name -> array) holds the recorded histories.
+    ``attrs`` (rank 0) are its provenance and run id; ``history`` (rank 0: name -> array)
+    holds the recorded histories.
     """
-    from ..io.parallel_h5 import h5py_parallel_ok, write_collective
+    from ..io.parallel_h5 import h5py_parallel_ok
+    from ..io.stage_checks import check_checkpoint
+    from ..io.stage_files import write_h5
 
     parallel = h5py_parallel_ok(comm)
     r0, r1 = dofmap.owned_dofs(comm.rank)
@@ -297,16 +335,20 @@ def write_checkpoint(path: Path, comm, key: str, step: int, fields_written: int,
              "penetration": state.penetration, "force": state.force}
     hist_meta = comm.bcast({k: (v.shape, v.dtype.str) for k, v in (history or {}).items()}
                            if comm.rank == 0 else None, root=0)
+    size = 3 * 8 * n + sum(8 * np.size(v) for v in small.values()) + sum(
+        int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in hist_meta.values())
 
     def fill(f, par: bool) -> None:
-        f.attrs["inputs_sha256"] = key
         f.attrs["step"] = int(step)
         f.attrs["fields_written"] = int(fields_written)
-        f.attrs["format"] = FORMAT_VERSION
         g = f.create_group("state")
         for name, v in vecs.items():
             d = g.create_dataset(name, (n,), "f8")
-            if r1 > r0:
+            if par:
+                from ..io.parallel_h5 import write_slab
+
+                write_slab(d, (r0,), (r1 - r0,), v if r1 > r0 else None, True)
+            elif r1 > r0:
                 d[r0:r1] = v
         s = f.create_group("small")
         for name, v in small.items():
@@ -319,35 +361,23 @@ def write_checkpoint(path: Path, comm, key: str, step: int, fields_written: int,
             if comm.rank == 0:
                 d[...] = history[name]
 
-    write_collective(path, comm, fill)
+    write_h5(path, comm, fill, size_hint=int(size), attrs=attrs, parallel=parallel,
+             check=lambda tmp: check_checkpoint(tmp))
 
 
-def read_checkpoint(path: Path, key: str, dofmap: DofMap, rank: int) -> dict | None:
-    """This rank's part of a complete checkpoint with digest ``key`` (None if there is none).
-
-    Every rank reads its own rows (plain h5py, read only).
-    """
+def read_checkpoint(path: Path, dofmap: DofMap, rank: int) -> dict:
+    """This rank's part of a checkpoint the stage found current and sound (every rank reads
+    its own rows, plain h5py, read only)."""
     import h5py
 
-    if not path.exists():
-        return None
-    try:
-        with h5py.File(path, "r") as f:
-            if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("inputs_sha256") != key:
-                return None
-            r0, r1 = dofmap.owned_dofs(rank)
-            out = {"step": int(f.attrs["step"]), "fields_written": int(f.attrs["fields_written"])}
-            for name in ("u", "v", "a"):
-                out[name] = f[f"state/{name}"][r0:r1]
-            for name in f["small"]:
-                out[name] = f[f"small/{name}"][()]
-            out["history"] = ({name: f[f"history/{name}"][()] for name in f["history"]}
-                              if rank == 0 else None)
-            return out
-    except (OSError, KeyError):
-        return None
+    with h5py.File(path, "r") as f:
+        r0, r1 = dofmap.owned_dofs(rank)
+        out = {"step": int(f.attrs["step"]), "fields_written": int(f.attrs["fields_written"])}
+        for name in ("u", "v", "a"):
+            out[name] = f[f"state/{name}"][r0:r1]
+        for name in f["small"]:
+            out[name] = f[f"small/{name}"][()]
+        out["history"] = ({name: f[f"history/{name}"][()] for name in f["history"]}
+                          if rank == 0 else None)
+        return out
 
-
-def json_attr(value) -> str:
-    """JSON for an HDF5 attribute (numpy scalars as floats)."""
-    return json.dumps(value, default=float)

@@ -10,37 +10,67 @@ irregularities of ``[irregularity]``, exactly as in the ``mbs`` stage (same vehi
 and contact solver, :mod:`.integrate`), but on the full model: a causal solution whose
 waves travel at the speeds of the mesh, with no truncation of a modal basis.
 
-Outputs in the output folder (the files of ``reconstruct``, so ``assess`` and the studies
-read them unchanged):
+Outputs in the output folder (the layout of ``reconstruct``'s files, so ``assess`` and the
+studies read them unchanged; their own rows of
+:data:`railvib_hpc.io.stage_files.STAGE_FILES`):
 
-* ``fields.h5`` + ``fields.xdmf`` (every node at the steps of ``output.dt`` within
-  ``output.window``), ``/stress`` + ``stress.xdmf`` at ``output.stress_times``;
-* ``probes.h5`` + ``probes/<name>.csv``: the mesh probes and ``output.probes`` at every step,
-  and ``/rail`` with the rail bending moments (full model: nothing left out);
+* ``fields.h5`` + ``fields.xdmf`` (+ ``fields_views.h5``): every node at the steps of
+  ``output.dt`` within ``output.window``; ``/stress`` + ``stress.xdmf`` (+
+  ``stress_views.h5``) at ``output.stress_times``;
+* ``probes.h5`` + ``probes/<name>.csv``: the mesh probes and ``output.probes`` (with their
+  roles) at every step, and ``/rail`` with the rail bending moments (full model: nothing
+  left out);
 * ``transient.h5``: ``/time``; ``/wheels/x, contact_force, penetration,
   rail_displacement, wheel_height, rail_index``; ``/vehicle/y, y_dot, y_ddot``;
-  ``/rail/x, uz, ry``; attributes ``complete``, ``inputs_sha256``, ``case_toml``, ``stats``.
+  ``/rail/x, uz, ry``; attribute ``stats`` (run statistics, contact forces).
 
-A rerun with the same inputs reuses the results. A run that is interrupted resumes from its
-last checkpoint (``transient_checkpoint.h5``, every ``transient.checkpoint_interval``
-seconds) and gives the same answer: the state is stored exactly, the factor is recomputed
-deterministically.
+Every file carries its provenance and is written checked, atomically and recorded
+(:mod:`railvib_hpc.io.stage_files`); the mesh is ``mesh.h5`` of the same folder (built or
+reused as by ``railvib mesh``).
+
+Reuse: a rerun reuses the three products when all are current and sound for the case
+(:func:`previous_results`); otherwise it says why in one line (``recomputing the transient
+results in OUT: transient.h5 was computed with vehicle.speed = 30, the case says 20``) and
+recomputes all three (they come from one time integration). Changed
+``output.stress_times`` alone only recompute ``/stress`` of the reused ``fields.h5``.
+
+Checkpoints: an interrupted run resumes from its last checkpoint
+(``transient_checkpoint.h5``, every ``transient.checkpoint_interval`` seconds) and gives
+the same answer: the state is stored exactly, the factor is recomputed deterministically.
+The checkpoint is a stage file too: it is resumed only when it is current for the case,
+computed from the same ``mesh.h5``, unchanged and sound, and when the partial
+``fields.h5`` (``.fields.h5.resume``) carries its run id; otherwise the run starts at
+t = 0 and says why.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import resource
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
 from ..config import Case
 from ..errors import UserError
+from ..io.stage_checks import CHECKS, check_checkpoint, check_transient
+from ..io.stage_files import (
+    digest,
+    ensure_space,
+    examine,
+    forget,
+    inputs_hash,
+    output_lock,
+    provenance,
+    record_file,
+    resume_path,
+    spec,
+    write_h5,
+)
+from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
 from .integrate import (
@@ -51,28 +81,15 @@ from .integrate import (
     gather_values,
     initial_acceleration,
 )
-from .output import (
-    FORMAT_VERSION,
-    FieldWriter,
-    PointSampler,
-    RailSampler,
-    partial_fields_ok,
-    read_checkpoint,
-    write_checkpoint,
-)
+from .output import FieldWriter, PointSampler, RailSampler, read_checkpoint, write_checkpoint
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
 
-#: Case sections the full-order solution depends on.
-TRANSIENT_INPUTS = ("geometry", "track", "building", "mesh", "domain", "materials", "sections",
-                    "pads", "boundary", "damping", "vehicle", "irregularity", "transient")
-#: Keys of [modal] that change the full-order model (the rest is about the eigensolver).
-MODAL_KEYS = ("lumped_mass", "hex_formulation", "fix_sleeper_rotations",
-              "fix_rail_rotations_at_pads", "damping_ratio")
-#: Keys of [output] that change the transient outputs.
-OUTPUT_KEYS = ("dt", "window", "float32", "stress_times", "probes")
+#: Table names of the products (:data:`railvib_hpc.io.stage_files.STAGE_FILES`), in the
+#: order they are checked (the solution first; it is written last).
+FIELDS, PROBES, HISTORIES = "transient:fields.h5", "transient:probes.h5", "transient.h5"
+PRODUCTS = (HISTORIES, FIELDS, PROBES)
 CHECKPOINT = "transient_checkpoint.h5"
-PARTIAL_FIELDS = ".fields.h5.transient-partial"
 #: Output steps buffered per collective write of fields.h5.
 FIELD_BLOCK = 16
 #: Rail nodes ahead of each wheel whose columns are computed in one block.
@@ -87,38 +104,139 @@ class Interrupted(RuntimeError):
     """Raised by the ``stop_after`` test hook after a checkpoint (simulates a killed run)."""
 
 
-# --------------------------------------------------------------------------- files
-def transient_digest(case: Case) -> str:
-    """SHA-256 of everything the transient results depend on."""
-    extra = ""
-    if case["irregularity.type"] == "file":
-        extra = hashlib.sha256(case.resolve(case["irregularity.file"]).read_bytes()).hexdigest()
-    payload = {"format": FORMAT_VERSION, "sections": case.digest(*TRANSIENT_INPUTS),
-               "modal": {k: case[f"modal.{k}"] for k in MODAL_KEYS},
-               "output": {k: case[f"output.{k}"] for k in OUTPUT_KEYS}, "profile": extra}
-    return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()
+# --------------------------------------------------------------------------- reuse
+def _checks_context(case: Case) -> dict:
+    from ..mbs.stage import static_wheel_load
+
+    return {"static_wheel_load": static_wheel_load(case)}
 
 
-def previous_result(out_dir: Path, key: str) -> dict | None:
-    """The summary of complete transient results with digest ``key`` in ``out_dir`` (rank 0).
+def _why(path: Path, reason: str) -> str:
+    return f"{path.name} {reason[3:]}" if reason.startswith("it ") else f"{path.name}: {reason}"
 
-    All three products must be there: ``transient.h5``, ``fields.h5`` and ``probes.h5``,
-    each complete and with the same digest.
+
+def previous_results(case: Case, out_dir: Path, rep: Reporter) -> dict | None:
+    """The run statistics of current, sound transient results in ``out_dir`` (rank 0).
+
+    ``fields.h5``, ``probes.h5`` and ``transient.h5`` must all pass
+    :func:`~railvib_hpc.io.stage_files.examine` for the case (with their data checks and
+    companions). Otherwise the reason is printed in one line (unless there is nothing
+    at all), the three are deleted, and None is returned.
     """
+    context = _checks_context(case)
+    reason, present, stats = None, False, None
+    for name in PRODUCTS:
+        path = out_dir / spec(name).filename
+        v = examine(path, name, case, data_check=CHECKS[name], context=context)
+        present = present or v.kind != "missing"
+        if not v.ok and reason is None:
+            reason = _why(path, v.reason)
+        if v.ok and name == HISTORIES:
+            stats = json.loads(str(v.attrs.get("stats", "{}")))
+    if reason is None:
+        return stats
+    if present:
+        rep.info(f"recomputing the transient results in {out_dir}: {reason}")
+    for name in PRODUCTS:
+        forget(out_dir / spec(name).filename)
+    return None
+
+
+def stress_key(case: Case) -> str:
+    """Inputs hash of ``/stress`` in ``fields.h5``: the fields' and the stress times."""
+    return digest({"fields": inputs_hash(case, FIELDS),
+                   "times": [float(t) for t in case["output.stress_times"]]})
+
+
+def _stress_current(out_dir: Path, key: str) -> bool:
     import h5py
 
     try:
-        for name in ("fields.h5", "probes.h5", "transient.h5"):
-            path = out_dir / name
-            if not path.exists():
-                return None
-            with h5py.File(path, "r") as f:
-                if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("inputs_sha256") != key:
-                    return None
-                if name == "transient.h5":
-                    return json.loads(f.attrs["stats"])
-    except (OSError, KeyError, ValueError):
-        return None
+        with h5py.File(out_dir / "fields.h5", "r") as f:
+            ok = ("stress" in f and int(f.attrs.get("stress_complete", 0)) == 1
+                  and f["stress"].attrs.get("inputs_sha256") == key)
+    except (OSError, KeyError):
+        return False
+    return ok and (out_dir / "stress.xdmf").is_file()
+
+
+def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
+    """``/stress`` of reused fields: kept when current, else recomputed in place."""
+    if not case["output.stress_times"]:
+        return
+    fields = out_dir / "fields.h5"
+    key = on_root(lambda: stress_key(case), comm)
+    if on_root(lambda: _stress_current(out_dir, key), comm):
+        rep.info(f"reusing /stress of {fields}")
+        return
+
+    def check_times() -> int:
+        import h5py
+
+        with h5py.File(fields, "r") as f:
+            _check_stress_times(case, f["time"][()])
+            n_hexes = f["mesh/hexes"].shape[0]
+        ensure_space(out_dir, _stress_bytes(case, n_hexes), "the stresses of fields.h5")
+        return n_hexes
+
+    with rep.stage("transient: stresses"):
+        on_root(check_times, comm)
+        _stress_writer(case, comm, rep, key)(fields)    # rewritten in place: record again
+        record_file(fields, comm)
+
+
+def _check_stress_times(case: Case, t_out: np.ndarray) -> None:
+    times = [float(v) for v in case["output.stress_times"]]
+    tol = 1e-9 * max(1.0, float(np.abs(t_out).max()))
+    bad = [v for v in times if v < t_out[0] - tol or v > t_out[-1] + tol]
+    if bad:
+        raise TransientInputError(f"output.stress_times = {times}: {bad} outside the stored "
+                                  f"time range [{t_out[0]:.6g}, {t_out[-1]:.6g}] s of "
+                                  "fields.h5 (output.window)")
+
+
+def _stress_bytes(case: Case, n_hexes: int) -> int:
+    n = len(case["output.stress_times"])
+    return 16 * n * int(n_hexes) + 16 * n
+
+
+def _resumable(case: Case, out_dir: Path, mesh_sha: str, n_fields: tuple, nt: int,
+               rep: Reporter) -> str | None:
+    """The run id of a checkpoint this run may resume, or None (rank 0).
+
+    The checkpoint must be current for the case and computed from this ``mesh.h5``,
+    unchanged and sound (:func:`~railvib_hpc.io.stage_files.examine`), and the partial
+    ``fields.h5`` must carry the fields' provenance and the checkpoint's run id. Anything
+    else is deleted, saying why.
+    """
+    import h5py
+
+    ckpt = out_dir / CHECKPOINT
+    partial = resume_path(out_dir / "fields.h5")
+    v = examine(ckpt, CHECKPOINT, case, data_check=check_checkpoint,
+                upstream={"mesh.h5": mesh_sha})
+    why = None if v.ok else (v.reason if v.kind != "missing" else "")
+    run_id = str(v.attrs.get("run_id", "")) if v.ok else ""
+    if v.ok:
+        step, written = int(v.attrs.get("step", -1)), int(v.attrs.get("fields_written", -1))
+        try:
+            with h5py.File(partial, "r") as f:
+                a = f.attrs
+                if (a.get("railvib_file") != FIELDS or a.get("inputs_sha256")
+                        != inputs_hash(case, FIELDS) or a.get("run_id") != run_id):
+                    why = f"the partial fields file {partial.name} belongs to another run"
+                elif f["fields/displacement"].shape != n_fields:
+                    why = f"the partial fields file {partial.name} has another shape"
+        except (OSError, KeyError):
+            why = f"its partial fields file {partial.name} is missing or unreadable"
+        if why is None and not (0 <= step < nt and 0 <= written <= n_fields[0]):
+            why = f"it is at step {step} of {nt} with {written} output steps written"
+    if why is None:
+        return run_id
+    if why:
+        rep.info(f"not resuming from {ckpt}: {why}; starting at t = 0")
+    forget(ckpt)
+    partial.unlink(missing_ok=True)
     return None
 
 
@@ -185,10 +303,15 @@ class Recorder:
 
 
 # --------------------------------------------------------------------------- the stage
-def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
+def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
+                        petsc_options: list[str] | None = None, *,
                         checkpoint_steps: int | None = None, stop_after: int | None = None
                         ) -> dict:
-    """Direct time integration of the full model (collective); see the module notes.
+    """``railvib transient``: direct time integration of the full model (collective).
+
+    Self-contained like every stage: initialises PETSc with ``petsc_options`` (once per
+    process), holds the output folder's lock, reuses current results or recomputes them
+    (resuming a current checkpoint); see the module notes.
 
     Parameters
     ----------
@@ -200,6 +323,8 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
         MPI communicator.
     rep
         Reporter (progress, timings).
+    petsc_options
+        Options for PETSc (``railvib ... -- OPTIONS``).
     checkpoint_steps
         Also checkpoint every this many steps (tests; the case's interval still applies).
     stop_after
@@ -209,33 +334,41 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
     Returns
     -------
     dict
-        Summary (time step, steps, timings, contact forces, peak memory, ...).
+        Summary (time step, steps, timings, contact forces, peak memory, ...), ``reused``.
     """
-    from ..io.stage_files import atomic_file
+    from ..petsc_env import init_petsc
 
     out_dir = Path(out_dir)
-    key = transient_digest(case)
-    old = on_root(lambda: previous_result(out_dir, key), comm)
-    if old is not None:
-        rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
-                 "settings)")
-        return {**old, "reused": True}
+    with output_lock(out_dir, comm, "transient", rep=rep):
+        init_petsc(petsc_options)
+        old = on_root(lambda: previous_results(case, out_dir, rep), comm)
+        if old is not None:
+            rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
+                     "settings)")
+            _refresh_stress(case, out_dir, comm, rep)
+            return {**old, "reused": True}
+        return _transient(case, out_dir, comm, rep, checkpoint_steps, stop_after)
+
+
+def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps: int | None,
+               stop_after: int | None) -> dict:
     t_wall = time.perf_counter()
-    init = _setup(case, out_dir, comm, rep, key)
+    init = _setup(case, out_dir, comm, rep)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
+    upstream = {"mesh.h5": init["mesh_sha"]}
     recorder = Recorder(nt, init["n_wheels"], init["n_dof"], len(init["probe_names"]),
                         init["rails"].dofs.shape[:2] + (2,)) if comm.rank == 0 else None
     out_index = np.full(nt + 1, -1, dtype=np.int64)
     out_index[steps_out] = np.arange(steps_out.size)
-    partial = out_dir / PARTIAL_FIELDS
     ckpt_path = out_dir / CHECKPOINT
 
     # ---- initial state or resume
-    resume_ok = on_root(lambda: read_checkpoint(ckpt_path, key, dofmap, 0) is not None
-                        and partial_fields_ok(partial, key), comm)
+    run_id = on_root(lambda: _resumable(case, out_dir, init["mesh_sha"],
+                                        (steps_out.size, mesh.n_nodes, 3), nt, rep), comm)
+    resume_ok = run_id is not None
     if resume_ok:
-        ck = read_checkpoint(ckpt_path, key, dofmap, comm.rank)
+        ck = read_checkpoint(ckpt_path, dofmap, comm.rank)
         state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
                       ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
         if comm.rank == 0:
@@ -245,15 +378,21 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
         rep.info(f"resuming from the checkpoint at step {state.step} of {nt} "
                  f"(t = {state.step * dt:.4f} s)")
     else:
+        run_id = on_root(lambda: uuid.uuid4().hex, comm)
         with rep.stage("transient: initial state"):
             state = _initial_state(init, comm, rep)
         fields_written = 0
-    writer = FieldWriter(partial, comm, mesh, dofmap, steps_out * dt, steps_out,
+
+    def fields_attrs() -> dict:
+        return {**provenance(FIELDS, case, upstream), "run_id": run_id,
+                "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1 else 1,
+                "window": json.dumps(case["output.window"] or None)}
+
+    writer = FieldWriter(out_dir / "fields.h5", comm, mesh, dofmap, steps_out * dt, steps_out,
                          case["output.float32"],
-                         {"inputs_sha256": key, "railvib_version": __version__,
-                          "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1
-                          else 1, "window": json.dumps(case["output.window"] or None)},
-                         resume=resume_ok, block=FIELD_BLOCK)
+                         on_root(fields_attrs, comm) if not resume_ok else {},
+                         resume=resume_ok, block=FIELD_BLOCK,
+                         extra_bytes=_stress_bytes(case, len(mesh.hexes)))
     solver.start(state)
     probes, rails_s = init["probe_sampler"], init["rail_sampler"]
 
@@ -280,6 +419,9 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
         if k >= fields_written_box[0]:
             writer.put(int(k), state.u, state.v, state.a)
 
+    def checkpoint_attrs() -> dict:
+        return {**provenance(CHECKPOINT, case, upstream), "run_id": run_id}
+
     fields_written_box = [fields_written]
     if not resume_ok:
         record(0, init.get("info0"))
@@ -302,33 +444,36 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
                 (checkpoint_steps is not None and state.step % checkpoint_steps == 0)
             want = comm.bcast(want, root=0) if comm.size > 1 else want
             if want and state.step < nt:
-                writer.flush()
+                writer.sync()          # the fields on disk up to this step, then the state
                 fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
-                write_checkpoint(ckpt_path, comm, key, state.step, fields_written_box[0], state,
-                                 dofmap, recorder.arrays if comm.rank == 0 else None)
+                write_checkpoint(ckpt_path, comm,
+                                 checkpoint_attrs() if comm.rank == 0 else None, state.step,
+                                 fields_written_box[0], state, dofmap,
+                                 recorder.arrays if comm.rank == 0 else None)
                 last_ckpt = time.perf_counter()
                 if stop_after is not None and state.step >= stop_after:
                     writer.close()
                     raise Interrupted(f"stopped after the checkpoint at step {state.step}")
     t_integration = time.perf_counter() - t_run
 
-    # ---- outputs
+    # ---- outputs: fields.h5 (+ /stress), probes.h5, transient.h5 (last), then the
+    # checkpoint goes
     with rep.stage("transient: fields, stresses"):
         stress = None
         if case["output.stress_times"]:
-            stress = _stress_writer(case, comm, rep, key)
-        writer.finish(out_dir / "fields.h5", stress)
+            stress = _stress_writer(case, comm, rep, on_root(lambda: stress_key(case), comm))
+        writer.finish(stress)
         if not case["output.stress_times"] and comm.rank == 0:
-            (out_dir / "stress.xdmf").unlink(missing_ok=True)
+            remove_xdmf(out_dir / "stress.xdmf")
     rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
     stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
                    recorder, nt - first_step, comm)
     with rep.stage("transient: probes, histories"):
         def write_rank0() -> None:
-            _write_probes(out_dir, init, recorder, key, case)
-            with atomic_file(out_dir / "transient.h5") as tmp:
-                _write_histories(tmp, case, init, recorder, key, stats)
-            ckpt_path.unlink(missing_ok=True)
+            _write_probes(out_dir, init, recorder, case, provenance(PROBES, case, upstream))
+            _write_histories(out_dir / "transient.h5", case, init, recorder, stats,
+                             provenance(HISTORIES, case, upstream))
+            forget(ckpt_path)
 
         on_root(write_rank0, comm)
     solver.destroy()
@@ -342,17 +487,17 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
     return {**stats, "reused": False}
 
 
-def _setup(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> dict:
+def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
     from ..mbs.results import n_steps
     from ..mbs.stage import build_irregularity, build_vehicle, passage
-    from ..mesh.stage import run_mesh_stage
+    from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, case_dofmap
     from ..modal.petsc import assemble, assemble_damping
     from .petsc import TransientSystem
 
     with rep.stage("transient: mesh"):
-        mesh = on_root(lambda: run_mesh_stage(case, out_dir, rep)[0], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
     with rep.stage("transient: dofs"):
         dofmap = case_dofmap(mesh, case, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "
@@ -371,6 +516,8 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> dict:
     times = np.arange(nt + 1) * dt
     x = run["x_start"] + run["offsets"][None, :] + speed * times[:, None]
     steps_out = output_steps(case, dt, nt)
+    if case["output.stress_times"]:
+        _check_stress_times(case, steps_out * dt)
     rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
              f"steps; generalized-alpha rho_inf = {case['transient.rho_inf']:g}")
     with rep.stage("transient: assembly"):
@@ -406,7 +553,8 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter, key: str) -> dict:
         columns = RailColumns(system, rails, LOOKAHEAD_NODES)
     solver = DirectSolver(system, prescribed, driver, columns)
     names, coords = probe_points(mesh, case)
-    return {"mesh": mesh, "dofmap": dofmap, "rails": rails, "vehicle": vehicle, "run": run,
+    return {"mesh": mesh, "mesh_sha": mesh_sha, "dofmap": dofmap, "rails": rails,
+            "vehicle": vehicle, "run": run,
             "dt": dt, "nt": nt, "times": times, "x": x, "steps_out": steps_out, "K": K, "M": M,
             "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
             "columns": columns, "coupling": coupling, "forces": forces,
@@ -462,13 +610,16 @@ def _initial_state(init: dict, comm, rep: Reporter) -> State:
 
 
 def _stress_writer(case: Case, comm, rep: Reporter, key: str):
+    """``write(path)``: ``/stress`` at ``output.stress_times`` into ``path`` (collective) with
+    the stress writer of ``reconstruct`` (``stress.xdmf`` names the final ``fields.h5``)."""
     from ..reconstruct.stress import hex_materials, stress_from_fields
 
     materials = hex_materials(case)
 
     def write(path: Path) -> None:
         stats = stress_from_fields(path, comm, case["output.stress_times"], materials, rep=rep,
-                                   attrs={"inputs_sha256": key}, require_complete=False)
+                                   attrs={"inputs_sha256": key},
+                                   require_complete=path.name == "fields.h5")
         rep.info(f"  stresses at {stats['n_times']} time(s), max von Mises "
                  f"{stats['max_von_mises'] / 1e3:.3f} kPa")
 
@@ -530,21 +681,32 @@ def format_summary(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def _write_probes(out_dir: Path, init: dict, recorder: Recorder, key: str, case: Case) -> None:
-    """probes.h5 + probes/*.csv (layout of reconstruct) with the rail bending moments."""
+def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
+                  prov: dict) -> None:
+    """probes.h5 + probes/*.csv (layout of reconstruct, with the probes' roles) and the rail
+    bending moments (rank 0)."""
     from ..fem.beam import shear_deformation_factors
     from ..reconstruct.probes import write_probes_csv, write_probes_h5
     from ..reconstruct.stress import rail_bending_moment, rail_section
+    from ..schema import DEFAULT_PROBE_ROLE
 
     t = init["times"]
     pr = recorder.arrays["probes"]
     hist = {}
     sampler = init["probe_sampler"]
+    mesh = init["mesh"]
+    user_roles = list(case["output.probe_roles"])
     for i, name in enumerate(init["probe_names"]):
+        if name in mesh.probes:
+            role = mesh.probe_roles.get(name, DEFAULT_PROBE_ROLE)
+        else:
+            k = int(name.rsplit("_", 1)[1]) - 1
+            role = user_roles[k] if k < len(user_roles) else DEFAULT_PROBE_ROLE
         hist[name] = {"t": t, "displacement": pr[:, 0, i], "velocity": pr[:, 1, i],
                       "acceleration": pr[:, 2, i], "coords": init["probe_coords"][i],
-                      "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i]}
-    rails, mesh = init["rails"], init["mesh"]
+                      "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i],
+                      "role": role}
+    rails = init["rails"]
     sec = rail_section(case)
     rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
     moments, ends = [], []
@@ -561,19 +723,20 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, key: str, case:
     groups = {"rail": {"time": t, "x": rails.x, "y": rails.y, "nodes": rails.nodes,
                        "bending_moment": np.stack(moments, axis=1),
                        "bending_moment_ends": np.stack(ends, axis=1)}}
-    attrs = {"inputs_sha256": key, "railvib_version": __version__, "solver": "transient",
+    attrs = {**prov, "solver": "transient",
              "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
              "rail_moment_static_correction_included": 1}
     write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
     write_probes_csv(out_dir / "probes", hist)
 
 
-def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, key: str,
-                     stats: dict) -> None:
-    import h5py
-
+def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, stats: dict,
+                     prov: dict) -> None:
+    """``transient.h5`` (rank 0; checked, atomic, recorded)."""
     a = recorder.arrays
-    with h5py.File(path, "w") as f:
+    vehicle = init["vehicle"]
+
+    def fill(f, parallel: bool) -> None:
         f["time"] = init["times"]
         w = f.create_group("wheels")
         w["x"] = init["x"]
@@ -584,16 +747,17 @@ def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, key
         w["rail_index"] = init["run"]["wheel_rail"]
         v = f.create_group("vehicle")
         v["y"], v["y_dot"], v["y_ddot"] = a["y"], a["y_dot"], a["y_ddot"]
-        vehicle = init["vehicle"]
-        v.attrs["dof_names"] = json.dumps(list(vehicle.dof_names) if vehicle is not None else [])
+        v.attrs["dof_names"] = json.dumps(list(vehicle.dof_names) if vehicle is not None
+                                          else [])
         v.attrs["type"] = case["vehicle.type"]
         r = f.create_group("rail")
         r["x"] = init["rails"].x
         r["uz"] = a["rail"][..., 0]
         r["ry"] = a["rail"][..., 1]
-        f.attrs["inputs_sha256"] = key
-        f.attrs["case_toml"] = case.to_toml()
-        f.attrs["railvib_version"] = __version__
-        f.attrs["stats"] = json.dumps(stats, default=float)
-        f.attrs["solver"] = "transient"
-        f.attrs["complete"] = 1
+
+    attrs = {**prov, "stats": json.dumps(stats, default=float), "solver": "transient"}
+    size = sum(v.nbytes for k, v in a.items() if k != "probes") + init["times"].nbytes \
+        + init["x"].nbytes
+    context = _checks_context(case)
+    write_h5(path, None, fill, size_hint=int(size), attrs=attrs,
+             check=lambda tmp: check_transient(tmp, True, context))

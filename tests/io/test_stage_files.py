@@ -181,3 +181,54 @@ def test_a_second_process_is_refused_with_the_holder(tmp_path):
         finally:
             holder.kill()
             holder.wait()
+
+
+def test_transient_rows_select_what_the_full_order_solution_depends_on():
+    """Every key of K, M, C, loads and time step changes the transient files' hashes; the
+    modal solver, the MBS, the stress times and the checkpoint interval do not."""
+    base = load_case(BASELINE)
+
+    def changed(name: str, *sets: str) -> bool:
+        return sf.inputs_hash(base, name) != sf.inputs_hash(load_case(BASELINE, list(sets)),
+                                                             name)
+
+    for key in ("vehicle.speed=20", "damping.f2=50", "boundary.base=absorbing",
+                "transient.rho_inf=0.8", "modal.damping_ratio=0.05", "output.dt=0.002",
+                "irregularity.type=fra", "materials.subgrade.E=4e8"):
+        assert changed("transient.h5", key), key
+    for key in ("mbs.dt=1e-5", "modal.n_modes=50", "modal.tol=1e-9",
+                "transient.checkpoint_interval=5", "output.stress_times=[0.3]",
+                "output.probes=[1.0,2.0,3.0]", "output.window=[0.1,0.5]"):
+        assert not changed("transient.h5", key), key
+    assert changed("transient:fields.h5", "output.window=[0.1,0.5]")
+    assert not changed("transient:fields.h5", "output.probes=[1.0,2.0,3.0]")
+    assert changed("transient:probes.h5", "output.probes=[1.0,2.0,3.0]")
+    assert changed("transient_checkpoint.h5", "output.probes=[1.0,2.0,3.0]")
+    assert changed("transient_checkpoint.h5", "output.float32=true")
+    assert not changed("transient_checkpoint.h5", "output.stress_times=[0.3]")
+    assert not changed("modes.h5", "damping.f2=50")        # nothing else changed
+    assert sf.spec("transient:fields.h5").filename == "fields.h5"
+    assert sf.spec("fields.h5").filename == "fields.h5"
+
+
+def test_fields_of_one_stage_are_foreign_to_the_other(tmp_path):
+    case = load_case(BASELINE)
+    path = tmp_path / "fields.h5"
+    sf.write_h5(path, None, lambda f, par: f.create_dataset("x", data=np.ones(3)),
+                size_hint=100, attrs=sf.provenance("transient:fields.h5", case, {}))
+    v = sf.examine(path, "fields.h5", case, companions=False)
+    assert (v.ok, v.kind) == (False, "foreign")
+    assert v.reason == "it was written by 'railvib transient', not by 'railvib reconstruct'"
+    assert sf.examine(path, "transient:fields.h5", case, companions=False).ok
+    err = sf.refuse(path, v, "transient:fields.h5")
+    assert str(err).endswith(": run 'railvib transient'")
+    missing = sf.refuse(tmp_path / "transient.h5", sf.Verdict(False, "", "missing"))
+    assert str(missing) == f"{tmp_path / 'transient.h5'} not found: run 'railvib transient' first"
+
+
+def test_resume_path_survives_the_clean_up_of_dead_runs(tmp_path):
+    part = sf.resume_path(tmp_path / "fields.h5")
+    assert part.name == ".fields.h5.resume" and sf.final_name(part.name) == "fields.h5"
+    part.write_bytes(b"partial")
+    assert sf.remove_stale_temps(tmp_path) == (0, 0)
+    assert part.exists()

@@ -119,6 +119,45 @@ def test_two_ranks_give_the_serial_answer(tmp_path_factory):
             assert np.abs(b[k] - a[k]).max() <= 1e-8 * scale, k
 
 
+@pytest.mark.mpi
+def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factory):
+    """The checkpoint is written collectively (mpio) by global DOF: a run interrupted on 2
+    ranks resumes on 2 ranks, or on 1, to the uninterrupted answer (to the round-off of the
+    2-rank factorization)."""
+    import shutil
+    from pathlib import Path
+
+    from railvib_hpc.transient.stage import Interrupted
+
+    init_petsc([])
+    base = tmp_path_factory.mktemp("resume2") if comm.rank == 0 else None
+    base = Path(comm.bcast(str(base) if base else None, root=0))
+    if comm.rank == 0:
+        _run(tiny_case(), base / "serial")
+    comm.Barrier()
+    with pytest.raises(Interrupted):
+        _run(tiny_case(), base / "parallel", comm, checkpoint_steps=30, stop_after=60)
+    if comm.rank == 0:
+        assert (base / "parallel" / "transient_checkpoint.h5").exists()
+        assert (base / "parallel" / ".fields.h5.resume").exists()
+        shutil.copytree(base / "parallel", base / "one", symlinks=True)
+    comm.Barrier()
+    stats = _run(tiny_case(), base / "parallel", comm)
+    assert 0 < stats["steps_run"] < stats["n_steps"]
+    if comm.rank == 0:
+        one = _run(tiny_case(), base / "one")
+        assert 0 < one["steps_run"] < one["n_steps"]
+        ref = _histories(base / "serial")
+        for folder in ("parallel", "one"):
+            new = _histories(base / folder)
+            for k in ref:
+                scale = np.abs(ref[k]).max()
+                assert np.abs(new[k] - ref[k]).max() <= 1e-8 * scale, (folder, k)
+        assert not (base / "parallel" / "transient_checkpoint.h5").exists()
+        assert not (base / "parallel" / ".fields.h5.resume").exists()
+    comm.Barrier()
+
+
 def test_moving_force_run(tmp_path):
     stats = _run(tiny_case("vehicle.type=moving_force"), tmp_path)
     with h5py.File(tmp_path / "transient.h5", "r") as f:
@@ -151,7 +190,17 @@ def test_cli_transient_runs_and_assesses(tmp_path, capsys):
                 *SETS, "--set", "vehicle.type=moving_force"])
     assert code == 0
     text = capsys.readouterr().out
-    assert "transient complete: 9 probes assessed" in text
+    assert "transient complete: 10 probes assessed" in text
+    assert "assessed the results of the full-order time integration (railvib transient)" in text
     report = (tmp_path / "report.md").read_text()
-    assert "full-order time integration" in report
-    assert (tmp_path / "assessment.json").exists()
+    assert "solver               full-order time integration (railvib transient)" in report
+    doc = json.loads((tmp_path / "assessment.json").read_text())
+    assert doc["solver"] == "transient"
+    assert set(json.loads(doc["provenance"]["upstream_sha256"])) == {
+        "transient.h5", "fields.h5", "probes.h5"}
+    # the XDMF of the fields has its per-step views (both ParaView XDMF readers)
+    assert (tmp_path / "fields_views.h5").exists() and (tmp_path / "stress_views.h5").exists()
+    # a rerun reuses everything and assesses again
+    assert run(["transient", str(BASELINE), "--out", str(tmp_path),
+                *SETS, "--set", "vehicle.type=moving_force"]) == 0
+    assert "reusing the transient results" in capsys.readouterr().out

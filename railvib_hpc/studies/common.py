@@ -300,6 +300,7 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
     from probe histories ``{name: {t, displacement, velocity, acceleration, coords}}``."""
     from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
     from ..assess.weighting import third_octave_rms
+    from ..reconstruct.probes import probe_peaks
     from ..schema import DEFAULT_PROBE_ROLE
 
     missing = [p for p in probes if p not in hist]
@@ -311,18 +312,8 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
     peaks, assessment, spectra = {}, {}, {}
     a_cfg = case["assessment"]
     for name, h in hist.items():
-        a, v, u = h["acceleration"], h["velocity"], h["displacement"]
-        amag = np.linalg.norm(a, axis=1)
-        k = int(np.argmax(amag))
-        onset = np.flatnonzero(amag >= a_cfg["wave_threshold"] * amag[k])
-        peaks[name] = {"coords": np.asarray(h["coords"]).tolist(),
-                       "t_onset": float(t[onset[0]]) if onset.size else None,
-                       "acc_x": float(np.abs(a[:, 0]).max()),
-                       "acc_y": float(np.abs(a[:, 1]).max()),
-                       "acc_vertical": float(np.abs(a[:, 2]).max()),
-                       "acc_total": float(amag[k]), "t_acc_total": float(t[k]),
-                       "vel_total": float(np.linalg.norm(v, axis=1).max()),
-                       "disp_total": float(np.linalg.norm(u, axis=1).max())}
+        a, v = h["acceleration"], h["velocity"]
+        peaks[name] = probe_peaks(h, a_cfg["wave_threshold"])
         if name not in probes or t.size < 2:
             continue
         res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],

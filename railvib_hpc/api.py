@@ -402,6 +402,20 @@ class Pipeline:
     >>> p = Pipeline(Case.defaults(), tempfile.mkdtemp(), petsc_options={"log_view": None})
     >>> p.petsc_options, p.comm.size
     (('-log_view',), 1)
+
+    The modes and the passage of a coarse model (a few seconds):
+
+    >>> case = Case.defaults().replace({"mesh.refinement": 0.25, "modal.n_modes": 8,
+    ...                                 "modal.block_size": 8})
+    >>> p = Pipeline(case, tempfile.mkdtemp(), quiet=True)
+    >>> modes = p.modal()                       # builds the mesh it needs
+    >>> modes.n_modes, modes.reused, f"{modes.frequencies_hz[0]:.1f} Hz"
+    (8, False, '10.9 Hz')
+    >>> p.modal().reused                        # a second call reuses modes.h5
+    True
+    >>> passage = p.mbs()
+    >>> f"{passage.static_wheel_load[0] / 1e3:.2f} kN", passage.loss_of_contact_steps
+    ('7.69 kN', 0)
     >>> Pipeline(Case.defaults(), tempfile.mkdtemp(), petsc_options=["log_view"])
     ... # doctest: +ELLIPSIS
     Traceback (most recent call last):

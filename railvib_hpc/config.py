@@ -243,7 +243,7 @@ def _did_you_mean(key: str) -> str:
         return f"unknown key; did you mean '{close[0]}'?"
     if known:
         return f"unknown section '{section}'; sections are: {known}"
-    return f"unknown key; see the case-file reference in README.md (section [{section}])"
+    return f"unknown key; see docs/case_reference.md (section [{section}])"
 
 
 def parse_override(text: str) -> tuple[str, Any]:

@@ -160,7 +160,7 @@ def test_pipeline_results_match_the_files_on_every_rank(shared_tmp):
 def test_pipeline_errors_reach_every_rank_and_are_recorded(shared_tmp):
     case = rv.Case.from_file(BASELINE).replace(TINY)
     pipe = rv.Pipeline(case, shared_tmp / "empty", quiet=True)
-    with pytest.raises(rv.StaleInputError, match="modes.h5 not found: run 'railvib modal'"):
+    with pytest.raises(rv.StaleInputError, match=r"modes\.h5 not found: run 'railvib modal'"):
         pipe.mbs()
     if comm.rank == 0:
         failed = rv.read_run_record(shared_tmp / "empty")["stages"]["mbs"]

@@ -29,7 +29,9 @@ One entry::
     reused          what the stage reused (its summary's ``reused``: bool or per file)
     ranks, hosts    the MPI ranks and the distinct host names
     peak_rss_gb_per_rank, peak_rss_gb_total, peak_rss_gb_max
-                    peak resident memory of every rank during the call [GB = 1e9 B]
+                    peak resident memory of every rank's process during the call
+                    [GB = 1e9 B] (what the process already held counts too: Python, the
+                    libraries, arrays an earlier stage of the same process kept)
     memory_measure  how it was measured (see below)
     command         the command line, or the API call
     case_name, case_file, case_sha256

@@ -182,6 +182,13 @@ def test_run_study_returns_a_result(shared_tmp):
     assert [r["speed"] for r in res.rows] == [20.0, 60.0]
     assert res.tables and res.tables[0].head and res.report["json"].exists()
     assert res.settings["speeds"] == [20.0, 60.0]
+    if comm.rank == 0:                  # every stage call recorded: shared modes, each passage
+        shared = rv.read_run_record(shared_tmp / "speed" / "model")
+        assert shared["stages"]["modal"]["command"] == "railvib study speed: shared model"
+        v20 = rv.read_run_record(res.variants[0].folder)
+        assert v20["stages"]["mbs"]["command"] == "railvib study speed --variant v20"
+        assert v20["stages"]["mbs"]["ranks"] == comm.size
+    comm.Barrier()
     listed = rv.run_study("speed", case, shared_tmp, settings={"speeds": [20.0, 60.0]},
                           list_only=True, quiet=True)
     assert not listed.merged and listed.computed == () and \

@@ -9,6 +9,7 @@ Folders (``<out>`` is the ``--out`` folder of the command)::
         probes.h5                     probe histories (from the modes, see below)
         result.json                   the variant's result, written last and atomically
         failed.json                   written instead when the variant failed (user error)
+        run.json                      its modal and mbs stage calls (times, memory, versions)
     <out>/<study>/model/              shared model of the modes and speed studies
 
 Building responses come from :func:`railvib_hpc.reconstruct.probes.probe_histories`: the
@@ -60,6 +61,7 @@ import numpy as np
 from .. import __version__
 from ..config import Case, build_case
 from ..errors import UserError
+from ..io.run_record import record_stage
 from ..io.stage_files import (
     copy_file,
     digest,
@@ -345,9 +347,13 @@ def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep:
         return {}
     mcase = on_root(lambda: variant_case(case, plan.shared_overrides), comm)
     folder = root / SHARED_DIR
-    with output_lock(folder, comm, f"study {plan.kind}: shared model", wait=True, rep=rep), \
-            rep.stage(f"{plan.kind}: shared model"):
-        return run_modal_stage(mcase, folder, comm, rep)
+    command = f"railvib study {plan.kind}: shared model"
+    with output_lock(folder, comm, command, wait=True, rep=rep), \
+            rep.stage(f"{plan.kind}: shared model"), \
+            record_stage(folder, comm, "modal", mcase, rep, command) as call:
+        summary = run_modal_stage(mcase, folder, comm, rep)
+        call.done(summary)
+        return summary
 
 
 def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
@@ -385,6 +391,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
         return _run_direct_variant(plan, v, vcase, digest, vdir, comm, rep, settings)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
+    command = f"railvib study {plan.kind} --variant {v.name}"
     try:
         t0 = time.perf_counter()
         if v.shared:
@@ -397,10 +404,14 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
             if v.band_hz > 0:
                 modal, vcase = _modes_for_band(vcase, vdir, v.band_hz, comm, rep)
             else:
-                modal = run_modal_stage(vcase, vdir, comm, rep)
+                with record_stage(vdir, comm, "modal", vcase, rep, command) as call:
+                    modal = run_modal_stage(vcase, vdir, comm, rep)
+                    call.done(modal)
         timings["modal"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        mbs = run_mbs_stage(vcase, vdir, comm, rep)
+        with record_stage(vdir, comm, "mbs", vcase, rep, command) as call:
+            mbs = run_mbs_stage(vcase, vdir, comm, rep)
+            call.done(mbs)
         timings["mbs"] = time.perf_counter() - t0
 
         def finish() -> dict:

@@ -611,10 +611,11 @@ class Pipeline:
             binding = [b.get("utilisation") for b in res.get("standards", {}).values()
                        if not b.get("comparison_only") and b.get("utilisation") is not None]
             utilisation[name] = float(max(binding)) if binding else None
-        return AssessResult(**self._common("assess", summary, seconds, timings, unused),
-                            assessment_json=out / "assessment.json",
-                            report_html=report.get("html"), report_md=report.get("markdown"),
-                            report_json=report.get("json"),
+        common = self._common("assess", summary, seconds, timings, unused)
+        common["reused"] = False                  # the assessment is always recomputed
+        return AssessResult(**common, assessment_json=out / "assessment.json",
+                            report_html=report.get("html"),
+                            report_md=report.get("markdown"), report_json=report.get("json"),
                             verdict=dict(summary.get("verdict", {})),
                             max_utilisation=utilisation)
 

@@ -37,6 +37,7 @@ _EXPORTS = {
     "ReconstructResult": "railvib_hpc.api",
     "AssessResult": "railvib_hpc.api",
     "RunResult": "railvib_hpc.api",
+    "StagesResult": "railvib_hpc.api",
     "ProbePeak": "railvib_hpc.api",
     "StudyResult": "railvib_hpc.api",
     "StudyTable": "railvib_hpc.api",

@@ -62,8 +62,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "AssessResult", "Case", "CaseError", "MBSResult", "MeshResult", "ModalResult",
-    "Pipeline", "ProbePeak", "ReconstructResult", "RunResult", "StageResult", "StudyResult",
-    "StudyTable", "UserError", "VariantStatus", "run_study",
+    "Pipeline", "ProbePeak", "ReconstructResult", "RunResult", "StageResult", "StagesResult",
+    "StudyResult", "StudyTable", "UserError", "VariantStatus", "run_study",
 ]
 
 PetscOptions = Sequence[str] | Mapping[str, Any] | None
@@ -364,6 +364,27 @@ class RunResult:
         return {s: getattr(self, s).seconds for s in PIPELINE_ORDER}
 
 
+@dataclass(frozen=True)
+class StagesResult:
+    """:meth:`Pipeline.run_stages`: the results of a sequence of stages.
+
+    Attributes
+    ----------
+    results
+        ``{stage: result}`` in the order they ran.
+    seconds, run_json, unused_petsc_options
+        As for :class:`RunResult`.
+    """
+
+    results: dict[str, StageResult]
+    seconds: float
+    run_json: Path
+    unused_petsc_options: tuple[str, ...]
+
+    def __getitem__(self, stage: str) -> StageResult:
+        return self.results[stage]
+
+
 # ----------------------------------------------------------------------------- the pipeline
 class Pipeline:
     """A case bound to an output folder: run its stages, get typed results.
@@ -495,19 +516,25 @@ class Pipeline:
                 "unused_petsc_options": unused}
 
     def stage(self, name: str) -> StageResult:
-        """Run any registered stage (:data:`railvib_hpc.pipeline.STAGES`) by name.
+        """Run any registered stage by name (:data:`railvib_hpc.pipeline.STAGES` and any
+        stage :func:`~railvib_hpc.pipeline.stage_runner` knows); the pipeline's own stages
+        return their typed results.
 
         Raises
         ------
         ValueError
             For a name that is not a stage.
         """
-        if name not in STAGES:
-            raise ValueError(f"unknown stage {name!r}; stages: {', '.join(STAGES)}")
+        from .pipeline import stage_runner
+
         typed = {"mesh": self.mesh, "modal": self.modal, "mbs": self.mbs,
                  "reconstruct": self.reconstruct, "assess": self.assess}
         if name in typed:
             return typed[name]()
+        try:
+            stage_runner(name)
+        except KeyError:
+            raise ValueError(f"unknown stage {name!r}; stages: {', '.join(STAGES)}") from None
         summary, seconds, timings, unused = self._call(name)
         return StageResult(**self._common(name, summary, seconds, timings, unused))
 
@@ -622,23 +649,46 @@ class Pipeline:
     def run(self) -> RunResult:
         """The whole pipeline (mesh, modal, mbs, reconstruct, assess) under one lock of the
         output folder; each stage reuses what is current."""
+        done = self.run_stages(PIPELINE_ORDER)
+        return RunResult(**done.results, seconds=done.seconds, run_json=done.run_json,
+                         unused_petsc_options=done.unused_petsc_options)
+
+    def run_stages(self, names: Sequence[str]) -> StagesResult:
+        """Run the named stages in order under one lock of the output folder and one scope
+        of the PETSc options, like :meth:`run` for another sequence (e.g. a full-order
+        solution, then its assessment).
+
+        Raises
+        ------
+        ValueError
+            For a name that is not a stage (before anything runs).
+        """
         from .io.run_record import RUN_FILE
         from .io.stage_files import output_lock
+        from .pipeline import stage_runner
 
+        names = tuple(names)
+        for name in names:
+            try:
+                stage_runner(name)
+            except KeyError:
+                raise ValueError(f"unknown stage {name!r}; stages: "
+                                 f"{', '.join(STAGES)}") from None
         t0 = time.perf_counter()
         outer, label = self._in_scope, self._label("run")
         with self._options_scope() as unused, \
                 output_lock(self.out_dir, self.comm, label, wait=self.wait, rep=self.reporter):
             self._in_scope, self._run_label = True, label
             try:
-                results = {name: getattr(self, name)() for name in PIPELINE_ORDER}
+                results = {name: self.stage(name) for name in names}
             finally:
                 self._in_scope, self._run_label = outer, None
         seconds = time.perf_counter() - t0
         if self.comm.size > 1:
             seconds = self.comm.bcast(seconds, root=0)
-        return RunResult(**results, seconds=seconds, run_json=self.out_dir / RUN_FILE,
-                         unused_petsc_options=tuple(unused))
+        return StagesResult(results=results, seconds=seconds,
+                            run_json=self.out_dir / RUN_FILE,
+                            unused_petsc_options=tuple(unused))
 
     # --------------------------------------------------------------- reading
     def run_record(self) -> dict | None:

@@ -89,6 +89,9 @@ def test_pipeline_refuses_bad_options_and_copies_them(tmp_path):
         rv.Pipeline(BASELINE, tmp_path, petsc_options=["preonly"])
     with pytest.raises(ValueError, match="unknown stage 'nope'"):
         p.stage("nope")
+    with pytest.raises(ValueError, match="unknown stage 'nope'"):
+        p.run_stages(["mesh", "nope"])               # refused before anything runs
+    assert not (tmp_path / "mesh.h5").exists()
 
 
 # ----------------------------------------------------------------------------- Pipeline
@@ -150,10 +153,14 @@ def test_pipeline_results_match_the_files_on_every_rank(shared_tmp):
         result.modal.frequencies_hz.tolist()
     assert again.peak_rss_gb_total is None
     assert pipe.reconstruct().reused == {"fields": True, "stress": True, "probes": True}
+    again = pipe.run_stages(["mbs", "reconstruct"])
+    assert list(again.results) == ["mbs", "reconstruct"] and again["mbs"].reused is True
     record = pipe.run_record()
-    assert [c["stage"] for c in record["calls"]][-2:] == ["modal", "reconstruct"]
+    assert [c["stage"] for c in record["calls"]][-4:] == ["modal", "reconstruct", "mbs",
+                                                          "reconstruct"]
     assert record["stages"]["modal"]["reused"] is True
     assert record["stages"]["modal"]["command"].endswith(".modal()")
+    assert record["stages"]["mbs"]["command"].endswith(".run()")
 
 
 @pytest.mark.mpi

@@ -44,7 +44,7 @@ test-mpi: setup
 
 # ruff, then the layer order and the ban on import cycles (.importlinter)
 lint: setup
-	$(VENV)/bin/ruff check railvib_hpc tests bench
+	$(VENV)/bin/ruff check railvib_hpc tests bench examples tools
 	$(VENV)/bin/lint-imports --no-cache
 
 docs: setup

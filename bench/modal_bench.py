@@ -16,7 +16,6 @@ process, and prints the time ratio and the largest eigenvalue difference.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import shutil
@@ -83,19 +82,19 @@ def run_modal(refinement: str, ranks: int, modes: int) -> dict:
         stats["n_nodes"] = int(f["mesh/points"].shape[0])
         stats["n_hexes"] = int(f["mesh/hexes"].shape[0])
     stats["wall"] = wall
-    stats["stage_times"] = _stage_times(proc.stdout)
+    stats["stage_times"] = _stage_times(out)
     shutil.rmtree(out, ignore_errors=True)
     return stats
 
 
-def _stage_times(stdout: str) -> dict[str, float]:
-    times = {}
-    for line in stdout.splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[2].endswith("%"):
-            with contextlib.suppress(ValueError):
-                times[parts[0]] = float(parts[1])
-    return times
+def _stage_times(out: Path) -> dict[str, float]:
+    """The modal stage's timed parts and its total, from ``<out>/run.json``."""
+    from railvib_hpc.io.run_record import read_run_record
+
+    entry = (read_run_record(out) or {}).get("stages", {}).get("modal")
+    if entry is None:
+        raise RuntimeError(f"{out}/run.json has no modal entry")
+    return {**{n: float(t) for n, t in entry["substages"]}, "modal": float(entry["wall_s"])}
 
 
 def run_scipy(refinement: str, modes: int, timeout: float) -> dict:

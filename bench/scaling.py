@@ -10,11 +10,12 @@ Usage::
 
 **Scaling.** For each rank count it runs ``railvib run CASE`` (mesh, modal, mbs,
 reconstruct, assess) in a fresh folder under the launcher (``{n}`` = ranks; on a cluster
-e.g. ``--launcher "srun -n {n}"`` inside an allocation, ``--ranks 1 2 4 8 16``), parses the
-Reporter's timing table printed at the end of the run, groups the stages and prints the
-time, speed-up and parallel efficiency per stage, plus the eigensolver's own breakdown and
-peak memory from ``modes.h5``. The mesh (gmsh), the MBS and the assessment run on rank 0
-by design; modal (assembly, MUMPS, Lanczos) and reconstruct are parallel.
+e.g. ``--launcher "srun -n {n}"`` inside an allocation, ``--ranks 1 2 4 8 16``), reads the
+run's ``run.json`` (:mod:`railvib_hpc.io.run_record`: wall time, parts and peak memory of
+every rank per stage) and prints the time, speed-up and parallel efficiency per stage,
+the peak memory per stage, plus the eigensolver's own breakdown from ``modes.h5``. The mesh
+(gmsh), the MBS and the assessment run on rank 0 by design; modal (assembly, MUMPS,
+Lanczos) and reconstruct are parallel.
 
 **Estimate.** From every ``modes.h5`` found under the ``--from`` folders (default: the
 mesh convergence study's levels, ``results/studies/convergence/*/``; same rank count and
@@ -33,7 +34,6 @@ import argparse
 import json
 import math
 import os
-import re
 import shlex
 import shutil
 import subprocess
@@ -48,43 +48,31 @@ import tomllib
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "jobs" / "thesis_baseline.toml"
 
-#: Reporter stage names -> pipeline stage.
-GROUPS = (("mesh", lambda s: s == "mesh"),
-          ("modal", lambda s: s in ("dofs", "assembly", "eigensolve", "write modes",
-                                    "static solves", "write static.h5")
-           or s.startswith("mesh (load") or s.startswith("static correction")),
-          ("mbs", lambda s: s == "mbs"),
-          ("reconstruct", lambda s: s.startswith("reconstruct")),
-          ("assess", lambda s: s == "assess"))
-_ROW = re.compile(r"^(?P<name>.+?)\s+(?P<t>[0-9]+\.[0-9]+)\s+(?P<share>[0-9.]+)%\s*$")
+#: The pipeline's stages, in order (the ``stages`` table of run.json).
+GROUPS = ("mesh", "modal", "mbs", "reconstruct", "assess")
 
 
-def parse_timings(stdout: str) -> dict[str, float]:
-    """The Reporter's timing table (the last one printed) as ``{stage: seconds}``."""
-    lines = stdout.splitlines()
-    start = max((i for i, ln in enumerate(lines) if ln.startswith("stage") and
-                 "time [s]" in ln), default=None)
-    if start is None:
-        raise RuntimeError("no timing table in the output")
-    out: dict[str, float] = {}
-    for ln in lines[start + 1:]:
-        if ln.startswith("total"):
-            break
-        m = _ROW.match(ln)
-        if m:
-            out[m["name"].strip()] = out.get(m["name"].strip(), 0.0) + float(m["t"])
-    return out
+def read_run_json(out: Path) -> dict:
+    """Per stage of ``<out>/run.json``: wall time, its timed parts, peak memory (all ranks).
 
+    Raises
+    ------
+    RuntimeError
+        When the run left no record of a stage.
+    """
+    from railvib_hpc.io.run_record import read_run_record
 
-def group(timings: dict[str, float]) -> dict[str, float]:
-    """Sum the Reporter stages into mesh / modal / mbs / reconstruct / assess."""
-    out = {g: 0.0 for g, _ in GROUPS}
-    for name, t in timings.items():
-        for g, test in GROUPS:
-            if test(name):
-                out[g] += t
-                break
-    return out
+    record = read_run_record(out)
+    if record is None:
+        raise RuntimeError(f"{out}: no readable run.json")
+    missing = [g for g in GROUPS if g not in record["stages"]]
+    if missing:
+        raise RuntimeError(f"{out}/run.json has no entry for {', '.join(missing)}")
+    stages = {g: record["stages"][g] for g in GROUPS}
+    return {"stages": {g: float(e["wall_s"]) for g, e in stages.items()},
+            "raw": {f"{g}/{n}": float(t) for g, e in stages.items() for n, t in e["substages"]},
+            "peak_gb": {g: float(e["peak_rss_gb_total"]) for g, e in stages.items()},
+            "versions": stages["modal"]["versions"]}
 
 
 def run_pipeline(n: int, case: Path, sets: list[str], launcher: str, work: Path,
@@ -106,15 +94,14 @@ def run_pipeline(n: int, case: Path, sets: list[str], launcher: str, work: Path,
     if proc.returncode != 0:
         raise RuntimeError(f"{n} ranks: exit {proc.returncode}\n{proc.stdout[-3000:]}\n"
                            f"{proc.stderr[-3000:]}")
-    raw = parse_timings(proc.stdout)
+    record = read_run_json(out)
     with h5py.File(out / "modes.h5", "r") as f:
         stats = json.loads(f.attrs["stats"])
     fields = out / "fields.h5"
     size = fields.stat().st_size if fields.exists() else 0
     if not keep:
         shutil.rmtree(out, ignore_errors=True)
-    return {"ranks": n, "wall": wall, "stages": group(raw), "raw": raw, "stats": stats,
-            "fields_bytes": size}
+    return {"ranks": n, "wall": wall, **record, "stats": stats, "fields_bytes": size}
 
 
 def scaling_table(runs: list[dict]) -> str:
@@ -124,7 +111,7 @@ def scaling_table(runs: list[dict]) -> str:
             *(f"speed-up {r['ranks']}" for r in runs[1:]),
             *(f"efficiency {r['ranks']}" for r in runs[1:])]
     rows = []
-    names = [g for g, _ in GROUPS] + ["sum of stages", "wall (incl. start-up)"]
+    names = [*GROUPS, "sum of stages", "wall (incl. start-up)"]
     serial = {"mesh": "mesh (rank 0)", "mbs": "mbs (rank 0)", "assess": "assess (rank 0)"}
     for g in names:
         def t(r: dict, g: str = g) -> float:
@@ -148,9 +135,10 @@ def scaling_table(runs: list[dict]) -> str:
             eff = [s * base["ranks"] / r["ranks"] for s, r in zip(sp, runs[1:])]
             rows.append([label, *(f"{v:.2f}" for v in vals), *(f"{s:.2f}" for s in sp),
                          *(f"{e:.2f}" for e in eff)])
-    rows.append(["peak memory, all ranks [GB]",
-                 *(f"{r['stats'].get('peak_rss_gb_total', math.nan):.2f}" for r in runs),
-                 *([""] * (2 * (len(runs) - 1)))])
+    for g in GROUPS:
+        rows.append([f"peak memory of {g}, all ranks [GB]",
+                     *(f"{r['peak_gb'][g]:.2f}" for r in runs),
+                     *([""] * (2 * (len(runs) - 1)))])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines)

@@ -1,8 +1,10 @@
 """Command line: ``railvib COMMAND CASE.toml [--out DIR] [--set key=value ...] [--wait]
 [-- PETSc options]``.
 
-The CLI parses, loads the case, takes the output folder's lock and dispatches to the
-stages (:data:`railvib_hpc.pipeline.STAGES`); everything else lives in the stages.
+A thin shell over the Python API (:mod:`railvib_hpc.api`): the CLI parses the arguments,
+loads the case, takes the output folder's lock, calls :class:`~railvib_hpc.api.Pipeline`
+or :func:`~railvib_hpc.api.run_study`, and turns their results and errors into printed
+lines and exit codes. Everything else lives in the API and the stages.
 
 Exit codes (the same on every MPI rank):
 
@@ -23,7 +25,6 @@ import sys
 import tempfile
 import traceback
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from . import __version__
 from .config import Case, load_case, results_folder_name
@@ -31,10 +32,6 @@ from .errors import UserError
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
 
-if TYPE_CHECKING:
-    pass
-
-STAGES = ("mesh", "modal", "mbs", "reconstruct", "assess")
 STUDIES = ("convergence", "modes", "reflection", "speed", "thesis")
 
 
@@ -123,37 +120,48 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
 
 
 def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Reporter,
-              petsc_options: list[str]) -> int:
+              petsc_options: list[str], command: str) -> tuple[int, list[str]]:
+    """Run the command; returns the exit code and the PETSc options nothing used."""
+    from .api import Pipeline, run_study
     from .io.stage_files import output_lock
-    from .pipeline import TRANSIENT_PIPELINE, run_pipeline, stage_runner
+    from .petsc_env import unused_options
+    from .pipeline import TRANSIENT_PIPELINE
 
     if args.command == "check":
-        return _cmd_check(case, rep)
+        return _cmd_check(case, rep), unused_options(petsc_options)
     if args.command == "study":
-        from .studies import run_study
-
-        return run_study(args.kind, case, out, comm, rep, variants=args.variant,
-                         merge_only=args.merge, prepare=args.prepare, list_only=args.list,
-                         study_set=args.study_set, petsc_options=petsc_options,
-                         wait=args.wait)
-    command = " ".join(["railvib", args.command, str(args.case)])
-    with output_lock(out, comm, command, wait=args.wait, rep=rep):
-        if args.command in ("run", "transient"):
+        study = run_study(args.kind, case, out, comm, variants=args.variant,
+                          merge_only=args.merge, prepare=args.prepare, list_only=args.list,
+                          study_set=args.study_set, petsc_options=petsc_options,
+                          wait=args.wait, reporter=rep)
+        return (0 if study.ok else 2), list(study.unused_petsc_options)
+    pipe = Pipeline(case, out, comm, petsc_options, reporter=rep, wait=args.wait,
+                    command=command)
+    with output_lock(out, comm, " ".join(["railvib", args.command, str(args.case)]),
+                     wait=args.wait, rep=rep):
+        if args.command == "transient":
             _cmd_check(case, rep)
-            summary = run_pipeline(case, out, comm, rep, petsc_options,
-                                   TRANSIENT_PIPELINE if args.command == "transient" else None)
+            res = pipe.run_stages(TRANSIENT_PIPELINE)
             rep.info("\n" + rep.timing_table())
-            verdict = summary["assess"]["verdict"]
-            failed = [k for k, v in verdict.items() if v is False]
-            what = "pipeline" if args.command == "run" else "transient"
-            rep.info(f"{what} complete: {len(verdict)} probes assessed, "
+            assess = res["assess"]
+            failed = assess.exceeded
+            rep.info(f"transient complete: {len(assess.verdict)} probes assessed, "
                      + (f"limits exceeded at {', '.join(failed)}" if failed
                         else "no limit exceeded"))
-            return 0
-        stage_runner(args.command)(case, out, comm, rep, petsc_options)
+            return 0, list(res.unused_petsc_options)
+        if args.command == "run":
+            _cmd_check(case, rep)
+            result = pipe.run()
+            rep.info("\n" + rep.timing_table())
+            failed = result.assess.exceeded
+            rep.info(f"pipeline complete: {len(result.verdict)} probes assessed, "
+                     + (f"limits exceeded at {', '.join(failed)}" if failed
+                        else "no limit exceeded"))
+            return 0, list(result.unused_petsc_options)
+        stage = pipe.stage(args.command)
         if args.command != "mesh":
             rep.info("\n" + rep.timing_table())
-        return 0
+        return 0, list(stage.unused_petsc_options)
 
 
 def run(argv: list[str] | None = None) -> int:
@@ -164,10 +172,10 @@ def run(argv: list[str] | None = None) -> int:
         clear_options,
         petsc_error_text,
         petsc_error_type,
-        unused_options,
     )
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    command = " ".join(["railvib", *argv])
     argv, petsc_options = _split_petsc(argv)
     args = _parser().parse_args(argv)
     comm = world()
@@ -179,8 +187,7 @@ def run(argv: list[str] | None = None) -> int:
         for note in case.notes:
             rep.info(f"note: {note}")
         out = _out_dir(args, case, rep)
-        code = _dispatch(args, case, out, comm, rep, petsc_options)
-        unused = unused_options(petsc_options)
+        code, unused = _dispatch(args, case, out, comm, rep, petsc_options, command)
         if unused:
             _warn(comm, f"railvib {args.command}: warning: PETSc options after '--' that "
                         f"nothing used: {' '.join(unused)} (misspelt, or nothing was solved "

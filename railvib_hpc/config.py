@@ -15,8 +15,8 @@ import json
 import math
 import os
 import re
-from collections.abc import Collection
-from dataclasses import dataclass
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -32,34 +32,145 @@ FRA_FITTED_WAVELENGTH_MIN = 1.524
 _SECTION_KEYS = {k.rsplit(".", 1)[0] for k in ALL_KEYS}
 
 
-@dataclass
+@dataclass(frozen=True)
 class Case:
-    """A validated case.
+    """A validated case: every schema key with a typed value. Immutable.
+
+    Make one with :meth:`from_file`, :meth:`from_dict` or :meth:`defaults`; derive
+    variants with :meth:`replace`, which validates like a case file (the same
+    :class:`~railvib_hpc.errors.CaseError` lines as the command line) and returns a new
+    case.
 
     Attributes
     ----------
     data
-        Nested dict with every schema key filled in.
+        Nested dict with every schema key filled in (read it, never modify it:
+        ``case[key]`` returns copies of sections and lists).
     path
-        The case file (``None`` for the built-in defaults).
+        The case file (``None`` for the built-in defaults or a dict); relative paths in
+        the case (``mesh.file``, ``irregularity.file``) are resolved against its folder.
     notes
         Things the user should know that are not errors (e.g. preset values
         overridden by the file).
+    given
+        The entries the file, the dict and the overrides gave (dotted keys), from which
+        :meth:`replace` rebuilds the case (so a changed ``case.preset`` applies its
+        values).
+
+    Examples
+    --------
+    >>> case = Case.defaults()
+    >>> case["materials.subgrade.E"]
+    200000000.0
+    >>> soft = case.replace({"materials.subgrade.E": 1.5e8, "vehicle.speed": 20})
+    >>> soft["materials.subgrade.E"], soft["vehicle.speed"], case["vehicle.speed"]
+    (150000000.0, 20.0, 30.0)
+    >>> case.replace({"materials.subgrade.E": -1.0})  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    railvib_hpc.errors.CaseError: invalid case file: materials.subgrade.E = -1.0: must be > 0 ...
     """
 
     data: dict[str, Any]
     path: Path | None = None
     notes: tuple[str, ...] = ()
+    given: dict[str, Any] | None = field(default=None, repr=False, compare=False)
 
+    # --------------------------------------------------------------- constructors
+    @classmethod
+    def from_file(cls, path: str | os.PathLike, overrides: Mapping[str, Any] | Sequence[str]
+                  | None = None) -> Case:
+        """Read and validate a TOML case file.
+
+        Parameters
+        ----------
+        path
+            The case file.
+        overrides
+            ``{dotted key: value}`` with typed values (``{"modal.n_modes": 20}``), or
+            ``["key=value", ...]`` strings as given to ``--set``.
+
+        Raises
+        ------
+        CaseError
+            Every problem of the file and the overrides, as the command line prints them.
+        """
+        if overrides is None or isinstance(overrides, Mapping):
+            case = load_case(path)
+            return case.replace(overrides) if overrides else case
+        if isinstance(overrides, str):
+            overrides = [overrides]
+        return load_case(path, list(overrides))
+
+    @classmethod
+    def from_dict(cls, mapping: Mapping[str, Any], path: str | os.PathLike | None = None
+                  ) -> Case:
+        """Validate a case given as a (nested, TOML-like, or flat dotted-key) mapping.
+
+        Keys not given take their preset's or the schema's defaults. ``path``: a file
+        whose folder relative paths in the case refer to (default: the current folder).
+
+        Examples
+        --------
+        >>> case = Case.from_dict({"case": {"name": "soft"}, "vehicle.speed": 25.0})
+        >>> case["case.name"], case["vehicle.speed"]
+        ('soft', 25.0)
+        """
+        return build_case(dict(mapping), None, Path(path).resolve() if path else None)
+
+    @classmethod
+    def defaults(cls) -> Case:
+        """The built-in defaults: the thesis baseline (``jobs/thesis_baseline.toml``)."""
+        return build_case({}, None, None)
+
+    # --------------------------------------------------------------- derived cases
+    def replace(self, changes: Mapping[str, Any] | None = None, /, **sections: Any) -> Case:
+        """A new validated case with some values changed (this one is unchanged).
+
+        Parameters
+        ----------
+        changes
+            ``{dotted key: value}``; values are typed (numbers, strings, lists, booleans)
+            and checked like a case file's; a section's dict (``{"vehicle": {...}}``)
+            sets several keys of it.
+        **sections
+            Plain keywords for top-level sections, e.g. ``vehicle={"speed": 20}``.
+
+        Raises
+        ------
+        CaseError
+            Naming every invalid key and value.
+        """
+        flat = dict(self.given) if self.given is not None else _flatten(self.data)
+        merged = _flatten({**dict(changes or {}), **sections})
+        flat.update(merged)
+        return build_case(flat, None, self.path)
+
+    # --------------------------------------------------------------- reading
     def __getitem__(self, dotted: str) -> Any:
         node: Any = self.data
         for part in dotted.split("."):
             node = node[part]
-        return node
+        return copy.deepcopy(node) if isinstance(node, dict | list) else node
+
+    def get(self, dotted: str, default: Any = None) -> Any:
+        """``case[dotted]``, or ``default`` when the key does not exist."""
+        try:
+            return self[dotted]
+        except (KeyError, TypeError):
+            return default
 
     def section(self, name: str) -> dict[str, Any]:
         """Return a copy of one section, e.g. ``case.section("geometry")``."""
-        return copy.deepcopy(self[name])
+        return self[name]
+
+    def to_dict(self) -> dict[str, Any]:
+        """A deep copy of the nested case (e.g. to edit and pass to :meth:`from_dict`)."""
+        return copy.deepcopy(self.data)
+
+    def flat(self) -> dict[str, Any]:
+        """Every key as ``{dotted key: value}`` (copies)."""
+        return copy.deepcopy(_flatten(self.data))
 
     def digest(self, *sections: str, exclude: Collection[str] = ()) -> str:
         """SHA-256 of the given sections (all if none), for result reuse keys.
@@ -74,7 +185,7 @@ class Case:
                 return node
             return {k: drop(v) for k, v in node.items() if k not in exclude}
 
-        payload = {n: drop(self[n]) for n in names}
+        payload = {n: drop(self.data[n]) if "." not in n else drop(self[n]) for n in names}
         if "mesh" in names and self["mesh.file"]:
             payload["mesh_file_sha256"] = hash_file(self.resolve(self["mesh.file"]))
         return digest(payload)
@@ -132,7 +243,7 @@ def _did_you_mean(key: str) -> str:
         return f"unknown key; did you mean '{close[0]}'?"
     if known:
         return f"unknown section '{section}'; sections are: {known}"
-    return f"unknown key; see the case-file reference in README.md (section [{section}])"
+    return f"unknown key; see docs/case_reference.md (section [{section}])"
 
 
 def parse_override(text: str) -> tuple[str, Any]:
@@ -306,7 +417,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         notes.append(f"irregularity.wavelength_min = {irr['wavelength_min']:g} m lies below the "
                      f"range the FRA spectra were fitted to (>= {FRA_FITTED_WAVELENGTH_MIN} m = "
                      "5 ft): the shorter wavelengths are an extrapolation")
-    case = Case(data=data, path=path, notes=tuple(notes))
+    case = Case(data=data, path=path, notes=tuple(notes), given=copy.deepcopy(flat))
     problems.extend(check_consistency(case))
     if problems:
         raise CaseError(problems)

@@ -1,8 +1,9 @@
-"""Generate the case-file reference (README) and the fully commented baseline case.
+"""Generate the case-file reference and the fully commented baseline case.
 
-``python -m railvib_hpc.docs`` rewrites the README section between the
-``<!-- case-reference -->`` markers and ``jobs/thesis_baseline.toml``; a test
-fails when either is out of date with :mod:`railvib_hpc.schema`.
+``python -m railvib_hpc.docs`` (``make docs``) rewrites the tables between the
+``<!-- case-reference -->`` markers of ``docs/case_reference.md`` and
+``jobs/thesis_baseline.toml``; ``tests/test_config.py`` fails when either is out of date
+with :mod:`railvib_hpc.schema`.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from pathlib import Path
 from .schema import PRESETS, SCHEMA, Param, iter_params, source
 
 BEGIN, END = "<!-- case-reference:begin -->", "<!-- case-reference:end -->"
+#: The generated case reference, relative to the repository root.
+CASE_REFERENCE = Path("docs") / "case_reference.md"
 
 
 def _fmt(v: object) -> str:
@@ -92,14 +95,14 @@ def update(root: Path) -> list[Path]:
     if not job.exists() or job.read_text() != text:
         job.write_text(text)
         changed.append(job)
-    readme = root / "README.md"
-    content = readme.read_text()
+    reference = root / CASE_REFERENCE
+    content = reference.read_text()
     head, rest = content.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
     new = f"{head}{BEGIN}\n{case_reference_markdown()}{END}{tail}"
     if new != content:
-        readme.write_text(new)
-        changed.append(readme)
+        reference.write_text(new)
+        changed.append(reference)
     return changed
 
 

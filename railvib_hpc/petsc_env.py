@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import os
 import sys
+from collections.abc import Iterator, Mapping, Sequence
 
 
 def _debian_dir(pattern: str) -> str | None:
@@ -184,3 +186,54 @@ def petsc_error_text(exc: BaseException) -> str:
         return f"error code {ierr}"
     words = (specific.value or text.value or b"").decode(errors="replace").strip()
     return f"{words} (error code {ierr})" if words else f"error code {ierr}"
+
+
+def option_words(options: Sequence[str] | Mapping[str, object] | None) -> list[str]:
+    """PETSc options as command-line words (a new list; the argument is never changed).
+
+    A mapping gives ``{name: value}`` (``None`` or ``""`` for a flag), names with or
+    without the leading ``-``.
+
+    Examples
+    --------
+    >>> option_words({"railvib_eig_st_ksp_type": "preonly", "-log_view": None})
+    ['-railvib_eig_st_ksp_type', 'preonly', '-log_view']
+    >>> option_words(("-log_view",))
+    ['-log_view']
+    """
+    if options is None:
+        return []
+    if isinstance(options, str):
+        return options.split()
+    if isinstance(options, Mapping):
+        words: list[str] = []
+        for name, value in options.items():
+            words.append(name if str(name).startswith("-") else f"-{name}")
+            if value is not None and value != "":
+                words.append(str(value))
+        return words
+    return [str(w) for w in options]
+
+
+@contextlib.contextmanager
+def options_scope(options: Sequence[str]) -> Iterator[list[str]]:
+    """Keep ``options`` in PETSc's database only for the block (the stages insert them when
+    they start PETSc); on leaving, remove them again.
+
+    Yields a list that, after the block, holds the options nothing used (see
+    :func:`unused_options`), so the caller can warn about typos.
+
+    Examples
+    --------
+    >>> with options_scope(["-no_such_option_anywhere"]) as unused:
+    ...     pass
+    >>> unused
+    ['-no_such_option_anywhere']
+    """
+    words = list(options)
+    unused: list[str] = []
+    try:
+        yield unused
+        unused.extend(unused_options(words))
+    finally:
+        clear_options(words)

@@ -7,6 +7,10 @@ or recomputes its outputs through :mod:`railvib_hpc.io.stage_files`) and returns
 summary dict on every rank. User and environment errors raise
 :class:`~railvib_hpc.errors.UserError` on every rank.
 
+:func:`call_stage` is how a stage is called from outside: it holds the output folder's
+lock and records the call (wall time, peak memory of every rank, versions, the command
+and the case digest) in ``<out>/run.json`` (:mod:`railvib_hpc.io.run_record`).
+The CLI and the Python API (:mod:`railvib_hpc.api`) call every stage through it.
 The full-order solution (``railvib transient``) is a stage with the same entry point
 that ``run`` does not include (:data:`OPTIONAL_STAGES`); the ``transient`` command runs
 :data:`TRANSIENT_PIPELINE`.
@@ -35,6 +39,8 @@ STAGES: dict[str, tuple[str, str]] = {
     "assess": ("railvib_hpc.assess.stage", "run_assess_stage"),
 }
 
+#: The stages ``railvib run`` (and :func:`run_pipeline`) runs, in order.
+PIPELINE_ORDER: tuple[str, ...] = ("mesh", "modal", "mbs", "reconstruct", "assess")
 #: Stages with the same entry point that ``railvib run`` does not run.
 OPTIONAL_STAGES: dict[str, tuple[str, str]] = {
     "transient": ("railvib_hpc.transient.stage", "run_transient_stage"),
@@ -51,18 +57,55 @@ def stage_runner(name: str) -> StageRunner:
     return getattr(importlib.import_module(module), func)
 
 
+def call_stage(name: str, case, out_dir: str | Path, comm, rep,
+               petsc_options: list[str] | None = None, *, command: str | None = None,
+               wait: bool = False) -> dict:
+    """Run stage ``name`` under the lock of ``out_dir`` and record it in ``run.json``.
+
+    Parameters
+    ----------
+    name
+        A key of :data:`STAGES`.
+    case, out_dir, comm, rep, petsc_options
+        As for every stage entry point.
+    command
+        What ran it, for ``run.json`` (default ``railvib <name>``).
+    wait
+        Wait for another command holding the folder instead of refusing.
+
+    Returns
+    -------
+    dict
+        The stage's summary (every rank).
+    """
+    from .io.run_record import record_stage
+    from .io.stage_files import output_lock
+
+    out_dir = Path(out_dir)
+    command = command or f"railvib {name}"
+    with output_lock(out_dir, comm, command, wait=wait, rep=rep), \
+            record_stage(out_dir, comm, name, case, rep, command) as call:
+        summary = stage_runner(name)(case, out_dir, comm, rep, petsc_options)
+        call.done(summary)
+    return summary
+
+
 def run_pipeline(case, out_dir: str | Path, comm, rep, petsc_options: list[str] | None = None,
-                 stages: tuple[str, ...] | None = None) -> dict[str, dict]:
+                 stages: tuple[str, ...] | None = None, *, command: str | None = None,
+                 wait: bool = False) -> dict[str, dict]:
     """Run the stages in order (all by default) under one lock of ``out_dir``.
 
     Each stage reuses what is current and recomputes what is stale or corrupt, saying
-    why. Returns ``{stage: summary}``.
+    why; each call is recorded in ``run.json`` (:func:`call_stage`). Returns
+    ``{stage: summary}``.
     """
     from .io.stage_files import output_lock
 
     out_dir = Path(out_dir)
+    command = command or "railvib run"
     summaries = {}
-    with output_lock(out_dir, comm, "railvib run", rep=rep):
-        for name in stages or tuple(STAGES):
-            summaries[name] = stage_runner(name)(case, out_dir, comm, rep, petsc_options)
+    with output_lock(out_dir, comm, command, wait=wait, rep=rep):
+        for name in stages or PIPELINE_ORDER:
+            summaries[name] = call_stage(name, case, out_dir, comm, rep, petsc_options,
+                                         command=command)
     return summaries

@@ -36,6 +36,7 @@ import os
 import re
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -373,3 +374,42 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
                for k in ("t", "displacement", "velocity", "acceleration"))
     size += sum(np.asarray(v).nbytes for d in (groups or {}).values() for v in d.values())
     return write_h5(path, None, fill, size_hint=int(size), attrs=attrs, check=check_probes)
+
+
+def probe_peaks(history: Mapping[str, np.ndarray], wave_threshold: float) -> dict[str, Any]:
+    """Peak response of one probe history (``t``, ``displacement``, ``velocity``,
+    ``acceleration``, ``coords``), as the studies and the Python API report it.
+
+    Returns
+    -------
+    dict
+        ``coords`` [m]; ``t_onset`` (first time ``|a|`` reaches ``wave_threshold`` times its
+        peak, None if never); ``acc_x``, ``acc_y``, ``acc_vertical`` (peak ``|a_x|``,
+        ``|a_y|``, ``|a_z|``) and ``acc_total`` (peak ``|a|``) [m/s²] with ``t_acc_total``
+        [s]; ``vel_total`` (peak ``|v|``) [m/s]; ``disp_total`` (peak ``|u|``) [m].
+
+    Examples
+    --------
+    >>> t = np.linspace(0.0, 1.0, 5)
+    >>> a = np.zeros((5, 3)); a[2] = [0.0, 3.0, -4.0]
+    >>> h = {"t": t, "acceleration": a, "velocity": a / 10, "displacement": a / 100,
+    ...      "coords": np.zeros(3)}
+    >>> p = probe_peaks(h, 0.1)
+    >>> p["acc_vertical"], p["acc_total"], p["t_acc_total"], p["t_onset"]
+    (4.0, 5.0, 0.5, 0.5)
+    """
+    t = np.asarray(history["t"], dtype=float)
+    a, v, u = (np.asarray(history[k], dtype=float)
+               for k in ("acceleration", "velocity", "displacement"))
+    amag = np.linalg.norm(a, axis=1)
+    k = int(np.argmax(amag)) if amag.size else 0
+    onset = np.flatnonzero(amag >= wave_threshold * amag[k]) if amag.size else np.array([])
+    return {"coords": np.asarray(history["coords"], dtype=float).tolist(),
+            "t_onset": float(t[onset[0]]) if onset.size else None,
+            "acc_x": float(np.abs(a[:, 0]).max()) if a.size else 0.0,
+            "acc_y": float(np.abs(a[:, 1]).max()) if a.size else 0.0,
+            "acc_vertical": float(np.abs(a[:, 2]).max()) if a.size else 0.0,
+            "acc_total": float(amag[k]) if amag.size else 0.0,
+            "t_acc_total": float(t[k]) if t.size else 0.0,
+            "vel_total": float(np.linalg.norm(v, axis=1).max()) if v.size else 0.0,
+            "disp_total": float(np.linalg.norm(u, axis=1).max()) if u.size else 0.0}

@@ -15,7 +15,8 @@ and PNG figures (:mod:`.report`) and prints a verdict:
 Study settings: :mod:`.settings` (defaults, ``--study-set key=value``).
 """
 
-from .runner import STUDY_MODULES, run_study
+from .runner import STUDY_MODULES, execute_study
 from .settings import SETTINGS, StudySettingsError, study_settings
 
-__all__ = ["SETTINGS", "STUDY_MODULES", "StudySettingsError", "run_study", "study_settings"]
+__all__ = ["SETTINGS", "STUDY_MODULES", "StudySettingsError", "execute_study",
+           "study_settings"]

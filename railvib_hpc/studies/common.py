@@ -9,6 +9,7 @@ Folders (``<out>`` is the ``--out`` folder of the command)::
         probes.h5                     probe histories (from the modes, see below)
         result.json                   the variant's result, written last and atomically
         failed.json                   written instead when the variant failed (user error)
+        run.json                      its modal and mbs stage calls (times, memory, versions)
     <out>/<study>/model/              shared model of the modes and speed studies
 
 Building responses come from :func:`railvib_hpc.reconstruct.probes.probe_histories`: the
@@ -60,6 +61,7 @@ import numpy as np
 from .. import __version__
 from ..config import Case, build_case
 from ..errors import UserError
+from ..io.run_record import record_stage
 from ..io.stage_files import (
     copy_file,
     digest,
@@ -301,6 +303,7 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
     from probe histories ``{name: {t, displacement, velocity, acceleration, coords}}``."""
     from ..assess.standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe
     from ..assess.weighting import third_octave_rms
+    from ..reconstruct.probes import probe_peaks
     from ..schema import DEFAULT_PROBE_ROLE
 
     missing = [p for p in probes if p not in hist]
@@ -312,18 +315,8 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
     peaks, assessment, spectra = {}, {}, {}
     a_cfg = case["assessment"]
     for name, h in hist.items():
-        a, v, u = h["acceleration"], h["velocity"], h["displacement"]
-        amag = np.linalg.norm(a, axis=1)
-        k = int(np.argmax(amag))
-        onset = np.flatnonzero(amag >= a_cfg["wave_threshold"] * amag[k])
-        peaks[name] = {"coords": np.asarray(h["coords"]).tolist(),
-                       "t_onset": float(t[onset[0]]) if onset.size else None,
-                       "acc_x": float(np.abs(a[:, 0]).max()),
-                       "acc_y": float(np.abs(a[:, 1]).max()),
-                       "acc_vertical": float(np.abs(a[:, 2]).max()),
-                       "acc_total": float(amag[k]), "t_acc_total": float(t[k]),
-                       "vel_total": float(np.linalg.norm(v, axis=1).max()),
-                       "disp_total": float(np.linalg.norm(u, axis=1).max())}
+        a, v = h["acceleration"], h["velocity"]
+        peaks[name] = probe_peaks(h, a_cfg["wave_threshold"])
         if name not in probes or t.size < 2:
             continue
         res = assess_probe(t, a, v, a_cfg["standards"], building_use=a_cfg["building_use"],
@@ -355,9 +348,13 @@ def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep:
         return {}
     mcase = on_root(lambda: variant_case(case, plan.shared_overrides), comm)
     folder = root / SHARED_DIR
-    with output_lock(folder, comm, f"study {plan.kind}: shared model", wait=True, rep=rep), \
-            rep.stage(f"{plan.kind}: shared model"):
-        return run_modal_stage(mcase, folder, comm, rep)
+    command = f"railvib study {plan.kind}: shared model"
+    with output_lock(folder, comm, command, wait=True, rep=rep), \
+            rep.stage(f"{plan.kind}: shared model"), \
+            record_stage(folder, comm, "modal", mcase, rep, command) as call:
+        summary = run_modal_stage(mcase, folder, comm, rep)
+        call.done(summary)
+        return summary
 
 
 def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
@@ -395,6 +392,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
         return _run_direct_variant(plan, v, vcase, digest, vdir, comm, rep, settings)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
+    command = f"railvib study {plan.kind} --variant {v.name}"
     try:
         t0 = time.perf_counter()
         if v.shared:
@@ -407,10 +405,14 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
             if v.band_hz > 0:
                 modal, vcase = _modes_for_band(vcase, vdir, v.band_hz, comm, rep)
             else:
-                modal = run_modal_stage(vcase, vdir, comm, rep)
+                with record_stage(vdir, comm, "modal", vcase, rep, command) as call:
+                    modal = run_modal_stage(vcase, vdir, comm, rep)
+                    call.done(modal)
         timings["modal"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        mbs = run_mbs_stage(vcase, vdir, comm, rep)
+        with record_stage(vdir, comm, "mbs", vcase, rep, command) as call:
+            mbs = run_mbs_stage(vcase, vdir, comm, rep)
+            call.done(mbs)
         timings["mbs"] = time.perf_counter() - t0
 
         def finish() -> dict:

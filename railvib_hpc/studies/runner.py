@@ -12,8 +12,10 @@ Modes of the command (see ``jobs/README.md``):
 
 Every variant's result is a ``result.json`` written atomically at its end: an interrupted
 study resumes where it stopped (finished variants are skipped, the stages reuse their
-files). Exit code 0, or 2 when a selected variant failed with a user error (e.g. the
-modal stage's memory check); the report is written either way.
+files). :func:`execute_study` returns a summary (the variants and their status, the
+failed ones, the verdict, tables and report files); the command line exits with code 2
+when a selected variant failed with a user error (e.g. the modal stage's memory check).
+The report is written either way.
 """
 
 from __future__ import annotations
@@ -148,15 +150,19 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     rep.info(f"wrote {files['markdown']}, {files['json']}"
              + "".join(f", {p}" for p in figs))
     return {"verdict": analysis["verdict"], "files": {k: str(p) for k, p in files.items()},
-            "variants": entries}
+            "variants": entries, "tables": analysis.get("tables", []),
+            "rows": analysis.get("rows", []), "figures": [str(p) for p in figs]}
 
 
-def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
-              variants: Sequence[str] = (), merge_only: bool = False, prepare: bool = False,
-              list_only: bool = False, study_set: Sequence[str] = (),
-              settings: dict[str, Any] | None = None,
-              petsc_options: list[str] | None = None, wait: bool = False) -> int:
-    """Run a study (collective); returns the exit code.
+def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
+                  variants: Sequence[str] = (), merge_only: bool = False,
+                  prepare: bool = False, list_only: bool = False,
+                  study_set: Sequence[str] = (), settings: dict[str, Any] | None = None,
+                  petsc_options: Sequence[str] | None = None, wait: bool = False) -> dict:
+    """Run a study (collective); returns its summary (the same on every rank).
+
+    The public entry point is :func:`railvib_hpc.api.run_study`, which wraps this
+    summary into a :class:`~railvib_hpc.api.StudyResult`.
 
     Parameters
     ----------
@@ -184,15 +190,19 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
     settings
         Study settings given programmatically (merged before ``study_set``).
     petsc_options
-        PETSc/SLEPc options (after ``--``), passed to PETSc when a model is computed.
+        PETSc/SLEPc options (after ``--``), passed to PETSc when a model is computed
+        (the list is not changed).
     wait
         Wait for another command that holds a variant folder (``--wait``) instead of
         failing that variant.
 
     Returns
     -------
-    int
-        0, or 2 when a selected variant failed (its ``failed.json`` says why).
+    dict
+        ``kind``, ``folder``, ``settings`` (validated), ``variants`` (name, parameter,
+        overrides, folder, status, error), ``computed`` and ``failed`` (variant names of
+        this call), ``merged`` (whether the report was written), ``verdict``, ``tables``,
+        ``files`` and ``figures`` (of the report; empty when not merged), ``seconds``.
     """
     t0 = time.perf_counter()
     cfg = on_root(lambda: study_settings(kind, study_set, settings, case), comm)
@@ -210,8 +220,9 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
             rep.info(text_table(["index", "variant", "overrides", "status"], rows))
 
         on_root(show, comm)
-        return 0
+        return _summary(kind, plan, case, root, cfg, comm, t0, [], [], None)
     failed: list[str] = []
+    computed: list[str] = []
     if not merge_only:
         from ..petsc_env import init_petsc
 
@@ -227,10 +238,27 @@ def run_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *
                 res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait)
             if "failed" in res:
                 failed.append(v.name)
+            else:
+                computed.append(v.name)
+    merged = None
     if merge_only or not (chosen or prepare):
         with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):
-            on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
+            merged = on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
     rep.info(f"{kind} study command finished in {time.perf_counter() - t0:.1f} s"
              + (f"; failed variants: {', '.join(failed)} (see their {FAILED_NAME})"
                 if failed else ""))
-    return 2 if failed else 0
+    return _summary(kind, plan, case, root, cfg, comm, t0, computed, failed, merged)
+
+
+def _summary(kind: str, plan: StudyPlan, case: Case, root: Path, cfg: dict, comm, t0: float,
+             computed: list[str], failed: list[str], merged: dict | None) -> dict:
+    """The summary :func:`execute_study` returns (every rank)."""
+    entries = merged["variants"] if merged is not None else \
+        on_root(lambda: status(plan, case, root, cfg)[0], comm)
+    merged = merged or {}
+    return {"kind": kind, "folder": str(root), "settings": cfg, "variants": entries,
+            "computed": computed, "failed": failed, "merged": bool(merged),
+            "verdict": merged.get("verdict"), "tables": merged.get("tables", []),
+            "rows": merged.get("rows", []),
+            "files": merged.get("files", {}), "figures": merged.get("figures", []),
+            "seconds": time.perf_counter() - t0}

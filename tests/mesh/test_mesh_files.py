@@ -18,7 +18,7 @@ def test_mesh_command_writes_consistent_xdmf_and_h5(tmp_path):
     out = tmp_path / "res"
     assert run(["mesh", str(BASELINE), "--set", "mesh.refinement=0.5", "--out", str(out)]) == 0
     assert {p.name for p in out.iterdir()} == {".railvib", "mesh.h5", "mesh.xdmf", "mesh.msh",
-                                               "mesh_report.json"}
+                                               "mesh_report.json", "run.json"}
     root = ET.parse(out / "mesh.xdmf").getroot()
     with h5py.File(out / "mesh.h5", "r") as f:
         for item in root.iter("DataItem"):

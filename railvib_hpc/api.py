@@ -1,0 +1,875 @@
+"""The Python API: cases, the pipeline as an object, studies; what the command line uses.
+
+Three things make a script or a notebook out of what ``railvib`` does on the command
+line:
+
+* :class:`Case` -- a validated, immutable case: :meth:`Case.from_file`,
+  :meth:`Case.from_dict`, :meth:`Case.defaults`, and :meth:`Case.replace` for variants
+  (typed values, the same validation and the same one-line
+  :class:`~railvib_hpc.errors.CaseError` as the command line);
+* :class:`Pipeline` -- the problem (a case) bound to an output folder, a communicator and
+  PETSc options; its methods :meth:`~Pipeline.mesh`, :meth:`~Pipeline.modal`,
+  :meth:`~Pipeline.mbs`, :meth:`~Pipeline.reconstruct`, :meth:`~Pipeline.assess` and
+  :meth:`~Pipeline.run` run the stages (reusing what is current, as the command line
+  does) and return small frozen results: the files written, the key numbers and arrays,
+  what was reused and the timings;
+* :func:`run_study` -- a whole study (convergence, modes, reflection, speed, thesis),
+  returning a :class:`StudyResult`.
+
+Everything is collective: run the same script under ``mpirun -n N`` and every rank gets
+the same results (rank 0 prints). PETSc options given to a :class:`Pipeline` are in
+PETSc's database only while a stage runs and removed afterwards; the options nothing used
+are in ``result.unused_petsc_options``. Every stage call is recorded in
+``<out>/run.json`` (:mod:`railvib_hpc.io.run_record`; :meth:`Pipeline.run_record`).
+
+Example
+-------
+A coarse model (refinement 0.25, 8 modes; about 10 s on one core)::
+
+    import railvib_hpc as rv
+
+    case = rv.Case.from_file("jobs/thesis_baseline.toml").replace(
+        {"mesh.refinement": 0.25, "modal.n_modes": 8, "modal.block_size": 8,
+         "output.dt": 0.01})
+    result = rv.Pipeline(case, "results/coarse").run()
+    print(result.modal.frequencies_hz[:3], result.mbs.peak_contact_force.max())
+    print(result.reconstruct.probes["slab1"].acc_vertical, result.assess.passed)
+
+Errors are exceptions: :class:`~railvib_hpc.errors.UserError` (a bad value, a stale
+input file, a locked folder, a full disk; its message is the command line's one line,
+raised on every rank together) and its subclasses.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .config import Case
+from .errors import CaseError, UserError
+from .log import Reporter
+from .parallel import on_root, world
+from .pipeline import PIPELINE_ORDER, STAGES
+
+if TYPE_CHECKING:
+    from mpi4py import MPI
+
+__all__ = [
+    "AssessResult", "Case", "CaseError", "MBSResult", "MeshResult", "ModalResult",
+    "Pipeline", "ProbePeak", "ReconstructResult", "RunResult", "StageResult", "StagesResult",
+    "StudyResult", "StudyTable", "UserError", "VariantStatus", "run_study",
+]
+
+PetscOptions = Sequence[str] | Mapping[str, Any] | None
+
+
+class _Silent:
+    """A stream that drops everything (``quiet=True``)."""
+
+    def write(self, text: str) -> int:
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def _reporter(comm, reporter: Reporter | None, quiet: bool) -> Reporter:
+    if reporter is not None:
+        return reporter
+    return Reporter(comm.rank, _Silent() if quiet else None)
+
+
+def _frozen(values: Any) -> np.ndarray:
+    """A read-only float array (results are immutable)."""
+    arr = np.array(values, dtype=float)
+    arr.flags.writeable = False
+    return arr
+
+
+def _path(out_dir: Path, name: str) -> Path | None:
+    p = out_dir / name
+    return p if p.exists() else None
+
+
+def _as_case(case: Case | str | os.PathLike) -> Case:
+    if isinstance(case, Case):
+        return case
+    if isinstance(case, str | os.PathLike):
+        return Case.from_file(case)
+    raise TypeError(f"case must be a Case or a case file, not {type(case).__name__}")
+
+
+# ----------------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class StageResult:
+    """What every stage call returns.
+
+    Attributes
+    ----------
+    stage
+        The stage's name.
+    out_dir
+        The output folder.
+    reused
+        What the stage reused instead of computing (a bool, or per file for
+        ``reconstruct``).
+    seconds
+        Wall time of the call [s] (rank 0).
+    timings
+        The timed parts of the call, ``{name: seconds}`` (e.g. ``assembly``, ``eigensolve``).
+    summary
+        The stage's full summary (the dict the stage returned).
+    unused_petsc_options
+        PETSc options of the pipeline that nothing used during the call (typos, or
+        nothing was solved).
+    """
+
+    stage: str
+    out_dir: Path
+    reused: Any
+    seconds: float
+    timings: dict[str, float]
+    summary: dict[str, Any]
+    unused_petsc_options: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class MeshResult(StageResult):
+    """``mesh``: the model's files, its size and quality warnings.
+
+    Attributes
+    ----------
+    mesh_h5, mesh_xdmf, report_json
+        The mesh in HDF5, its XDMF view (ParaView), the quality report.
+    mesh_msh
+        gmsh's mesh (None when ``mesh.file`` gave one).
+    n_nodes, n_hexes
+        Size of the mesh.
+    min_scaled_jacobian, max_aspect_ratio
+        Worst element quality.
+    warnings
+        The mesh check's warnings.
+    """
+
+    mesh_h5: Path
+    mesh_xdmf: Path
+    mesh_msh: Path | None
+    report_json: Path
+    n_nodes: int
+    n_hexes: int
+    min_scaled_jacobian: float
+    max_aspect_ratio: float
+    warnings: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class ModalResult(StageResult):
+    """``modal``: the mass-normalised modes.
+
+    Attributes
+    ----------
+    modes_h5, modes_xdmf
+        The modes and their ParaView view (None with ``modal.band_only``: one band only).
+    static_h5
+        The static solutions of the static correction (None when it is off).
+    frequencies_hz
+        The natural frequencies [Hz] (read-only array).
+    n_dofs
+        Free degrees of freedom of the model.
+    max_orthonormality_error, max_relative_residual
+        The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
+    peak_rss_gb_total
+        Peak memory over all ranks of the eigensolve [GB] (None when reused).
+    """
+
+    modes_h5: Path | None
+    modes_xdmf: Path | None
+    static_h5: Path | None
+    frequencies_hz: np.ndarray
+    n_dofs: int | None
+    max_orthonormality_error: float | None
+    max_relative_residual: float | None
+    peak_rss_gb_total: float | None
+
+    @property
+    def n_modes(self) -> int:
+        """Number of modes."""
+        return int(self.frequencies_hz.size)
+
+
+@dataclass(frozen=True)
+class MBSResult(StageResult):
+    """``mbs``: the vehicle's passage over the modal track.
+
+    Attributes
+    ----------
+    mbs_h5
+        The histories (contact forces, vehicle, modal coordinates).
+    plots
+        The PNG plots written with it.
+    n_modes, dt, n_steps, t_end
+        Modes used, time step [s], steps, end time [s].
+    static_wheel_load, mean_contact_force, peak_contact_force, min_contact_force
+        Per wheel [N] (read-only arrays; the mean on the flexible rail).
+    max_rail_deflection
+        Largest rail deflection under a wheel [m].
+    loss_of_contact_steps
+        Steps in which a wheel lost contact.
+    """
+
+    mbs_h5: Path
+    plots: tuple[Path, ...]
+    n_modes: int
+    dt: float
+    n_steps: int
+    t_end: float
+    static_wheel_load: np.ndarray
+    mean_contact_force: np.ndarray
+    peak_contact_force: np.ndarray
+    min_contact_force: np.ndarray
+    max_rail_deflection: float
+    loss_of_contact_steps: int
+
+
+@dataclass(frozen=True)
+class ProbePeak:
+    """Peak response at one probe (from ``probes.h5``).
+
+    Attributes
+    ----------
+    name, role
+        The probe and its role (``floor``, ``wall``, ``foundation``, ``ground`` ...).
+    coords
+        Its position [m].
+    acc_vertical, acc_total
+        Peak ``|a_z|`` and peak ``|a|`` [m/s²]; ``t_acc_total`` the time of the latter [s].
+    vel_total, disp_total
+        Peak ``|v|`` [m/s] and ``|u|`` [m].
+    t_onset
+        First time ``|a|`` reaches ``assessment.wave_threshold`` of its peak [s].
+    """
+
+    name: str
+    role: str
+    coords: tuple[float, float, float]
+    acc_vertical: float
+    acc_total: float
+    t_acc_total: float
+    vel_total: float
+    disp_total: float
+    t_onset: float | None
+
+
+@dataclass(frozen=True)
+class ReconstructResult(StageResult):
+    """``reconstruct``: fields of every node, stresses, probe histories.
+
+    Attributes
+    ----------
+    fields_h5, fields_xdmf
+        Displacement, velocity and acceleration of every node and their ParaView view.
+    stress_xdmf
+        Element stresses at ``output.stress_times`` (None when there are none).
+    probes_h5
+        Probe histories (and ``probes/<name>.csv``).
+    probes
+        ``{probe: ProbePeak}``.
+    """
+
+    fields_h5: Path
+    fields_xdmf: Path | None
+    stress_xdmf: Path | None
+    probes_h5: Path
+    probes: dict[str, ProbePeak]
+
+
+@dataclass(frozen=True)
+class AssessResult(StageResult):
+    """``assess``: verdicts per probe and standard, and the report.
+
+    Attributes
+    ----------
+    assessment_json
+        Everything assessed (``results``, wave arrivals, thesis comparison).
+    report_html, report_md, report_json
+        The report.
+    verdict
+        ``{probe: passed}`` (True, False, or None when undetermined).
+    max_utilisation
+        ``{probe: largest value / limit over the binding standards}``.
+    """
+
+    assessment_json: Path
+    report_html: Path | None
+    report_md: Path | None
+    report_json: Path | None
+    verdict: dict[str, bool | None]
+    max_utilisation: dict[str, float | None]
+
+    @property
+    def passed(self) -> bool:
+        """True when no probe exceeds a limit (undetermined verdicts do not count)."""
+        return all(v is not False for v in self.verdict.values())
+
+    @property
+    def exceeded(self) -> tuple[str, ...]:
+        """The probes where a limit is exceeded."""
+        return tuple(k for k, v in self.verdict.items() if v is False)
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """:meth:`Pipeline.run`: every stage's result.
+
+    Attributes
+    ----------
+    mesh, modal, mbs, reconstruct, assess
+        The stages' results.
+    seconds
+        Wall time of the whole run [s].
+    run_json
+        ``<out>/run.json``, the record of every stage call.
+    unused_petsc_options
+        PETSc options nothing used during the run.
+    """
+
+    mesh: MeshResult
+    modal: ModalResult
+    mbs: MBSResult
+    reconstruct: ReconstructResult
+    assess: AssessResult
+    seconds: float
+    run_json: Path
+    unused_petsc_options: tuple[str, ...]
+
+    @property
+    def passed(self) -> bool:
+        """True when no probe exceeds a limit."""
+        return self.assess.passed
+
+    @property
+    def verdict(self) -> dict[str, bool | None]:
+        """``{probe: passed}``."""
+        return self.assess.verdict
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """``{stage: seconds}``."""
+        return {s: getattr(self, s).seconds for s in PIPELINE_ORDER}
+
+
+@dataclass(frozen=True)
+class StagesResult:
+    """:meth:`Pipeline.run_stages`: the results of a sequence of stages.
+
+    Attributes
+    ----------
+    results
+        ``{stage: result}`` in the order they ran.
+    seconds, run_json, unused_petsc_options
+        As for :class:`RunResult`.
+    """
+
+    results: dict[str, StageResult]
+    seconds: float
+    run_json: Path
+    unused_petsc_options: tuple[str, ...]
+
+    def __getitem__(self, stage: str) -> StageResult:
+        return self.results[stage]
+
+
+# ----------------------------------------------------------------------------- the pipeline
+class Pipeline:
+    """A case bound to an output folder: run its stages, get typed results.
+
+    Parameters
+    ----------
+    case
+        A :class:`Case`, or a case file.
+    out_dir
+        Output folder (created; every stage reads and writes its files there).
+    comm
+        MPI communicator (default ``COMM_WORLD``; under plain ``python``, one rank).
+    petsc_options
+        PETSc/SLEPc options: ``["-railvib_eig_st_ksp_type", "preonly"]`` or
+        ``{"railvib_eig_st_ksp_type": "preonly"}``; copied (your list is not changed),
+        checked, and in PETSc's database only while a stage runs.
+    reporter
+        Where progress goes (default: a :class:`~railvib_hpc.log.Reporter` printing on
+        rank 0).
+    quiet
+        Print nothing (ignored when ``reporter`` is given).
+    wait
+        Wait for another command that uses ``out_dir`` instead of raising
+        :class:`~railvib_hpc.errors.OutputLockedError`.
+    command
+        How this run is named in ``run.json`` (default: the Python call).
+
+    Raises
+    ------
+    UserError
+        For a word in ``petsc_options`` that is neither an option nor its value.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> p = Pipeline(Case.defaults(), tempfile.mkdtemp(), petsc_options={"log_view": None})
+    >>> p.petsc_options, p.comm.size
+    (('-log_view',), 1)
+
+    The modes and the passage of a coarse model (a few seconds):
+
+    >>> case = Case.defaults().replace({"mesh.refinement": 0.25, "modal.n_modes": 8,
+    ...                                 "modal.block_size": 8})
+    >>> p = Pipeline(case, tempfile.mkdtemp(), quiet=True)
+    >>> modes = p.modal()                       # builds the mesh it needs
+    >>> modes.n_modes, modes.reused, f"{modes.frequencies_hz[0]:.1f} Hz"
+    (8, False, '10.9 Hz')
+    >>> p.modal().reused                        # a second call reuses modes.h5
+    True
+    >>> passage = p.mbs()
+    >>> f"{passage.static_wheel_load[0] / 1e3:.2f} kN", passage.loss_of_contact_steps
+    ('7.69 kN', 0)
+    >>> Pipeline(Case.defaults(), tempfile.mkdtemp(), petsc_options=["log_view"])
+    ... # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    railvib_hpc.errors.UserError: 'log_view' after '--' is neither a PETSc option ...
+    """
+
+    def __init__(self, case: Case | str | os.PathLike, out_dir: str | os.PathLike,
+                 comm: MPI.Comm | None = None, petsc_options: PetscOptions = None, *,
+                 reporter: Reporter | None = None, quiet: bool = False, wait: bool = False,
+                 command: str | None = None):
+        from .petsc_env import check_option_words, option_words
+
+        self.comm = comm if comm is not None else world()
+        self.case = _as_case(case)
+        self.out_dir = Path(out_dir)
+        words = option_words(petsc_options)
+        check_option_words(words)
+        self.petsc_options: tuple[str, ...] = tuple(words)
+        self.reporter = _reporter(self.comm, reporter, quiet)
+        self.wait = wait
+        self.command = command
+        self._in_scope = False
+        self._run_label: str | None = None
+
+    def __repr__(self) -> str:
+        return (f"Pipeline(case={self.case['case.name']!r}, out_dir={str(self.out_dir)!r}, "
+                f"ranks={self.comm.size})")
+
+    # --------------------------------------------------------------- running
+    def _label(self, call: str) -> str:
+        """What ``run.json`` and the lock record as the command of a call."""
+        if self.command:
+            return self.command
+        if self._run_label:
+            return self._run_label
+        return (f"railvib_hpc.Pipeline({self.case['case.name']!r}, {str(self.out_dir)!r})"
+                f".{call}()")
+
+    def _options_scope(self):
+        """PETSc options in the database for the block (nested blocks share the outer one)."""
+        import contextlib
+
+        from .petsc_env import options_scope
+
+        if self._in_scope:
+            return contextlib.nullcontext([])
+        return options_scope(self.petsc_options)
+
+    def _call(self, name: str) -> tuple[dict, float, dict[str, float], tuple[str, ...]]:
+        from .pipeline import call_stage
+
+        rep = self.reporter
+        n0 = len(rep.timings)
+        t0 = time.perf_counter()
+        outer = self._in_scope
+        with self._options_scope() as unused:
+            self._in_scope = True
+            try:
+                summary = call_stage(name, self.case, self.out_dir, self.comm, rep,
+                                     list(self.petsc_options), command=self._label(name),
+                                     wait=self.wait)
+            finally:
+                self._in_scope = outer
+        seconds = time.perf_counter() - t0
+        timings: dict[str, float] = {}
+        for n, t in rep.timings[n0:]:
+            timings[n] = timings.get(n, 0.0) + t
+        if self.comm.size > 1:          # rank 0's summary and clock: the same result everywhere
+            summary, seconds, timings = self.comm.bcast((summary, seconds, timings), root=0)
+        return summary, seconds, timings, tuple(unused)
+
+    def _common(self, name: str, summary: dict, seconds: float, timings: dict,
+                unused: tuple[str, ...]) -> dict[str, Any]:
+        return {"stage": name, "out_dir": self.out_dir, "reused": summary.get("reused"),
+                "seconds": seconds, "timings": timings, "summary": summary,
+                "unused_petsc_options": unused}
+
+    def stage(self, name: str) -> StageResult:
+        """Run any registered stage by name (:data:`railvib_hpc.pipeline.STAGES` and any
+        stage :func:`~railvib_hpc.pipeline.stage_runner` knows); the pipeline's own stages
+        return their typed results.
+
+        Raises
+        ------
+        ValueError
+            For a name that is not a stage.
+        """
+        from .pipeline import stage_runner
+
+        typed = {"mesh": self.mesh, "modal": self.modal, "mbs": self.mbs,
+                 "reconstruct": self.reconstruct, "assess": self.assess}
+        if name in typed:
+            return typed[name]()
+        try:
+            stage_runner(name)
+        except KeyError:
+            raise ValueError(f"unknown stage {name!r}; stages: {', '.join(STAGES)}") from None
+        summary, seconds, timings, unused = self._call(name)
+        return StageResult(**self._common(name, summary, seconds, timings, unused))
+
+    def mesh(self) -> MeshResult:
+        """Build (or reuse) the mesh: ``mesh.h5``, ``mesh.xdmf``, ``mesh.msh``."""
+        summary, seconds, timings, unused = self._call("mesh")
+        out = self.out_dir
+
+        def extra() -> dict[str, Any]:
+            q = summary.get("quality", {})
+            return {"mesh_h5": out / "mesh.h5", "mesh_xdmf": out / "mesh.xdmf",
+                    "mesh_msh": _path(out, "mesh.msh") if not self.case["mesh.file"]
+                    else None, "report_json": out / "mesh_report.json",
+                    "n_nodes": int(q.get("n_nodes", 0)), "n_hexes": int(q.get("n_hexes", 0)),
+                    "min_scaled_jacobian": float(q.get("min_scaled_jacobian", float("nan"))),
+                    "max_aspect_ratio": float(q.get("max_aspect_ratio", float("nan"))),
+                    "warnings": tuple(summary.get("warnings", ()))}
+
+        return MeshResult(**self._common("mesh", summary, seconds, timings, unused),
+                          **on_root(extra, self.comm))
+
+    def modal(self) -> ModalResult:
+        """Compute (or reuse) the modes: ``modes.h5`` (and ``static.h5``)."""
+        summary, seconds, timings, unused = self._call("modal")
+        out = self.out_dir
+
+        def extra() -> dict[str, Any]:
+            import h5py
+
+            modes = _path(out, "modes.h5") if not summary.get("band_only") else None
+            freqs: Any = []
+            if modes is not None:
+                with h5py.File(modes, "r") as f:
+                    freqs = f["modes/frequency_hz"][()]
+            return {"modes_h5": modes, "modes_xdmf": _path(out, "modes.xdmf") if modes
+                    else None,
+                    "static_h5": _path(out, "static.h5") if self.case["mbs.static_correction"]
+                    else None,
+                    "frequencies_hz": np.asarray(freqs, dtype=float),
+                    "n_dofs": summary.get("n_dofs"),
+                    "max_orthonormality_error": summary.get("max_orthonormality_error"),
+                    "max_relative_residual": summary.get("max_relative_residual"),
+                    "peak_rss_gb_total": None if summary.get("reused")
+                    else summary.get("peak_rss_gb_total")}
+
+        fields = on_root(extra, self.comm)
+        fields["frequencies_hz"] = _frozen(fields["frequencies_hz"])
+        return ModalResult(**self._common("modal", summary, seconds, timings, unused),
+                           **fields)
+
+    def mbs(self) -> MBSResult:
+        """Run (or reuse) the multibody simulation: ``mbs.h5`` and its plots."""
+        summary, seconds, timings, unused = self._call("mbs")
+        out = self.out_dir
+        plots = on_root(lambda: tuple(sorted(out.glob("mbs_*.png"))), self.comm)
+        s = summary
+        return MBSResult(
+            **self._common("mbs", summary, seconds, timings, unused),
+            mbs_h5=out / "mbs.h5", plots=plots, n_modes=int(s["n_modes"]), dt=float(s["dt"]),
+            n_steps=int(s["n_steps"]), t_end=float(s["t_end"]),
+            static_wheel_load=_frozen(s["static_wheel_load"]),
+            mean_contact_force=_frozen(s["mean_contact_force"]),
+            peak_contact_force=_frozen(s["peak_contact_force"]),
+            min_contact_force=_frozen(s["min_contact_force"]),
+            max_rail_deflection=float(s["max_rail_deflection"]),
+            loss_of_contact_steps=int(s["loss_of_contact_steps"]))
+
+    def reconstruct(self) -> ReconstructResult:
+        """Reconstruct (or reuse) fields, stresses and probe histories."""
+        summary, seconds, timings, unused = self._call("reconstruct")
+        out = self.out_dir
+        threshold = self.case["assessment.wave_threshold"]
+
+        def extra() -> dict[str, Any]:
+            from .assess.stage import read_probes
+            from .reconstruct.probes import probe_peaks
+
+            peaks = {}
+            for name, h in read_probes(out / "probes.h5").items():
+                p = probe_peaks(h, threshold)
+                peaks[name] = ProbePeak(
+                    name=name, role=h["role"], coords=tuple(p["coords"]),
+                    acc_vertical=p["acc_vertical"], acc_total=p["acc_total"],
+                    t_acc_total=p["t_acc_total"], vel_total=p["vel_total"],
+                    disp_total=p["disp_total"], t_onset=p["t_onset"])
+            return {"fields_h5": out / "fields.h5", "fields_xdmf": _path(out, "fields.xdmf"),
+                    "stress_xdmf": _path(out, "stress.xdmf")
+                    if self.case["output.stress_times"] else None,
+                    "probes_h5": out / "probes.h5", "probes": peaks}
+
+        return ReconstructResult(**self._common("reconstruct", summary, seconds, timings,
+                                                unused), **on_root(extra, self.comm))
+
+    def assess(self) -> AssessResult:
+        """Assess every probe against the standards of ``[assessment]``; write the report."""
+        summary, seconds, timings, unused = self._call("assess")
+        out = self.out_dir
+        report = {k: Path(v) for k, v in summary.get("report", {}).items()}
+        utilisation: dict[str, float | None] = {}
+        for name, res in summary.get("results", {}).items():
+            binding = [b.get("utilisation") for b in res.get("standards", {}).values()
+                       if not b.get("comparison_only") and b.get("utilisation") is not None]
+            utilisation[name] = float(max(binding)) if binding else None
+        common = self._common("assess", summary, seconds, timings, unused)
+        common["reused"] = False                  # the assessment is always recomputed
+        return AssessResult(**common, assessment_json=out / "assessment.json",
+                            report_html=report.get("html"),
+                            report_md=report.get("markdown"), report_json=report.get("json"),
+                            verdict=dict(summary.get("verdict", {})),
+                            max_utilisation=utilisation)
+
+    def run(self) -> RunResult:
+        """The whole pipeline (mesh, modal, mbs, reconstruct, assess) under one lock of the
+        output folder; each stage reuses what is current."""
+        done = self.run_stages(PIPELINE_ORDER)
+        return RunResult(**done.results, seconds=done.seconds, run_json=done.run_json,
+                         unused_petsc_options=done.unused_petsc_options)
+
+    def run_stages(self, names: Sequence[str]) -> StagesResult:
+        """Run the named stages in order under one lock of the output folder and one scope
+        of the PETSc options, like :meth:`run` for another sequence (e.g. a full-order
+        solution, then its assessment).
+
+        Raises
+        ------
+        ValueError
+            For a name that is not a stage (before anything runs).
+        """
+        from .io.run_record import RUN_FILE
+        from .io.stage_files import output_lock
+        from .pipeline import stage_runner
+
+        names = tuple(names)
+        for name in names:
+            try:
+                stage_runner(name)
+            except KeyError:
+                raise ValueError(f"unknown stage {name!r}; stages: "
+                                 f"{', '.join(STAGES)}") from None
+        t0 = time.perf_counter()
+        outer, label = self._in_scope, self._label("run")
+        with self._options_scope() as unused, \
+                output_lock(self.out_dir, self.comm, label, wait=self.wait, rep=self.reporter):
+            self._in_scope, self._run_label = True, label
+            try:
+                results = {name: self.stage(name) for name in names}
+            finally:
+                self._in_scope, self._run_label = outer, None
+        seconds = time.perf_counter() - t0
+        if self.comm.size > 1:
+            seconds = self.comm.bcast(seconds, root=0)
+        return StagesResult(results=results, seconds=seconds,
+                            run_json=self.out_dir / RUN_FILE,
+                            unused_petsc_options=tuple(unused))
+
+    # --------------------------------------------------------------- reading
+    def run_record(self) -> dict | None:
+        """The output folder's ``run.json`` (None when no stage ran there yet)."""
+        from .io.run_record import read_run_record
+
+        return on_root(lambda: read_run_record(self.out_dir), self.comm)
+
+
+# ----------------------------------------------------------------------------- studies
+@dataclass(frozen=True)
+class VariantStatus:
+    """One variant of a study.
+
+    Attributes
+    ----------
+    name, parameter, overrides
+        The variant, its parameter values and its case overrides.
+    folder
+        Its folder.
+    status
+        ``finished``, ``failed``, ``stale`` or ``pending``.
+    error
+        Why it failed or is stale.
+    """
+
+    name: str
+    parameter: dict[str, Any]
+    overrides: tuple[str, ...]
+    folder: Path
+    status: str
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class StudyTable:
+    """A table of a study's report (the values as printed)."""
+
+    title: str
+    head: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+
+    def as_dicts(self) -> list[dict[str, str]]:
+        """The rows as ``{column: value}``."""
+        return [dict(zip(self.head, r)) for r in self.rows]
+
+
+@dataclass(frozen=True)
+class StudyResult:
+    """:func:`run_study`: the variants, the verdict and the report.
+
+    Attributes
+    ----------
+    kind
+        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
+    folder
+        ``<out>/<kind>``.
+    settings
+        The validated study settings.
+    variants
+        Every variant with its status (after this call).
+    computed, failed
+        Names of the variants this call computed, and of those that failed (their
+        ``failed.json`` says why).
+    merged
+        Whether the report was written (not for ``variants=``, ``prepare`` or ``list_only``).
+    verdict
+        The study's verdict: ``text`` and the numbers behind it (None when not merged).
+    tables
+        The report's tables.
+    rows
+        The analysis per variant (the numbers behind the tables).
+    report
+        ``{"markdown": path, "json": path}`` (empty when not merged).
+    figures
+        The report's figures.
+    seconds
+        Wall time [s].
+    unused_petsc_options
+        PETSc options nothing used.
+    """
+
+    kind: str
+    folder: Path
+    settings: dict[str, Any]
+    variants: tuple[VariantStatus, ...]
+    computed: tuple[str, ...]
+    failed: tuple[str, ...]
+    merged: bool
+    verdict: dict[str, Any] | None
+    tables: tuple[StudyTable, ...]
+    rows: tuple[dict[str, Any], ...]
+    report: dict[str, Path]
+    figures: tuple[Path, ...]
+    seconds: float
+    unused_petsc_options: tuple[str, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        """True when no variant of this call failed."""
+        return not self.failed
+
+    @property
+    def verdict_text(self) -> str | None:
+        """The verdict's sentence."""
+        return None if self.verdict is None else self.verdict.get("text")
+
+
+def run_study(kind: str, case: Case | str | os.PathLike, out_dir: str | os.PathLike,
+              comm: MPI.Comm | None = None, *, settings: Mapping[str, Any] | None = None,
+              study_set: Sequence[str] = (), variants: Sequence[str | int] = (),
+              merge_only: bool = False, prepare: bool = False, list_only: bool = False,
+              petsc_options: PetscOptions = None, wait: bool = False,
+              reporter: Reporter | None = None, quiet: bool = False) -> StudyResult:
+    """Run a study (collective): its variants, then the report; resumable.
+
+    Parameters
+    ----------
+    kind
+        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
+    case
+        The study's base case (a :class:`Case` or a case file); its ``[study.<kind>]``
+        table holds the study's settings.
+    out_dir
+        Output folder; the study writes into ``<out_dir>/<kind>/``.
+    comm
+        MPI communicator (default ``COMM_WORLD``).
+    settings
+        Study settings with typed values (``{"speeds": [20.0, 40.0]}``), applied over the
+        case's ``[study.<kind>]`` table and validated the same way.
+    study_set
+        Study settings as ``key=value`` strings (``--study-set``), applied last.
+    variants
+        Compute only these variants (names or 0-based indices); no report.
+    merge_only, prepare, list_only
+        Only write the report / only compute the shared model / only list the variants.
+    petsc_options
+        As for :class:`Pipeline` (copied, never changed; in PETSc's database only while
+        the study runs).
+    wait
+        Wait for other commands holding a variant folder instead of failing that variant.
+    reporter, quiet
+        As for :class:`Pipeline`.
+
+    Returns
+    -------
+    StudyResult
+        The same on every rank. A variant that fails with a user error does not raise: it
+        is in ``failed`` (and ``ok`` is False).
+
+    Raises
+    ------
+    UserError
+        Bad settings or variant names (one line, every rank).
+    """
+    from .petsc_env import check_option_words, option_words, options_scope
+    from .studies import execute_study
+
+    if comm is None:
+        comm = world()
+    case = _as_case(case)
+    words = option_words(petsc_options)
+    check_option_words(words)
+    rep = _reporter(comm, reporter, quiet)
+    with options_scope(words) as unused:
+        s = execute_study(kind, case, Path(out_dir), comm, rep,
+                          variants=[str(v) for v in variants], merge_only=merge_only,
+                          prepare=prepare, list_only=list_only, study_set=list(study_set),
+                          settings=dict(settings) if settings else None,
+                          petsc_options=list(words), wait=wait)
+    return StudyResult(
+        kind=s["kind"], folder=Path(s["folder"]), settings=dict(s["settings"]),
+        variants=tuple(VariantStatus(name=e["name"], parameter=dict(e.get("parameter") or {}),
+                                     overrides=tuple(e.get("overrides", ())),
+                                     folder=Path(e["folder"]), status=e["status"],
+                                     error=e.get("error")) for e in s["variants"]),
+        computed=tuple(s["computed"]), failed=tuple(s["failed"]), merged=s["merged"],
+        verdict=s["verdict"],
+        tables=tuple(StudyTable(t.get("title", ""), tuple(t["head"]),
+                                tuple(tuple(str(c) for c in r) for r in t["rows"]))
+                     for t in s["tables"]),
+        rows=tuple(s["rows"]), report={k: Path(v) for k, v in s["files"].items()},
+        figures=tuple(Path(p) for p in s["figures"]), seconds=s["seconds"],
+        unused_petsc_options=tuple(unused))

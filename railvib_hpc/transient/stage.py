@@ -32,7 +32,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import resource
 import time
 from pathlib import Path
 
@@ -43,6 +42,7 @@ from ..config import Case
 from ..errors import UserError
 from ..log import Reporter
 from ..parallel import on_root
+from ..resources import peak_memory_gb
 from .integrate import (
     DirectSolver,
     RailColumns,
@@ -320,7 +320,7 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter, *,
         writer.finish(out_dir / "fields.h5", stress)
         if not case["output.stress_times"] and comm.rank == 0:
             (out_dir / "stress.xdmf").unlink(missing_ok=True)
-    rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+    rss = comm.allgather(peak_memory_gb())
     stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
                    recorder, nt - first_step, comm)
     with rep.stage("transient: probes, histories"):

@@ -205,12 +205,12 @@ def test_block_operator_destroy_frees_the_factor():
 @pytest.mark.mpi
 @pytest.mark.skipif(not LINUX_PROC, reason="resident memory is read from /proc (Linux)")
 def test_bands_release_their_memory(shared_tmp):
-    """Five bands of a 10 x 10 x 20 block: the resident memory after each band is freed
+    """Five bands of an 8 x 8 x 16 block: the resident memory after each band is freed
     stays within half a MUMPS factor of the one after band 1 (a band's factor kept alive
     adds all of it per band); each band's log line and statistics carry the memory before
     it, its own peak, at its end and after freeing it; the predictor is within 25 % of
     each band's measured peak."""
-    mesh, rules = block_mesh(10), {"bottom": ("ux", "uy", "uz")}
+    mesh, rules = block_mesh(8), {"bottom": ("ux", "uy", "uz")}
     ref, *_ = solve(mesh, soil_case(), rules, 24, comm=comm)
     f_max = _cut(ref.frequencies_hz, 20)[1]
     lines: list[str] = []

@@ -13,10 +13,12 @@ Usage (every heavy run under the shared lock)::
 Each configuration runs in a fresh process (so that peak memory is its own) under mpirun
 with a fresh output folder; printed: modes, bands, wall time of the command, eigensolve
 time, factorisations, right-hand sides, orthogonalisation, the merge, max |Phi^T M Phi - I|,
-max relative residual, peak memory summed over the ranks (getrusage) and the memory
-predictor's value (largest band: base + matrices + MUMPS estimate + dense arrays; merge:
-candidates + modes), and
-the largest relative eigenvalue difference to the first configuration.
+max relative residual, peak memory summed over the ranks (the processes' life) and the
+memory predictor's value (largest band: resident memory + K - sigma M and MUMPS's copy of
+it + MUMPS estimate + dense arrays; merge: candidates + modes), and
+the largest relative eigenvalue difference to the first configuration. Per band (comment
+lines): the resident memory before it, its own peak (``VmHWM`` since its start), the
+predictor, the resident memory after it is freed and the peak so far.
 """
 
 from __future__ import annotations
@@ -156,9 +158,12 @@ def main() -> None:
                       f"{st.get('linear_solves', 0)} RHS in "
                       f"{st.get('time_block_solves', 0):.1f} s, "
                       f"orth {st.get('time_orthogonalization', 0):.1f} s, band "
-                      f"{st.get('time_band', 0):.1f} s, peak so far "
-                      f"{st.get('peak_rss_gb', 0):.2f} GB, "
-                      f"predicted {st.get('predicted_peak_gb', 0):.2f} GB -->", flush=True)
+                      f"{st.get('time_band', 0):.1f} s; memory: before "
+                      f"{st.get('rss_before_gb', float('nan')):.2f} GB, own peak "
+                      f"{st.get('peak_rss_band_gb', float('nan')):.2f} GB, predicted "
+                      f"{st.get('predicted_peak_gb', 0):.2f} GB, after freeing "
+                      f"{st.get('rss_after_free_gb', float('nan')):.2f} GB, peak so far "
+                      f"{st.get('peak_rss_gb', 0):.2f} GB -->", flush=True)
 
 
 if __name__ == "__main__":

@@ -29,13 +29,18 @@ from __future__ import annotations
 
 import json
 import math
-import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..resources import (
+    current_memory_gb,
+    peak_memory_gb,
+    release_memory,
+    reset_peak_memory,
+)
 from .bands import Band, check_counts, hz, omega2, plan_bands
 from .ritz import (
     PREFIX,
@@ -72,20 +77,6 @@ SHIFT_NUDGE = 1e-6
 #: modes (as the single-shift stage's 3 n_modes): measured on the thesis model, 1006 modes
 #: in 5 bands, 2 x needed 5-7 restarts per band and 7-9.5 right-hand sides per mode.
 BASIS_FACTOR = 3
-
-
-def release_memory() -> None:
-    """Return freed heap memory to the operating system (glibc ``malloc_trim``).
-
-    Between bands: blocks of n x 32 doubles (tens of MB) fall below glibc's dynamic mmap
-    threshold and fragment the heap; measured, the peak grew by ~1 GB per band at thesis
-    size without this. A no-op where glibc is absent."""
-    import contextlib
-    import ctypes
-    import ctypes.util
-
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
 
 
 @dataclass
@@ -237,6 +228,7 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
         op = _factor(K, M, comm, band.sigma, extra_gb, s.out_of_core, inertia=band.sigma > 0)
         try:
             for lanczos_tol in (s.tol, s.tol / RETRY_TOL_FACTOR):
+                result = X = None          # a retry's Lanczos run reuses their memory
                 _, X, st = block_lanczos(op, min(nev, max_basis - 2 * b),
                                          K.getOwnershipRange()[0], block=b, tol=lanczos_tol,
                                          max_basis=max_basis, max_restarts=s.max_restarts,
@@ -245,6 +237,7 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
                 t_p = time.perf_counter()
                 window = band_window(band)
                 result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st, window)
+                X = None                   # overwritten by the modes (and guards)
                 st["time_purify_project"] = time.perf_counter() - t_p
                 st["lanczos_tol"] = lanczos_tol
                 if not (hopeless(result, s.tol) & in_window(result, window)).any():
@@ -255,6 +248,9 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
                 raise EigenSolveError(f"{band.label(0)}: {exc}; use more bands "
                                       "(smaller modal.band_modes or more modal.bands)") from None
             continue
+        except BaseException:
+            op.destroy()
+            raise
         try:
             if static_rhs is not None and op.sigma == 0.0:
                 t_s = time.perf_counter()
@@ -265,14 +261,52 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
             st["time_block_solves"] = op.time_solves
             st.update(time_factorization=op.time_factorization,
                       factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
-                      predicted_peak_gb=op.predicted_peak_gb, shift_hz=float(hz(op.sigma)))
+                      predicted_peak_gb=op.predicted_peak_gb,
+                      predicted_parts_gb=dict(op.memory_parts), shift_hz=float(hz(op.sigma)))
         finally:
             op.destroy()
         st["time_band"] = time.perf_counter() - t0
-        st["peak_rss_gb"] = comm.allreduce(
-            resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
         return result, n_below, st
     raise AssertionError("unreachable")
+
+
+def free_memory(comm) -> None:
+    """Collective on ``comm``: destroy the PETSc objects petsc4py stashed when their last
+    Python reference went (``PETSc.garbage_cleanup``; the band's own objects are destroyed
+    explicitly, this catches any other), then return the freed heap to the system."""
+    from petsc4py import PETSc
+
+    PETSc.garbage_cleanup(comm)
+    release_memory()
+
+
+def _total(comm, value: float) -> float:
+    """Sum of a per-rank value over ``comm`` (memory of all ranks)."""
+    return float(comm.allreduce(value))
+
+
+def band_memory(comm, own_peak: bool) -> dict:
+    """Memory after a band is freed, summed over the ranks of ``comm`` [GB].
+
+    ``rss_after_free_gb``: resident now (``VmRSS``; the band's factor, basis and modes are
+    gone, only what outlives it is left); ``peak_rss_band_gb``: the band's own peak
+    (``VmHWM`` since its start, when ``own_peak``: every rank could restart the count;
+    else NaN); ``peak_rss_gb``: the peak of the processes so far.
+    """
+    return {"rss_after_free_gb": _total(comm, current_memory_gb()),
+            "peak_rss_band_gb": _total(comm, peak_memory_gb(since_reset=True))
+            if own_peak else float("nan"),
+            "peak_rss_gb": _total(comm, peak_memory_gb())}
+
+
+def band_line(rec: BandRecord, n_bands: int) -> str:
+    """The log line of a solved band: modes, time and memory (all ranks)."""
+    st = rec.stats
+    return (f"  {rec.band.label(n_bands)}: {rec.n_modes} modes in {st['time_band']:.1f} s; "
+            f"memory (all ranks) before {st['rss_before_gb']:.2f} GB, peak "
+            f"{st['peak_rss_band_gb']:.2f} GB (predicted {st['predicted_peak_gb']:.2f} GB, "
+            f"factor {st['factor_memory_gb']:.2f} GB), at the end "
+            f"{st['rss_band_end_gb']:.2f} GB, freed {st['rss_after_free_gb']:.2f} GB")
 
 
 def band_window(band: Band) -> tuple[float, float]:
@@ -356,7 +390,7 @@ def plan_for(cache: BandCache, s: BandSettings, n_total: int) -> list[Band]:
 
 
 def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
-                static_rhs: np.ndarray | None = None) -> ModalResult | None:
+                static_rhs: np.ndarray | None = None, log=None) -> ModalResult | None:
     """Every mode below ``s.f_max`` by band slicing (collective on ``comm``).
 
     Parameters
@@ -371,11 +405,16 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         ``monitor(done, total, basis, label=...)`` progress callback (modes of all bands).
     static_rhs
         Rows of right-hand sides solved with the lowest band's factor (shift 0).
+    log
+        ``log(line)``: one line per solved band (modes, time, memory: :func:`band_line`);
+        the numbers are also in the band's ``stats`` (:func:`band_memory`).
 
     Returns
     -------
     ModalResult, or None with ``band_only`` (the band is cached, nothing merged).
     """
+    from mpi4py import MPI
+
     t_start = time.perf_counter()
     s.cache_dir.mkdir(parents=True, exist_ok=True) if comm.rank == 0 else None
     comm.Barrier()
@@ -423,20 +462,29 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
                                   f"basis {basis}")
 
             rhs = static_rhs if (groups == 1 and band.shift_hz == 0.0) else None
+            free_memory(sub)       # (what came before: the heap trimmed, the count's factor)
+            rss_before = _total(sub, current_memory_gb())
+            own_peak = sub.allreduce(reset_peak_memory(), op=MPI.LAND)
             result, n_below, st = solve_band(Kg, Mg, sub, band, est, s, band_monitor, rhs)
             if rhs is not None:
                 static = result.static
             done_modes["n"] += est
             result = _trim(result, band)
             name = _band_file(band)
+            st["rss_before_gb"] = rss_before
             _write_band(s.cache_dir / name, sub, band, result, n_below, st)
             f = result.frequencies_hz
+            rec = BandRecord(band, name, n_below, len(f),     # (a band may hold no mode)
+                             float(f[0]) if len(f) else band.lo_hz,
+                             float(f[-1]) if len(f) else band.hi_hz, st)
+            st["rss_band_end_gb"] = _total(sub, current_memory_gb())
+            del result, f
+            free_memory(sub)
+            st.update(band_memory(sub, own_peak))
             if sub.rank == 0:
-                records.append(BandRecord(           # (a band may hold no mode at all)
-                    band, name, n_below, len(f), float(f[0]) if len(f) else band.lo_hz,
-                    float(f[-1]) if len(f) else band.hi_hz, st).to_json())
-            del result
-            release_memory()
+                records.append(rec.to_json())
+            if log is not None and groups == 1:
+                log(band_line(rec, n_bands))
         if groups > 1:
             Kg.destroy()
             Mg.destroy()
@@ -453,6 +501,8 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         raise EigenSolveError(failed[0][1]) if failed[0][0] else RuntimeError(failed[0][1])
     for rec in (r for part in comm.allgather(records) for r in part):
         r = BandRecord.from_json(rec)
+        if log is not None and groups > 1:
+            log(band_line(r, n_bands))
         cache.bands = [c for c in cache.bands if c.file != r.file] + [r]
         if r.band.shift_hz > 0:
             cache.counts[float(r.band.shift_hz)] = r.n_below

@@ -78,14 +78,32 @@ def longest_row(A, comm) -> int:
     return comm.allreduce(int(np.diff(ip).max(initial=0)), op=MPI.MAX)
 
 
-#: Resident memory of one rank besides the model's arrays: Python, numpy/scipy,
-#: PETSc/SLEPc/MUMPS, MPI, h5py, gmsh (0.12 GB after the imports), the replicated mesh and
-#: DOF map, allocator slack: 0.75 GB measured (getrusage) on 2 ranks of the coarse thesis
-#: model, whose own arrays take < 0.15 GB.
+#: Resident memory of one rank before the factorisation where ``/proc`` cannot tell it
+#: (the predictor otherwise measures it, :meth:`BlockOperator.memory_parts`): Python,
+#: numpy/scipy, PETSc/SLEPc/MUMPS, MPI, h5py, gmsh (0.12 GB after the imports), the mesh and
+#: the DOF map; 0.17 GB measured (VmRSS) per rank of the coarse thesis model (25k DOFs,
+#: 2 ranks) with K and M, whose own share is 0.013 GB; more as a safety margin.
 BASE_GB_PER_RANK = 0.3
 
 #: Bytes per stored matrix entry (double value + 32-bit column index).
 BYTES_PER_ENTRY = 12
+
+#: Bytes per entry of the copy of ``K - sigma M`` that PETSc hands to MUMPS for a Cholesky
+#: factorization: its upper triangle as coordinate triples (two 32-bit MUMPS indices + the
+#: double value; PETSc's ``MatConvertToTriples_mpiaij_mpisbaij``).
+MUMPS_TRIPLE_BYTES = 16
+
+#: Work blocks (n x ``block`` doubles each) of the Lanczos phase besides the basis, measured
+#: (VmHWM) on the coarse thesis model: one expansion holds the M product, PETSc's dense
+#: copies of the block and of the product (``sparse_times_block``), the solution, MUMPS's
+#: centralised right-hand side and distributed solution, and the Gram-Schmidt products and
+#: corrected block; the thick restart the kept Ritz vectors; glibc keeps the freed blocks'
+#: pages in its heap between them.
+LANCZOS_WORK_BLOCKS = 12
+
+#: Work blocks of the purification phase besides its three n x ``wanted`` arrays (the
+#: solves of one block and their K and M products, measured as above).
+PURIFY_WORK_BLOCKS = 12
 
 
 #: Share of the available memory (``MemAvailable``) a modal solve may plan to use at its peak:
@@ -97,15 +115,19 @@ def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: in
              ) -> float:
     """Peak of the dense arrays of a block Lanczos solve [GB, all ranks], 8 bytes each.
 
-    The larger of: the Lanczos phase (basis of ``basis + block`` columns, three work
-    blocks, the Ritz vectors ``wanted`` — guards included — formed at its end), the
-    purification (Ritz vectors, their purified copies and K and M products, one rotated
-    copy being formed: 5 x ``wanted``, plus the solve blocks), and the static solves (modes,
-    right-hand sides and solutions of ``static_cols`` loads).
+    The largest of three phases, in n-vectors:
+
+    * Lanczos: the basis (``basis + block``), :data:`LANCZOS_WORK_BLOCKS` work blocks and
+      the Ritz vectors ``wanted`` (guards included) formed from the basis at its end;
+    * purification (:func:`purify_and_project`, in place): the Ritz vectors, their K and M
+      products and the round-off bound of :func:`~railvib_hpc.modal.ritz.normalise_and_check`
+      (4 x ``wanted``) and :data:`PURIFY_WORK_BLOCKS` work blocks;
+    * static solves: the modes, right-hand sides and solutions of ``static_cols`` loads and
+      the solve's work blocks.
     """
-    lanczos = basis + 4 * block + wanted
-    purify = 5 * wanted + 3 * block
-    static = wanted + 2 * static_cols + block
+    lanczos = basis + (1 + LANCZOS_WORK_BLOCKS) * block + wanted
+    purify = 4 * wanted + PURIFY_WORK_BLOCKS * block
+    static = wanted + 2 * static_cols + PURIFY_WORK_BLOCKS * block
     return BYTES_PER_DOUBLE * n_global * max(lanczos, purify, static) / BYTES_PER_GB
 
 
@@ -139,6 +161,17 @@ def available_memory_gb(comm: MPI.Comm) -> float:
     return comm.allreduce(mine, op=MPI.SUM)
 
 
+def destroy_all(*objects) -> None:
+    """``destroy()`` every PETSc object given (None skipped), in the order given.
+
+    Explicitly, not by dropping the Python reference: petsc4py 3.18 only stashes a parallel
+    object whose last reference is dropped, until a collective ``PETSc.garbage_cleanup``.
+    """
+    for obj in objects:
+        if obj is not None:
+            obj.destroy()
+
+
 class BlockOperator:
     """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
 
@@ -146,11 +179,28 @@ class BlockOperator:
                  out_of_core: str = "auto", inertia: bool = False):
         """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
 
-        The memory predictor (:attr:`predicted_peak_gb`, all ranks): the ranks' base
-        (:data:`BASE_GB_PER_RANK`), the matrices K, M and K - sigma M (nonzeros x
-        :data:`BYTES_PER_ENTRY`), MUMPS's own estimate of everything it allocates
-        (INFOG(17) in core, INFOG(27) out of core) and the dense arrays ``extra_gb``
-        (:func:`dense_gb`); it must stay below 90 % of the available memory.
+        The memory predictor (:attr:`predicted_peak_gb`: the peak resident memory of the
+        ranks together while this operator lives, comparable with their ``VmHWM``) is the
+        sum of :attr:`memory_parts` [GB]:
+
+        * ``resident``: what the processes hold when the operator is created (``VmRSS``
+          summed over the ranks: Python and the libraries, the mesh, the DOF map, K and M,
+          whatever the caller keeps), measured, not modelled; where ``/proc`` is missing,
+          :data:`BASE_GB_PER_RANK` per rank plus K and M;
+        * ``shifted_matrix``: ``K - sigma M`` (sigma != 0; nonzeros x
+          :data:`BYTES_PER_ENTRY` and the row pointers);
+        * ``mumps_input``: PETSc's copy of its upper triangle handed to MUMPS
+          (:data:`MUMPS_TRIPLE_BYTES` per entry);
+        * ``factor``: MUMPS's own estimate of everything it allocates for the factorization,
+          from the analysis (INFOG(17) in core, INFOG(27) out of core);
+        * ``dense``: the caller's dense arrays ``extra_gb`` (:func:`dense_gb`: the Lanczos
+          basis, work blocks, Ritz vectors and the purification's arrays).
+
+        Measured on the coarse thesis model (25k DOFs, 2 ranks; block 8, 16 and 32; bands of
+        8-76 modes) the prediction was within 4 % of every band's own peak. The memory check:
+        what the operator adds (all parts but ``resident``, which the processes already
+        hold and ``MemAvailable`` does not count) must stay below
+        :data:`MEMORY_HEADROOM` of the available memory.
 
         ``out_of_core``: ``"auto"`` switches MUMPS to out-of-core (factor on disk,
         ICNTL(22) = 1) when the in-core estimate does not fit but the out-of-core one does;
@@ -161,89 +211,124 @@ class BlockOperator:
         ``inertia``: also count the eigenvalues below ``sigma`` (Sylvester: the negative
         pivots of the LDL^T factor, MUMPS INFOG(12), exact with ICNTL(13) = 1 so that the
         root front is not factored by ScaLAPACK) into :attr:`n_below`.
-        """
-        from petsc4py import PETSc
 
+        Call :meth:`destroy` when done: it frees the factor at once (collective).
+        """
         self.K, self.M, self.comm, self.sigma = K, M, comm, sigma
+        self.ksp = self.factor = None
+        self._set_ooc = False
         self._inertia = inertia
         self.n_below: int | None = None
         self.n_global = K.getSize()[0]
         self.n_local = K.getLocalSize()[0]
+        self.A = K
+        try:
+            self._setup(prefix, extra_gb, out_of_core)
+        except BaseException:
+            self.destroy()          # nothing of a failed operator outlives it
+            raise
+
+    def _setup(self, prefix: str, extra_gb: float, out_of_core: str) -> None:
+        """Memory check and factorization (see :meth:`__init__`)."""
+        from petsc4py import PETSc
+
+        from ..resources import current_memory_gb
+
+        K, M, comm, sigma = self.K, self.M, self.comm, self.sigma
+        resident = comm.allreduce(current_memory_gb())       # before K - sigma M is formed
         if sigma != 0.0:
             self.A = K.duplicate(copy=True)
             self.A.axpy(-sigma, M, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        else:
-            self.A = K
         t0 = time.perf_counter()
         self._ooc_option = f"{prefix}st_mat_mumps_icntl_22"
         opts = PETSc.Options()
         user_set = opts.hasName(self._ooc_option)
-        self._set_ooc = False
         if out_of_core == "always" and not user_set:
             self._use_out_of_core(True)
         avail_gb = available_memory_gb(comm)
         self.factor_memory_gb = self._estimate_factor_memory(prefix)
         self.in_core_memory_gb = self.factor_memory_gb
 
-        nnz = sum(int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
-                  for A in ({id(K): K, id(M): M, id(self.A): self.A}.values()))
-        self.matrices_gb = BYTES_PER_ENTRY * nnz / 1e9
-        base_gb = BASE_GB_PER_RANK * comm.size
+        fixed = self._fixed_memory_gb(resident)
 
         def peak(factor_gb: float) -> float:
-            return base_gb + self.matrices_gb + factor_gb + extra_gb
+            return sum(fixed.values()) + factor_gb + extra_gb
 
-        fits = peak(self.factor_memory_gb) <= MEMORY_HEADROOM * avail_gb
+        def fit(factor_gb: float) -> bool:     # what the processes hold is not available
+            return peak(factor_gb) - fixed["resident"] <= MEMORY_HEADROOM * avail_gb
+
+        fits = fit(self.factor_memory_gb)
         self.available_gb = avail_gb
         ooc_note = ""
         if not fits and out_of_core == "auto" and not user_set:
             self._use_out_of_core(True)
             ooc_gb = self._estimate_factor_memory(prefix)
-            if peak(ooc_gb) <= MEMORY_HEADROOM * avail_gb:
+            if fit(ooc_gb):
                 self.factor_memory_gb, fits = ooc_gb, True
             else:
                 self._use_out_of_core(False)
-                ooc_note = (f"; out of core: ~{ooc_gb:.1f} GB factor, ~{peak(ooc_gb):.1f} GB "
-                            "at the peak, does not fit either")
-        if not fits:
-            if self._set_ooc:
-                self._use_out_of_core(False)
+                ooc_note = (f"; out of core: ~{ooc_gb:.1f} GB factor, "
+                            f"~{peak(ooc_gb) - fixed['resident']:.1f} GB more, does not fit "
+                            "either")
+        if not fits:                       # (the option set here goes with destroy)
             advice = ("a coarser mesh (mesh.refinement), more nodes or a smaller "
                       "modal.max_basis / modal.n_modes")
             if out_of_core == "never":
                 advice += ", or MUMPS out of core (modal.out_of_core = 'auto' or 'always')"
+            more = peak(self.factor_memory_gb) - fixed["resident"]
             raise InsufficientMemory(
                 f"the model has {self.n_global:,} DOFs: MUMPS estimates "
                 f"~{self.factor_memory_gb:.1f} GB for the Cholesky factor "
-                f"{'out of core' if out_of_core == 'always' else 'in core'}, the matrices "
-                f"~{self.matrices_gb:.1f} GB and the Lanczos basis and blocks ~{extra_gb:.1f} "
-                f"GB, ~{peak(self.factor_memory_gb):.1f} GB at the peak{ooc_note}, but "
-                f"{avail_gb:.1f} GB are available on {comm.size} rank(s) "
+                f"{'out of core' if out_of_core == 'always' else 'in core'}; with the copies "
+                f"of K - sigma M (~{fixed['shifted_matrix'] + fixed['mumps_input']:.1f} GB) "
+                f"and the Lanczos basis and blocks (~{extra_gb:.1f} GB) the solve needs "
+                f"~{more:.1f} GB more than the ~{fixed['resident']:.1f} GB its processes hold "
+                f"now{ooc_note}, but {avail_gb:.1f} GB are available on {comm.size} rank(s) "
                 f"(modal.out_of_core = '{out_of_core}'); use {advice}")
         self.out_of_core = opts.getInt(self._ooc_option, 0) == 1
-        #: the memory predictor (see above), all ranks [GB]
+        #: the memory predictor's parts (see :meth:`__init__`), all ranks [GB]
+        self.memory_parts = dict(fixed, factor=self.factor_memory_gb, dense=extra_gb)
+        #: the memory predictor: the peak resident memory of the ranks [GB]
         self.predicted_peak_gb = peak(self.factor_memory_gb)
-        ksp, F = self._factor_solver(prefix)
+        self.ksp, self.factor = ksp, F = self._factor_solver(prefix)
         try:
             ksp.setUp()
             failed = F.getMumpsInfog(1) < 0    # PETSc flags a failed factorization silently
         except PETSc.Error:
             failed = True
-        if failed:
-            if self._set_ooc:
-                self._use_out_of_core(False)
+        if failed:                         # (destroyed by __init__)
             raise FactorizationError(f"MUMPS Cholesky factorization of K - sigma M failed "
                                      f"(INFOG(1) = {F.getMumpsInfog(1)}, INFOG(2) = "
                                      f"{F.getMumpsInfog(2)}); is the model free to move "
                                      "(missing supports)? A small positive modal.shift_hz "
                                      "helps then")
         self.time_factorization = time.perf_counter() - t0
-        self.ksp = ksp
-        self.factor = F
-        if inertia:
+        if self._inertia:
             self.n_below = int(F.getMumpsInfog(12))
         self.n_solves = 0
         self.time_solves = 0.0
+
+    def _fixed_memory_gb(self, resident: float) -> dict[str, float]:
+        """The predictor's parts besides the factor and the dense arrays [GB, all ranks]:
+        ``resident`` (what the processes held before this operator: ``VmRSS`` summed over
+        the ranks; where it is NaN, :data:`BASE_GB_PER_RANK` per rank and K and M),
+        ``shifted_matrix`` (``K - sigma M``, when sigma != 0) and ``mumps_input`` (PETSc's
+        triples of its upper triangle for MUMPS)."""
+        import math
+
+        from petsc4py import PETSc
+
+        def nnz(A) -> int:
+            return int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
+
+        if math.isnan(resident):
+            resident = BASE_GB_PER_RANK * self.comm.size + \
+                BYTES_PER_ENTRY * (nnz(self.K) + nnz(self.M)) / BYTES_PER_GB
+        n_a = nnz(self.A)
+        shifted = 0.0 if self.A is self.K else \
+            (BYTES_PER_ENTRY * n_a + 8 * (self.n_global + self.comm.size)) / BYTES_PER_GB
+        return {"resident": resident, "shifted_matrix": shifted,
+                "mumps_input": MUMPS_TRIPLE_BYTES * (n_a + self.n_global) / 2 / BYTES_PER_GB}
 
     def _use_out_of_core(self, on: bool) -> None:
         """Set (or remove again) the MUMPS out-of-core option of this operator's factor."""
@@ -281,16 +366,16 @@ class BlockOperator:
         from petsc4py import PETSc
 
         ksp, F = self._factor_solver(prefix)
-        if F.getType() != "mumps":
-            ksp.destroy()
-            return 0.0
-        F.setMumpsIcntl(23, 1)
-        with contextlib.suppress(PETSc.Error):
-            ksp.setUp()
-        out_of_core = PETSc.Options().getInt(f"{prefix}st_mat_mumps_icntl_22", 0) == 1
-        estimate = F.getMumpsInfog(27 if out_of_core else 17) / 1e3
-        ksp.destroy()
-        return estimate
+        try:
+            if F.getType() != "mumps":
+                return 0.0
+            F.setMumpsIcntl(23, 1)
+            with contextlib.suppress(PETSc.Error):
+                ksp.setUp()
+            out_of_core = PETSc.Options().getInt(f"{prefix}st_mat_mumps_icntl_22", 0) == 1
+            return F.getMumpsInfog(27 if out_of_core else 17) / 1e3
+        finally:
+            destroy_all(F, ksp)         # the analysis's symbolic data (~10 % of the factor)
 
     def _dense(self, arr: np.ndarray):
         return dense_block(arr, self.n_global, self.comm)
@@ -332,9 +417,19 @@ class BlockOperator:
         return out
 
     def destroy(self) -> None:
-        self.ksp.destroy()
-        if self.A is not self.K:
+        """Free the factor, its solver and ``K - sigma M`` now (collective; idempotent).
+
+        The factor must be destroyed explicitly: petsc4py 3.18 does not destroy a parallel
+        PETSc object whose last Python reference goes away but stashes it for
+        ``PETSc.garbage_cleanup`` (``PetscObjectDelayedDestroy``), and the Python handle of
+        ``pc.getFactorMatrix()`` is the last reference once the KSP is destroyed: measured,
+        every band kept its whole MUMPS factor resident (+1.1 GB per band at thesis size).
+        """
+        destroy_all(self.factor, self.ksp)
+        self.factor = self.ksp = None
+        if self.A is not None and self.A is not self.K:
             self.A.destroy()
+        self.A = None
         if self._set_ooc:
             self._use_out_of_core(False)
 
@@ -534,22 +629,40 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     return theta[:nev], X, stats
 
 
-def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False
+#: Rows per slice when a block of vectors is rotated in place (:func:`rotate_in_place`):
+#: the temporary is ``ROTATE_ROWS x k`` doubles, not another ``n x k`` block.
+ROTATE_ROWS = 4096
+
+
+def rotate_in_place(A: np.ndarray, Z: np.ndarray) -> None:
+    """``A[:] = A @ Z`` for a square Z, by slices of :data:`ROTATE_ROWS` rows (no n x k copy)."""
+    for r in range(0, A.shape[0], ROTATE_ROWS):
+        A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z
+
+
+def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False,
+                       select: Callable[[np.ndarray], np.ndarray] | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One more operator application (purification), then Rayleigh-Ritz with K and M.
 
     Applying ``(K - sigma M)^-1 M`` once more damps the high-frequency error left in the
     Ritz vectors (what SLEPc calls purification); the final Rayleigh-Ritz step makes the
-    modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues (ascending), modes
-    ``Phi``, the products ``K Phi`` and ``M Phi``, and for every mode an upper bound of
-    the norm of its solve residual ``M X - (K - sigma M) X_p`` (the accuracy of the
-    factorisation: a floor for the eigen-residual, since ``K phi - lambda M phi`` contains
-    it). ``refine``: one step of iterative refinement per solve (``X_p += (K - sigma
-    M)^-1 s``), which brings an inaccurate factor's solves to working accuracy.
+    modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues, modes ``Phi``, the
+    products ``K Phi`` and ``M Phi``, and for every mode an upper bound of the norm of its
+    solve residual ``M X - (K - sigma M) X_p`` (the accuracy of the factorisation: a floor
+    for the eigen-residual, since ``K phi - lambda M phi`` contains it). ``refine``: one step
+    of iterative refinement per solve (``X_p += (K - sigma M)^-1 s``), which brings an
+    inaccurate factor's solves to working accuracy.
+
+    Memory: ``X`` is overwritten: it becomes ``Phi`` (the purified vectors are written over
+    the block just solved with, and all three blocks are rotated in place,
+    :func:`rotate_in_place`), so the phase holds ``X``, ``K Phi`` and ``M Phi`` and a few
+    solve blocks. ``select(lam)``: the order of the returned pairs, a permutation of
+    ``range(k)`` (default: ascending eigenvalues).
     """
     from mpi4py import MPI
 
-    Xp = np.empty_like(X)
+    Xp = X
     KX = np.empty_like(X)
     MX = np.empty_like(X)
     sres = np.zeros(X.shape[1])
@@ -569,12 +682,10 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     op.comm.Allreduce(MPI.IN_PLACE, kp, op=MPI.SUM)
     op.comm.Allreduce(MPI.IN_PLACE, mp, op=MPI.SUM)
     lam, Z = eigh(0.5 * (kp + kp.T), 0.5 * (mp + mp.T))
-    # one rotated copy at a time (memory: see dense_gb)
-    Phi = Xp @ Z
-    del Xp
-    KPhi = KX @ Z
-    del KX
-    MPhi = MX @ Z
-    del MX
+    if select is not None:
+        perm = np.asarray(select(lam))
+        lam, Z = lam[perm], Z[:, perm]
+    for A in (Xp, KX, MX):
+        rotate_in_place(A, Z)
     # ||S z_i|| <= sum_j |z_ji| ||s_j|| (triangle inequality; S itself is not kept)
-    return lam, Phi, KPhi, MPhi, np.abs(Z).T @ np.sqrt(sres)
+    return lam, Xp, KX, MX, np.abs(Z).T @ np.sqrt(sres)

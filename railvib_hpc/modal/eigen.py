@@ -81,7 +81,8 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
                 tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
                 monitor=None, static_rhs: np.ndarray | None = None,
-                out_of_core: str = "auto", bands=None, assemble=None) -> ModalResult | None:
+                out_of_core: str = "auto", bands=None, assemble=None,
+                log=None) -> ModalResult | None:
     """Extract mass-normalised modes.
 
     Parameters
@@ -123,6 +124,8 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         temporary cache folder.
     assemble
         ``assemble(subcomm) -> (K, M)``: the matrices on a sub-communicator (band groups).
+    log
+        Band-sliced: ``log(line)`` gets one line per solved band (modes, time, memory).
 
     Raises
     ------
@@ -143,7 +146,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
                             monitor, static_rhs, out_of_core)
     if method == "block_lanczos":
         return _solve_bands(K, M, comm, f_max, tol, max_it, block_size, monitor, static_rhs,
-                            out_of_core, bands, assemble)
+                            out_of_core, bands, assemble, log)
     ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
     set_ooc = out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
     if set_ooc:
@@ -156,7 +159,8 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
 
 
 def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, block_size: int,
-                 monitor, static_rhs, out_of_core: str, bands, assemble) -> ModalResult | None:
+                 monitor, static_rhs, out_of_core: str, bands, assemble,
+                 log=None) -> ModalResult | None:
     """Band-sliced block Lanczos (:mod:`.band_solve`); a temporary cache without settings."""
     import shutil
     import tempfile
@@ -177,7 +181,7 @@ def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, bl
                              out_of_core=out_of_core, cache_dir=Path(tmp), key="temporary")
     try:
         return solve_bands(K, M, comm, bands, assemble=assemble, monitor=monitor,
-                           static_rhs=static_rhs)
+                           static_rhs=static_rhs, log=log)
     finally:
         comm.Barrier()
         if tmp is not None and comm.rank == 0:
@@ -277,6 +281,7 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
     r0 = K.getOwnershipRange()[0]
     try:
         for lanczos_tol in (tol, tol / RETRY_TOL_FACTOR):
+            result = X = None              # a retry's Lanczos run reuses their memory
             _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=lanczos_tol,
                                      max_basis=max_basis, max_restarts=max_restarts,
                                      monitor=monitor, guard=block_size)
@@ -302,6 +307,8 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
                         time_factorization=op.time_factorization,
                         factor_memory_gb=op.factor_memory_gb, out_of_core=op.out_of_core,
                         factor_memory_in_core_gb=op.in_core_memory_gb,
+                        predicted_peak_gb=op.predicted_peak_gb,
+                        predicted_parts_gb=dict(op.memory_parts),
                         time_solve=t1 - t0 - op.time_factorization, time_extract=0.0)
     result.static = static
     result.warnings = convergence_verdict(result, tol)

@@ -75,6 +75,11 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     by the Rayleigh-Ritz step instead; the ``n_wanted`` nearest to the shift are kept.
     ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a band; the pairs beyond
     its edges belong to the neighbouring bands).
+
+    Memory: every pass works in ``X`` itself (it is overwritten; afterwards its first
+    columns are the modes, the rest the rotated guards), plus the K and M products of the
+    pass (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project`): three blocks of X's
+    width in all, not the five of purified, rotated and selected copies.
     """
     from mpi4py import MPI
 
@@ -82,28 +87,35 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
 
     stats = {} if stats is None else stats
     n_wanted = int(stats.get("n_wanted", X.shape[1]))
-    guards = X[:, n_wanted:]
-    X = X[:, :n_wanted]
-    for attempt in range(EXTRA_PURIFICATIONS + 1):
-        basis = X if attempt == 0 or guards.shape[1] == 0 else np.hstack([X, guards])
-        lam, Xp, KX, MX, solve_res = purify_and_project(op, basis, block, refine=attempt > 0)
-        # the n_wanted nearest to the shift (all of them on the first pass), ascending
+    n_guard = X.shape[1] - n_wanted
+
+    def nearest_first(lam: np.ndarray) -> np.ndarray:
+        """The n_wanted nearest to the shift (all of them on the first pass), ascending,
+        then the others (the next pass's guards)."""
         near = np.sort(np.argsort(np.abs(lam - op.sigma), kind="stable")[:n_wanted])
         order = near[np.argsort(lam[near], kind="stable")]
-        result = ModalResult(lam[order], np.ascontiguousarray(Xp[:, order]), {})
-        normalise_and_check(result, K, M, comm, KX[:, order], MX[:, order], tol=tol)
+        return np.concatenate([order, np.setdiff1d(np.arange(len(lam)), order)])
+
+    for attempt in range(EXTRA_PURIFICATIONS + 1):
+        # X[:, :n_wanted] holds the wanted vectors (pass 0: Ritz vectors, later: the modes)
+        # and X[:, n_wanted:] the guards (pass 0: Lanczos's, later: the rotated rest)
+        basis = X[:, :n_wanted] if attempt == 0 or n_guard == 0 else X
+        lam, Xp, KX, MX, solve_res = purify_and_project(op, basis, block, refine=attempt > 0,
+                                                        select=nearest_first)
+        KX, MX = KX[:, :n_wanted], MX[:, :n_wanted]
+        # the solves' own residuals are a floor too (relative to ||K phi||; scale-free)
+        solve_floor = solve_res[:n_wanted] / np.sqrt(
+            comm.allreduce(np.sum(KX**2, axis=0), op=MPI.SUM))
+        result = ModalResult(lam[:n_wanted], Xp[:, :n_wanted], {})
+        normalise_and_check(result, K, M, comm, KX, MX, tol=tol)    # scales X's columns
+        del KX, MX, Xp
         stats["extra_purifications"] = attempt
         if not (unconverged(result, tol) & in_window(result, window)).any():
             break
-        if guards.shape[1]:
-            rest = np.setdiff1d(np.arange(len(lam)), order)
-            guards = np.ascontiguousarray(Xp[:, rest])
-        X = result.phi
-    # the solves' own residuals are a floor too (relative to ||K phi||; scale-free)
-    knorm = np.sqrt(comm.allreduce(np.sum(KX[:, order] ** 2, axis=0), op=MPI.SUM))
-    solve_floor = solve_res[order] / knorm
     result.residual_floors = np.maximum(result.residual_floors, solve_floor)
     stats["max_solve_residual"] = float(solve_floor.max())
+    # the modes without the guards behind them (a view would keep them alive)
+    result.phi = np.ascontiguousarray(result.phi)
     return result
 
 
@@ -193,7 +205,7 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndar
                         MPhi: np.ndarray | None = None, tol: float = 0.0) -> None:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
 
-    ``KPhi``/``MPhi`` may be given when already computed (they are scaled along).
+    ``KPhi``/``MPhi`` may be given when already computed (they are scaled along, in place).
 
     Records the relative residuals ``rho_i = ||K phi_i - lambda_i M phi_i|| / ||K phi_i||``
     (``result.residuals``) and, for the modes with ``rho_i > tol``, their round-off floor
@@ -201,6 +213,8 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndar
     + 1, :func:`railvib_hpc.tolerances.gamma`; ``result.residual_floors``, 0 elsewhere):
     the error of evaluating the residual in double precision, below which no solver can
     verify an eigenpair. (Computing it needs |K| and |M|, so it is only done when needed.)
+    Memory: ``result.phi`` is scaled in place and every other n x m temporary is formed
+    :data:`NORMALISE_CHUNK` columns at a time.
     """
     from mpi4py import MPI
 
@@ -211,10 +225,10 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndar
 
     phi = result.phi
     lam = result.eigenvalues
+    chunk = NORMALISE_CHUNK
+    cols = [slice(j, j + chunk) for j in range(0, phi.shape[1], chunk)]
     if KPhi is None and MPhi is None:
         # column chunks: no (n, m) copies of K Phi and M Phi (many modes of a big model)
-        chunk = NORMALISE_CHUNK
-        cols = [slice(j, j + chunk) for j in range(0, phi.shape[1], chunk)]
         modal_mass = np.concatenate([np.einsum("ij,ij->j", phi[:, c], sparse_times_block(
             M, phi[:, c], comm)) for c in cols]) if cols else np.zeros(0)
         phi *= 1.0 / np.sqrt(comm.allreduce(modal_mass, op=MPI.SUM))
@@ -235,25 +249,34 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndar
         modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
         scale = 1.0 / np.sqrt(modal_mass)
         phi *= scale
-        MPhi = MPhi * scale
-        KPhi = sparse_times_block(K, phi, comm) if KPhi is None else KPhi * scale
+        MPhi *= scale
+        if KPhi is None:
+            KPhi = sparse_times_block(K, phi, comm)
+        else:
+            KPhi *= scale
         gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
         stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
-        res = comm.allreduce(np.sum((KPhi - MPhi * lam) ** 2, axis=0), op=MPI.SUM)
-        knorm = comm.allreduce(np.sum(KPhi**2, axis=0), op=MPI.SUM)
+        res = np.empty(len(lam))
+        knorm = np.empty(len(lam))
+        for c in cols:
+            res[c] = np.sum((KPhi[:, c] - MPhi[:, c] * lam[c]) ** 2, axis=0)
+            knorm[c] = np.sum(KPhi[:, c] ** 2, axis=0)
+        for a in (res, knorm):
+            comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
     result.residuals = np.sqrt(res / knorm)
     floor = np.zeros(len(lam))
     need = np.flatnonzero(result.residuals > tol)
     if need.size:
         k = max(longest_row(K, comm), longest_row(M, comm)) + 1
-        absphi = np.abs(phi[:, need])
-        bound = np.zeros_like(absphi)
-        for A, w in ((K, 1.0), (M, np.abs(lam[need]))):
+        bound = np.zeros((phi.shape[0], need.size))
+        for A, w in ((K, np.ones(need.size)), (M, np.abs(lam[need]))):
             Aabs = abs_matrix(A, comm)
-            bound += sparse_times_block(Aabs, absphi, comm) * w
+            for j in range(0, need.size, chunk):
+                c = slice(j, j + chunk)
+                bound[:, c] += sparse_times_block(Aabs, np.abs(phi[:, need[c]]), comm) * w[c]
             Aabs.destroy()
         floor[need] = tolerances.gamma(k) * np.sqrt(
-            comm.allreduce(np.sum(bound**2, axis=0), op=MPI.SUM) / knorm[need])
+            comm.allreduce(np.einsum("ij,ij->j", bound, bound), op=MPI.SUM) / knorm[need])
     result.residual_floors = floor
     result.stats.update({
         "max_orthonormality_error": float(np.abs(gram - np.eye(len(lam))).max()),

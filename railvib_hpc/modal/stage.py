@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import resource
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +19,7 @@ from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
+from ..resources import peak_memory_gb
 from .boundary import case_dofmap
 from .eigen import solve_modes
 from .elements import nodal_masses
@@ -43,8 +43,6 @@ if TYPE_CHECKING:
 AUTO_BASIS_BUDGET_GB = 4.0
 #: Seconds between two progress lines of the eigensolve.
 PROGRESS_INTERVAL_S = 2.0
-#: ``ru_maxrss`` is in kB on Linux: kB per GB.
-KB_PER_GB = 1e6
 
 
 def _max_basis(case: Case, n_dofs: int) -> int:
@@ -162,7 +160,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
             bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
-                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2])
+                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info)
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
         M.destroy()
@@ -199,7 +197,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         stats["convergence_warnings"] = list(result.warnings)
         stats.update({"assembly_" + k: v for k, v in ainfo.items()})
         stats["time_assembly_total"] = t_assembly
-        rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / KB_PER_GB)
+        rss = comm.allgather(peak_memory_gb())
         stats["peak_rss_gb_per_rank"] = rss
         stats["peak_rss_gb_total"] = float(sum(rss))
         stats["n_dofs"] = dofmap.n_dofs

@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import json
 import math
-import resource
 import time
 import uuid
 from pathlib import Path
@@ -73,6 +72,7 @@ from ..io.stage_files import (
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
+from ..resources import peak_memory_gb
 from .integrate import (
     DirectSolver,
     RailColumns,
@@ -465,7 +465,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         writer.finish(stress)
         if not case["output.stress_times"] and comm.rank == 0:
             remove_xdmf(out_dir / "stress.xdmf")
-    rss = comm.allgather(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6)
+    rss = comm.allgather(peak_memory_gb())
     stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
                    recorder, nt - first_step, comm)
     with rep.stage("transient: probes, histories"):

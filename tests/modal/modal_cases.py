@@ -21,6 +21,17 @@ def column_mesh(nz: int, height: float = 5.8, width: float = 0.1) -> Mesh:
                 node_sets={"bottom": np.arange(4)})
 
 
+def block_mesh(n: int, height: float = 8.0, width: float = 2.0) -> Mesh:
+    """An n x n x 2n block of subgrade hexes, node set 'bottom' (its base)."""
+    from fem_tools import box_mesh
+
+    pts, hexes = box_mesh(n, n, 2 * n, width, width, height)
+    return Mesh(points=pts, hexes=hexes, hex_part=np.full(len(hexes), PART_ID["subgrade"],
+                                                          np.int32),
+                lines=np.zeros((0, 2), np.int64), line_part=np.zeros(0, np.int32),
+                node_sets={"bottom": np.flatnonzero(pts[:, 2] == 0.0)})
+
+
 def beam_mesh(n: int, length: float, part: str = "rail") -> Mesh:
     """A straight beam along x, n elements, node sets 'start', 'end'."""
     pts = np.c_[np.linspace(0.0, length, n + 1), np.zeros(n + 1), np.zeros(n + 1)]
@@ -243,9 +254,9 @@ def write_msh(mesh: Mesh, path, node_sets: bool = False) -> None:
 
 def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, edges=(),
                  band_modes: int = 250, groups: int = 1, band_only: int = 0,
-                 block_size: int = 8, tol: float = 1e-10):
-    """Band-sliced solve of the model on ``comm`` (cache in ``cache_dir``); returns
-    (result, K, M, dofmap)."""
+                 block_size: int = 8, tol: float = 1e-10, log=None):
+    """Band-sliced solve of the model on ``comm`` (cache in ``cache_dir``; ``log`` gets a
+    line per band); returns (result, K, M, dofmap)."""
     from pathlib import Path
 
     from mpi4py import MPI
@@ -269,7 +280,7 @@ def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, ed
                      band_only=band_only, tol=tol, block_size=block_size, max_restarts=100,
                      out_of_core="auto", cache_dir=Path(cache_dir), key="test")
     result = solve_modes(K, M, comm, f_max=f_max, tol=tol, block_size=block_size, bands=s,
-                         assemble=on)
+                         assemble=on, log=log)
     return result, K, M, dofmap
 
 

@@ -181,8 +181,13 @@ def test_huge_mesh_is_refused_before_gmsh(tmp_path, capsys, tally):
     """The issue: mesh.layer_elements = 1e6 made gmsh raise a bare Exception."""
     _expect_one_line(tally, "mesh.layer_elements = 1e6", ["mesh", B, "--out", tmp_path,
                                                           *COARSE, "--set",
+                                                          "mesh.layout=refined", "--set",
                                                           "mesh.layer_elements=1000000"],
                      capsys, "hexahedra")
+    # the thesis layout (the default) has the APDL's own divisions: the key is refused
+    _expect_one_line(tally, "mesh.layer_elements on the thesis layout",
+                     ["mesh", B, "--out", tmp_path, *COARSE, "--set",
+                      "mesh.layer_elements=1000000"], capsys, "applies to mesh.layout = 'refined'")
 
 
 # ----------------------------------------------------------------------------- PETSc options

@@ -82,7 +82,8 @@ def concrete_energy_shares(modes_path: Path, modes: int = 2) -> list[float]:
     """Kinetic-energy share of the concrete building in the first ``modes`` modes.
 
     ``phi^T M_c phi`` with the consistent mass ``M_c`` of the building's hexahedra; the
-    modes are mass-normalised (``phi^T M phi = 1``), so this is the share directly.
+    modes are mass-normalised (``phi^T M phi = 1``), so this is the share directly. Empty
+    when the model has no building (a user mesh of the track and soil only).
     """
     import h5py
 
@@ -94,6 +95,8 @@ def concrete_energy_shares(modes_path: Path, modes: int = 2) -> list[float]:
         hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
         conc = hexes[np.isin(part, [PART_ID[p] for p in _CONCRETE])]
         nodes = np.unique(conc)
+        if nodes.size == 0:
+            return []
         lo, hi = int(nodes.min()), int(nodes.max()) + 1
         phi = f["modes/translation"][:modes, lo:hi, :]
     rho = _concrete_density(modes_path)
@@ -247,10 +250,12 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
         rows.append(_row(
             "first natural frequency", f"{THESIS_F1_HZ} Hz", f"{freq[0]:.3f} Hz"
             + (f" (mode 2: {freq[1]:.3f} Hz)" if n > 1 else ""),
-            "modes 1-2 are the building's sway: "
-            + " and ".join(f"{100 * s:.0f} %" for s in shares)
-            + " of their kinetic energy is in the concrete; the thesis's lowest mode is "
-            f"very likely the same pair ({100 * (freq[0] / THESIS_F1_HZ - 1):+.1f} %)"))
+            ("modes 1-2 are the building's sway: "
+             + " and ".join(f"{100 * s:.0f} %" for s in shares)
+             + " of their kinetic energy is in the concrete; the thesis's lowest mode is "
+             f"very likely the same pair ({100 * (freq[0] / THESIS_F1_HZ - 1):+.1f} %)")
+            if shares else "this model has no building, the thesis's lowest mode is the "
+            "building's sway: not comparable"))
     # ---- accelerations
     c_peaks = {}
     if have_modes and mbs_path.exists():

@@ -95,5 +95,6 @@ def test_reflection_settings_reject_unknown_boundaries_and_solvers():
 
     with pytest.raises(StudySettingsError, match=r"boundaries.*unknown entries \['sponge'\]"):
         study_settings("reflection", ["boundaries=[thesis,sponge]"])
-    with pytest.raises(StudySettingsError, match=r"solver = 'fast': allowed: modal, direct"):
+    with pytest.raises(StudySettingsError,
+                       match=r"solver = 'fast': allowed values: 'modal', 'direct'"):
         study_settings("reflection", ["solver=fast"])

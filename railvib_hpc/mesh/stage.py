@@ -204,13 +204,20 @@ def format_report(report: dict) -> str:
         f"non-conformal faces {q['nonconformal_faces']}",
         "node sets: " + ", ".join(f"{k} {v}" for k, v in report["node_sets"].items()),
     ]
-    if report.get("node_sets_derived"):
-        lines.append("node sets derived from the bounding box (not in mesh.file): "
-                     + ", ".join(report["node_sets_derived"]))
-    if report.get("probes_outside"):
-        lines.append("probe points outside the mesh (left out): "
-                     + ", ".join(report["probes_outside"]))
+    lines += user_mesh_notes(report)
     return "\n".join(lines)
+
+
+def user_mesh_notes(report: dict) -> list[str]:
+    """What was completed or left out of a user mesh (``mesh.file``), one line each."""
+    out = []
+    if report.get("node_sets_derived"):
+        out.append("node sets derived from the bounding box (not in mesh.file): "
+                   + ", ".join(report["node_sets_derived"]))
+    if report.get("probes_outside"):
+        out.append("probe points outside the mesh (left out): "
+                   + ", ".join(report["probes_outside"]))
+    return out
 
 
 def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
@@ -281,9 +288,5 @@ def _print_warnings(report: dict, reporter: Reporter) -> None:
     """The mesh check's warnings, and what was completed or left out of a user mesh."""
     for warning in report.get("warnings", []):
         reporter.info(f"WARNING (mesh check): {warning}")
-    if report.get("node_sets_derived"):
-        reporter.info("note: node sets derived from the bounding box (not in mesh.file): "
-                      + ", ".join(report["node_sets_derived"]))
-    if report.get("probes_outside"):
-        reporter.info("note: probe points outside the mesh (left out): "
-                      + ", ".join(report["probes_outside"]))
+    for note in user_mesh_notes(report):
+        reporter.info(f"note: {note}")

@@ -52,25 +52,38 @@ def on_root(fn: Callable[[], T], comm: MPI.Comm | None = None,
         On ranks > 0 when ``fn`` raised any other exception (rank 0 re-raises the original).
     """
     comm = comm or world()
-    outcome: tuple[bool, Any]
+    outcome: tuple[bool, Any] = (True, None)
     original: BaseException | None = None
     if comm.rank == 0:
-        try:
-            outcome = (True, fn())
-        except UserError as exc:
-            outcome = (False, exc)
-        except OSError as exc:
-            outcome = (False, OutputError(os_error_text(exc)))
-        except BaseException as exc:
-            original = exc
-            outcome = (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}"))
-    else:
-        outcome = (True, None)
+        outcome, original = root_outcome(fn)
     if comm.size > 1:
         ok, payload = outcome
         msg = comm.bcast((ok, payload if (not ok or broadcast_result) else None), root=0)
         if comm.rank != 0:
             outcome = msg
+    return settle(outcome, original)
+
+
+def root_outcome(fn: Callable[[], T]) -> tuple[tuple[bool, Any], BaseException | None]:
+    """Call ``fn`` (on rank 0) and turn what happened into a message for the other ranks.
+
+    Returns ``((ok, value_or_exception), original)``: a user error travels as itself, an
+    ``OSError`` as :class:`~railvib_hpc.errors.OutputError`, anything else as
+    :class:`RootFailure`, with the original exception kept for rank 0 to re-raise.
+    """
+    try:
+        return (True, fn()), None
+    except UserError as exc:
+        return (False, exc), None
+    except OSError as exc:
+        return (False, OutputError(os_error_text(exc))), None
+    except BaseException as exc:
+        return (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}")), exc
+
+
+def settle(outcome: tuple[bool, Any], original: BaseException | None = None) -> Any:
+    """The value of an outcome of :func:`root_outcome`, or raise its error (rank 0 raises the
+    original exception)."""
     ok, payload = outcome
     if not ok:
         if original is not None:

@@ -1367,20 +1367,12 @@ def _root_while_others_sleep(fn: Callable[[], Any], comm) -> Any:
     in a broadcast."""
     import time
 
-    from ..parallel import RootFailure
+    from ..parallel import root_outcome, settle
 
     tag = 7316
     original = None
     if comm.rank == 0:
-        try:
-            outcome = (True, fn())
-        except UserError as exc:
-            outcome = (False, exc)
-        except OSError as exc:
-            outcome = (False, OutputError(os_error_text(exc)))
-        except BaseException as exc:
-            original = exc
-            outcome = (False, RootFailure(f"rank 0 failed: {type(exc).__name__}: {exc}"))
+        outcome, original = root_outcome(fn)
         for r in range(1, comm.size):
             comm.send(outcome, dest=r, tag=tag)
     else:
@@ -1390,12 +1382,7 @@ def _root_while_others_sleep(fn: Callable[[], Any], comm) -> Any:
             if done:
                 break
             time.sleep(0.2)
-    ok, payload = outcome
-    if original is not None:
-        raise original
-    if not ok:
-        raise payload
-    return payload
+    return settle(outcome, original)
 
 
 # ----------------------------------------------------------------------------- misc

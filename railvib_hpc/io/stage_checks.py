@@ -337,13 +337,7 @@ def check_mbs(path: Path, full: bool = True, context: Mapping[str, Any] | None =
                             "modal/q_dot", "modal/q_ddot", "modal/omega", "modal/zeta"))
         if missing:
             return missing
-        load = context.get("static_wheel_load")
-        if load is None:
-            try:
-                load = max(json.loads(f.attrs.get("stats", "{}")).get("static_wheel_load")
-                           or [0.0])
-            except (ValueError, TypeError):
-                load = 0.0
+        load = _static_wheel_load(f, context)
         q = f["modal/q"][()]
         psi = None
         modes = context.get("modes_path")
@@ -442,13 +436,7 @@ def check_transient(path: Path, full: bool = True, context: Mapping[str, Any] | 
             out += nonfinite(name, a)
         if out:
             return out
-        load = context.get("static_wheel_load")
-        if load is None:
-            try:
-                load = max(json.loads(f.attrs.get("stats", "{}")).get("static_wheel_load")
-                           or [0.0])
-            except (ValueError, TypeError):
-                load = 0.0
+        load = _static_wheel_load(f, context)
         if load:
             out += exceeds("wheels/contact_force", f["wheels/contact_force"][()],
                            CONTACT_FORCE_FACTOR * float(load),
@@ -488,3 +476,15 @@ CHECKS = {"mesh.h5": check_mesh, "modes.h5": check_modes, "static.h5": check_sta
           "mbs.h5": check_mbs, "fields.h5": check_fields, "probes.h5": check_probes,
           "transient.h5": check_transient, "transient:fields.h5": check_fields,
           "transient:probes.h5": check_probes, "transient_checkpoint.h5": check_checkpoint}
+
+
+def _static_wheel_load(f, context: dict) -> float:
+    """The static wheel load [N]: from the caller's context, else from the file's ``stats``
+    attribute (0 when neither has it)."""
+    load = context.get("static_wheel_load")
+    if load is not None:
+        return load
+    try:
+        return max(json.loads(f.attrs.get("stats", "{}")).get("static_wheel_load") or [0.0])
+    except (ValueError, TypeError):
+        return 0.0

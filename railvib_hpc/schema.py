@@ -504,7 +504,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                 "damping ratios of damping_modes (one per entry)"),
         "static_correction": Param(False, "bool", "-",
                                    "add the residual static flexibility of the modes not "
-                                   "kept (mode-acceleration method; needs static.h5 from the "
+                                   "kept as residual modes with their mass and damping "
+                                   "(modal truncation augmentation; needs static.h5 from the "
                                    "modal stage)"),
     },
     "transient": {

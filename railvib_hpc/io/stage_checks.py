@@ -239,10 +239,11 @@ def _shortest_line(f) -> float:
 # ----------------------------------------------------------------------------- static.h5
 def check_static(path: Path, full: bool = True, context: Mapping[str, Any] | None = None
                  ) -> list[str]:
-    """``static.h5``: finite, symmetric rail flexibility with a non-negative diagonal."""
+    """``static.h5``: finite, symmetric rail flexibility with a non-negative diagonal, and
+    the static fields' mass matrix."""
     with _h5(path) as f:
         missing = _need(f, ("static/rail_flexibility", "static/translation",
-                            "static/load_dofs"))
+                            "static/load_dofs", "static/residual_mass"))
         if missing:
             return missing
         x = f["static/rail_flexibility"][()]
@@ -251,6 +252,12 @@ def check_static(path: Path, full: bool = True, context: Mapping[str, Any] | Non
                         or not np.allclose(x, x.T, rtol=1e-8,
                                            atol=1e-12 * float(np.abs(x).max() or 1))):
             out.append("static/rail_flexibility is not a symmetric flexibility matrix")
+        mass = f["static/residual_mass"][()]
+        if not out:
+            out += nonfinite("static/residual_mass", mass)
+        if not out and (mass.shape != x.shape or np.any(np.diag(mass) < 0)):
+            out.append("static/residual_mass is not a mass matrix of the rail DOFs' static "
+                       "fields")
         if full and not out:
             t = f["static/translation"]
             for k in range(0, t.shape[0], 64):

@@ -14,11 +14,14 @@ name, renamed when complete, reused when its inputs are unchanged):
 * ``/modal/q``, ``q_dot``, ``q_ddot`` (nt, m), ``omega``, ``zeta`` (m,); with
   ``modal.damping = 'full'`` also ``damping_matrix`` (m, m) (``zeta`` is then its diagonal
   as ratios, ``D_ii / (2 omega_i)``);
-* ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) rail-DOF loads (derivatives by
-  finite differences of the stored steps) and ``/static/q_shift``,
+* ``/static/g``, ``g_dot``, ``g_ddot`` (nt, n_r) and ``/static/q_shift``,
   ``q_shift_dot``, ``q_shift_ddot`` (nt, m) ``= -Lambda^-1 Phi_r^T g`` (and
   derivatives) when the static correction is on (attributes ``basis_file``,
-  ``basis``): the fields are ``Phi (q + q_shift) + X g``;
+  ``basis``): the fields are ``Phi (q + q_shift) + X g``. The static correction runs the
+  kept modes together with the residual modes of
+  :func:`.static_correction.residual_modes` (mass, damping and the exact static
+  flexibility); ``g = V p`` from their coordinates ``p`` (``/static/residual_omega``,
+  ``residual_vectors``), so ``g_dot`` and ``g_ddot`` are exact, not differenced;
 * the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance`
   (``inputs_sha256``, ``upstream_sha256`` of ``modes.h5``/``static.h5``, ``case_toml``,
   ...), ``complete`` and ``stats`` (JSON: time step, steps, wall time, contact-force
@@ -121,26 +124,80 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
 
         zeta = rayleigh_ratio(*case_rayleigh(case), omega)
     elif kind == "full":
-        from ..io.stage_files import file_digest
-        from ..modal.projection import compose_damping, damping_key, read_damping_parts
+        from ..modal.projection import compose_damping
 
-        path = Path(modes_path).with_name("modal_damping.h5")
-        # the key the modal stage wrote: the modes' content digest and the damping keys
-        parts = read_damping_parts(path, damping_key(case, file_digest(modes_path).sha256))
-        if parts is None:
-            raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
-                                "'railvib modal' with modal.damping = 'full'")
-        d = compose_damping(case, parts, omega)
-        for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
-            if int(k) <= m:
-                d[int(k) - 1, int(k) - 1] = 2.0 * r * omega[int(k) - 1]
-        return d
+        return _override_diagonal(case, compose_damping(case, damping_parts(case, modes_path),
+                                                        omega), omega, m)
     else:
         zeta = np.full(m, case["modal.damping_ratio"])
     for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
         if int(k) <= m:
             zeta[int(k) - 1] = r
     return zeta
+
+
+def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
+    """The projected damping parts of ``modal_damping.h5`` next to ``modes_path`` (rank 0).
+
+    Raises
+    ------
+    MBSInputError
+        Without a ``modal_damping.h5`` of these modes and settings.
+    """
+    from ..io.stage_files import file_digest
+    from ..modal.projection import damping_key, read_damping_parts
+
+    path = Path(modes_path).with_name("modal_damping.h5")
+    # the key the modal stage wrote: the modes' content digest and the damping keys
+    parts = read_damping_parts(path, damping_key(case, file_digest(modes_path).sha256))
+    if parts is None:
+        raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
+                            "'railvib modal' with modal.damping = 'full'")
+    return parts
+
+
+def _override_diagonal(case: Case, d: np.ndarray, omega: np.ndarray, m: int) -> np.ndarray:
+    """``mbs.damping_modes`` / ``damping_ratios`` on the diagonal of a damping matrix."""
+    for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
+        if int(k) <= m:
+            d[int(k) - 1, int(k) - 1] = 2.0 * r * omega[int(k) - 1]
+    return d
+
+
+def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
+                     omega: np.ndarray, omega_rest: np.ndarray, modes_path: Path
+                     ) -> np.ndarray:
+    """Damping of the kept modes followed by the residual modes of the static correction.
+
+    ``modal.damping = 'uniform'`` (and ``'strain_energy'``, whose per-material shares the
+    residual modes do not have): ``modal.damping_ratio`` for them; ``'rayleigh'``: the
+    Rayleigh ratio at their frequencies (exact: ``[Phi, X' V]`` diagonalises K and M);
+    ``'full'``: the projected parts of ``[Phi, X']`` in ``modal_damping.h5`` turned onto the
+    new basis (:func:`.static_correction.residual_damping_parts`) and composed like the
+    modes' (dashpots, pads and materials couple modes and residual modes).
+    """
+    kind = case["modal.damping"]
+    m = omega.size
+    if kind == "full":
+        from ..modal.projection import compose_damping
+        from .static_correction import residual_damping_parts
+
+        try:
+            parts = residual_damping_parts(damping_parts(case, modes_path), res, rest_rows,
+                                           omega_rest, m)
+        except ValueError as exc:
+            raise MBSInputError(f"{Path(modes_path).with_name('modal_damping.h5')}: {exc}; "
+                                "rerun 'railvib modal' with mbs.static_correction = true") \
+                from exc
+        om = np.concatenate([omega, res.omega])
+        return _override_diagonal(case, compose_damping(case, parts, om), om, m)
+    if kind == "rayleigh":
+        from ..modal.damping import case_rayleigh, rayleigh_ratio
+
+        extra = rayleigh_ratio(*case_rayleigh(case), res.omega)
+    else:
+        extra = np.full(res.omega.size, case["modal.damping_ratio"])
+    return np.concatenate([zeta, extra])
 
 
 def build_vehicle(case: Case) -> Vehicle | None:
@@ -245,16 +302,18 @@ def passage(case: Case, vehicle, flexible_end: float) -> dict:
             "x_end": x_end, "t_end": t_end}
 
 
-def _read_static(out_dir: Path, n_r: int) -> np.ndarray:
+def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
+    """``K^-1`` on the rail DOFs and the deflated static fields' mass from ``static.h5``."""
     import h5py
 
     path = out_dir / "static.h5"
     with h5py.File(path, "r") as f:
         x_rr = f["static/rail_flexibility"][()]
+        x_mass = f["static/residual_mass"][()]
     if x_rr.shape != (n_r, n_r):
         raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
                             f"({n_r}, {n_r})")
-    return x_rr
+    return x_rr, x_mass
 
 
 def static_wheel_load(case: Case) -> float:
@@ -294,9 +353,8 @@ def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
 
 
 def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
-                    n_wheels: int, n_r: int, out_dir: Path) -> None:
+                    n_wheels: int, n_r: int, out_dir: Path, run_modes) -> None:
     """An empty passage, too many steps or too little memory: one clear error first."""
-    from .integrate import auto_time_step, wheel_rails
     from .results import kept_steps
 
     if t_end <= 0:
@@ -307,12 +365,7 @@ def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
     if case["mbs.dt"]:
         dt, how = case["mbs.dt"], f"mbs.dt = {case['mbs.dt']:g} s"
     else:
-        if vehicle is None:
-            dt = auto_time_step(rm.omega)
-        else:
-            rails = rm.normal_rails(getattr(vehicle, "conicity", 0.0))
-            dt = auto_time_step(rm.omega, wheel_rails(rails, vehicle), vehicle,
-                                case["mbs.points_per_period"], case["vehicle.speed"])
+        dt = _auto_step(case, rm, run_modes, vehicle)
         how = f"the automatic step {dt:.3g} s"
     nt = int(np.ceil(t_end / dt))
     if nt > MAX_MBS_STEPS:
@@ -326,7 +379,8 @@ def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
     # positions and shape functions of every step (1 + 5 values per wheel); the stored
     # histories twice (the result and the file being written)
     need = 8.0 * (nt + 1) * (1 + 6 * n_wheels) \
-        + 2 * 8.0 * kept * (3 * m + 4 * n_wheels + 3 * n_dof + 3 * n_r + 3 * m * (n_r > 0))
+        + 2 * 8.0 * kept * (3 * run_modes.omega.size + 4 * n_wheels + 3 * n_dof + 3 * n_r
+                            + 3 * m * (n_r > 0))
     check_memory(need, f"the multibody run ({nt:.3g} steps, {kept:.3g} stored)",
                  "shorten vehicle.t_after, use a larger mbs.dt or mbs.store_every")
     ensure_space(out_dir, need / 2, f"mbs.h5 ({kept:.3g} stored steps)")
@@ -354,7 +408,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 
     from .integrate import simulate_moving_force, simulate_vehicle
     from .modal_input import read_rail_modes
-    from .static_correction import rail_dof_rows, residual_flexibility
+    from .static_correction import rail_dof_rows
 
     rep = rep or Reporter(0)
     out_dir = Path(out_dir)
@@ -385,12 +439,16 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     speed = case["vehicle.speed"]
     travel = x_end - x_start - float(np.min(offsets))
     n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
-    _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
-                    n_r, out_dir)
-    residual = None
+    res, run_modes, run_damping = None, rm, zeta
     if case["mbs.static_correction"]:
-        residual = residual_flexibility(_read_static(out_dir, n_r), rm.rails, rm.omega)
-    dt = case["mbs.dt"] or None
+        res, run_modes, run_damping = _with_residual_modes(case, rm, zeta, out_dir, n_r)
+        rep.info(f"static correction: {res.omega.size} residual modes, "
+                 f"{res.omega[0] / (2 * np.pi) if res.omega.size else 0:.1f} - "
+                 f"{res.omega[-1] / (2 * np.pi) if res.omega.size else 0:.4g} Hz, added to "
+                 f"the {m} modes")
+    _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
+                    n_r, out_dir, run_modes)
+    dt = case["mbs.dt"] or _auto_step(case, rm, run_modes, vehicle)
     t_read = time.perf_counter() - t0
     t_run = time.perf_counter()
     label = "mbs: time integration"
@@ -405,23 +463,28 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 
     if vehicle is None:
         result = simulate_moving_force(
-            rm.omega, zeta, rm.rails if residual is not None else
-            tuple(rm.rails[i] for i in wheel_rail), forces, x_start + offsets, speed, t_end,
-            dt=dt, store_every=case["mbs.store_every"], residual=residual,
-            load_rail=wheel_rail)
+            run_modes.omega, run_damping, tuple(run_modes.rails[i] for i in wheel_rail),
+            forces, x_start + offsets, speed, t_end, dt=dt,
+            store_every=case["mbs.store_every"])
     else:
         x_lo = x_start + float(np.min(offsets)) - 1.0
         irregularity = build_irregularity(case, wheel_rail, (x_lo, x_end + speed *
                                                              case["vehicle.t_after"] + 1.0))
-        rails = rm.normal_rails(vehicle.conicity)
+        rails = run_modes.normal_rails(vehicle.conicity)
         result = simulate_vehicle(
-            rm.omega, zeta, rails, vehicle, x_start, speed, t_end, dt=dt,
+            run_modes.omega, run_damping, rails, vehicle, x_start, speed, t_end, dt=dt,
             irregularity=irregularity, store_every=case["mbs.store_every"],
-            points_per_period=case["mbs.points_per_period"], residual=residual,
+            points_per_period=case["mbs.points_per_period"],
             progress=progress, drop_height=case["vehicle.drop_height"])
     wall = time.perf_counter() - t_run
+    static = None
+    if res is not None:
+        result, static = _split_residual(result, res, m)
+        zeta = run_damping[:m, :m] if np.ndim(run_damping) == 2 else run_damping[:m]
     stats = _summary(result, rm.rails, vehicle, wall, t_read, m)
-    stats["static_correction"] = residual is not None
+    stats["static_correction"] = res is not None
+    if res is not None:
+        stats["residual_modes"] = int(res.omega.size)
     rep.info(format_summary(stats))
     problems = check_mbs_arrays(result.t, result.contact_force, result.q, result.q_dot,
                                 result.q_ddot, rm.omega, context["static_wheel_load"],
@@ -434,7 +497,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     attrs["stats"] = json.dumps(stats)
 
     def fill(f, parallel: bool) -> None:
-        _write(f, case, result, rm, zeta, wheel_rail, vehicle, residual)
+        _write(f, case, result, rm, zeta, wheel_rail, vehicle, static, res)
 
     write_h5(path, None, fill, size_hint=_result_nbytes(result), attrs=attrs,
              check=lambda tmp: check_mbs(tmp, True, context))
@@ -442,6 +505,59 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     plots = write_plots(out_dir, result, vehicle)
     rep.info("wrote " + ", ".join(str(p) for p in plots))
     return {**stats, "reused": False}
+
+
+def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
+    """The residual modes of the static correction, the rail modes with them appended
+    and the damping of both (:mod:`.static_correction`)."""
+    from .modal_input import RailModes, read_rail_modes
+    from .static_correction import kept_residual_mass, rail_dof_rows, residual_modes
+
+    x_rr, mass_file = _read_static(out_dir, n_r)
+    m = rm.omega.size
+    every = read_rail_modes(out_dir / "modes.h5")        # the modes not kept, too
+    rest_rows, omega_rest = rail_dof_rows(every.rails)[m:], every.omega[m:]
+    res = residual_modes(x_rr, kept_residual_mass(mass_file, rest_rows, omega_rest),
+                         rm.rails, rm.omega)
+    k = res.omega.size
+    rails = res.rails(rm.rails)
+    lateral = tuple((np.vstack([pv, np.zeros((k, pv.shape[1]))]),
+                     np.vstack([prz, np.zeros((k, prz.shape[1]))])) for pv, prz in rm.lateral)
+    modes = RailModes(np.concatenate([rm.omega, res.omega]), (rails[0], rails[1]), rm.rail_y,
+                      rm.rail_z, lateral)
+    return res, modes, residual_damping(case, zeta, res, rest_rows, rm.omega, omega_rest,
+                                        out_dir / "modes.h5")
+
+
+def _auto_step(case: Case, rm, run_modes, vehicle) -> float:
+    """The automatic time step: the kept modes' band (residual modes respond
+    quasi-statically in the exact propagator) and the contact resonance against the rails
+    the vehicle runs on (residual modes included), shortened to divide ``output.dt``."""
+    from .integrate import auto_time_step, wheel_rails
+
+    if vehicle is None:
+        dt = auto_time_step(rm.omega)
+    else:
+        rails = run_modes.normal_rails(getattr(vehicle, "conicity", 0.0))
+        dt = auto_time_step(rm.omega, wheel_rails(rails, vehicle), vehicle,
+                            case["mbs.points_per_period"], case["vehicle.speed"])
+    out = case["output.dt"]
+    # shortened to a whole fraction of output.dt, so the fields come at the times asked for
+    return out / np.ceil(out / dt * (1.0 - 1e-12)) if out > 0 else dt
+
+
+def _split_residual(result, res, m: int):
+    """The kept modes' histories, and ``g = V p`` with its exact derivatives from the
+    residual modes' coordinates ``p``."""
+    import dataclasses
+
+    v = res.vectors.T
+    static = (result.q[:, m:] @ v, result.q_dot[:, m:] @ v, result.q_ddot[:, m:] @ v)
+    kept = dataclasses.replace(result, q=np.ascontiguousarray(result.q[:, :m]),
+                               q_dot=np.ascontiguousarray(result.q_dot[:, :m]),
+                               q_ddot=np.ascontiguousarray(result.q_ddot[:, :m]),
+                               rail_loads=static[0])
+    return kept, static
 
 
 def _result_nbytes(result) -> int:
@@ -502,7 +618,7 @@ def format_summary(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, residual) -> None:
+def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, static, res) -> None:
     """Fill an open ``mbs.h5`` (layout in the module notes)."""
     f["time"] = result.t
     w = f.create_group("wheels")
@@ -523,20 +639,16 @@ def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, residual) -> No
         mg["damping_matrix"] = zeta
         zeta = np.diag(zeta) / (2.0 * np.where(rm.omega > 0, rm.omega, 1.0))
     mg["omega"], mg["zeta"] = rm.omega, zeta
-    if residual is not None:
+    if static is not None:
         from .static_correction import rail_dof_rows
 
         s = f.create_group("static")
-        g = result.rail_loads
-        ts = result.t
-        s["g"] = g
-        s["g_dot"] = np.gradient(g, ts, axis=0) if ts.size > 2 else np.zeros_like(g)
-        s["g_ddot"] = (np.gradient(s["g_dot"][()], ts, axis=0) if ts.size > 2
-                       else np.zeros_like(g))
         phi_r = rail_dof_rows(rm.rails)
-        s["q_shift"] = -(g @ phi_r.T) / rm.omega**2
-        s["q_shift_dot"] = -(s["g_dot"][()] @ phi_r.T) / rm.omega**2
-        s["q_shift_ddot"] = -(s["g_ddot"][()] @ phi_r.T) / rm.omega**2
+        for suffix, g in zip(("", "_dot", "_ddot"), static):
+            s["g" + suffix] = g
+            s["q_shift" + suffix] = -(g @ phi_r.T) / rm.omega**2
+        s["residual_omega"] = res.omega
+        s["residual_vectors"] = res.vectors
         s.attrs["basis_file"] = "static.h5"
         s.attrs["basis"] = "static/translation"
 

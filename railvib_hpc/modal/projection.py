@@ -16,6 +16,11 @@ rank 0 writes; attribute ``modes_sha256`` ties it to ``modes.h5``):
 * ``/mass/<group>``, ``/stiffness/<group>`` (m, m): ``Phi^T M_g Phi``, ``Phi^T K_g Phi`` of
   every material group of :func:`~.energy.material_groups` (per-material Rayleigh).
 
+With ``mbs.static_correction`` the basis is ``[Phi, X]``: the modes followed by the static
+fields of the rail DOFs (:mod:`.static`), so every part is (m + n_r, m + n_r) and the
+multibody stage can damp the residual vectors of the static correction consistently
+(:func:`railvib_hpc.mbs.static_correction.residual_damping_parts`).
+
 :func:`compose_damping` builds ``D`` for a case from them (pure numpy): Rayleigh
 ``alpha I + beta Lambda`` (exact for mass-normalised modes), or ``sum_g alpha_g
 Phi^T M_g Phi + beta_g Phi^T K_g Phi``, plus the dashpots and, with ``damping.pads``, the
@@ -34,8 +39,9 @@ from ..config import Case
 PARTS = ("dashpots", "pads")
 
 
-def read_phi_rows(modes_path: Path, dofmap, rank: int, m: int) -> np.ndarray:
-    """This rank's DOF rows (n_local, m) of the first ``m`` modes of ``modes.h5``.
+def read_phi_rows(modes_path: Path, dofmap, rank: int, m: int | None) -> np.ndarray:
+    """This rank's DOF rows (n_local, m) of the first ``m`` modes of ``modes.h5`` (all of
+    them for None).
 
     The inverse of :func:`railvib_hpc.modal.stage.node_arrays`: translations and rotations
     of the owned nodes mapped to their global DOF numbers.
@@ -53,6 +59,7 @@ def read_phi_rows(modes_path: Path, dofmap, rank: int, m: int) -> np.ndarray:
         index = f["dofs/index"][()]
         if not np.array_equal(index, dofmap.index):
             raise ValueError(f"{modes_path} was computed with another DOF numbering")
+        m = f["modes/eigenvalue"].shape[0] if m is None else m
         trans = f["modes/translation"][:m, nodes, :]
         rot_nodes = f["mesh/rotation_nodes"][()]
         lo, hi = np.searchsorted(rot_nodes, [nodes.start, nodes.stop])
@@ -104,12 +111,14 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
 
 
 def damping_key(case: Case, modes_sha: str) -> str:
-    """Key of ``modal_damping.h5``: the content digest of the modes it projects on and the
-    case keys of the damping matrix's parts (faces, pads, materials, [damping])."""
+    """Key of ``modal_damping.h5``: the content digest of the modes it projects on, the
+    case keys of the damping matrix's parts (faces, pads, materials, [damping]) and whether
+    the static fields of the rail DOFs are projected too (``mbs.static_correction``)."""
     from ..io.stage_files import digest
 
     return digest({"modes.h5": modes_sha,
-                   "case": case.digest("boundary", "pads", "materials", "damping")})
+                   "case": case.digest("boundary", "pads", "materials", "damping"),
+                   "static_columns": bool(case["mbs.static_correction"])})
 
 
 def write_damping_parts(path: Path, parts: dict[str, np.ndarray], modes_sha: str) -> None:

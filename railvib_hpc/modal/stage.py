@@ -32,7 +32,7 @@ from .projection import (
     read_phi_rows,
     write_damping_parts,
 )
-from .static import rail_load_dofs, solve_static, unit_loads, write_static
+from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -176,14 +176,20 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
                  f"'{case['modal.out_of_core']}')")
     with rep.stage("strain energies"):
         energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
+    x_static = result.static
+    x_mass = None
+    if want_static:
+        if x_static is None:
+            with rep.stage("static solves"):
+                x_static = solve_static(K, M, comm, static_rhs)
+        x_def, x_mass = residual_mass(M, result.phi, x_static, free, load_dofs.size, comm)
     parts = None
     if want_damping:
         with rep.stage("projected damping"):
-            parts = project_damping_parts(mesh, case, dofmap, comm, K, result.phi)
-    x_static = result.static
-    if want_static and x_static is None:
-        with rep.stage("static solves"):
-            x_static = solve_static(K, M, comm, static_rhs)
+            basis = result.phi if not want_static else np.hstack([result.phi, x_def])
+            parts = project_damping_parts(mesh, case, dofmap, comm, K, basis)
+    if want_static:
+        del x_def
     K.destroy()
     M.destroy()
     with rep.stage("write modes"):
@@ -229,7 +235,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
                                                                    "modes.h5": modes_sha}), comm)
             on_root(lambda: forget(static_path), comm)
             write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table,
-                         sattrs)
+                         sattrs, x_mass)
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary
@@ -291,6 +297,9 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
     with rep.stage("static solves"):
         try:
             x_static = solve_static(K, M, comm, rhs)
+            phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, None)
+            x_mass = residual_mass(M, phi, x_static, free, load_dofs.size, comm)[1]
+            del phi
         finally:
             K.destroy()
             M.destroy()
@@ -299,7 +308,8 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
         attrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
                                                               "modes.h5": modes_sha}), comm)
         on_root(lambda: forget(static_path), comm)
-        write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs)
+        write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs,
+                     x_mass)
     rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
              "rail DOFs (static correction)")
 
@@ -310,8 +320,16 @@ def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key:
     with rep.stage("projected damping (reused modes)"):
         mesh = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[0], comm)
         dofmap = case_dofmap(mesh, case, comm.size)
-        K, _, _ = assemble(mesh, case, dofmap, comm, mass=False)
+        want_static = bool(case["mbs.static_correction"])
+        K, M, _ = assemble(mesh, case, dofmap, comm, mass=want_static)
         phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, m)
+        if want_static:           # the residual vectors' rows too (their rotations included)
+            load_dofs, _ = rail_load_dofs(mesh, dofmap)
+            rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
+            x_def = residual_mass(M, phi, solve_static(K, M, comm, rhs), free,
+                                  load_dofs.size, comm)[0]
+            phi = np.hstack([phi, x_def])
+            M.destroy()
         parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
         K.destroy()
     on_root(lambda: write_damping_parts(out_dir / "modal_damping.h5", parts, key), comm)

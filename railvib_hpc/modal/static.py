@@ -10,6 +10,10 @@ with its own factorization. Written to ``static.h5`` (collective, like
 * ``/static/rail_flexibility`` (n_r, n_r): ``K^-1`` on the rail DOFs (zero rows and
   columns for constrained DOFs, e.g. rotations fixed at the pads);
 * ``/static/translation`` (n_r, n_nodes, 3): the static displacement fields;
+* ``/static/residual_mass`` (n_r, n_r): ``X'^T M X'`` of the static fields with the
+  modes of ``modes.h5`` taken out, ``X' = X - Phi Phi^T M X`` (:func:`deflate`; the mass of
+  the residual vectors of :func:`railvib_hpc.mbs.static_correction.residual_modes`, formed
+  without the cancellation of ``X^T M X - Phi_r^T Lambda^-2 Phi_r``);
 * ``/static/load_dofs`` (n_r, 3): rail index, node (global id), component (0 w, 1 ry);
 * the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance` (its
   ``upstream_sha256`` names the ``modes.h5`` it belongs to) and ``complete``.
@@ -88,17 +92,47 @@ def rail_flexibility(x_local: np.ndarray, dofs: np.ndarray, free: np.ndarray, r0
     return 0.5 * (out + out.T)
 
 
+def static_columns(x_local: np.ndarray, free: np.ndarray, n_r: int) -> np.ndarray:
+    """This rank's rows (n_local, n_r) of the static fields in the rail-DOF ordering
+    (zero columns for constrained rail DOFs)."""
+    cols = np.zeros((x_local.shape[0], n_r))
+    cols[:, free] = x_local
+    return cols
+
+
+def deflate(M, phi: np.ndarray, cols: np.ndarray, comm: MPI.Comm) -> np.ndarray:
+    """This rank's rows of ``X' = X - Phi (Phi^T M X)``: the static fields with the
+    (mass-normalised) modes taken out, M-orthogonal to them (collective)."""
+    from mpi4py import MPI
+
+    from .block_lanczos import sparse_times_block
+
+    coef = phi.T @ sparse_times_block(M, cols, comm)
+    comm.Allreduce(MPI.IN_PLACE, coef, op=MPI.SUM)
+    return cols - phi @ coef
+
+
+def residual_mass(M, phi: np.ndarray, x_local: np.ndarray, free: np.ndarray, n_r: int,
+                  comm: MPI.Comm) -> tuple[np.ndarray, np.ndarray]:
+    """The deflated static fields (this rank's rows, rail-DOF columns) and their mass
+    ``X'^T M X'`` (n_r, n_r), the same on every rank (collective)."""
+    from .projection import project
+
+    x_def = deflate(M, phi, static_columns(x_local, free, n_r), comm)
+    return x_def, project(M, x_def, comm)
+
+
 def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, free: np.ndarray,
-                 dofs: np.ndarray, table: np.ndarray, attrs: dict) -> str:
+                 dofs: np.ndarray, table: np.ndarray, attrs: dict, mass: np.ndarray) -> str:
     """Write ``static.h5`` (collective; checked, atomic, recorded); returns its digest.
 
-    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`).
+    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`); ``mass``:
+    ``X'^T M X'`` (n_r, n_r) of :func:`residual_mass`, the same on every rank.
     """
     n_r = dofs.size
     r0 = dofmap.owned_dofs(comm.rank)[0]
     flex = rail_flexibility(x_local, dofs, free, r0, comm)
-    cols = np.zeros((x_local.shape[0], n_r))
-    cols[:, free] = x_local
+    cols = static_columns(x_local, free, n_r)
     translation, _, _, _, nodes = dofmap.node_arrays(cols, comm.rank)
     parallel = h5py_parallel_ok(comm)
     if not parallel and comm.size > 1:
@@ -110,15 +144,17 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
     def fill(f, par: bool) -> None:
         g = f.create_group("static")
         d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
+        d_m = g.create_dataset("residual_mass", (n_r, n_r), "f8")
         d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
         d_l = g.create_dataset("load_dofs", table.shape, "i8")
         if comm.rank == 0:
             d_f[...] = flex
+            d_m[...] = mass
             d_l[...] = table
         if nodes.stop > nodes.start:
             d_t[:, nodes, :] = translation
 
-    size = 8 * (n_r * mesh.n_nodes * 3 + n_r * n_r + table.size)
+    size = 8 * (n_r * mesh.n_nodes * 3 + 2 * n_r * n_r + table.size)
     return write_h5(path, comm, fill, size_hint=size, attrs=attrs, parallel=parallel,
                     check=lambda tmp: check_static(tmp, False))
 

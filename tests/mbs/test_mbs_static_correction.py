@@ -121,3 +121,87 @@ def test_contact_residual_matrix_is_symmetric_and_matches_interpolation(track):
     f = np.array([1.0, 2.0, 3.0, 4.0])
     loads = cr.loads(0, f)
     assert loads[0::2].sum() == pytest.approx(-f.sum(), rel=1e-12)
+
+
+# ------------------------------------------------------------------ residual modes
+@pytest.fixture(scope="module")
+def beam_matrices():
+    _, _, M, free = supported_beam_fe(L, N_EL, EI, RHO_A, K_PAD, A)
+    return M, free
+
+
+def deflated_mass(track, beam_matrices, m):
+    """``X'^T M X'`` of the static fields of every rail DOF (both rails) with the m kept
+    modes taken out on the full vectors (what ``static.h5`` and the stage form)."""
+    from railvib_hpc.mbs.static_correction import kept_residual_mass, rail_dof_rows
+
+    M, free = beam_matrices
+    _, omega_all, full, kinv = track
+    fi = np.flatnonzero(free >= 0)
+    mfull = np.zeros_like(kinv)
+    mfull[np.ix_(fi, fi)] = M
+    phi = full                                     # every mode of the "file"
+    xd = kinv - phi @ (phi.T @ mfull @ kinv)       # deflated by all modes: zero here
+    one = xd.T @ mfull @ xd
+    n = one.shape[0]
+    mass_file = np.zeros((2 * n, 2 * n))
+    mass_file[:n, :n] = mass_file[n:, n:] = one
+    omega_file, rails_file, _ = rails_of(track, omega_all.size)
+    keep = np.r_[np.arange(m), omega_all.size + np.arange(m)]
+    rest = np.setdiff1d(np.arange(omega_file.size), keep)
+    rows = rail_dof_rows(rails_file)
+    return kept_residual_mass(mass_file, rows[rest], omega_file[rest])
+
+
+def test_residual_modes_are_the_modes_left_out(track, beam_matrices):
+    """Every DOF of this track is a rail DOF: the residual modes of m kept modes are exactly
+    the other modes (frequencies to round-off, amplified by the condition number of K)."""
+    from railvib_hpc.mbs.static_correction import residual_modes
+    from railvib_hpc.tolerances import EPS
+
+    _, omega_all, _, kinv = track
+    cond = (omega_all[-1] / omega_all[0]) ** 2
+    for m in (5, 20):
+        omega, rails, x_rr = rails_of(track, m)
+        res = residual_modes(x_rr, deflated_mass(track, beam_matrices, m), rails, omega)
+        expect = np.sort(np.concatenate([omega_all[m:], omega_all[m:]]))
+        assert res.omega.size == expect.size
+        # relative error of the frequencies: eps * cond(K) * n from the static solve and
+        # from the modes, in each of the two cancellations (flexibility and mass)
+        np.testing.assert_allclose(res.omega, expect, rtol=4 * EPS * cond * kinv.shape[0])
+        assert res.omega.min() >= omega.max()
+
+
+def test_residual_modes_keep_the_static_flexibility(track, beam_matrices):
+    from railvib_hpc.mbs.static_correction import rail_dof_rows, residual_modes
+
+    omega, rails, x_rr = rails_of(track, 10)
+    res = residual_modes(x_rr, deflated_mass(track, beam_matrices, 10), rails, omega)
+    phi = rail_dof_rows(rails)
+    total = (phi / omega[:, None] ** 2).T @ phi + (res.rows / res.omega**2) @ res.rows.T
+    np.testing.assert_allclose(total, x_rr, rtol=0, atol=1e-9 * np.abs(x_rr).max())
+    # the appended rails carry the residual modes' rows
+    both = res.rails(rails)
+    assert both[0].phi_w.shape == (omega.size + res.omega.size, rails[0].x_nodes.size)
+
+
+def test_rolling_wheel_with_residual_modes_equals_all_modes(track, beam_matrices):
+    """A wheelset rolling at 30 m/s over the discrete pads: 10 modes + residual modes give
+    the same contact force as all 478 modes per rail (the same basis), where the massless,
+    undamped residual flexibility does not."""
+    from railvib_hpc.mbs.static_correction import residual_modes
+
+    veh = SuspendedWheelset(k_suspension=0.0)
+    run = dict(x0=4.0, speed=30.0, t_end=0.04, dt=2e-5)
+    omega, rails, x_rr = rails_of(track, 10)
+    res = residual_modes(x_rr, deflated_mass(track, beam_matrices, 10), rails, omega)
+    aug = simulate_vehicle(np.concatenate([omega, res.omega]), 0.03, res.rails(rails), veh,
+                           **run)
+    m_all = track[1].size
+    omega_all, rails_all, _ = rails_of(track, m_all)
+    ref = simulate_vehicle(omega_all, 0.03, rails_all, veh, **run)
+    scale = float(np.abs(ref.contact_force).max())
+    np.testing.assert_allclose(aug.contact_force, ref.contact_force, rtol=0, atol=1e-6 * scale)
+    massless = simulate_vehicle(omega, 0.03, rails, veh, residual=residual_flexibility(
+        x_rr, rails, omega), **run)
+    assert np.abs(massless.contact_force - ref.contact_force).max() > 1e-3 * scale

@@ -112,3 +112,36 @@ def test_modal_stage_writes_the_projected_parts_and_mbs_integrates_them(tmp_path
         assert dm.shape == (30, 30)
         assert zeta == pytest.approx(np.diag(dm) / (2 * om), rel=1e-12)
         assert np.all(np.isfinite(f["modal/q"][()]))
+
+
+def test_static_correction_with_full_damping_damps_the_residual_modes(tmp_path):
+    """``modal.damping = 'full'`` with the static correction: the parts are projected on the
+    modes and the deflated static fields, rebuilt the same from reused modes, and the
+    multibody stage runs the modes with the residual modes (above the band), coupled."""
+    args = ["--out", str(tmp_path), "--set", "mesh.refinement=0.25", "--set",
+            "modal.n_modes=20", "--set", "modal.damping=full", "--set",
+            "mbs.static_correction=true", "--set", "boundary.base=absorbing", "--set",
+            "vehicle.x_start=2.7", "--set", "vehicle.x_end=4.2"]
+    assert run(["modal", str(BASELINE), *args]) == 0
+    with h5py.File(tmp_path / "static.h5", "r") as f:
+        n_r = f["static/rail_flexibility"].shape[0]
+        mass = f["static/residual_mass"][()]
+    assert np.all(np.linalg.eigvalsh(mass) > -1e-9 * np.abs(mass).max())
+    with h5py.File(tmp_path / "modal_damping.h5", "r") as f:
+        dash = f["dashpots"][()]
+    assert dash.shape == (20 + n_r, 20 + n_r)
+    (tmp_path / "modal_damping.h5").unlink()
+    assert run(["modal", str(BASELINE), *args]) == 0
+    with h5py.File(tmp_path / "modal_damping.h5", "r") as f:
+        again = f["dashpots"][()]
+    assert np.abs(again - dash).max() <= 1e-8 * np.abs(dash).max()
+    for n_modes in (20, 12):                     # all modes of the file, and fewer
+        assert run(["mbs", str(BASELINE), *args, "--set", f"mbs.n_modes={n_modes}"]) == 0
+        with h5py.File(tmp_path / "mbs.h5", "r") as f:
+            om = f["modal/omega"][()]
+            res_om = f["static/residual_omega"][()]
+            assert f["modal/damping_matrix"].shape == (n_modes, n_modes)
+            assert res_om.size > 0 and res_om.min() >= om.max()
+            assert np.all(np.isfinite(f["static/g_ddot"][()]))
+            force = f["wheels/contact_force"][()]
+        assert np.all(np.isfinite(force)) and force.max() < 3 * force[0].max()

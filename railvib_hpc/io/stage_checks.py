@@ -267,6 +267,34 @@ def check_static(path: Path, full: bool = True, context: Mapping[str, Any] | Non
     return out
 
 
+def check_modal_damping(path: Path, full: bool = True,
+                        context: Mapping[str, Any] | None = None) -> list[str]:
+    """``modal_damping.h5``: the dashpot and pad parts, every part square, symmetric and
+    finite, all of one size."""
+    with _h5(path) as f:
+        missing = _need(f, ("dashpots", "pads"))
+        if missing:
+            return missing
+        parts: dict = {}
+        f.visititems(lambda name, obj: parts.__setitem__(name, obj)
+                     if hasattr(obj, "shape") else None)
+        size = f["dashpots"].shape
+        out: list[str] = []
+        for name, d in parts.items():
+            if d.ndim != 2 or d.shape[0] != d.shape[1] or d.shape != size:
+                out.append(f"{name} has shape {d.shape}, the dashpots {size}")
+                break
+            if full:
+                a = d[()]
+                out += nonfinite(name, a)
+                if not out and not np.allclose(a, a.T, rtol=1e-8,
+                                               atol=1e-12 * float(np.abs(a).max() or 1)):
+                    out.append(f"{name} is not symmetric")
+                if out:
+                    break
+    return out
+
+
 # ----------------------------------------------------------------------------- mbs.h5
 def rail_amplitude(modes_path: Path, m: int) -> np.ndarray:
     """(m,) largest modal amplitude at the rails: translation plus element length times
@@ -480,7 +508,8 @@ def check_checkpoint(path: Path, full: bool = True, context: Mapping[str, Any] |
 
 #: The data check of each stage file (by table name).
 CHECKS = {"mesh.h5": check_mesh, "modes.h5": check_modes, "static.h5": check_static,
-          "mbs.h5": check_mbs, "fields.h5": check_fields, "probes.h5": check_probes,
+          "modal_damping.h5": check_modal_damping, "mbs.h5": check_mbs,
+          "fields.h5": check_fields, "probes.h5": check_probes,
           "transient.h5": check_transient, "transient:fields.h5": check_fields,
           "transient:probes.h5": check_probes, "transient_checkpoint.h5": check_checkpoint}
 

@@ -19,8 +19,10 @@ modes.h5         modal        + materials, sections, pads, modal (without  mesh.
                               damping settings, ``modal.out_of_core``
                               and the band split), boundary
 static.h5        modal        as modes.h5                                 mesh.h5, modes.h5
+modal_damping.h5 modal        + pads, [damping], mbs.static_correction    mesh.h5, modes.h5
 mbs.h5           mbs          + damping settings, [damping], vehicle,     modes.h5
-                              irregularity (and its file), mbs            (static.h5)
+                              irregularity (and its file), mbs            (static.h5,
+                                                                          modal_damping.h5)
 fields.h5        reconstruct  + output.dt, window, float32,               modes.h5, mbs.h5
                               static_correction_rates                     (static.h5)
 probes.h5        reconstruct  + output.window, probes,                    modes.h5, mbs.h5
@@ -341,6 +343,10 @@ MODAL_ONLY_EXCLUDED = ("damping_ratio", "damping", *MODAL_SOLVER_LAYOUT)
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
                   ("boundary", ()))
+#: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
+#: dashpots and the layers of [damping] (the ratios only enter when composed, but the
+#: whole section is kept for safety), and whether the static fields are projected too.
+_MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()), ("mbs.static_correction", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
                 ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
                 ("vehicle", ()), ("irregularity", ()), ("mbs", ()))
@@ -409,7 +415,9 @@ STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
               ("mesh.file",)),
     StageFile("modes.h5", "modal", 2, _MODAL, ("mesh.h5",), ("modes.xdmf",), ("mesh.file",)),
     StageFile("static.h5", "modal", 2, _MODAL, ("mesh.h5", "modes.h5"), (), ("mesh.file",)),
-    StageFile("mbs.h5", "mbs", 2, _MBS, ("modes.h5", "static.h5"), (),
+    StageFile("modal_damping.h5", "modal", 2, _MODAL_DAMPING, ("mesh.h5", "modes.h5"), (),
+              ("mesh.file",)),
+    StageFile("mbs.h5", "mbs", 2, _MBS, ("modes.h5", "static.h5", "modal_damping.h5"), (),
               ("mesh.file", "irregularity.file")),
     StageFile("fields.h5", "reconstruct", 2, _FIELDS, ("modes.h5", "mbs.h5", "static.h5"),
               ("fields.xdmf",), ("mesh.file", "irregularity.file")),

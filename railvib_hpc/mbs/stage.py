@@ -53,6 +53,7 @@ from ..errors import DataError, ResourceError, UserError
 from ..io.stage_checks import (
     check_mbs,
     check_mbs_arrays,
+    check_modal_damping,
     check_modes,
     check_static,
     rail_amplitude,
@@ -144,16 +145,16 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     MBSInputError
         Without a ``modal_damping.h5`` of these modes and settings.
     """
-    from ..io.stage_files import file_digest
-    from ..modal.projection import damping_key, read_damping_parts
+    from ..io.stage_checks import check_modal_damping
+    from ..modal.projection import read_damping_parts
 
-    path = Path(modes_path).with_name("modal_damping.h5")
-    # the key the modal stage wrote: the modes' content digest and the damping keys
-    parts = read_damping_parts(path, damping_key(case, file_digest(modes_path).sha256))
-    if parts is None:
-        raise MBSInputError(f"modal.damping = 'full' needs {path} of these modes: rerun "
-                            "'railvib modal' with modal.damping = 'full'")
-    return parts
+    out_dir = Path(modes_path).parent
+    if not (out_dir / "modal_damping.h5").exists():
+        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / 'modal_damping.h5'}: "
+                            "run 'railvib modal' with modal.damping = 'full' first")
+    require_inputs(out_dir, ("modes.h5", "modal_damping.h5"), case,
+                   {"modes.h5": check_modes, "modal_damping.h5": check_modal_damping})
+    return read_damping_parts(out_dir / "modal_damping.h5")
 
 
 def _override_diagonal(case: Case, d: np.ndarray, omega: np.ndarray, m: int) -> np.ndarray:
@@ -332,7 +333,8 @@ def check_context(case: Case, out_dir: Path) -> dict:
 
 def input_files(case: Case) -> tuple[str, ...]:
     """The stage files ``mbs.h5`` is computed from."""
-    return ("modes.h5", "static.h5") if case["mbs.static_correction"] else ("modes.h5",)
+    return (("modes.h5",) + (("static.h5",) if case["mbs.static_correction"] else ())
+            + (("modal_damping.h5",) if case["modal.damping"] == "full" else ()))
 
 
 def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
@@ -347,8 +349,13 @@ def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
             and not (out_dir / "static.h5").exists():
         raise MBSInputError(f"mbs.static_correction = true needs {out_dir / 'static.h5'}: "
                             "run 'railvib modal' with mbs.static_correction = true first")
+    if case["modal.damping"] == "full" and (out_dir / "modes.h5").exists() \
+            and not (out_dir / "modal_damping.h5").exists():
+        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / 'modal_damping.h5'}: "
+                            "run 'railvib modal' with modal.damping = 'full' first")
     verdicts = require_inputs(out_dir, input_files(case), case,
-                              {"modes.h5": check_modes, "static.h5": check_static})
+                              {"modes.h5": check_modes, "static.h5": check_static,
+                               "modal_damping.h5": check_modal_damping})
     return {n: v.sha256 for n, v in verdicts.items()}
 
 

@@ -9,7 +9,8 @@ C of the full-order model (:func:`~.petsc.assemble_damping`, the same ``[damping
 
 So that changing the damping ratios or frequencies reuses the modes, ``modal_damping.h5``
 stores the projected *parts* of C, which do not depend on them (collective computation,
-rank 0 writes; attribute ``modes_sha256`` ties it to ``modes.h5``):
+rank 0 writes; a stage file of :data:`railvib_hpc.io.stage_files.STAGE_FILES`: provenance
+with the content digest of the ``modes.h5`` it projects on, checked atomic write, record):
 
 * ``/dashpots`` (m, m): ``Phi^T C_dashpots Phi`` of the absorbing faces;
 * ``/pads`` (m, m): ``Phi^T C_pads Phi`` of the rail pads' dashpots (``pads.c*``);
@@ -110,46 +111,33 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
     return out
 
 
-def damping_key(case: Case, modes_sha: str) -> str:
-    """Key of ``modal_damping.h5``: the content digest of the modes it projects on, the
-    case keys of the damping matrix's parts (faces, pads, materials, [damping]) and whether
-    the static fields of the rail DOFs are projected too (``mbs.static_correction``)."""
-    from ..io.stage_files import digest
+def write_damping_parts(path: Path, parts: dict[str, np.ndarray], attrs: dict) -> str:
+    """Write ``modal_damping.h5`` (rank 0; checked, atomic, recorded); returns its digest.
 
-    return digest({"modes.h5": modes_sha,
-                   "case": case.digest("boundary", "pads", "materials", "damping"),
-                   "static_columns": bool(case["mbs.static_correction"])})
+    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`, upstream
+    ``mesh.h5`` and ``modes.h5``).
+    """
+    from ..io.stage_checks import check_modal_damping
+    from ..io.stage_files import write_h5
 
-
-def write_damping_parts(path: Path, parts: dict[str, np.ndarray], modes_sha: str) -> None:
-    """Write ``modal_damping.h5`` atomically (rank 0)."""
-    import h5py
-
-    from ..io.stage_files import atomic_file
-
-    with atomic_file(path) as tmp, h5py.File(tmp, "w") as f:
+    def fill(f, parallel: bool) -> None:
         for name, value in parts.items():
             f.create_dataset(name, data=value)
-        f.attrs["modes_sha256"] = modes_sha
-        f.attrs["complete"] = 1
+
+    size = sum(int(v.nbytes) for v in parts.values())
+    return write_h5(path, None, fill, size_hint=size, attrs=attrs,
+                    check=lambda tmp: check_modal_damping(tmp, True))
 
 
-def read_damping_parts(path: Path, modes_sha: str) -> dict[str, np.ndarray] | None:
-    """The parts of a complete ``modal_damping.h5`` belonging to these modes, else None."""
+def read_damping_parts(path: Path) -> dict[str, np.ndarray]:
+    """Every projected part of a ``modal_damping.h5`` (verified by the caller)."""
     import h5py
 
-    if not path.exists():
-        return None
-    try:
-        with h5py.File(path, "r") as f:
-            if int(f.attrs.get("complete", 0)) != 1 or f.attrs.get("modes_sha256") != modes_sha:
-                return None
-            out = {}
-            f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                         if hasattr(obj, "shape") else None)
-            return out
-    except OSError:
-        return None
+    out: dict[str, np.ndarray] = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
+                     if hasattr(obj, "shape") else None)
+    return out
 
 
 def compose_damping(case: Case, parts: dict[str, np.ndarray], omega: np.ndarray) -> np.ndarray:

@@ -13,7 +13,13 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
-from ..io.stage_checks import check_eigenvalues, check_mode_shapes, check_modes, check_static
+from ..io.stage_checks import (
+    check_eigenvalues,
+    check_modal_damping,
+    check_mode_shapes,
+    check_modes,
+    check_static,
+)
 from ..io.stage_files import ensure_space, examine, forget, output_lock, provenance
 from ..io.xdmf import ensure_views
 from ..log import Reporter
@@ -25,13 +31,7 @@ from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
-from .projection import (
-    damping_key,
-    project_damping_parts,
-    read_damping_parts,
-    read_phi_rows,
-    write_damping_parts,
-)
+from .projection import project_damping_parts, read_phi_rows, write_damping_parts
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
@@ -130,10 +130,16 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
 
             if not on_root(static_ok, comm):
                 _static_only(case, out_dir, comm, rep, modes_sha)
-        if want_damping and not on_root(
-                lambda: read_damping_parts(damping_path, damping_key(case, modes_sha))
-                is not None, comm):
-            _damping_only(case, out_dir, comm, rep, damping_key(case, modes_sha), len(f))
+        if want_damping:
+            def damping_ok() -> bool:
+                v = examine(damping_path, "modal_damping.h5", case,
+                            data_check=check_modal_damping)
+                if not v.ok and v.kind != "missing":
+                    rep.info(f"recomputing {damping_path}: {v.reason}")
+                return v.ok
+
+            if not on_root(damping_ok, comm):
+                _damping_only(case, out_dir, comm, rep, modes_sha, len(f))
         return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                 **json.loads(stats)}
 
@@ -225,8 +231,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
     if parts is not None:
-        on_root(lambda: write_damping_parts(damping_path, parts, damping_key(case, modes_sha)),
-                comm)
+        _write_damping(case, damping_path, comm, parts, mesh_sha, modes_sha)
         rep.info(f"wrote {damping_path}: Phi^T C Phi of the dashpots, pads and materials "
                  "(modal.damping = 'full')")
     if want_static:
@@ -314,11 +319,23 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
              "rail DOFs (static correction)")
 
 
-def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key: str,
+def _write_damping(case: Case, path: Path, comm: MPI.Comm, parts: dict, mesh_sha: str,
+                   modes_sha: str) -> None:
+    """Write ``modal_damping.h5`` on rank 0 (a stage file: provenance, checked, atomic)."""
+    def write() -> None:
+        forget(path)
+        write_damping_parts(path, parts, provenance("modal_damping.h5", case,
+                                                    {"mesh.h5": mesh_sha,
+                                                     "modes.h5": modes_sha}))
+
+    on_root(write, comm)
+
+
+def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes_sha: str,
                   m: int) -> None:
     """modal_damping.h5 for reused modes: assemble again, read the modes' rows, project."""
     with rep.stage("projected damping (reused modes)"):
-        mesh = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[0], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
         dofmap = case_dofmap(mesh, case, comm.size)
         want_static = bool(case["mbs.static_correction"])
         K, M, _ = assemble(mesh, case, dofmap, comm, mass=want_static)
@@ -332,7 +349,7 @@ def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, key:
             M.destroy()
         parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
         K.destroy()
-    on_root(lambda: write_damping_parts(out_dir / "modal_damping.h5", parts, key), comm)
+    _write_damping(case, out_dir / "modal_damping.h5", comm, parts, mesh_sha, modes_sha)
     rep.info(f"wrote {out_dir / 'modal_damping.h5'} (modal.damping = 'full')")
 
 

@@ -145,3 +145,27 @@ def test_static_correction_with_full_damping_damps_the_residual_modes(tmp_path):
             assert np.all(np.isfinite(f["static/g_ddot"][()]))
             force = f["wheels/contact_force"][()]
         assert np.all(np.isfinite(force)) and force.max() < 3 * force[0].max()
+
+
+def test_modal_damping_file_is_a_stage_file(tmp_path, capsys):
+    """``modal_damping.h5`` carries provenance: a changed ``[damping]`` recomputes it (the
+    modes are reused), and ``mbs`` refuses one of other settings in one line, exit code 2."""
+    args = ["--out", str(tmp_path), "--set", "mesh.refinement=0.25", "--set",
+            "modal.n_modes=12", "--set", "modal.damping=full", "--set",
+            "boundary.base=absorbing", "--set", "vehicle.x_start=2.7", "--set",
+            "vehicle.x_end=4.2"]
+    assert run(["modal", str(BASELINE), *args]) == 0
+    with h5py.File(tmp_path / "modal_damping.h5", "r") as f:
+        assert f.attrs["railvib_file"] == "modal_damping.h5" and f.attrs["complete"] == 1
+        pads = f["pads"][()]
+    capsys.readouterr()
+    assert run(["modal", str(BASELINE), *args, "--set", "damping.f1=3.0"]) == 0
+    out = capsys.readouterr().out
+    assert f"reusing {tmp_path / 'modes.h5'}" in out
+    assert f"recomputing {tmp_path / 'modal_damping.h5'}" in out and "damping.f1" in out
+    with h5py.File(tmp_path / "modal_damping.h5", "r") as f:
+        np.testing.assert_allclose(f["pads"][()], pads, rtol=1e-9, atol=1e-12 * abs(pads).max())
+    # mbs with the first settings: the parts on disk belong to damping.f1 = 3
+    assert run(["mbs", str(BASELINE), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "modal_damping.h5" in err[0] and "Traceback" not in err[0]

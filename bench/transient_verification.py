@@ -246,6 +246,17 @@ def section_de(path: Path, label: str) -> list[str]:
                    + " |")
     out.append("| max over the building probes | | | "
                + " | ".join(f"{100 * r['max_building']:.1f} %" for r in rows) + " |")
+    if all("in_band_deviation" in r for r in rows):
+        out += ["", "In-band check, the whole modal chain against the direct solution where the "
+                "modes are complete: a_z of both low-passed (zero phase, Butterworth order 8) at "
+                "0.8 x the modal band:", "",
+                "| probe | " + " | ".join(f"{r['n_modes']}"
+                                          f"{' + corr.' if r['static_correction'] else ''} "
+                                          f"(< {r['in_band_hz']:.1f} Hz)" for r in rows) + " |",
+                "|---|" + "---|" * len(rows)]
+        for p in rows[0]["in_band_deviation"]:
+            out.append(f"| {p} | " + " | ".join(f"{100 * r['in_band_deviation'][p]:+.1f} %"
+                                                 for r in rows) + " |")
     out += ["", "Share of the direct solution's building acceleration energy below each modal "
             "band:", ""]
     for r in rows:

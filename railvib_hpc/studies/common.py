@@ -84,7 +84,7 @@ RESULT_NAME = "result.json"
 FAILED_NAME = "failed.json"
 SHARED_DIR = "model"
 #: Files of the shared model linked into each variant folder.
-SHARED_FILES = ("modes.h5", "static.h5")
+SHARED_FILES = ("modes.h5", "static.h5", "modal_damping.h5")
 
 
 class StudyError(UserError):

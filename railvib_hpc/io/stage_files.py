@@ -19,7 +19,7 @@ modes.h5         modal        + materials, sections, pads, modal (without  mesh.
                               damping settings, ``modal.out_of_core``
                               and the band split), boundary
 static.h5        modal        as modes.h5                                 mesh.h5, modes.h5
-modal_damping.h5 modal        + pads, [damping], mbs.static_correction    mesh.h5, modes.h5
+modal_damping.h5 modal        + pads, [damping]                           mesh.h5, modes.h5
 mbs.h5           mbs          + damping settings, [damping], vehicle,     modes.h5
                               irregularity (and its file), mbs            (static.h5,
                                                                           modal_damping.h5)
@@ -344,9 +344,10 @@ _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
                   ("boundary", ()))
 #: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
-#: dashpots and the layers of [damping] (the ratios only enter when composed, but the
-#: whole section is kept for safety), and whether the static fields are projected too.
-_MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()), ("mbs.static_correction", ()))
+#: dashpots and [damping] (the ratios only enter when composed, but the whole section is
+#: kept for safety). Whether the static fields are projected too is in the file's shape:
+#: one with them serves a run without the static correction as well.
+_MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
                 ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
                 ("vehicle", ()), ("irregularity", ()), ("mbs", ()))

@@ -134,6 +134,9 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
             def damping_ok() -> bool:
                 v = examine(damping_path, "modal_damping.h5", case,
                             data_check=check_modal_damping)
+                if v.ok and want_static and damping_size(damping_path) <= len(f):
+                    v.ok, v.reason = False, ("it holds the modes only (mbs.static_correction "
+                                             "= true needs the static fields projected too)")
                 if not v.ok and v.kind != "missing":
                     rep.info(f"recomputing {damping_path}: {v.reason}")
                 return v.ok
@@ -317,6 +320,12 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
                      x_mass)
     rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
              "rail DOFs (static correction)")
+
+
+def damping_size(path: Path) -> int:
+    """Size of the basis ``modal_damping.h5`` is projected on (modes, + static fields)."""
+    with h5py_file(path) as f:
+        return int(f["dashpots"].shape[0])
 
 
 def _write_damping(case: Case, path: Path, comm: MPI.Comm, parts: dict, mesh_sha: str,

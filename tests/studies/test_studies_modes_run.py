@@ -45,3 +45,21 @@ def test_modes_study_shares_the_modes_and_resumes(shared_tmp, capsys):
         res = json.loads((root / "n4_modal" / "result.json").read_text())
         assert res["model"]["modes_used"] == 4 and res["model"]["modes_in_file"] == 8
     comm.Barrier()
+
+
+@pytest.mark.mpi
+def test_modes_study_with_the_full_damping_matrix(shared_tmp, capsys):
+    """modal.damping = 'full' (absorbing faces): every variant reads the shared
+    modal_damping.h5, with and without the residual modes."""
+    out = shared_tmp / "full"
+    args = ["study", "modes", str(BASELINE), *TINY, "--out", str(out),
+            "--set", "modal.damping=full", "--set", "boundary.base=absorbing",
+            "--set", "boundary.virtual_thickness=20", "--study-set", "n_modes=[4, 8]"]
+    assert run(args) == 0
+    text = capsys.readouterr().out
+    if comm.rank == 0:
+        assert "modes study: 4 of 4 variants finished" in text
+        for name in ("n4_modal", "n4_corrected", "n8_modal", "n8_corrected"):
+            link = out / "modes" / name / "modal_damping.h5"
+            assert link.is_symlink() and os.readlink(link) == "../model/modal_damping.h5"
+    comm.Barrier()

@@ -231,8 +231,8 @@ def section_de(path: Path, label: str) -> list[str]:
            + (" (the bench reused that result)" if d["wall_s"] < s["time_integration"] else
               f" ({d['wall_s']:.0f} s wall, {d['peak_rss_gb']:.2f} GB)")
            + "; modal: `railvib "
-           f"study modes` with modal.damping = 'rayleigh' (the direct solution's damping in "
-           f"modal coordinates) ({data['modal_wall_s']:.0f} s wall). Peak accelerations of the "
+           "study modes` with the direct solution's damping in modal coordinates "
+           f"({data['modal_wall_s']:.0f} s wall). Peak accelerations of the "
            "direct solution and the modal runs' differences from them:", ""]
     rows = data["modal"]
     probes = list(d["peaks"])
@@ -286,6 +286,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--thesis", type=Path, help="direct_vs_modal.json at thesis size")
     p.add_argument("--coarse", type=Path, help="direct_vs_modal.json of the coarse model")
+    p.add_argument("--absorbing", type=Path, help="direct_vs_modal.json of the coarse model "
+                   "with absorbing faces (modal.damping = 'full')")
     p.add_argument("--out", type=Path, default=ROOT / "docs" / "verification" / "transient.md")
     args = p.parse_args()
     from railvib_hpc.petsc_env import init_petsc
@@ -299,7 +301,8 @@ def main() -> None:
              "(a)-(c) are `tests/transient/test_verification.py` (serial and 2 ranks).", ""]
     lines += section_a() + section_b() + section_c()
     for path, label in ((args.thesis, "thesis model, refinement 1"),
-                        (args.coarse, "coarse model, refinement 0.5")):
+                        (args.coarse, "coarse model, refinement 0.5"),
+                        (args.absorbing, "coarse model, absorbing faces")):
         if path is not None and path.exists():
             lines += section_de(path, label)
     lines.append(f"_Generated in {time.perf_counter() - t0:.0f} s by "

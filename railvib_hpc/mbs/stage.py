@@ -145,7 +145,6 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     MBSInputError
         Without a ``modal_damping.h5`` of these modes and settings.
     """
-    from ..io.stage_checks import check_modal_damping
     from ..modal.projection import read_damping_parts
 
     out_dir = Path(modes_path).parent

@@ -1116,6 +1116,16 @@ def _sync_h5(comm, error: BaseException | None, what: str, folder: Path) -> None
         raise error
 
 
+def _sync_or_remove(comm, error: BaseException | None, what: str, folder: Path,
+                    tmp: Path) -> None:
+    """:func:`_sync_h5`, removing the temporary file ``tmp`` when any rank failed."""
+    try:
+        _sync_h5(comm, error, what, folder)
+    except BaseException:
+        _remove(comm, tmp)
+        raise
+
+
 def _remove(comm, tmp: Path) -> None:
     if comm is None or comm.rank == 0:
         with contextlib.suppress(OSError):
@@ -1144,11 +1154,7 @@ def start_h5(tmp: str | os.PathLike, comm, *, size_hint: int, what: str) -> None
             reserve(tmp, needed_bytes(size_hint))
         except BaseException as exc:
             error = exc
-    try:
-        _sync_h5(comm, error, f"writing {tmp.parent / what}", tmp.parent)
-    except BaseException:
-        _remove(comm, tmp)
-        raise
+    _sync_or_remove(comm, error, f"writing {tmp.parent / what}", tmp.parent, tmp)
 
 
 def commit_h5(tmp: str | os.PathLike, path: str | os.PathLike, comm, *,
@@ -1180,11 +1186,7 @@ def commit_h5(tmp: str | os.PathLike, path: str | os.PathLike, comm, *,
             _fsync_dir(path.parent)
         except BaseException as exc:
             error = exc
-    try:
-        _sync_h5(comm, error, f"writing {path}", path.parent)
-    except BaseException:
-        _remove(comm, tmp)
-        raise
+    _sync_or_remove(comm, error, f"writing {path}", path.parent, tmp)
     if not record:
         return ""
     return record_file(path, comm)

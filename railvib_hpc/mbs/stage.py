@@ -359,8 +359,9 @@ def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
 
 
 def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
-                    n_wheels: int, n_r: int, out_dir: Path, run_modes) -> None:
-    """An empty passage, too many steps or too little memory: one clear error first."""
+                    n_wheels: int, n_r: int, out_dir: Path, run_modes) -> float:
+    """An empty passage, too many steps or too little memory: one clear error first.
+    Returns the time step (``mbs.dt`` or the automatic one)."""
     from .results import kept_steps
 
     if t_end <= 0:
@@ -390,6 +391,7 @@ def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
     check_memory(need, f"the multibody run ({nt:.3g} steps, {kept:.3g} stored)",
                  "shorten vehicle.t_after, use a larger mbs.dt or mbs.store_every")
     ensure_space(out_dir, need / 2, f"mbs.h5 ({kept:.3g} stored steps)")
+    return dt
 
 
 def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
@@ -452,9 +454,8 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
                  f"{res.omega[0] / (2 * np.pi) if res.omega.size else 0:.1f} - "
                  f"{res.omega[-1] / (2 * np.pi) if res.omega.size else 0:.4g} Hz, added to "
                  f"the {m} modes")
-    _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m, len(offsets),
-                    n_r, out_dir, run_modes)
-    dt = case["mbs.dt"] or _auto_step(case, rm, run_modes, vehicle)
+    dt = _passage_checks(case, rm, vehicle, t_end if travel > 0 else 0.0, x_end, m,
+                         len(offsets), n_r, out_dir, run_modes)
     t_read = time.perf_counter() - t0
     t_run = time.perf_counter()
     label = "mbs: time integration"
@@ -516,13 +517,19 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
     """The residual modes of the static correction, the rail modes with them appended
     and the damping of both (:mod:`.static_correction`)."""
+    import h5py
+
     from .modal_input import RailModes, read_rail_modes
     from .static_correction import kept_residual_mass, rail_dof_rows, residual_modes
 
     x_rr, mass_file = _read_static(out_dir, n_r)
     m = rm.omega.size
-    every = read_rail_modes(out_dir / "modes.h5")        # the modes not kept, too
-    rest_rows, omega_rest = rail_dof_rows(every.rails)[m:], every.omega[m:]
+    with h5py.File(out_dir / "modes.h5", "r") as f:
+        m_file = f["modes/eigenvalue"].shape[0]
+    rest_rows, omega_rest = np.zeros((0, n_r)), np.zeros(0)
+    if m_file > m:                                        # the rail rows of the modes not kept
+        every = read_rail_modes(out_dir / "modes.h5")
+        rest_rows, omega_rest = rail_dof_rows(every.rails)[m:], every.omega[m:]
     res = residual_modes(x_rr, kept_residual_mass(mass_file, rest_rows, omega_rest),
                          rm.rails, rm.omega)
     k = res.omega.size

@@ -38,6 +38,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "jobs" / "thesis_baseline.toml"
+#: ``modal.band_modes`` that makes the automatic split one band (more modes than any run has)
+ONE_BAND_MODES = 10**7
 
 
 def run(out: Path, ranks: int, sets: list[str], petsc: list[str], timeout: float) -> dict:
@@ -95,7 +97,10 @@ def main() -> None:
                     help="numbers of bands (Weyl split); 0 = automatic (modal.band_modes)")
     ap.add_argument("--groups", type=int, default=1)
     ap.add_argument("--reference", nargs="*", default=[],
-                    choices=["slepc-slicing", "single-shift", "krylovschur"])
+                    choices=["slepc-slicing", "single-shift", "krylovschur", "eigsh"],
+                    help="reference solvers on the same matrix; eigsh = scipy's ARPACK with "
+                         "SuperLU shift-invert, serial (bench/modal_bench.py's worker), for the "
+                         "mode count of the first run")
     ap.add_argument("--set", action="append", default=[], dest="extra")
     ap.add_argument("--petsc", nargs="*", default=[])
     ap.add_argument("--timeout", type=float, default=3600)
@@ -108,12 +113,18 @@ def main() -> None:
     configs = []
     for nb in args.bands:
         sets = [*base, f"modal.f_max={args.f_max!r}", f"modal.band_groups={args.groups}"]
-        if nb > 0:
+        if nb == 1:
+            # no inner edges would mean "automatic" (modal.band_modes per band): one band
+            # is asked for by a band_modes above any mode count
+            sets.append(f"modal.band_modes={ONE_BAND_MODES}")
+        elif nb > 1:
             edges = weyl_edges(0.0, args.f_max, nb)
             sets.append(f"modal.bands={json.dumps(edges)}")
         configs.append((f"bands {'auto' if nb == 0 else nb}, groups {args.groups}", sets))
     ref_counts = None
     for ref in args.reference:
+        if ref == "eigsh":
+            continue                      # run after the PETSc configurations, below
         if ref == "slepc-slicing":
             configs.append(("SLEPc spectrum slicing", [*base, f"modal.f_max={args.f_max!r}",
                                                        "modal.method=krylovschur"]))
@@ -164,6 +175,27 @@ def main() -> None:
                       f"{st.get('predicted_peak_gb', 0):.2f} GB, after freeing "
                       f"{st.get('rss_after_free_gb', float('nan')):.2f} GB, peak so far "
                       f"{st.get('peak_rss_gb', 0):.2f} GB -->", flush=True)
+    if "eigsh" in args.reference:
+        if ref_lam is None:
+            print("| scipy eigsh | not run: no PETSc run gave the mode count |")
+            return
+        print(f"| scipy eigsh | {eigsh_row(args.refinement, ref_lam, args.timeout)}", flush=True)
+
+
+def eigsh_row(refinement: float, ref_lam: np.ndarray, timeout: float) -> str:
+    """The table row of scipy's ``eigsh`` for ``len(ref_lam)`` modes of the same case."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from modal_bench import run_scipy
+
+    r = run_scipy(repr(refinement), len(ref_lam), timeout)
+    if "error" in r:
+        return f"failed: {r['error'].strip().splitlines()[-1]} |"
+    lam = np.asarray(r["eigenvalues"])
+    diff = np.abs(lam / ref_lam - 1).max()
+    f = np.sqrt(lam) / (2 * np.pi)
+    return (f"serial | {len(lam)} ({f[0]:.3f}-{f[-1]:.3f} Hz) | 1 | {r['wall']:.1f} | "
+            f"{r['eigsh']:.1f} | (SuperLU, in eigsh) | | | | | | {r['peak_rss_gb']:.2f} | | "
+            f"{diff:.1e} |")
 
 
 if __name__ == "__main__":

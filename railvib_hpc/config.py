@@ -24,7 +24,15 @@ import tomllib
 
 from .errors import CaseError
 from .io.stage_files import digest, hash_file
-from .schema import PRESETS, SCHEMA, Param, iter_params
+from .schema import (
+    MAX_SOIL_LAYERS,
+    PRESETS,
+    SCHEMA,
+    SOIL_LAYER_KEYS,
+    SOIL_LAYER_PARTS,
+    Param,
+    iter_params,
+)
 
 ALL_KEYS: dict[str, Param] = dict(iter_params())
 #: Shortest wavelength of the FRA spectra's fitted range (5 ft; Hamid et al., FRA 1980) [m].
@@ -339,12 +347,119 @@ def _check_list(key: str, param: Param, value: Any, problems: list) -> Any:
     return out
 
 
+#: Damping ratio of a soil layer that gives none (the materials' default).
+SOIL_LAYER_DAMPING_RATIO = 0.03
+
+
+def _check_layers(key: str, value: Any, problems: list) -> Any:
+    """The ``layers`` kind: a list of tables (:data:`~railvib_hpc.schema.SOIL_LAYER_KEYS`).
+
+    Returns the entries with floats, ``damping_ratio`` filled in; E stays as given (the
+    derived layer properties are :func:`soil_layers`).
+    """
+    allowed = ", ".join(SOIL_LAYER_KEYS)
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        problems.append((key, value, "expected a list of tables ([[soil.layers]] with "
+                         f"{allowed})"))
+        return value
+    if len(value) > MAX_SOIL_LAYERS:
+        problems.append((key, f"{len(value)} layers", f"at most {MAX_SOIL_LAYERS} layers"))
+        return value
+    out = []
+    n_before = len(problems)
+    for k, entry in enumerate(value):
+        where = f"{key}[{k + 1}]"
+        unknown = sorted(set(entry) - set(SOIL_LAYER_KEYS))
+        if unknown:
+            problems.append((f"{where}.{unknown[0]}", entry[unknown[0]],
+                             f"unknown key; allowed: {allowed}"))
+        for name, (required, _) in SOIL_LAYER_KEYS.items():
+            if required and name not in entry:
+                problems.append((f"{where}.{name}", None,
+                                 f"missing ({SOIL_LAYER_KEYS[name][1]})"))
+        if ("E" in entry) == ("c_s" in entry):
+            problems.append((f"{where}.E", entry.get("E"),
+                             "give exactly one of E (Pa) and c_s (m/s)"))
+        layer = {"damping_ratio": SOIL_LAYER_DAMPING_RATIO}
+        for name, v in entry.items():
+            if name not in SOIL_LAYER_KEYS:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+                problems.append((f"{where}.{name}", v, f"expected a number: "
+                                 f"{SOIL_LAYER_KEYS[name][1]}"))
+                continue
+            v = float(v)
+            last = k == len(value) - 1
+            bad = {"thickness": not (v > 0 or (last and v == 0)),
+                   "nu": not 0.0 <= v < 0.5, "damping_ratio": not 0.0 <= v < 1.0,
+                   }.get(name, not v > 0)
+            if bad:
+                problems.append((f"{where}.{name}", v, SOIL_LAYER_KEYS[name][1]))
+            layer[name] = v
+        out.append(layer)
+    if not value:
+        return []
+    return value if len(problems) > n_before else out
+
+
+def soil_layers(case: Case) -> list[dict[str, float]]:
+    """The case's soil layers, top down, with ``E``, ``c_s``, ``nu``, ``rho``, ``damping_ratio``,
+    ``thickness`` and their levels ``z_top``, ``z_bottom`` (m; the last one ends at the base).
+
+    Empty for a homogeneous subgrade (``soil.layers = []``).
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case, soil_layers
+    >>> case = Case.defaults().replace({"soil.layers": [
+    ...     {"thickness": 2.0, "c_s": 150.0, "nu": 0.3, "rho": 1800.0},
+    ...     {"thickness": 0.0, "E": 4e8, "nu": 0.25, "rho": 2000.0}]})
+    >>> [(round(x["z_top"], 2), round(x["z_bottom"], 2), round(x["c_s"], 1)) for x in
+    ...  soil_layers(case)]
+    [(4.8, 2.8, 150.0), (2.8, 0.0, 282.8)]
+    >>> round(soil_layers(case)[0]["E"] / 1e6, 1)  # 2 rho c_s^2 (1 + nu), in MPa
+    105.3
+    """
+    out = []
+    z = case["geometry.z1"]
+    base = case["geometry.z0"] - case["domain.extra_depth"]
+    layers = case["soil.layers"]
+    for k, entry in enumerate(layers):
+        layer = dict(entry)
+        nu, rho = layer["nu"], layer["rho"]
+        if "c_s" in layer:
+            layer["E"] = 2.0 * rho * layer["c_s"] ** 2 * (1.0 + nu)
+        else:
+            layer["c_s"] = math.sqrt(layer["E"] / (2.0 * (1.0 + nu) * rho))
+        bottom = z - layer["thickness"]
+        if k == len(layers) - 1 and layer["thickness"] == 0.0:
+            bottom = base
+        layer.update(z_top=z, z_bottom=bottom, part=SOIL_LAYER_PARTS[k])
+        out.append(layer)
+        z = bottom
+    return out
+
+
+def solid_material(case: Case, name: str) -> dict[str, float]:
+    """``E``, ``nu``, ``rho``, ``damping_ratio`` of a material: ``materials.<name>``, or a
+    soil layer's (``name`` = ``soil_layer_<k>``, :func:`soil_layers`)."""
+    if name in SOIL_LAYER_PARTS:
+        layers = soil_layers(case)
+        k = SOIL_LAYER_PARTS.index(name)
+        if k >= len(layers):
+            raise KeyError(f"{name}: the case gives {len(layers)} soil layer(s)")
+        return {key: layers[k][key] for key in ("E", "nu", "rho", "damping_ratio")}
+    return case[f"materials.{name}"]
+
+
 def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
     """Type-check and convert one value; append problems; return the converted value."""
     unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
     kind = param.kind
     if kind in ("floats", "ints", "bools", "strs", "triples"):
         return _check_list(key, param, value, problems)
+    if kind == "layers":
+        return _check_layers(key, value, problems)
     if kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             problems.append((key, value, f"expected a number{unit} ({param.doc})"))
@@ -394,7 +509,11 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         flat[key] = value
     for key in list(flat):
         if key not in ALL_KEYS:
-            problems.append((key, flat.pop(key), _did_you_mean(key)))
+            table = next((k for k, prm in ALL_KEYS.items()
+                          if prm.kind == "layers" and key.startswith(k + ".")), None)
+            hint = (f"{table} is a list of tables: write [[{table}]] (double brackets), one "
+                    "per layer" if table else _did_you_mean(key))
+            problems.append((key, flat.pop(key), hint))
 
     preset = flat.get("case.preset", ALL_KEYS["case.preset"].default)
     data = defaults()
@@ -625,6 +744,39 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_mbs(case))
     out.extend(check_studies(case["study"]))
     out.extend(_check_dynamics(case))
+    out.extend(_check_soil(case))
+    return out
+
+
+def _check_soil(case: Case) -> list[tuple[str, Any, str]]:
+    """The wavelength sizing needs its frequency; the soil layers must reach the base of the
+    model and start above it (a ``mesh.file`` brings its own layer parts, named
+    ``soil_layer_<k>``, and is not checked)."""
+    out = []
+    if case["mesh.elements_per_wavelength"] > 0 and not case["mesh.wavelength_hz"] > 0:
+        out.append(("mesh.elements_per_wavelength", case["mesh.elements_per_wavelength"],
+                    "needs mesh.wavelength_hz > 0 (the frequency whose shear wavelengths the "
+                    "soil elements must resolve)"))
+    layers = case["soil.layers"]
+    if not layers or case["mesh.file"]:
+        return out
+    depth = case["geometry.z1"] - (case["geometry.z0"] - case["domain.extra_depth"])
+    slack = 1e-9 * max(depth, 1.0)
+    total = sum(x["thickness"] for x in layers)
+    if layers[-1]["thickness"] > 0 and total < depth - slack:
+        out.append(("soil.layers", f"{len(layers)} layer(s), {total:g} m thick",
+                    f"do not reach the base: it lies {depth:g} m below the ground "
+                    "(geometry.z1 - geometry.z0 + domain.extra_depth); make the last layer "
+                    "thicker or give it thickness = 0 (down to the base)"))
+        return out
+    top = 0.0
+    for k, x in enumerate(layers[:-1]):
+        top += x["thickness"]
+        if top >= depth - slack:
+            out.append((f"soil.layers[{k + 2}]", f"starts {top:g} m deep",
+                        f"lies below the base ({depth:g} m below the ground): remove it or "
+                        "make the layers above thinner"))
+            break
     return out
 
 
@@ -774,6 +926,8 @@ def dumps_toml(tree: dict[str, Any]) -> str:
             return repr(v)
         if isinstance(v, list):
             return "[" + ", ".join(scalar(x) for x in v) + "]"
+        if isinstance(v, dict):          # a table in a list: [[soil.layers]] as inline tables
+            return "{" + ", ".join(f"{k} = {scalar(x)}" for k, x in v.items()) + "}"
         return str(v)
 
     def walk(node: dict[str, Any], path: str) -> None:

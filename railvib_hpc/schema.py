@@ -82,15 +82,38 @@ def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
     }
 
 
-#: Parts of the model, in the order of their part ids (id = index + 1).
+#: Most soil layers a case may give (``[[soil.layers]]``); each is a part of its own.
+MAX_SOIL_LAYERS = 8
+#: Parts of the layered soil, top down (they replace ``subgrade`` when layers are given).
+SOIL_LAYER_PARTS = tuple(f"soil_layer_{k}" for k in range(1, MAX_SOIL_LAYERS + 1))
+#: Parts of the model, in the order of their part ids (id = index + 1); the soil layers come
+#: last so that the thesis's part ids stay what they were.
 PARTS: tuple[str, ...] = (
     "rail", "rigid_rail", "sleeper", "pad_x", "pad_y", "pad_z",
     "ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
+    *SOIL_LAYER_PARTS,
 )
-SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall")
+SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
+               *SOIL_LAYER_PARTS)
+BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
+#: Material of each solid part: ``materials.<name>``, or the soil layer of the same name
+#: (:func:`railvib_hpc.config.solid_material`).
+SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
+                  **{p: "concrete" for p in BUILDING_PARTS}, **{p: p for p in SOIL_LAYER_PARTS}}
+#: The soil parts (absorbing faces may cut only these).
+SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS)
+#: Keys of one ``[[soil.layers]]`` entry: (required, meaning). Exactly one of E and c_s.
+SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
+    "thickness": (True, "thickness in m (> 0; the last layer may give 0: down to the base)"),
+    "E": (False, "Young's modulus in Pa (> 0; or c_s)"),
+    "c_s": (False, "shear-wave speed in m/s (> 0; or E): E = 2 rho c_s^2 (1 + nu)"),
+    "nu": (True, "Poisson's ratio (0 <= nu < 0.5)"),
+    "rho": (True, "density in kg/m^3 (> 0)"),
+    "damping_ratio": (False, "damping ratio (0 <= x < 1; default 0.03), used by "
+                             "modal.damping = 'strain_energy' and damping.model = 'per_material'"),
+}
 BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
 PAD_PARTS = ("pad_x", "pad_y", "pad_z")
-BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
 #: Roles of probe points, carried as metadata from where a probe is defined (the mesh
 #: layout's named probes, ``output.probe_roles`` for the user's): ``floor`` a floor slab
@@ -253,6 +276,34 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "layer_elements": Param(1, "int", "-",
                                 "layout 'refined': elements through each of the ballast and "
                                 "subballast layers", "pos"),
+        "elements_per_wavelength": Param(0.0, "float", "-",
+                                         "if > 0: soil element sizes at most c_S / (f n) "
+                                         "(f = mesh.wavelength_hz, which must then be > 0; "
+                                         "n this value): vertically "
+                                         "per soil layer, horizontally for the softest soil; "
+                                         "0: the layout's sizes. A warning names every soil "
+                                         "part whose elements resolve the band with fewer "
+                                         "(mesh.min_elements_per_wavelength)", "nonneg"),
+        "wavelength_hz": Param(0.0, "float", "Hz",
+                               "frequency the soil mesh must resolve: sizes with "
+                               "mesh.elements_per_wavelength, and the mesh check (0: the check "
+                               "uses modal.f_max when > 0, else none)", "nonneg"),
+        "min_elements_per_wavelength": Param(6.0, "float", "-",
+                                             "fewest linear elements per shear wavelength at "
+                                             "mesh.wavelength_hz before the mesh stage warns "
+                                             "(the frequency error of trilinear hexahedra with "
+                                             "consistent mass is (k h)^2 / 24: 4.6 % at 6, "
+                                             "1.6 % at 10)",
+                                             "pos"),
+    },
+    "soil": {
+        "layers": Param([], "layers", "-",
+                        "horizontal soil layers from the ground level (geometry.z1) down, as "
+                        "[[soil.layers]] tables with thickness, E or c_s, nu, rho and "
+                        "damping_ratio; they replace materials.subgrade below the ground; the "
+                        "layers must reach the base (geometry.z0 - domain.extra_depth), the "
+                        "last may give thickness = 0 (down to the base); [] = one homogeneous "
+                        "subgrade (the thesis)"),
     },
     "domain": {
         "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),

@@ -14,8 +14,14 @@ __all__ = ["wave_arrival", "wave_speeds"]
 
 
 def wave_speeds(case: Case) -> tuple[float, float]:
-    """P- and S-wave speeds of the subgrade [m/s]."""
-    e, nu, rho = (case[f"materials.subgrade.{k}"] for k in ("E", "nu", "rho"))
+    """P- and S-wave speeds of the subgrade [m/s]; of the top soil layer when the soil is
+    layered (``soil.layers``: the path along the surface; a head wave through a stiffer
+    layer below can arrive earlier at a distance)."""
+    from ..config import soil_layers, solid_material
+
+    layers = soil_layers(case)
+    mat = solid_material(case, layers[0]["part"] if layers else "subgrade")
+    e, nu, rho = (mat[k] for k in ("E", "nu", "rho"))
     c_p = math.sqrt(e * (1 - nu) / (rho * (1 + nu) * (1 - 2 * nu)))
     c_s = math.sqrt(e / (2 * rho * (1 + nu)))
     return c_p, c_s

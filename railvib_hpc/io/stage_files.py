@@ -334,7 +334,12 @@ def record_file(path: Path, comm=None) -> str:
 #: A selection of case keys: (dotted prefix, leaf names left out below it).
 Selection = tuple[tuple[str, tuple[str, ...]], ...]
 
-_MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("domain", ()))
+#: The mesh: its geometry and divisions, the soil layers, and the soils' E, nu, rho (the
+#: wavelength sizing, mesh.elements_per_wavelength, reads their shear-wave speeds).
+_SOIL_WAVE_SPEED = ("damping_ratio",)
+_MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("domain", ()),
+         ("soil", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
+         ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).
 MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, soil_layers, solid_material
 
 _TOL = 1e-9
 
@@ -108,6 +108,26 @@ class Layout:
 
 def _ndiv(length: float, size: float, refinement: float) -> int:
     return max(1, int(round(length * refinement / size - 1e-9)))
+
+
+def resolved_frequency(case: Case) -> float:
+    """The frequency the soil mesh must resolve: ``mesh.wavelength_hz``, else ``modal.f_max``
+    (0: none)."""
+    return case["mesh.wavelength_hz"] or case["modal.f_max"]
+
+
+def shear_wave_speed(mat: dict[str, float]) -> float:
+    """``c_S = sqrt(E / (2 (1 + nu) rho))`` of a material's ``E``, ``nu``, ``rho``."""
+    return float(np.sqrt(mat["E"] / (2.0 * (1.0 + mat["nu"]) * mat["rho"])))
+
+
+def wavelength_size(case: Case, material: str) -> float:
+    """Largest element size that keeps ``mesh.elements_per_wavelength`` elements per shear
+    wavelength of ``material`` at ``mesh.wavelength_hz`` (inf: no wavelength sizing)."""
+    n, f = case["mesh.elements_per_wavelength"], case["mesh.wavelength_hz"]
+    if n <= 0 or f <= 0:
+        return float("inf")
+    return shear_wave_speed(solid_material(case, material)) / (f * n)
 
 
 #: Divisions of the APDL script (Appendix A) that differ from the ``mesh`` keys' defaults,
@@ -184,12 +204,28 @@ def build_layout(case: Case) -> Layout:
     ny = np.array([(ydiv_thesis if thesis else ydiv)(y0, y1)
                    for y0, y1 in zip(yb[:-1], yb[1:])])
 
+    # --- soil layers (top down) and wavelength sizing (mesh.elements_per_wavelength)
+    layers = soil_layers(case)
+    soils = [x["part"] for x in layers] or ["subgrade"]
+    h_soft = min(wavelength_size(case, name) for name in (*soils, "ballast", "subballast"))
+    if np.isfinite(h_soft):        # horizontally: the softest soil (one grid for all layers)
+        nx = np.maximum(nx, np.ceil(np.diff(xb) * r / h_soft - 1e-9).astype(int))
+        ny = np.maximum(ny, np.ceil(np.diff(yb) * r / h_soft - 1e-9).astype(int))
+
+    def soil_part(z: float) -> str:
+        """The soil part at level ``z`` below the ground."""
+        for x in layers:
+            if z > x["z_bottom"]:
+                return x["part"]
+        return layers[-1]["part"] if layers else "subgrade"
+
     # --- z levels
     zbot = g["z0"] - d["extra_depth"]
     fh, bd, st = b["footing_height"], b["beam_depth"], b["slab_thickness"]
     zbb = g["zbb"]
-    below = _merge([zbot, g["z0"], zbb, zbb + fh, zbb + fh + bd, g["z1"]])
-    below = below[below <= g["z1"] + _TOL]
+    interfaces = [x["z_bottom"] for x in soil_layers(case)[:-1]]
+    below = _merge([zbot, g["z0"], zbb, zbb + fh, zbb + fh + bd, g["z1"], *interfaces])
+    below = below[(below <= g["z1"] + _TOL) & (below >= zbot - _TOL)]
     embank = [g["z1"], g["z2"], g["z3"]]
     above = _merge([g["z1"], zbb + b["z_slab1_base"] - bd, zbb + b["z_slab1_base"],
                     zbb + b["z_slab1_base"] + st, zbb + b["z_slab2_base"] - bd,
@@ -206,10 +242,18 @@ def build_layout(case: Case) -> Layout:
             size = THESIS_DIVISIONS["vertical_soil"]
         else:
             size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
-        zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, size, r)
-    layers = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
-    for z0, z1 in zip(embank[:-1], embank[1:]):
-        zdiv[zkey(z0, z1)] = max(1, round(layers * r))
+        n = _ndiv(z1 - z0, size, r)
+        h_wave = wavelength_size(case, soil_part(0.5 * (z0 + z1)))
+        if np.isfinite(h_wave):    # vertically: the layer's own wavelength
+            n = max(n, int(np.ceil((z1 - z0) * r / h_wave - 1e-9)))
+        zdiv[zkey(z0, z1)] = n
+    n_layer = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
+    for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), ("subballast", "ballast")):
+        n = max(1, round(n_layer * r))
+        h_wave = wavelength_size(case, part)
+        if np.isfinite(h_wave):
+            n = max(n, int(np.ceil((z1 - z0) * r / h_wave - 1e-9)))
+        zdiv[zkey(z0, z1)] = n
     for z0, z1 in zip(above[:-1], above[1:]):
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
 
@@ -255,7 +299,7 @@ def build_layout(case: Case) -> Layout:
                 if in_plan and zc > zbb:
                     part = building_part(xc - g["xbb"], yc - g["ybb"], zc - zbb)
                 else:
-                    part = "subgrade"
+                    part = soil_part(zc)
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if abs(yc) < toe:

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..fem.reference import hex_volumes
-from ..schema import PART_ID, PARTS
+from ..schema import PART_ID, PARTS, SOIL_LAYER_PARTS
 
 #: For each hex corner, its three edge neighbours in right-handed order.
 _CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
@@ -53,10 +53,12 @@ class Mesh:
         return len(self.points)
 
     def counts_per_part(self) -> dict[str, int]:
-        """Number of elements in each part (parts with no elements are listed with 0)."""
+        """Number of elements in each part (the thesis's parts with no elements are listed with
+        0, soil layers only when present)."""
         hex_counts = np.bincount(self.hex_part, minlength=len(PARTS) + 1)
         line_counts = np.bincount(self.line_part, minlength=len(PARTS) + 1)
-        return {p: int(hex_counts[PART_ID[p]] + line_counts[PART_ID[p]]) for p in PARTS}
+        counts = {p: int(hex_counts[PART_ID[p]] + line_counts[PART_ID[p]]) for p in PARTS}
+        return {p: n for p, n in counts.items() if n or p not in SOIL_LAYER_PARTS}
 
     def nodes_per_part(self) -> dict[str, int]:
         """Number of distinct nodes used by each part."""
@@ -65,7 +67,8 @@ class Mesh:
             pid = PART_ID[p]
             conn = np.concatenate([self.hexes[self.hex_part == pid].ravel(),
                                    self.lines[self.line_part == pid].ravel()])
-            out[p] = int(np.unique(conn).size)
+            if conn.size or p not in SOIL_LAYER_PARTS:
+                out[p] = int(np.unique(conn).size)
         return out
 
     def hex_volumes(self) -> np.ndarray:

@@ -16,7 +16,7 @@ from ..io.stage_files import examine, forget, output_lock, provenance, write_tex
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory
-from ..schema import PART_ID, PARTS
+from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
 from .gmsh_model import generate, read_msh
 from .layout import Layout, build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
@@ -80,6 +80,44 @@ def quality_warnings(quality: dict, tol: float) -> list[str]:
     return out
 
 
+def wavelength_warnings(quality: dict, case: Case) -> list[str]:
+    """One warning per soil part whose longest element edge resolves the shear wavelength at
+    :func:`~railvib_hpc.mesh.layout.resolved_frequency` with fewer than
+    ``mesh.min_elements_per_wavelength`` elements (none when no frequency is set)."""
+    from ..config import solid_material
+    from .layout import resolved_frequency, shear_wave_speed
+
+    f = resolved_frequency(case)
+    need = case["mesh.min_elements_per_wavelength"]
+    if f <= 0:
+        return []
+    key = "mesh.wavelength_hz" if case["mesh.wavelength_hz"] else "modal.f_max"
+    out = []
+    for part, h in quality.get("max_edge_per_soil_part", {}).items():
+        try:
+            c_s = shear_wave_speed(solid_material(case, SOLID_MATERIAL[part]))
+        except KeyError:          # a layer part in a user's mesh that the case does not give
+            continue
+        per = c_s / f / h
+        if per < need:
+            out.append(f"{key} = {f:g} Hz is under-resolved in {part}: c_S {c_s:.4g} m/s, "
+                       f"wavelength {c_s / f:.3g} m, elements up to {h:.3g} m = {per:.2g} per "
+                       f"wavelength < mesh.min_elements_per_wavelength = {need:g}; refine "
+                       "(mesh.elements_per_wavelength, mesh.refinement) or lower the band")
+    return out
+
+
+def max_edge_per_soil_part(mesh: Mesh) -> dict[str, float]:
+    """Longest hexahedron edge of every soil part present (m)."""
+    longest = mesh.edge_lengths().max(axis=1) if len(mesh.hexes) else np.zeros(0)
+    out = {}
+    for part in SOIL_PARTS:
+        sel = mesh.hex_part == PART_ID[part]
+        if sel.any():
+            out[part] = float(longest[sel].max())
+    return out
+
+
 def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     """Generate the model with gmsh (or read ``mesh.file``) and attach the probe points.
 
@@ -113,6 +151,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     quality["duplicate_nodes"] = mesh.duplicate_nodes()
     quality["unused_nodes"] = mesh.unused_nodes()
     quality["nonconformal_faces"] = nonconformal_faces(mesh)
+    quality["max_edge_per_soil_part"] = max_edge_per_soil_part(mesh)
     timings["quality"] = time.perf_counter() - t0
     if quality["n_inverted"]:
         raise MeshError(f"mesh has {quality['n_inverted']} inverted hexahedra (non-positive "
@@ -121,7 +160,8 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
     report = {
         "source": source,
         "quality": quality,
-        "warnings": quality_warnings(quality, case["modal.tol"]),
+        "warnings": (quality_warnings(quality, case["modal.tol"])
+                     + wavelength_warnings(quality, case)),
         "elements_per_part": mesh.counts_per_part(),
         "nodes_per_part": mesh.nodes_per_part(),
         "volume_per_part": mesh.volume_per_part(),
@@ -192,6 +232,8 @@ def format_report(report: dict) -> str:
     q = report["quality"]
     lines = [f"{'part':<12} {'elements':>9} {'nodes':>9} {'volume [m3]':>12}"]
     for p in PARTS:
+        if p not in report["elements_per_part"]:       # a soil layer the model does not have
+            continue
         vol = report["volume_per_part"].get(p)
         lines.append(f"{p:<12} {report['elements_per_part'][p]:>9d} "
                      f"{report['nodes_per_part'][p]:>9d} "
@@ -246,7 +288,8 @@ def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
             report = json.loads(report_path.read_text())
             reporter.info(f"reusing {h5} (same mesh inputs)")
             report["reused"] = True
-            report["warnings"] = quality_warnings(report["quality"], case["modal.tol"])
+            report["warnings"] = (quality_warnings(report["quality"], case["modal.tol"])
+                                  + wavelength_warnings(report["quality"], case))
             _print_warnings(report, reporter)
             return mesh, report, verdict.sha256
         except (OSError, KeyError, ValueError) as exc:

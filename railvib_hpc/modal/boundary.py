@@ -30,18 +30,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, solid_material
 from ..errors import UserError
 from ..fem.boundary import face_impedance, wave_speeds
 from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
-from ..schema import BOUNDARY_FACES, PART_ID, PARTS
+from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_PARTS
 from .dofmap import COMPONENTS
 from .elements import SOLID_MATERIAL
 
-#: Soil parts: an absorbing face must have one of these behind every element face.
-SOIL_PARTS = ("ballast", "subballast", "subgrade")
 #: Normal displacement component of each face (roller).
 _NORMAL = {"x_min": "ux", "x_max": "ux", "y_min": "uy", "y_max": "uy", "base": "uz"}
 
@@ -161,11 +159,10 @@ def absorbing_faces(mesh: Mesh, case: Case) -> dict[str, FaceElements]:
 
 def _material_arrays(case: Case, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """Per-face (E, nu, rho) of the solid behind it."""
-    names = [SOLID_MATERIAL[PARTS[int(p) - 1]] for p in part]
-    e = np.array([case[f"materials.{m}.E"] for m in names], dtype=float)
-    nu = np.array([case[f"materials.{m}.nu"] for m in names], dtype=float)
-    rho = np.array([case[f"materials.{m}.rho"] for m in names], dtype=float)
-    return e, nu, rho
+    mats = {int(p): solid_material(case, SOLID_MATERIAL[PARTS[int(p) - 1]])
+            for p in np.unique(part)}
+    return tuple(np.array([mats[int(p)][k] for p in part], dtype=float)
+                 for k in ("E", "nu", "rho"))
 
 
 def boundary_node_blocks(mesh: Mesh, case: Case, kind: str

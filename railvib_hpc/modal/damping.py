@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, solid_material
 from .elements import PADS
 
 
@@ -51,7 +51,8 @@ def material_rayleigh(case: Case, groups: Sequence[str]) -> dict[str, tuple[floa
     """``{group: (alpha_g, beta_g)}`` of ``damping.model = 'per_material'``."""
     out = {}
     for g in groups:
-        zeta = case["modal.damping_ratio"] if g == PADS else case[f"materials.{g}.damping_ratio"]
+        zeta = (case["modal.damping_ratio"] if g == PADS
+                else solid_material(case, g)["damping_ratio"])
         out[g] = rayleigh_coefficients(zeta, case["damping.f1"], case["damping.f2"])
     return out
 

@@ -12,16 +12,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, solid_material
 from ..fem.beam import beam_mass, beam_stiffness, shear_deformation_factors, shear_modulus
 from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
 from ..fem.spring import spring_matrices
 from ..mesh.model import Mesh
-from ..schema import BUILDING_PARTS, PART_ID
+from ..schema import PART_ID, SOLID_MATERIAL
 
-#: Material section of each solid part.
-SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
-                  **{p: "concrete" for p in BUILDING_PARTS}}
 BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
 PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
 
@@ -93,7 +90,9 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
 
     for part, mat_name in SOLID_MATERIAL.items():
         sel = np.flatnonzero(hex_sel & (mesh.hex_part == PART_ID[part]))
-        mat = case[f"materials.{mat_name}"]
+        if not len(sel):
+            continue
+        mat = solid_material(case, mat_name)
         for start in range(0, len(sel), chunk):
             conn = mesh.hexes[sel[start:start + chunk]]
             x = mesh.points[conn]
@@ -156,7 +155,8 @@ def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
         sel = hex_sel & (mesh.hex_part == PART_ID[part])
         if sel.any():
             conn = mesh.hexes[sel]
-            diag = hex8_lumped_mass_diagonal(mesh.points[conn], case[f"materials.{mat_name}.rho"])
+            diag = hex8_lumped_mass_diagonal(mesh.points[conn],
+                                             solid_material(case, mat_name)["rho"])
             out += np.bincount(conn.ravel(), weights=diag[:, 0::3].ravel(), minlength=len(out))
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
         sel = node_mask[mesh.lines].any(axis=1) & (mesh.line_part == PART_ID[part])

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, solid_material
 from ..mesh.model import Mesh
 from .dofmap import DofMap
 from .elements import PADS, material_groups
@@ -72,6 +72,6 @@ def damping_from_energies(energies: dict[str, np.ndarray], case: Case) -> np.nda
     names = list(energies)
     e = np.stack([np.asarray(energies[g], dtype=float) for g in names], axis=1)
     ratios = np.array([case["modal.damping_ratio"] if g == PADS
-                       else case[f"materials.{g}.damping_ratio"] for g in names])
+                       else solid_material(case, g)["damping_ratio"] for g in names])
     total = e.sum(axis=1)
     return (e @ ratios) / np.where(total > 0, total, 1.0)

@@ -85,10 +85,17 @@ def hex_materials(case: Case) -> dict[int, tuple[float, float]]:
     dict
         Keys are :data:`railvib_hpc.schema.PART_ID` values of the solid parts.
     """
+    from ..config import solid_material
     from ..modal.elements import SOLID_MATERIAL
 
-    return {PART_ID[part]: (float(case[f"materials.{mat}.E"]), float(case[f"materials.{mat}.nu"]))
-            for part, mat in SOLID_MATERIAL.items()}
+    out = {}
+    for part, mat in SOLID_MATERIAL.items():
+        try:
+            props = solid_material(case, mat)
+        except KeyError:              # a soil layer the case does not have
+            continue
+        out[PART_ID[part]] = (float(props["E"]), float(props["nu"]))
+    return out
 
 
 def _material_arrays(hex_part: np.ndarray, materials: Mapping[int, tuple[float, float]]

@@ -32,7 +32,7 @@ from .errors import UserError
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
 
-STUDIES = ("convergence", "modes", "reflection", "speed", "thesis")
+STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -745,6 +745,48 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(check_studies(case["study"]))
     out.extend(_check_dynamics(case))
     out.extend(_check_soil(case))
+    out.extend(_check_measures(case))
+    return out
+
+
+def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
+    """The trench and the wave-impeding block: sizes given, inside the soil, clear of the
+    embankment and the building."""
+    out: list[tuple[str, Any, str]] = []
+    g = case["geometry"]
+    toe, face = -g["ys1"], -g["ys2"]
+    soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
+    tr = case["trench"]
+    if tr["type"] != "none" or tr["width"] > 0:
+        for key in ("width", "depth"):
+            if not tr[key] > 0:
+                out.append((f"trench.{key}", tr[key], f"must be > 0 m for trench.type = "
+                            f"'{tr['type']}' (and a trench's mesh lines)"))
+        if tr["distance"] < toe - 1e-9:
+            out.append(("trench.distance", tr["distance"],
+                        f"the trench's near face must lie beyond the embankment toe "
+                        f"(|geometry.ys1| = {toe:g} m from the track centreline)"))
+        elif tr["distance"] + tr["width"] > face + 1e-9:
+            out.append(("trench.width", tr["width"],
+                        f"the trench (from {tr['distance']:g} to "
+                        f"{tr['distance'] + tr['width']:g} m) would cut through the building: "
+                        f"its face is at |geometry.ys2| = {face:g} m"))
+        if tr["depth"] >= soil_depth - 1e-9:
+            out.append(("trench.depth", tr["depth"],
+                        f"must be less than the soil depth ({soil_depth:g} m to the base)"))
+    wib = case["wib"]
+    if wib["type"] != "none" or wib["width"] > 0:
+        for key in ("width", "thickness"):
+            if not wib[key] > 0:
+                out.append((f"wib.{key}", wib[key], f"must be > 0 m for wib.type = "
+                            f"'{wib['type']}' (and the block's mesh lines)"))
+        if wib["width"] > 2 * toe + 1e-9:
+            out.append(("wib.width", wib["width"],
+                        f"must be at most the embankment base, 2 |geometry.ys1| = {2 * toe:g} m"))
+        if wib["depth"] + wib["thickness"] >= soil_depth - 1e-9:
+            out.append(("wib.thickness", wib["thickness"],
+                        f"the block (top {wib['depth']:g} m deep) must end above the base "
+                        f"({soil_depth:g} m below the ground)"))
     return out
 
 

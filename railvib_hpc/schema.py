@@ -91,17 +91,20 @@ SOIL_LAYER_PARTS = tuple(f"soil_layer_{k}" for k in range(1, MAX_SOIL_LAYERS + 1
 PARTS: tuple[str, ...] = (
     "rail", "rigid_rail", "sleeper", "pad_x", "pad_y", "pad_z",
     "ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
-    *SOIL_LAYER_PARTS,
+    *SOIL_LAYER_PARTS, "trench_fill", "wib",
 )
+#: Mitigation measures in the soil (``[trench]``, ``[wib]``): parts of their own material.
+MEASURE_PARTS = ("trench_fill", "wib")
 SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
-               *SOIL_LAYER_PARTS)
+               *SOIL_LAYER_PARTS, *MEASURE_PARTS)
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 #: Material of each solid part: ``materials.<name>``, or the soil layer of the same name
 #: (:func:`railvib_hpc.config.solid_material`).
 SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
-                  **{p: "concrete" for p in BUILDING_PARTS}, **{p: p for p in SOIL_LAYER_PARTS}}
+                  **{p: "concrete" for p in BUILDING_PARTS}, **{p: p for p in SOIL_LAYER_PARTS},
+                  "trench_fill": "trench_fill", "wib": "wib"}
 #: The soil parts (absorbing faces may cut only these).
-SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS)
+SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS, *MEASURE_PARTS)
 #: Keys of one ``[[soil.layers]]`` entry: (required, meaning). Exactly one of E and c_s.
 SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
     "thickness": (True, "thickness in m (> 0; the last layer may give 0: down to the base)"),
@@ -201,6 +204,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "subballast": _mat(200e6, 0.20, 1850.0, "subballast"),
         "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade"),
         "concrete": _mat(31e9, 0.25, 2500.0, "concrete building"),
+        # EPS geofoam, the usual soft trench fill (EPS 20: E ~ 5 MPa, rho ~ 20 kg/m^3; the
+        # EN 14933 range 3-8 MPa)
+        "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')"),
+        # jet-grouted or cement-stabilised soil block (E 0.5-5 GPa)
+        "wib": _mat(2e9, 0.25, 2100.0, "wave-impeding block ([wib])"),
     },
     "sections": {
         "rail": {
@@ -304,6 +312,34 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "layers must reach the base (geometry.z0 - domain.extra_depth), the "
                         "last may give thickness = 0 (down to the base); [] = one homogeneous "
                         "subgrade (the thesis)"),
+    },
+    "trench": {
+        "type": Param("none", "str", "-",
+                      "mitigation: a trench along the whole soil length between the track and "
+                      "the building: open (a void), filled (materials.trench_fill) or none "
+                      "(with width > 0 the mesh keeps the trench's lines and the soil stays: "
+                      "the reference for insertion loss on the same mesh)",
+                      choices=("none", "open", "filled")),
+        "distance": Param(0.0, "float", "m",
+                          "distance from the track centreline (y = 0) to the trench's near "
+                          "face, towards the building (beyond the embankment toe |YS1|, before "
+                          "the building face |YS2|)", "nonneg"),
+        "width": Param(0.0, "float", "m", "trench width across the track", "nonneg"),
+        "depth": Param(0.0, "float", "m", "trench depth below the ground (geometry.z1)",
+                       "nonneg"),
+    },
+    "wib": {
+        "type": Param("none", "str", "-",
+                      "mitigation: a wave-impeding block (materials.wib: jet grout, stabilised "
+                      "soil) under the track along the whole soil length, or none (with "
+                      "width > 0 the mesh keeps its lines: the reference on the same mesh)",
+                      choices=("none", "block")),
+        "width": Param(0.0, "float", "m",
+                       "block width across the track, centred on it (at most the embankment "
+                       "base, 2 |YS1|)", "nonneg"),
+        "depth": Param(0.0, "float", "m", "depth of the block's top below the ground",
+                       "nonneg"),
+        "thickness": Param(0.0, "float", "m", "block thickness", "nonneg"),
     },
     "domain": {
         "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),
@@ -693,6 +729,27 @@ SCHEMA: dict[str, dict[str, Any]] = {
                             unique=True),
             "probes": _study_probes(),
         },
+        "mitigation": {
+            "measures": Param([
+                "soft_pads: pads.kz=1.2e8",
+                "open_trench: trench.type=open; trench.distance=6.0; trench.width=0.6; "
+                "trench.depth=3.0",
+                "filled_trench: trench.type=filled; trench.distance=6.0; trench.width=0.6; "
+                "trench.depth=3.0",
+                "wib: wib.type=block; wib.width=6.0; wib.depth=1.0; wib.thickness=1.0"],
+                "strs", "-",
+                "the measures, each 'name: key=value; key=value' (case overrides, TOML "
+                "values). Defaults: soft rail pads (120 kN/mm instead of the thesis's "
+                "7,000), an open and an EPS-filled trench 0.6 m wide and 3 m deep 6 m from "
+                "the track, and a 6 m wide, 1 m thick wave-impeding block 1 m under the "
+                "track", unique=True),
+            "same_mesh": Param(True, "bool", "-",
+                               "compare a measure that changes the soil geometry (trench.*, "
+                               "wib.*) with a reference on its own mesh (the same lines, no "
+                               "measure) instead of the baseline: the insertion loss is then "
+                               "the measure's, not the mesh's"),
+            "probes": _study_probes(),
+        },
         "thesis": {
             "n_modes": Param(300, "int", "-", "the thesis's mode count (mbs.n_modes of the "
                              "count variants; the band must hold at least this many)", "pos"),
@@ -786,6 +843,14 @@ SOURCES: dict[str, dict[str, str]] = {
         **{f"materials.{m}.damping_ratio": "thesis §2.1: 3 % modal damping"
            for m in ("rail", "rigid_rail", "sleeper", "ballast", "subballast", "subgrade",
                      "concrete")},
+        # mitigation materials: not in the thesis (its future work); typical values
+        **{f"materials.trench_fill.{k}": "not in the thesis: EPS geofoam EPS 20 (EN 14933, "
+           "E 3-8 MPa, rho ~20 kg/m^3), the usual soft trench fill" for k in ("E", "nu", "rho")},
+        "materials.trench_fill.damping_ratio": "not in the thesis: the 3 % of the other "
+                                               "materials",
+        **{f"materials.wib.{k}": "not in the thesis: jet-grouted / cement-stabilised soil "
+           "(E 0.5-5 GPa, rho 2000-2200 kg/m^3)" for k in ("E", "nu", "rho")},
+        "materials.wib.damping_ratio": "not in the thesis: the 3 % of the other materials",
         **{f"sections.rail.{k}": f"{_RAIL_SEC} (railvib_hpc.sections)" for k in (
             "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
         **{f"sections.sleeper.{k}": f"{_SLP_SEC} (railvib_hpc.sections)" for k in (

@@ -12,7 +12,8 @@ JOBS = Path(__file__).resolve().parents[1] / "jobs"
 CASE_FILES = sorted(JOBS.glob("*.toml"))
 #: The study each study case file is written for (jobs/README.md).
 STUDY_OF = {"mesh_convergence.toml": "convergence", "modal_truncation.toml": "modes",
-            "boundary_reflection.toml": "reflection", "speed_sweep.toml": "speed"}
+            "boundary_reflection.toml": "reflection", "speed_sweep.toml": "speed",
+            "mitigation_study.toml": "mitigation"}
 
 
 def test_the_job_files_are_all_found():
@@ -33,5 +34,6 @@ def test_study_job_file_plans_its_variants(name):
     from railvib_hpc.studies.runner import make_plan
 
     kind = STUDY_OF[name]
-    plan = make_plan(kind, load_case(JOBS / name), study_settings(kind))
+    case = load_case(JOBS / name)
+    plan = make_plan(kind, case, study_settings(kind, case=case))     # the file's own table
     assert plan.kind == kind and len(plan.variants) >= 2

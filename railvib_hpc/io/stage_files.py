@@ -338,7 +338,7 @@ Selection = tuple[tuple[str, tuple[str, ...]], ...]
 #: wavelength sizing, mesh.elements_per_wavelength, reads their shear-wave speeds).
 _SOIL_WAVE_SPEED = ("damping_ratio",)
 _MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("domain", ()),
-         ("soil", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
+         ("soil", ()), ("trench", ()), ("wib", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
          ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).

@@ -168,8 +168,14 @@ def build_layout(case: Case) -> Layout:
     xb = _merge([xmin, xmax, *sleeper_x, *(g["xbb"] + s * o for o in offs for s in (-1, 1))])
     ymin = g["ys4"] - d["extra_width"]
     hs, hg, toe = t["sleeper_length"] / 2, t["gauge"] / 2, -g["ys1"]
+    tr, wib = case["trench"], case["wib"]
+    measure_y = []
+    if tr["width"] > 0:            # the trench's faces (also with type 'none': same mesh)
+        measure_y += [-tr["distance"], -tr["distance"] - tr["width"]]
+    if wib["width"] > 0:
+        measure_y += [-wib["width"] / 2, wib["width"] / 2]
     yb = _merge([ymin, g["ys0"], -toe, toe, -hs, hs, -hg, hg,
-                 *(g["ybb"] + s * o for o in offs for s in (-1, 1))])
+                 *(g["ybb"] + s * o for o in offs for s in (-1, 1)), *measure_y])
 
     # --- divisions per interval
     h_track = sp / m["soil_elements_per_bay"]
@@ -219,11 +225,26 @@ def build_layout(case: Case) -> Layout:
                 return x["part"]
         return layers[-1]["part"] if layers else "subgrade"
 
+    def ground_part(y: float, z: float) -> str | None:
+        """The part of a block centred at ``(y, z)`` below the ground outside the building:
+        the trench (None when open), the wave-impeding block, or the soil."""
+        if tr["type"] != "none" and -tr["distance"] - tr["width"] < y < -tr["distance"] \
+                and z > g["z1"] - tr["depth"]:
+            return None if tr["type"] == "open" else "trench_fill"
+        if wib["type"] != "none" and abs(y) < wib["width"] / 2 and \
+                g["z1"] - wib["depth"] - wib["thickness"] < z < g["z1"] - wib["depth"]:
+            return "wib"
+        return soil_part(z)
+
     # --- z levels
     zbot = g["z0"] - d["extra_depth"]
     fh, bd, st = b["footing_height"], b["beam_depth"], b["slab_thickness"]
     zbb = g["zbb"]
     interfaces = [x["z_bottom"] for x in soil_layers(case)[:-1]]
+    if tr["width"] > 0:
+        interfaces.append(g["z1"] - tr["depth"])
+    if wib["width"] > 0:
+        interfaces += [g["z1"] - wib["depth"], g["z1"] - wib["depth"] - wib["thickness"]]
     below = _merge([zbot, g["z0"], zbb, zbb + fh, zbb + fh + bd, g["z1"], *interfaces])
     below = below[(below <= g["z1"] + _TOL) & (below >= zbot - _TOL)]
     embank = [g["z1"], g["z2"], g["z3"]]
@@ -299,7 +320,7 @@ def build_layout(case: Case) -> Layout:
                 if in_plan and zc > zbb:
                     part = building_part(xc - g["xbb"], yc - g["ybb"], zc - zbb)
                 else:
-                    part = soil_part(zc)
+                    part = ground_part(yc, zc)
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if abs(yc) < toe:
@@ -321,6 +342,12 @@ def build_layout(case: Case) -> Layout:
         deform[(jhi, round(z, 9))] = hw
 
     zs = zbb
+    # the ground between the embankment and the building; with a trench's lines (any type,
+    # so that a measure and its same-mesh reference share the point) in front of the
+    # trench when the middle would fall into it
+    y_mid = 0.5 * (-toe + g["ys2"])
+    if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
+        y_mid = -0.5 * (toe + tr["distance"])
     # the named probes: point and role (railvib_hpc.schema.PROBE_ROLES)
     located = {
         # top centre of the footing nearest the track, first reached by the train
@@ -334,7 +361,7 @@ def build_layout(case: Case) -> Layout:
         "slab1": ((g["xbb"], g["ybb"], zs + levels["s1t"]), "floor"),
         "slab2": ((g["xbb"], g["ybb"], zs + levels["s2t"]), "floor"),
         "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
-        "ground_mid": ((g["xbb"], 0.5 * (-toe + g["ys2"]), g["z1"]), "ground"),
+        "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
         "ground_building": ((g["xbb"], g["ys2"], g["z1"]), "ground"),
         "ground_far": ((g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]), "ground"),
         "ground_opposite": ((g["xbb"], 0.5 * (toe + g["ys0"]), g["z1"]), "ground"),

@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 #: Case sections that determine the mesh (see ``mesh.h5`` in
 #: :data:`railvib_hpc.io.stage_files.STAGE_FILES`).
-MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain")
+MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain", "soil", "trench", "wib")
 #: Memory per hexahedron while gmsh meshes and the mesh is extracted: 0.7 kB measured on the
 #: thesis model (52,056 hexahedra: +29 MB over 8,556), times 3 for the quality checks.
 MESH_BYTES_PER_HEX = 2.0e3

@@ -422,8 +422,14 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     t0 = time.perf_counter()
     n_total = cache.count(s.f_max)
     if n_total is None and not (s.band_only and s.edges):
+        if log is not None:
+            log(f"counting the modes below modal.f_max = {s.f_max:g} Hz (inertia of one "
+                f"factorisation of K - omega^2 M, {K.getSize()[0]:,} DOFs) ...")
         n_total = count_below(K, M, comm, s.f_max, s.out_of_core)
         cache.counts[float(s.f_max)] = n_total
+        if log is not None:
+            log(f"  {n_total} modes below {s.f_max:g} Hz (counted in "
+                f"{time.perf_counter() - t0:.1f} s)")
     # an array task with given edges needs no count: the band grows to its edges by itself
     # and the merge counts at f_max
     t_count = time.perf_counter() - t0
@@ -462,6 +468,9 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
                                   f"basis {basis}")
 
             rhs = static_rhs if (groups == 1 and band.shift_hz == 0.0) else None
+            if log is not None and groups == 1:
+                log(f"{band.label(n_bands)}: factorising K - sigma M at {band.shift_hz:.2f} Hz, "
+                    f"then block Lanczos for ~{est} modes ...")
             free_memory(sub)       # (what came before: the heap trimmed, the count's factor)
             rss_before = _total(sub, current_memory_gb())
             own_peak = sub.allreduce(reset_peak_memory(), op=MPI.LAND)

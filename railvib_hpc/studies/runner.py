@@ -29,7 +29,7 @@ from ..config import Case
 from ..io.stage_files import output_lock
 from ..log import Reporter
 from ..parallel import on_root
-from . import convergence, modes, reflection, speed, thesis
+from . import convergence, mitigation, modes, reflection, speed, thesis
 from .common import (
     FAILED_NAME,
     SHARED_DIR,
@@ -50,7 +50,7 @@ if TYPE_CHECKING:
 
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
-                 "speed": speed, "thesis": thesis}
+                 "speed": speed, "thesis": thesis, "mitigation": mitigation}
 
 
 def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:

@@ -1,4 +1,6 @@
-"""Layered soil (``[[soil.layers]]``): the exact two-layer column, the layout, the checks.
+"""Layered soil ([[soil.layers]]) and the soil measures ([trench], [wib]).
+
+The layers: the exact two-layer column, the layout, the checks.
 
 The physics check is the 1D site-response column of two layers on a rigid base: a top
 layer (thickness h1, c1, rho1) over a bottom layer (h2, c2, rho2). With the free
@@ -202,3 +204,61 @@ def test_wavelength_sizing_needs_its_frequency():
     with pytest.raises(CaseError) as info:
         Case.defaults().replace({"mesh.elements_per_wavelength": 6.0})
     assert "mesh.elements_per_wavelength = 6.0: needs mesh.wavelength_hz > 0" in str(info.value)
+
+
+# --- the soil measures: trench and wave-impeding block -------------------------------------
+
+TRENCH = {"trench.distance": 6.0, "trench.width": 0.6, "trench.depth": 3.0}
+WIB = {"wib.width": 6.0, "wib.depth": 1.0, "wib.thickness": 1.0}
+
+
+def _parts(lay) -> dict[str, float]:
+    """Volume of every part of a layout's blocks."""
+    out: dict[str, float] = {}
+    for b in lay.blocks:
+        vol = (lay.xb[b.i + 1] - lay.xb[b.i]) * (lay.yb[b.j + 1] - lay.yb[b.j]) * (b.z1 - b.z0)
+        out[b.part] = out.get(b.part, 0.0) + vol
+    return out
+
+
+def test_trench_and_block_take_their_volume_from_the_soil():
+    case = thesis_case()
+    length = case["geometry.x4"] - case["geometry.x1"]
+    none = _parts(build_layout(case.replace({"trench.type": "none", **TRENCH})))
+    open_ = _parts(build_layout(case.replace({"trench.type": "open", **TRENCH})))
+    filled = _parts(build_layout(case.replace({"trench.type": "filled", **TRENCH})))
+    trench = length * 0.6 * 3.0
+    assert "trench_fill" not in none and "trench_fill" not in open_
+    assert none["subgrade"] - open_["subgrade"] == pytest.approx(trench, rel=1e-12)
+    assert filled["trench_fill"] == pytest.approx(trench, rel=1e-12)
+    assert filled["subgrade"] == pytest.approx(open_["subgrade"], rel=1e-12)
+    wib = _parts(build_layout(case.replace({"wib.type": "block", **WIB})))
+    assert wib["wib"] == pytest.approx(length * 6.0 * 1.0, rel=1e-12)
+    # without a width the thesis mesh is untouched; type 'none' keeps only the lines
+    assert predicted_hexes(build_layout(case.replace({"trench.depth": 3.0}))) == 41_880
+
+
+def test_a_probe_in_the_trench_moves_in_front_of_it_on_both_meshes():
+    case = thesis_case().replace({"trench.distance": 6.5, "trench.width": 1.2,
+                                  "trench.depth": 3.0})
+    for kind in ("none", "open"):
+        y = build_layout(case.replace({"trench.type": kind})).probes["ground_mid"][1]
+        assert y == pytest.approx(-0.5 * (-case["geometry.ys1"] + 6.5))
+
+
+@pytest.mark.parametrize("changes, key, words", [
+    ({"trench.type": "open", **TRENCH, "trench.distance": 2.0}, "trench.distance",
+     "beyond the embankment toe"),
+    ({"trench.type": "open", **TRENCH, "trench.width": 5.0}, "trench.width",
+     "would cut through the building"),
+    ({"trench.type": "filled", **TRENCH, "trench.depth": 4.8}, "trench.depth",
+     "less than the soil depth"),
+    ({"trench.type": "open"}, "trench.width", "must be > 0 m for trench.type = 'open'"),
+    ({"wib.type": "block", **WIB, "wib.width": 9.0}, "wib.width", "embankment base"),
+    ({"wib.type": "block", **WIB, "wib.depth": 4.0}, "wib.thickness", "must end above the base"),
+])
+def test_bad_measures_get_one_clear_line(changes, key, words):
+    with pytest.raises(CaseError) as info:
+        thesis_case().replace(changes)
+    hits = [ln for ln in str(info.value).splitlines() if f"{key} = " in ln]
+    assert hits and words in hits[0], str(info.value)

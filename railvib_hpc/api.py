@@ -13,7 +13,7 @@ line:
   :meth:`~Pipeline.run` run the stages (reusing what is current, as the command line
   does) and return small frozen results: the files written, the key numbers and arrays,
   what was reused and the timings;
-* :func:`run_study` -- a whole study (convergence, modes, reflection, speed, thesis),
+* :func:`run_study` -- a whole study (convergence, modes, reflection, speed, thesis, mitigation),
   returning a :class:`StudyResult`.
 
 Everything is collective: run the same script under ``mpirun -n N`` and every rank gets

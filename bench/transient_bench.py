@@ -13,9 +13,9 @@ Runs from scratch (fresh output folders):
 2. ``mpirun -n RANKS railvib run CASE --set modal.n_modes=MODES`` (+ ``--modal-set``): the
    modal pipeline (mesh, eigensolve, multibody, reconstruction, assessment) to compare.
 
-Prints the stage timings of both, steps per second, wall time of the passage and the peak
-memory (sum over ranks, ``/usr/bin/time -v``); target: the passage within 15 minutes on 2
-ranks at thesis size. JSON in ``OUT/bench.json``.
+Prints the stage timings of both (from each folder's ``run.json``), steps per second, wall
+time of the passage and the peak memory (sum over ranks, ``/usr/bin/time -v``); target: the
+passage within 15 minutes on 2 ranks at thesis size. JSON in ``OUT/bench.json``.
 """
 
 from __future__ import annotations
@@ -34,22 +34,33 @@ PY = str(ROOT / ".venv" / "bin" / "python")
 TARGET_S = 15 * 60
 
 
-def run(cmd: list[str], log: Path) -> dict:
-    """Run ``cmd`` under ``/usr/bin/time -v``: wall seconds, peak RSS (GB, all processes),
-    the stage table of the railvib output."""
+def run(cmd: list[str], log: Path, out: Path) -> dict:
+    """Run ``cmd`` under ``/usr/bin/time -v``: wall seconds, peak RSS of the whole command
+    (GB, all processes) and the stage timings from ``<out>/run.json`` (each stage's wall
+    time and its timed parts, ``"<stage>: <part>"``; each stage's own peak memory)."""
+    from railvib_hpc.io.run_record import read_run_record
+
     t0 = time.perf_counter()
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
     with open(log, "w") as f:
         rc = subprocess.run(["/usr/bin/time", "-v", *cmd], stdout=f, stderr=subprocess.STDOUT,
                             env=env).returncode
     wall = time.perf_counter() - t0
-    text = log.read_text()
     if rc != 0:
         sys.exit(f"failed ({rc}): {' '.join(cmd)}; see {log}")
-    rss = sum(int(x) for x in re.findall(r"Maximum resident set size \(kbytes\): (\d+)", text))
-    stages = {m.group(1).strip(): float(m.group(2)) for m in
-              re.finditer(r"^(\S.*?)\s{2,}(\d+\.\d+)\s+\d+\.\d%$", text, re.M)}
-    return {"wall_s": wall, "peak_rss_gb": rss / 1e6, "stages": stages}
+    rss = sum(int(x) for x in re.findall(r"Maximum resident set size \(kbytes\): (\d+)",
+                                         log.read_text()))
+    record = read_run_record(out)
+    if record is None:
+        sys.exit(f"{out}/run.json is missing or unreadable after: {' '.join(cmd)}")
+    stages, stage_rss = {}, {}
+    for name, entry in record["stages"].items():
+        stages[name] = float(entry["wall_s"])
+        for part, seconds in entry.get("substages", []):
+            stages[f"{name}: {part}"] = float(seconds)
+        stage_rss[name] = entry.get("peak_rss_gb_total")
+    return {"wall_s": wall, "peak_rss_gb": rss / 1e6, "stages": stages,
+            "stage_peak_rss_gb": stage_rss}
 
 
 def main() -> None:
@@ -69,14 +80,15 @@ def main() -> None:
     for d in ("transient", "modal"):
         subprocess.run(["rm", "-rf", str(out / d)], check=True)
     direct = run([*mpi, "transient", args.case, "--out", str(out / "transient"), *sets],
-                 out / "transient.log")
+                 out / "transient.log", out / "transient")
     import h5py
 
     with h5py.File(out / "transient" / "transient.h5", "r") as f:
         stats = json.loads(f.attrs["stats"])
     modal = run([*mpi, "run", args.case, "--out", str(out / "modal"), *sets, "--set",
                  f"modal.n_modes={args.modes}",
-                 *[x for s in args.modal_overrides for x in ("--set", s)]], out / "modal.log")
+                 *[x for s in args.modal_overrides for x in ("--set", s)]], out / "modal.log",
+                out / "modal")
     result = {"direct": {**direct, "stats": stats}, "modal": modal, "ranks": args.ranks,
               "modes": args.modes, "case": args.case, "overrides": args.overrides}
     (out / "bench.json").write_text(json.dumps(result, indent=1))

@@ -749,6 +749,14 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _sizes_given(case: Case, section: str, keys: Sequence[str]) -> list[tuple[str, Any, str]]:
+    """A measure's sizes that are not > 0 (its type or its width asks for it)."""
+    kind = case[f"{section}.type"]
+    return [(f"{section}.{key}", case[f"{section}.{key}"],
+             f"must be > 0 m for {section}.type = '{kind}' (and the {section}'s mesh lines)")
+            for key in keys if not case[f"{section}.{key}"] > 0]
+
+
 def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     """The trench and the wave-impeding block: sizes given, inside the soil, clear of the
     embankment and the building."""
@@ -758,10 +766,7 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
     tr = case["trench"]
     if tr["type"] != "none" or tr["width"] > 0:
-        for key in ("width", "depth"):
-            if not tr[key] > 0:
-                out.append((f"trench.{key}", tr[key], f"must be > 0 m for trench.type = "
-                            f"'{tr['type']}' (and a trench's mesh lines)"))
+        out.extend(_sizes_given(case, "trench", ("width", "depth")))
         if tr["distance"] < toe - 1e-9:
             out.append(("trench.distance", tr["distance"],
                         f"the trench's near face must lie beyond the embankment toe "
@@ -776,10 +781,7 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
                         f"must be less than the soil depth ({soil_depth:g} m to the base)"))
     wib = case["wib"]
     if wib["type"] != "none" or wib["width"] > 0:
-        for key in ("width", "thickness"):
-            if not wib[key] > 0:
-                out.append((f"wib.{key}", wib[key], f"must be > 0 m for wib.type = "
-                            f"'{wib['type']}' (and the block's mesh lines)"))
+        out.extend(_sizes_given(case, "wib", ("width", "thickness")))
         if wib["width"] > 2 * toe + 1e-9:
             out.append(("wib.width", wib["width"],
                         f"must be at most the embankment base, 2 |geometry.ys1| = {2 * toe:g} m"))

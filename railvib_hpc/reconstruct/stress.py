@@ -330,7 +330,9 @@ def case_from_modes(f) -> Case:
 
     Only ``[materials]`` and ``[sections]`` of the stored case (attribute
     ``case_toml``, fully resolved) are used, on top of the defaults, so that a
-    file written by an older version with since-renamed keys elsewhere still reads.
+    file written by an older version with since-renamed keys elsewhere still reads;
+    with soil layers also ``[soil]`` and the levels they are checked against
+    (``[geometry]``, ``[domain]``, ``mesh.file``).
     """
     import tomllib
 
@@ -338,7 +340,22 @@ def case_from_modes(f) -> Case:
 
     text = f.attrs["case_toml"]
     raw = tomllib.loads(text.decode() if isinstance(text, bytes) else text)
-    return build_case({k: raw[k] for k in ("materials", "sections") if k in raw})
+    keep = {k: raw[k] for k in ("materials", "sections") if k in raw}
+    layers = raw.get("soil", {}).get("layers")
+    if layers:
+        keep.update({k: raw[k] for k in ("soil", "geometry", "domain") if k in raw})
+        if raw.get("mesh", {}).get("file"):
+            # a user's mesh holds its own layer levels; only the layers' materials are
+            # needed here, so the levels are set to ones that pass the checks
+            n = len(layers)
+            keep["soil"] = {"layers": [{**x, "thickness": 0.0 if k == n - 1 else
+                                        _SOME_THICKNESS / n} for k, x in enumerate(layers)]}
+            keep["domain"] = {**keep.get("domain", {}), "extra_depth": _SOME_THICKNESS}
+    return build_case(keep)
+
+
+#: Layer thickness [m] that fits any valid geometry (see :func:`case_from_modes`).
+_SOME_THICKNESS = 1e-3
 
 
 # --------------------------------------------------------------------------- parallel driver

@@ -262,3 +262,23 @@ def test_bad_measures_get_one_clear_line(changes, key, words):
         thesis_case().replace(changes)
     hits = [ln for ln in str(info.value).splitlines() if f"{key} = " in ln]
     assert hits and words in hits[0], str(info.value)
+
+
+@pytest.mark.parametrize("user_mesh", [False, True])
+def test_stresses_find_the_layer_materials_in_modes_h5(tmp_path, user_mesh):
+    """The reconstruct stage rebuilds the materials from the case stored in modes.h5."""
+    import h5py
+
+    from railvib_hpc.reconstruct.stress import case_from_modes, hex_materials
+
+    case = column_case()
+    text = case.to_toml()
+    if user_mesh:           # a user's .msh with layer parts: its levels are not checked
+        text = text.replace('file = ""', 'file = "site.msh"', 1)
+        assert 'file = "site.msh"' in text
+    with h5py.File(tmp_path / "modes.h5", "w") as f:
+        f.attrs["case_toml"] = text
+        mats = hex_materials(case_from_modes(f))
+    for k, (c, rho, nu) in enumerate(((C1, RHO1, NU1), (C2, RHO2, NU2)), start=1):
+        assert mats[PART_ID[f"soil_layer_{k}"]] == pytest.approx((2 * rho * c**2 * (1 + nu), nu),
+                                                                rel=1e-12)

@@ -116,6 +116,15 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
              f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
+    from .config import soil_layers
+
+    z1 = case["geometry.z1"]
+    for x in soil_layers(case):
+        rep.info(f"  soil: {x['part']} {z1 - x['z_top']:g}-{z1 - x['z_bottom']:g} m deep, "
+                 f"c_S {x['c_s']:.4g} m/s, rho {x['rho']:g} kg/m^3, nu {x['nu']:g}")
+    for section, what in (("trench", "trench"), ("wib", "wave-impeding block")):
+        if case[f"{section}.type"] != "none":
+            rep.info(f"  {what}: " + ", ".join(f"{k} {v}" for k, v in case[section].items()))
     return 0
 
 

@@ -37,3 +37,9 @@ def test_study_job_file_plans_its_variants(name):
     case = load_case(JOBS / name)
     plan = make_plan(kind, case, study_settings(kind, case=case))     # the file's own table
     assert plan.kind == kind and len(plan.variants) >= 2
+
+
+def test_every_job_names_its_own_results_folder():
+    """Two job files with the same case.name would write into the same results/<name>."""
+    names = {p.name: load_case(p)["case.name"] for p in CASE_FILES}
+    assert len(set(names.values())) == len(names), names

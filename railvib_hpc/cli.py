@@ -13,12 +13,14 @@ Exit codes (the same on every MPI rank):
   input file, an output folder in use by another run, a full disk, missing permissions,
   a bad PETSc option; one line on stderr, no traceback;
 * 1 -- an internal error (a bug): one line asking to report it, naming a log file with
-  the traceback (``<out>/.railvib/crash-<time>-<pid>.log``).
+  the traceback (``<out>/.railvib/crash-<time>-<pid>.log``);
+* 141 -- the output's reader went away (``railvib check CASE | head -1``), nothing else.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import os
 import sys
@@ -32,6 +34,8 @@ from .errors import UserError
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
 
+#: Exit code when the output's reader goes away (a closed pipe): the shell's 128 + SIGPIPE.
+BROKEN_PIPE_EXIT = 141
 STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation")
 
 
@@ -206,6 +210,12 @@ def run(argv: list[str] | None = None) -> int:
         if comm.rank == 0:
             print(f"railvib {args.command}: error: {exc}", file=sys.stderr, flush=True)
         return exc.exit_code
+    except BrokenPipeError:
+        # whoever read the output went away (e.g. `railvib check CASE | head -1`): not a bug;
+        # later writes go nowhere instead of raising again at exit
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (open for the rest of the process)
+        return BROKEN_PIPE_EXIT
     except Exception as exc:
         petsc_error = petsc_error_type()
         if petsc_error is not None and isinstance(exc, petsc_error) and petsc_options:

@@ -239,3 +239,20 @@ def test_user_probe_roles_are_validated():
     with pytest.raises(CaseError, match=r"one role per point of output\.probes"):
         load_case(None, ["output.probes=[1.0, 2.0, 3.0]",
                          "output.probe_roles=[floor, wall]"])
+
+
+def test_a_closed_output_pipe_is_not_an_internal_error(tmp_path):
+    """`railvib check CASE | head -1` closes the pipe early: exit 141, no crash log."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    case = Path(__file__).resolve().parents[1] / "jobs" / "thesis_baseline.toml"
+    proc = subprocess.Popen([sys.executable, "-m", "railvib_hpc", "check", str(case),
+                             "--set", "trench.type=open", "--set", "trench.width=0.6",
+                             "--set", "trench.depth=2", "--set", "trench.distance=7"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    proc.stdout.close()                       # the reader goes away before any output
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 141, err
+    assert "internal error" not in err and not (tmp_path / "results").exists()

@@ -29,6 +29,9 @@ def main() -> None:
     ap.add_argument("--shift-hz", type=float, nargs="*", default=[0.0])
     ap.add_argument("--blr", type=float, nargs="*", default=[0.0, 1e-10, 1e-8, 1e-6])
     ap.add_argument("--ooc", action="store_true", help="MUMPS out of core (ICNTL(22) = 1)")
+    ap.add_argument("--relax", type=int, default=0,
+                    help="MUMPS ICNTL(14), the working-space relaxation in percent (0: "
+                         "PETSc's default); BLR stops with INFOG(1) = -20 at the default")
     args = ap.parse_args()
 
     from mpi4py import MPI
@@ -56,10 +59,12 @@ def main() -> None:
     B = start_block(dofmap.n_dofs, r0, r1, 32)
     opts = PETSc.Options()
     names = {"icntl_35": f"{PREFIX}st_mat_mumps_icntl_35", "cntl_7": f"{PREFIX}st_mat_mumps_cntl_7",
-             "icntl_22": f"{PREFIX}st_mat_mumps_icntl_22"}
+             "icntl_22": f"{PREFIX}st_mat_mumps_icntl_22",
+             "icntl_14": f"{PREFIX}st_mat_mumps_icntl_14"}
     if comm.rank == 0:
         print(f"# refinement {args.refinement}: {dofmap.n_dofs:,} DOFs, {comm.size} rank(s)"
-              f"{', out of core' if args.ooc else ''}")
+              f"{', out of core' if args.ooc else ''}"
+              f"{f', ICNTL(14) = {args.relax}' if args.relax else ''}")
         print("| shift [Hz] | BLR tol | estimate [GB] | factor entries (INFOG(29)) | "
               "factorisation [s] | 32 RHS [s] | solve rel. residual | peak [GB] |")
         print("|---|---|---|---|---|---|---|---|")
@@ -70,6 +75,8 @@ def main() -> None:
                 opts.setValue(names["cntl_7"], tol)
             if args.ooc:
                 opts.setValue(names["icntl_22"], 1)
+            if args.relax:
+                opts.setValue(names["icntl_14"], args.relax)
             sigma = (2 * np.pi * shift) ** 2
             t0 = time.perf_counter()
             op = BlockOperator(K, M, sigma, comm, PREFIX, out_of_core="never" if not args.ooc

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -18,13 +17,12 @@ def wave_speeds(case: Case) -> tuple[float, float]:
     layered (``soil.layers``: the path along the surface; a head wave through a stiffer
     layer below can arrive earlier at a distance)."""
     from ..config import soil_layers, solid_material
+    from ..fem.boundary import wave_speeds as material_wave_speeds
 
     layers = soil_layers(case)
     mat = solid_material(case, layers[0]["part"] if layers else "subgrade")
-    e, nu, rho = (mat[k] for k in ("E", "nu", "rho"))
-    c_p = math.sqrt(e * (1 - nu) / (rho * (1 + nu) * (1 - 2 * nu)))
-    c_s = math.sqrt(e / (2 * rho * (1 + nu)))
-    return c_p, c_s
+    c_p, c_s = material_wave_speeds(mat["E"], mat["nu"], mat["rho"])
+    return float(c_p), float(c_s)
 
 
 def wave_arrival(t: np.ndarray, acceleration: np.ndarray, t_entry: float,

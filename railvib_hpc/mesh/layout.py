@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..config import Case, soil_layers, solid_material
+from ..fem.boundary import wave_speeds
 
 _TOL = 1e-9
 
@@ -117,8 +118,15 @@ def resolved_frequency(case: Case) -> float:
 
 
 def shear_wave_speed(mat: dict[str, float]) -> float:
-    """``c_S = sqrt(E / (2 (1 + nu) rho))`` of a material's ``E``, ``nu``, ``rho``."""
-    return float(np.sqrt(mat["E"] / (2.0 * (1.0 + mat["nu"]) * mat["rho"])))
+    """c_S of a material's ``E``, ``nu``, ``rho`` (:func:`railvib_hpc.fem.boundary.wave_speeds`)."""
+    return float(wave_speeds(mat["E"], mat["nu"], mat["rho"])[1])
+
+
+def _resolving_divisions(n: int, length: float, h_max: float, refinement: float) -> int:
+    """``n``, or more so that the elements are at most ``h_max / refinement`` long."""
+    if not np.isfinite(h_max):
+        return n
+    return max(n, int(np.ceil(length * refinement / h_max - 1e-9)))
 
 
 def wavelength_size(case: Case, material: str) -> float:
@@ -214,9 +222,9 @@ def build_layout(case: Case) -> Layout:
     layers = soil_layers(case)
     soils = [x["part"] for x in layers] or ["subgrade"]
     h_soft = min(wavelength_size(case, name) for name in (*soils, "ballast", "subballast"))
-    if np.isfinite(h_soft):        # horizontally: the softest soil (one grid for all layers)
-        nx = np.maximum(nx, np.ceil(np.diff(xb) * r / h_soft - 1e-9).astype(int))
-        ny = np.maximum(ny, np.ceil(np.diff(yb) * r / h_soft - 1e-9).astype(int))
+    # horizontally: the softest soil (one grid for all layers)
+    nx = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(nx, np.diff(xb))])
+    ny = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(ny, np.diff(yb))])
 
     def soil_part(z: float) -> str:
         """The soil part at level ``z`` below the ground."""
@@ -240,7 +248,7 @@ def build_layout(case: Case) -> Layout:
     zbot = g["z0"] - d["extra_depth"]
     fh, bd, st = b["footing_height"], b["beam_depth"], b["slab_thickness"]
     zbb = g["zbb"]
-    interfaces = [x["z_bottom"] for x in soil_layers(case)[:-1]]
+    interfaces = [x["z_bottom"] for x in layers[:-1]]
     if tr["width"] > 0:
         interfaces.append(g["z1"] - tr["depth"])
     if wib["width"] > 0:
@@ -263,18 +271,14 @@ def build_layout(case: Case) -> Layout:
             size = THESIS_DIVISIONS["vertical_soil"]
         else:
             size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
-        n = _ndiv(z1 - z0, size, r)
-        h_wave = wavelength_size(case, soil_part(0.5 * (z0 + z1)))
-        if np.isfinite(h_wave):    # vertically: the layer's own wavelength
-            n = max(n, int(np.ceil((z1 - z0) * r / h_wave - 1e-9)))
-        zdiv[zkey(z0, z1)] = n
+        # vertically: the layer's own wavelength
+        zdiv[zkey(z0, z1)] = _resolving_divisions(
+            _ndiv(z1 - z0, size, r), z1 - z0,
+            wavelength_size(case, soil_part(0.5 * (z0 + z1))), r)
     n_layer = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
     for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), ("subballast", "ballast")):
-        n = max(1, round(n_layer * r))
-        h_wave = wavelength_size(case, part)
-        if np.isfinite(h_wave):
-            n = max(n, int(np.ceil((z1 - z0) * r / h_wave - 1e-9)))
-        zdiv[zkey(z0, z1)] = n
+        zdiv[zkey(z0, z1)] = _resolving_divisions(max(1, round(n_layer * r)), z1 - z0,
+                                                  wavelength_size(case, part), r)
     for z0, z1 in zip(above[:-1], above[1:]):
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
 

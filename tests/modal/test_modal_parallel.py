@@ -40,8 +40,42 @@ def coarse():
     return case, mesh
 
 
+#: A site on the coarse model: two soil layers, an EPS-filled trench and a wave-impeding block
+#: (each its own part and material).
+SITE = ["soil.layers=[{thickness=1.5, c_s=150.0, nu=0.3, rho=1800.0}, "
+        "{thickness=0.0, c_s=300.0, nu=0.3, rho=1950.0}]",
+        "trench.type=filled", "trench.distance=6.0", "trench.width=1.2", "trench.depth=3.0",
+        "wib.type=block", "wib.width=6.0", "wib.depth=1.0", "wib.thickness=1.2"]
+
+
+@pytest.fixture(scope="module")
+def coarse_site():
+    from railvib_hpc.mesh.gmsh_model import generate
+    from railvib_hpc.mesh.layout import build_layout
+    from railvib_hpc.parallel import on_root
+
+    case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
+    mesh = on_root(lambda: generate(build_layout(case))[0])
+    return case, mesh
+
+
 @pytest.mark.mpi
 def test_matrix_norms_and_eigenvalues_equal_serial(coarse):
+    _assert_equal_serial(*coarse)
+
+
+@pytest.mark.mpi
+def test_layered_site_with_measures_equals_serial(coarse_site):
+    from railvib_hpc.schema import PART_ID
+
+    case, mesh = coarse_site
+    present = set(np.unique(mesh.hex_part).tolist())
+    assert {PART_ID[p] for p in ("soil_layer_1", "soil_layer_2", "trench_fill", "wib")} <= present
+    _assert_equal_serial(case, mesh)
+
+
+def _assert_equal_serial(case, mesh):
+    """K, M and the 20 lowest modes on all ranks equal those on one, to round-off."""
     init_petsc([])
     from petsc4py import PETSc
 
@@ -49,7 +83,6 @@ def test_matrix_norms_and_eigenvalues_equal_serial(coarse):
     from railvib_hpc.modal.eigen import solve_modes
     from railvib_hpc.modal.petsc import assemble
 
-    case, mesh = coarse
     K1, M1, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
     dofmap = build_dofmap(mesh, comm.size)
     KN, MN, _ = assemble(mesh, case, dofmap, comm)

@@ -121,7 +121,9 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
     from .config import soil_layers
+    from .mesh.building import Building
 
+    rep.info(f"  building: {Building.of_case(case).describe()}")
     z1 = case["geometry.z1"]
     for x in soil_layers(case):
         rep.info(f"  soil: {x['part']} {z1 - x['z_top']:g}-{z1 - x['z_bottom']:g} m deep, "

@@ -666,19 +666,13 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     if not _close(g["ybb"], 0.5 * (g["ys2"] + g["ys3"])):
         out.append(("geometry.ybb", g["ybb"],
                     f"must be the centre of [YS3, YS2] = {0.5 * (g['ys2'] + g['ys3']):g} m"))
-    if not _close(length, width):
-        out.append(("geometry.x3", g["x3"],
-                    f"the building plan must be square: X3 - X2 = {length:g} m but "
-                    f"YS2 - YS3 = {width:g} m"))
     if not g["z0"] < g["zbb"] < g["z1"]:
         out.append(("geometry.zbb", g["zbb"],
                     f"the building base must lie inside the subgrade: Z0 = {g['z0']:g} < ZBB < "
                     f"Z1 = {g['z1']:g} m"))
-    half = 0.5 * min(length, width)
     fs, cs, wt = b["footing_size"], b["column_size"], b["wall_thickness"]
-    if not fs < half:
-        out.append(("building.footing_size", fs,
-                    f"two footings must fit side by side: footing_size < {half:g} m"))
+    out.extend(_check_spans(b, "x", length, "X3 - X2"))
+    out.extend(_check_spans(b, "y", width, "YS2 - YS3"))
     if not cs < fs:
         out.append(("building.column_size", cs,
                     f"must be smaller than building.footing_size = {fs:g} m"))
@@ -702,6 +696,8 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     ]
     names = ["footing top", "grade-beam top", "ground level (Z1 - ZBB)", "storey-1 beam underside",
              "slab 1 underside", "slab 1 top", "storey-2 beam underside", "slab 2 underside"]
+    if b["storeys"] == 1:         # z_slab2_base is not used
+        levels, names = levels[:6], names[:6]
     for i in range(1, len(levels)):
         if not levels[i][1] >= levels[i - 1][1] - 1e-12 or (
                 i not in (2, 3) and not levels[i][1] > levels[i - 1][1]):
@@ -747,6 +743,31 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_soil(case))
     out.extend(_check_measures(case))
     return out
+
+
+def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[str, Any, str]]:
+    """The building's spans along ``axis``: as many as bays, adding up to the plan between
+    the outer column lines, each wider than a footing."""
+    fs, bays, spans = b["footing_size"], b[f"bays_{axis}"], list(b[f"spans_{axis}"])
+    inner = plan - fs
+    if spans:
+        if len(spans) != bays:
+            return [(f"building.spans_{axis}", spans,
+                     f"must give one span per bay: {bays} (building.bays_{axis}), or none for "
+                     "equal spans")]
+        if not _close(sum(spans), inner):
+            return [(f"building.spans_{axis}", spans,
+                     f"must add up to {plan_text} - footing_size = {inner:g} m (the column "
+                     f"lines sit footing_size/2 inside the plan); they add up to "
+                     f"{sum(spans):g} m")]
+    span = min(spans) if spans else inner / bays
+    if not fs < span:
+        key = f"building.spans_{axis}" if spans else "building.footing_size"
+        return [(key, b[key.split(".")[1]],
+                 f"the footings must fit between the column lines: footing_size = {fs:g} m must "
+                 f"be < the smallest span along {axis}, {span:g} m ({plan_text} = {plan:g} m, "
+                 f"{bays} bay{'s' if bays > 1 else ''})")]
+    return []
 
 
 def _sizes_given(case: Case, section: str, keys: Sequence[str]) -> list[tuple[str, Any, str]]:

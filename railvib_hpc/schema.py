@@ -115,6 +115,8 @@ SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
     "damping_ratio": (False, "damping ratio (0 <= x < 1; default 0.03), used by "
                              "modal.damping = 'strain_energy' and damping.model = 'per_material'"),
 }
+#: Foundations of the building (``building.foundation``).
+FOUNDATION_TYPES = ("pad", "strip", "raft")
 BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
 PAD_PARTS = ("pad_x", "pad_y", "pad_z")
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
@@ -193,8 +195,26 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "wall_thickness": Param(0.3, "float", "m", "WALL_WIDTH: basement wall thickness", "pos"),
         "z_slab1_base": Param(4.2, "float", "m", "Z_SLAB1_BASE: underside of slab 1 above ZBB",
                               "pos"),
-        "z_slab2_base": Param(8.0, "float", "m", "Z_SLAB2_BASE: underside of slab 2 above ZBB",
-                              "pos"),
+        "z_slab2_base": Param(8.0, "float", "m",
+                              "Z_SLAB2_BASE: underside of slab 2 above ZBB (each storey above "
+                              "repeats storey 2's height)", "pos"),
+        "storeys": Param(2, "int", "-", "storeys above the basement, one slab on top of each",
+                         "pos"),
+        "bays_x": Param(1, "int", "-", "bays along the track (x); bays_x + 1 column lines",
+                        "pos"),
+        "bays_y": Param(1, "int", "-", "bays across the track (y); bays_y + 1 column lines",
+                        "pos"),
+        "spans_x": Param([], "floats", "m",
+                         "column-centre spans along x, from X2 (empty: bays_x equal spans; they "
+                         "add up to X3 - X2 - footing_size)", "pos"),
+        "spans_y": Param([], "floats", "m",
+                         "column-centre spans along y, from the face nearest the track YS2 "
+                         "(empty: bays_y equal spans; they add up to YS2 - YS3 - footing_size)",
+                         "pos"),
+        "foundation": Param("pad", "str", "-",
+                            "pad footings under the columns, strip footings along every column "
+                            "line, or a raft under the whole plan (footing_height thick)",
+                            choices=FOUNDATION_TYPES),
     },
     "materials": {
         "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),
@@ -831,6 +851,11 @@ SOURCES: dict[str, dict[str, str]] = {
         "building.wall_thickness": f"{_APDL}: WALL_WIDTH=0.3",
         "building.z_slab1_base": f"{_APDL}: Z_SLAB1_BASE=4.2",
         "building.z_slab2_base": f"{_APDL}: Z_SLAB2_BASE=8",
+        "building.storeys": f"{_APDL}: two slabs (A_SLAB1, A_SLAB2); thesis Fig. 13",
+        **{f"building.bays_{d}": f"{_APDL}: one bay, four columns (CX1..CX2 at the corners)"
+           for d in "xy"},
+        **{f"building.spans_{d}": f"{_APDL}: one span, X3 - X2 - FX1 = 6 m" for d in "xy"},
+        "building.foundation": f"{_APDL}: four pad footings (FX1, FX4) with grade beams",
         **{f"materials.{m}.{k}": f"{_APDL}: MP,{cmd},{n},{v}"
            for m, n, vals in (("rail", 1, ("210e9", "0.30", "7700")),
                               ("rigid_rail", 2, ("210e10", "0.30", "7700")),

@@ -249,6 +249,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     Nothing is labelled with the case before :func:`verify_chain` confirmed that every
     input file belongs to it.
     """
+    from .floors import floor_summary, format_floor_table
     from .report import write_report
     from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
@@ -299,7 +300,9 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     if pm is not None:
         extra.append({"id": "peak_map", "file": "figures/peak_map.png",
                       "title": "Peak velocity map: ground surface and slab tops", "data": pm})
+    floors = floor_summary(results, {name: h["role"] for name, h in hist.items()})
     text = [("Model and settings", model_summary(case, out_dir, solver)),
+            ("Assessment per floor", format_floor_table(floors)),
             ("Comparison with the thesis", format_thesis_table(rows)),
             ("Wave arrivals", format_comparison(comparison, arrivals, c_p, c_s))]
     files = write_report(out_dir, results, hist, None if x is None else (x, force),
@@ -308,10 +311,12 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                "wave_arrivals": arrivals, "thesis_comparison": comparison,
                "thesis_table": rows,
                "verdict": {k: v["passed"] for k, v in results.items()},
+               "floors": floors,
                "report": {k: str(p) for k, p in files.items()}}
     write_json(out_dir / "assessment.json", json.loads(json.dumps(summary, default=float)),
                provenance("assessment.json", case, upstream))
     rep.info(format_table(results))
+    rep.info(format_floor_table(floors))
     rep.info(format_thesis_table(rows))
     rep.info(format_comparison(comparison, arrivals, c_p, c_s))
     rep.info(f"assessed the results of the {SOLVER_TEXT[solver]}")

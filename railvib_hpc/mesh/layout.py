@@ -37,6 +37,7 @@ import numpy as np
 
 from ..config import Case, soil_layers, solid_material
 from ..fem.boundary import wave_speeds
+from .building import Building
 
 _TOL = 1e-9
 
@@ -156,24 +157,18 @@ THESIS_DIVISIONS: dict[str, float] = {
 
 def build_layout(case: Case) -> Layout:
     """Compute the block decomposition for a validated case."""
-    g, t, b, m, d = (case[s] for s in ("geometry", "track", "building", "mesh", "domain"))
+    g, t, m, d = (case[s] for s in ("geometry", "track", "mesh", "domain"))
     r = m["refinement"]
     sp = t["sleeper_spacing"]
     nbays = int(round(t["rail_length"] / sp))
     sleeper_x = g["x1"] + sp * np.arange(nbays + 1)
 
-    # --- building lines (local offsets from the base point)
-    half = 0.5 * (g["x3"] - g["x2"])
-    fs, cs, wt = b["footing_size"], b["column_size"], b["wall_thickness"]
-    a = half - fs                 # inner edge of the footings
-    c0 = half - fs / 2 - cs / 2   # inner column face
-    c1 = half - fs / 2 + cs / 2   # outer column face
-    wi = half - wt                # inner wall face
-    offs = [a, c0, c1, wi, half]
+    # --- building lines: footing, column and wall faces (mesh.building)
+    bldg = Building.of_case(case)
 
     xmin = g["x1"] - d["extra_length"]
     xmax = g["x4"] + d["extra_length"]
-    xb = _merge([xmin, xmax, *sleeper_x, *(g["xbb"] + s * o for o in offs for s in (-1, 1))])
+    xb = _merge([xmin, xmax, *sleeper_x, *bldg.x_lines()])
     ymin = g["ys4"] - d["extra_width"]
     hs, hg, toe = t["sleeper_length"] / 2, t["gauge"] / 2, -g["ys1"]
     tr, wib = case["trench"], case["wib"]
@@ -182,8 +177,7 @@ def build_layout(case: Case) -> Layout:
         measure_y += [-tr["distance"], -tr["distance"] - tr["width"]]
     if wib["width"] > 0:
         measure_y += [-wib["width"] / 2, wib["width"] / 2]
-    yb = _merge([ymin, g["ys0"], -toe, toe, -hs, hs, -hg, hg,
-                 *(g["ybb"] + s * o for o in offs for s in (-1, 1)), *measure_y])
+    yb = _merge([ymin, g["ys0"], -toe, toe, -hs, hs, -hg, hg, *bldg.y_lines(), *measure_y])
 
     # --- divisions per interval
     h_track = sp / m["soil_elements_per_bay"]
@@ -246,19 +240,16 @@ def build_layout(case: Case) -> Layout:
 
     # --- z levels
     zbot = g["z0"] - d["extra_depth"]
-    fh, bd, st = b["footing_height"], b["beam_depth"], b["slab_thickness"]
     zbb = g["zbb"]
     interfaces = [x["z_bottom"] for x in layers[:-1]]
     if tr["width"] > 0:
         interfaces.append(g["z1"] - tr["depth"])
     if wib["width"] > 0:
         interfaces += [g["z1"] - wib["depth"], g["z1"] - wib["depth"] - wib["thickness"]]
-    below = _merge([zbot, g["z0"], zbb, zbb + fh, zbb + fh + bd, g["z1"], *interfaces])
+    below = _merge([zbot, g["z0"], *bldg.levels_below(), g["z1"], *interfaces])
     below = below[(below <= g["z1"] + _TOL) & (below >= zbot - _TOL)]
     embank = [g["z1"], g["z2"], g["z3"]]
-    above = _merge([g["z1"], zbb + b["z_slab1_base"] - bd, zbb + b["z_slab1_base"],
-                    zbb + b["z_slab1_base"] + st, zbb + b["z_slab2_base"] - bd,
-                    zbb + b["z_slab2_base"], zbb + b["z_slab2_base"] + st])
+    above = _merge([g["z1"], *bldg.levels_above()])
     above = above[above >= g["z1"] - _TOL]
 
     zdiv: dict[tuple[float, float], int] = {}
@@ -283,35 +274,6 @@ def build_layout(case: Case) -> Layout:
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
 
     # --- classification of blocks by their centre
-    levels = dict(fh=fh, gb=fh + bd, base=g["z1"] - zbb,
-                  s1b=b["z_slab1_base"], s1t=b["z_slab1_base"] + st,
-                  s2b=b["z_slab2_base"], s2t=b["z_slab2_base"] + st)
-
-    def building_part(u: float, v: float, w: float) -> str | None:
-        au, av = abs(u), abs(v)
-        mm = max(au, av)
-        if w < levels["fh"]:
-            if au > a and av > a:
-                return "footing"
-            if mm > wi:
-                return "wall"
-            if (c0 < av < c1 and au < a) or (c0 < au < c1 and av < a):
-                return "beam"
-            return None
-        if w < levels["base"] and mm > wi:
-            return "wall"
-        in_storey = w < levels["s1b"] or levels["s1t"] < w < levels["s2b"]
-        if c0 < au < c1 and c0 < av < c1 and in_storey:
-            return "column"
-        on_beam_level = (w < levels["gb"] or levels["s1b"] - bd < w < levels["s1b"]
-                         or levels["s2b"] - bd < w < levels["s2b"])
-        if on_beam_level and ((c0 < av < c1 and au < c0) or (c0 < au < c1 and av < c0)):
-            return "beam"
-        if au < c1 and av < c1 and (levels["s1b"] < w < levels["s1t"] or
-                                    levels["s2b"] < w < levels["s2t"]):
-            return "slab"
-        return None
-
     blocks: list[Block] = []
     for i in range(len(xb) - 1):
         xc = 0.5 * (xb[i] + xb[i + 1])
@@ -321,10 +283,7 @@ def build_layout(case: Case) -> Layout:
             in_plan = in_x and g["ys3"] < yc < g["ys2"]
             for z0, z1 in zip(below[:-1], below[1:]):
                 zc = 0.5 * (z0 + z1)
-                if in_plan and zc > zbb:
-                    part = building_part(xc - g["xbb"], yc - g["ybb"], zc - zbb)
-                else:
-                    part = ground_part(yc, zc)
+                part = bldg.part(xc, yc, zc) if in_plan and zc > zbb else ground_part(yc, zc)
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if abs(yc) < toe:
@@ -332,7 +291,7 @@ def build_layout(case: Case) -> Layout:
                 blocks.append(Block(i, j, g["z2"], g["z3"], "ballast"))
             if in_plan:
                 for z0, z1 in zip(above[:-1], above[1:]):
-                    part = building_part(xc - g["xbb"], yc - g["ybb"], 0.5 * (z0 + z1) - zbb)
+                    part = bldg.part(xc, yc, 0.5 * (z0 + z1))
                     if part:
                         blocks.append(Block(i, j, float(z0), float(z1), part))
 
@@ -345,7 +304,6 @@ def build_layout(case: Case) -> Layout:
         deform[(jlo, round(z, 9))] = -hw
         deform[(jhi, round(z, 9))] = hw
 
-    zs = zbb
     # the ground between the embankment and the building; with a trench's lines (any type,
     # so that a measure and its same-mesh reference share the point) in front of the
     # trench when the middle would fall into it
@@ -354,16 +312,7 @@ def build_layout(case: Case) -> Layout:
         y_mid = -0.5 * (toe + tr["distance"])
     # the named probes: point and role (railvib_hpc.schema.PROBE_ROLES)
     located = {
-        # top centre of the footing nearest the track, first reached by the train
-        "footing": ((g["xbb"] - (half - fs / 2), g["ybb"] + (half - fs / 2), zs + fh),
-                    "foundation"),
-        # outer face of the basement wall facing the track, mid-length, mid-height
-        "basement_wall": ((g["xbb"], g["ys2"], zs + 0.5 * (g["z1"] - zs)), "wall"),
-        # the same wall's far end (x = X3), mid-height: the thesis's 20.2 m wave-arrival
-        # point (20.2 m from the far rail at the entry of the flexible track, section 6.6)
-        "basement_wall_far": ((g["x3"], g["ys2"], zs + 0.5 * (g["z1"] - zs)), "wall"),
-        "slab1": ((g["xbb"], g["ybb"], zs + levels["s1t"]), "floor"),
-        "slab2": ((g["xbb"], g["ybb"], zs + levels["s2t"]), "floor"),
+        **bldg.probes(),
         "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
         "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
         "ground_building": ((g["xbb"], g["ys2"], g["z1"]), "ground"),

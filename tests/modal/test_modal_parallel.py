@@ -115,7 +115,6 @@ def _norm_bounds(A, nu_max: float) -> dict:
 def _assert_equal_serial(case, mesh):
     """K, M and the 20 lowest modes on all ranks equal those on one, to round-off."""
     init_petsc([])
-    from petsc4py import PETSc
 
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes

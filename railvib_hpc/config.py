@@ -658,6 +658,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("geometry.ballast_bottom_half_width", g["ballast_bottom_half_width"],
                     f"must lie between ballast_top_half_width = {g['ballast_top_half_width']:g} "
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
+    out.extend(_check_tracks(case))
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
@@ -742,6 +743,28 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_dynamics(case))
     out.extend(_check_soil(case))
     out.extend(_check_measures(case))
+    return out
+
+
+def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
+    """A second track: its sleepers clear of the first's and inside the soil; the
+    ``[train2]`` keys only with it."""
+    g, t = case["geometry"], case["track"]
+    if t["count"] > 2:
+        return [("track.count", t["count"], "must be 1 or 2")]
+    if t["count"] == 1:
+        return [(f"train2.{k}", v, "applies to a second track only: set track.count = 2 (or "
+                 "leave it out)")
+                for k, v in case["train2"].items() if v != ALL_KEYS[f"train2.{k}"].default]
+    out = []
+    if not t["spacing"] > t["sleeper_length"]:
+        out.append(("track.spacing", t["spacing"],
+                    f"the two tracks' sleepers must not touch: spacing > track.sleeper_length "
+                    f"= {t['sleeper_length']:g} m"))
+    elif not g["ys0"] > t["spacing"] - g["ys1"]:
+        out.append(("geometry.ys0", g["ys0"],
+                    f"must be > track.spacing + |YS1| = {t['spacing'] - g['ys1']:g} m (the soil "
+                    "must extend beyond the embankment of the second track)"))
     return out
 
 

@@ -184,6 +184,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos"),
         "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos"),
         "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos"),
+        "count": Param(1, "int", "-",
+                       "tracks on the embankment: 1, or 2 (the second one track.spacing further "
+                       "from the building, on the same embankment)", "pos"),
+        "spacing": Param(4.0, "float", "m",
+                         "distance between the two tracks' centre lines (track.count = 2)",
+                         "pos"),
     },
     "building": {
         "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos"),
@@ -574,6 +580,23 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "vehicle: vertical stiffness coupling successive car ends",
                                    "nonneg"),
     },
+    "train2": {
+        "enabled": Param(True, "bool", "-",
+                         "with track.count = 2: a second train runs on track 2 (false: the "
+                         "track is there, unloaded)"),
+        "direction": Param("opposite", "str", "-",
+                           "the second train's direction: 'same' as [vehicle] (+x) or "
+                           "'opposite' (-x, from the far end of the rigid exit rail)",
+                           choices=("same", "opposite")),
+        "t_start": Param(0.0, "float", "s",
+                         "delay of the second train: it is where [vehicle]'s train would be "
+                         "at t = 0 (mirrored for 'opposite') t_start later", "nonneg"),
+        "speed": Param(0.0, "float", "m/s", "the second train's speed (0: vehicle.speed)",
+                       "nonneg"),
+        "n_cars": Param(0, "int", "-",
+                        "vehicle.type = 'vehicle': the second train's cars (0: vehicle.n_cars)",
+                        "nonneg"),
+    },
     "irregularity": {
         "type": Param("none", "str", "-",
                       "vertical rail irregularity: none, a profile file, or a seeded random "
@@ -842,6 +865,9 @@ SOURCES: dict[str, dict[str, str]] = {
         "track.sleeper_spacing": f"{_APDL}: Distance_betw_sleepers=0.6; {_T1}",
         "track.n_sleepers": f"{_APDL}: No_sleeper_div_total=36 (+1)",
         "track.sleeper_length": f"{_APDL}: K,...,Rigid,+-1.25,Z3; {_T1}",
+        "track.count": f"{_APDL}: one track",
+        "track.spacing": "not in the thesis (one track): 4.0 m, the usual track centre "
+                         "distance of European main lines (DB Ril 800.0130: >= 4.0 m)",
         "building.footing_size": f"{_APDL}: FX1=2.4, FX4=3.6 (local system 11)",
         "building.footing_height": f"{_APDL}: HSF=0.6 (the text's 1.2 m is not used)",
         "building.column_size": f"{_APDL}: CX1=2.7, CX2=3.3",

@@ -119,7 +119,7 @@ def simulate_moving_force(
     x0
         Scalar or (n,) positions at t = 0 [m].
     speed
-        Speed [m/s].
+        Speed [m/s], or (n,) velocities along x (negative towards -x).
     t_end
         Simulated time [s] (rounded up to whole steps).
     dt
@@ -144,7 +144,8 @@ def simulate_moving_force(
     prop = make_propagator(omega, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
-    x = x0a[None, :] + speed * t[:, None]
+    x = x0a[None, :] + np.broadcast_to(np.asarray(speed, dtype=float), p.shape)[None, :] \
+        * t[:, None]
     res = None
     if residual is not None:
         lr = np.zeros(p.size, int) if load_rail is None else np.asarray(load_rail, int)
@@ -362,7 +363,8 @@ def simulate_vehicle(
         Position of the reference (leading) wheel at t = 0 [m] (e.g. on the rigid
         rail before the flexible part).
     speed
-        Speed [m/s] (0 for a standing vehicle).
+        Speed [m/s] (0 for a standing vehicle), or (n_wheels,) velocities along x (trains
+        on two tracks, :class:`~railvib_hpc.mbs.train.Traffic`: negative towards -x).
     t_end
         Simulated time [s] (rounded up to whole steps).
     dt
@@ -407,15 +409,16 @@ def simulate_vehicle(
                         + ", ".join(missing_members(vehicle)))
     rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
+    wheel_speed = np.broadcast_to(np.asarray(speed, dtype=float), (vehicle.n_wheels,))
     if dt is None:
-        dt = auto_time_step(om, rl, vehicle, points_per_period, speed)
+        dt = auto_time_step(om, rl, vehicle, points_per_period, float(np.max(abs(wheel_speed))))
     dt = float(dt)
     prop = make_propagator(om, zeta, dt)
     nt = n_steps(t_end, dt)
     t = np.arange(nt + 1) * dt
     nw = vehicle.n_wheels
     offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
-    x = float(x0) + offsets[None, :] + speed * t[:, None]
+    x = float(x0) + offsets[None, :] + wheel_speed[None, :] * t[:, None]
     rows = RowEvaluator(rl, x)
     res = None
     if residual is not None:

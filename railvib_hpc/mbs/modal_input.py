@@ -25,9 +25,10 @@ class RailModes:
     omega
         (m,) natural circular frequencies [rad/s], ascending.
     rails
-        One :class:`RailCoupling` per rail (negative y first), nodes sorted along x.
+        One :class:`RailCoupling` per rail, by increasing y (track 1's two rails, then
+        track 2's), nodes sorted along x.
     rail_y
-        (2,) lateral position of each rail [m].
+        (n_rails,) lateral position of each rail [m].
     rail_z
         Height of the rail axis [m].
     lateral
@@ -36,23 +37,25 @@ class RailModes:
     """
 
     omega: np.ndarray
-    rails: tuple[RailCoupling, RailCoupling]
+    rails: tuple[RailCoupling, ...]
     rail_y: np.ndarray
     rail_z: float
     lateral: tuple = ()
 
-    def normal_rails(self, conicity: float) -> tuple[RailCoupling, RailCoupling]:
+    def normal_rails(self, conicity: float) -> tuple[RailCoupling, ...]:
         """The rails seen along the contact normals of coned wheels (conicity ``lambda``).
 
-        The rail at negative y gets ``phi_w + lambda phi_v``, the other
-        ``phi_w - lambda phi_v`` (see :func:`.coupling.contact_normal_rail`).
+        The rail of each track at the lower y gets ``phi_w + lambda phi_v``, the other
+        ``phi_w - lambda phi_v`` (see :func:`.coupling.contact_normal_rail`): the normals
+        lean towards the track's centre.
         """
         if conicity == 0.0 or not self.lateral:
             return self.rails
         out = []
-        for rail, (pv, prz), y in zip(self.rails, self.lateral, self.rail_y):
-            out.append(contact_normal_rail(rail, pv, prz, -np.sign(y) * conicity))
-        return (out[0], out[1])
+        for k, (rail, (pv, prz)) in enumerate(zip(self.rails, self.lateral)):
+            side = -1.0 if k % 2 == 0 else 1.0          # rails come in pairs, lower y first
+            out.append(contact_normal_rail(rail, pv, prz, -side * conicity))
+        return tuple(out)
 
 
 def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
@@ -88,7 +91,7 @@ def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
                 f"{', '.join(have) or 'nothing'}); 'railvib modal' works on such a mesh, "
                 "'mbs' and 'run' do not")
         if np.any(rail_nodes < 0):
-            raise ValueError(f"{path}: the two rails must have the same number of nodes")
+            raise ValueError(f"{path}: the rails must have the same number of nodes")
         points = f["mesh/points"][()]
         rot_nodes = f["mesh/rotation_nodes"][()]
         rails, ys, lateral = [], [], []
@@ -105,5 +108,5 @@ def read_rail_modes(path: str | Path, n_modes: int | None = None) -> RailModes:
             lateral.append((np.ascontiguousarray(tr[:, :, 1]), np.ascontiguousarray(rot[:, :, 2])))
             ys.append(float(points[nodes[0], 1]))
         rail_z = float(points[rail_nodes[0, 0], 2])
-    return RailModes(np.sqrt(np.maximum(lam, 0.0)), (rails[0], rails[1]), np.array(ys), rail_z,
+    return RailModes(np.sqrt(np.maximum(lam, 0.0)), tuple(rails), np.array(ys), rail_z,
                      tuple(lateral))

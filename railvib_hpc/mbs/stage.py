@@ -200,8 +200,47 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
     return np.concatenate([zeta, extra])
 
 
+def two_trains(case: Case) -> bool:
+    """Whether a second train runs on track 2 (``track.count = 2``, ``train2.enabled``)."""
+    return case["track.count"] == 2 and bool(case["train2.enabled"])
+
+
+def mirror_x(case: Case, x: np.ndarray | float) -> np.ndarray | float:
+    """``x`` mirrored about the middle of the rails (rigid entry rail start ``X0`` to rigid
+    exit rail end ``X4 + rigid_length``): where an 'opposite' train is when [vehicle]'s
+    would be at ``x``."""
+    lo = case["geometry.x0"]
+    hi = case["geometry.x4"] + case["track.rigid_length"]
+    return lo + hi - x
+
+
+def second_train_layout(case: Case, offsets: np.ndarray) -> tuple[np.ndarray, float]:
+    """Wheel positions at t = 0 relative to ``vehicle.x_start`` and the velocity of the
+    second train, whose own wheel offsets are ``offsets`` (<= 0, leading wheel first)."""
+    x0, t0 = case["vehicle.x_start"], case["train2.t_start"]
+    v2 = case["train2.speed"] or case["vehicle.speed"]
+    offsets = np.asarray(offsets, dtype=float)
+    if case["train2.direction"] == "same":
+        return offsets - v2 * t0, v2
+    return mirror_x(case, x0) - x0 - offsets + v2 * t0, -v2
+
+
 def build_vehicle(case: Case) -> Vehicle | None:
-    """The vehicle of ``[vehicle]`` (None for ``moving_force``)."""
+    """The vehicle of ``[vehicle]`` (None for ``moving_force``); with a second train on
+    track 2 (:func:`two_trains`) both as one :class:`~.train.Traffic`."""
+    first = _build_train(case, case["vehicle.n_cars"])
+    if first is None or not two_trains(case):
+        return first
+    from .train import Traffic
+
+    second = _build_train(case, case["train2.n_cars"] or case["vehicle.n_cars"])
+    pos2, v2 = second_train_layout(case, second.wheel_offsets)
+    return Traffic([first, second], positions=[first.wheel_offsets, pos2],
+                   speeds=[case["vehicle.speed"], v2], rail_shift=[0, 2])
+
+
+def _build_train(case: Case, n_cars: int) -> Vehicle | None:
+    """One train of ``[vehicle]`` with ``n_cars`` cars (None for ``moving_force``)."""
     from .vehicles import SuspendedWheelset
 
     v = case["vehicle"]
@@ -230,13 +269,16 @@ def build_vehicle(case: Case) -> Vehicle | None:
         secondary_span=v["secondary_span"], k_primary=v["k_primary"], c_primary=v["c_primary"],
         k_secondary=v["k_secondary"], c_secondary=v["c_secondary"],
         k_antiroll=v["k_antiroll"], contact_damping=v["contact_damping"], k_hertz=kh)
-    if v["n_cars"] == 1:
+    if n_cars == 1:
         return car
-    return Train([car] * v["n_cars"], k_coupler=v["coupler_stiffness"])
+    return Train([car] * n_cars, k_coupler=v["coupler_stiffness"])
 
 
-def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float, float]):
-    """The rail irregularity and wheel flats of ``[irregularity]`` (None when smooth)."""
+def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float, float],
+                       seed_shift: int = 0, flats: bool = True):
+    """The rail irregularity and wheel flats of ``[irregularity]`` (None when smooth);
+    a random profile draws with ``irregularity.seed + seed_shift``; ``flats = False``
+    leaves the wheel flats out."""
     from .irregularity import Irregularity, RailProfile, WheelFlat
 
     irr = case["irregularity"]
@@ -245,10 +287,10 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
         profile = RailProfile.from_file(case.resolve(irr["file"]))
     elif irr["type"] in ("fra", "iso8608"):
         profile = RailProfile.from_psd(
-            irr["type"], irr["track_class"], x_range, seed=irr["seed"],
+            irr["type"], irr["track_class"], x_range, seed=irr["seed"] + seed_shift,
             wavelength_range=(irr["wavelength_min"], irr["wavelength_max"]))
-    flats = ()
-    if irr["flat_depth"] > 0:
+    with_flats, flats = flats, ()
+    if with_flats and irr["flat_depth"] > 0:
         wheels = [int(w) for w in irr["flat_wheels"]]
         bad = [w for w in wheels if w >= len(wheel_rail)]
         if bad:
@@ -261,13 +303,45 @@ def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float,
     return Irregularity(profile=profile, flats=flats, wheel_rail=wheel_rail)
 
 
-def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forces, offsets and rails of the ``moving_force`` loads (one per rail and axle)."""
+def passage_irregularity(case: Case, vehicle, run: dict):
+    """The irregularity the wheels of a run see (None when smooth): :func:`build_irregularity`
+    over the x range the wheels cover; with two trains each train sees its own (a random
+    profile of track 2 draws with ``irregularity.seed + 1``; wheel flats are on train 1)."""
+    x0 = run["x_start"] + run["offsets"]
+    x1 = x0 + run["speeds"] * run["t_end"]
+    x_range = (float(min(x0.min(), x1.min())) - 1.0, float(max(x0.max(), x1.max())) + 1.0)
+    from .train import Traffic
+
+    if not isinstance(vehicle, Traffic):
+        return build_irregularity(case, run["wheel_rail"], x_range)
+    parts = [build_irregularity(case, np.asarray(t.wheel_rail), x_range, seed_shift=k,
+                                flats=k == 0)
+             for k, t in enumerate(vehicle.trains)]
+    if all(p is None for p in parts):
+        return None
+    start = vehicle.wheel_start
+
+    def heights(x_wheels: np.ndarray) -> np.ndarray:
+        return np.concatenate([np.zeros(b - a) if p is None else p(x_wheels[a:b])
+                               for p, a, b in zip(parts, start[:-1], start[1:])])
+
+    return heights
+
+
+def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Forces, offsets (relative to ``vehicle.x_start``), rails and velocities of the
+    ``moving_force`` loads (one per rail and axle; with two trains, the second's on rails
+    2 and 3)."""
     v = case["vehicle"]
     force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
     offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
     rails = np.tile([0, 1], len(v["axle_offsets"]))
-    return np.full(offs.size, force), offs, rails
+    speeds = np.full(offs.size, v["speed"])
+    if two_trains(case):
+        pos2, v2 = second_train_layout(case, offs)
+        offs, rails = np.concatenate([offs, pos2]), np.concatenate([rails, rails + 2])
+        speeds = np.concatenate([speeds, np.full(pos2.size, v2)])
+    return np.full(offs.size, force), offs, rails, speeds
 
 
 def passage(case: Case, vehicle, flexible_end: float) -> dict:
@@ -285,21 +359,26 @@ def passage(case: Case, vehicle, flexible_end: float) -> dict:
     Returns
     -------
     dict
-        ``forces`` (moving forces, else None), ``offsets``, ``wheel_rail`` (n_wheels,),
-        ``x_start``, ``x_end``, ``t_end`` [s].
+        ``forces`` (moving forces, else None), ``offsets``, ``wheel_rail``, ``speeds``
+        (velocity along x, n_wheels each), ``x_start``, ``x_end``, ``t_end`` [s].
     """
     x_end = case["vehicle.x_end"] or flexible_end + case["track.rigid_length"]
     x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
     forces = None
     if vehicle is None:
-        forces, offsets, wheel_rail = moving_loads(case)
+        forces, offsets, wheel_rail, speeds = moving_loads(case)
     else:
         offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
         wheel_rail = np.asarray(vehicle.wheel_rail)
-    t_end = (x_end - x_start - float(np.min(offsets))) / speed + case["vehicle.t_after"]
+        speeds = np.asarray(getattr(vehicle, "wheel_speeds", np.full(offsets.size, speed)),
+                            dtype=float)
+    # every wheel runs to x_end (a train in the opposite direction: to its mirror image)
+    x0 = x_start + offsets
+    goal = np.where(speeds > 0, x_end, mirror_x(case, x_end))
+    t_end = float(np.max((goal - x0) / speeds)) + case["vehicle.t_after"]
     return {"forces": forces, "offsets": np.asarray(offsets, dtype=float),
             "wheel_rail": np.asarray(wheel_rail, dtype=np.int64), "x_start": x_start,
-            "x_end": x_end, "t_end": t_end}
+            "x_end": x_end, "t_end": t_end, "speeds": speeds}
 
 
 def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -444,8 +523,8 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     run = passage(case, vehicle, float(max(r.x_nodes[-1] for r in rm.rails)))
     forces, offsets, wheel_rail = run["forces"], run["offsets"], run["wheel_rail"]
     x_start, x_end, t_end = run["x_start"], run["x_end"], run["t_end"]
-    speed = case["vehicle.speed"]
-    travel = x_end - x_start - float(np.min(offsets))
+    speeds = run["speeds"]
+    travel = x_end - x_start - float(np.min(offsets[speeds > 0], initial=0.0))
     n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
     res, run_modes, run_damping = None, rm, zeta
     if case["mbs.static_correction"]:
@@ -471,15 +550,13 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     if vehicle is None:
         result = simulate_moving_force(
             run_modes.omega, run_damping, tuple(run_modes.rails[i] for i in wheel_rail),
-            forces, x_start + offsets, speed, t_end, dt=dt,
+            forces, x_start + offsets, speeds, t_end, dt=dt,
             store_every=case["mbs.store_every"])
     else:
-        x_lo = x_start + float(np.min(offsets)) - 1.0
-        irregularity = build_irregularity(case, wheel_rail, (x_lo, x_end + speed *
-                                                             case["vehicle.t_after"] + 1.0))
+        irregularity = passage_irregularity(case, vehicle, run)
         rails = run_modes.normal_rails(vehicle.conicity)
         result = simulate_vehicle(
-            run_modes.omega, run_damping, rails, vehicle, x_start, speed, t_end, dt=dt,
+            run_modes.omega, run_damping, rails, vehicle, x_start, speeds, t_end, dt=dt,
             irregularity=irregularity, store_every=case["mbs.store_every"],
             points_per_period=case["mbs.points_per_period"],
             progress=progress, drop_height=case["vehicle.drop_height"])
@@ -536,7 +613,7 @@ def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
     rails = res.rails(rm.rails)
     lateral = tuple((np.vstack([pv, np.zeros((k, pv.shape[1]))]),
                      np.vstack([prz, np.zeros((k, prz.shape[1]))])) for pv, prz in rm.lateral)
-    modes = RailModes(np.concatenate([rm.omega, res.omega]), (rails[0], rails[1]), rm.rail_y,
+    modes = RailModes(np.concatenate([rm.omega, res.omega]), tuple(rails), rm.rail_y,
                       rm.rail_z, lateral)
     return res, modes, residual_damping(case, zeta, res, rest_rows, rm.omega, omega_rest,
                                         out_dir / "modes.h5")
@@ -553,7 +630,9 @@ def _auto_step(case: Case, rm, run_modes, vehicle) -> float:
     else:
         rails = run_modes.normal_rails(getattr(vehicle, "conicity", 0.0))
         dt = auto_time_step(rm.omega, wheel_rails(rails, vehicle), vehicle,
-                            case["mbs.points_per_period"], case["vehicle.speed"])
+                            case["mbs.points_per_period"],
+                            max(case["vehicle.speed"], case["train2.speed"] if two_trains(case)
+                                else 0.0))
     out = case["output.dt"]
     # shortened to a whole fraction of output.dt, so the fields come at the times asked for
     return out / np.ceil(out / dt * (1.0 - 1e-12)) if out > 0 else dt

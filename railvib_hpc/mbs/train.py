@@ -442,4 +442,130 @@ class Train(_LinearVehicle):
         return np.concatenate([v.external_force() for v in self.vehicles])
 
 
-__all__ = ["RailVehicle", "Train"]
+class Traffic(LinearVehicle):
+    """Independent trains on their own tracks in one simulation: they interact only through
+    the track and the ground (the modal coordinates they share).
+
+    The matrices are block diagonal (train 0 first, no coupling). Each train keeps its own
+    wheel layout; ``positions`` places its wheels at t = 0 relative to the simulation's
+    reference ``x0`` (so they may lie ahead of or behind the model: a wheel off the flexible
+    rail rides on rigid ground), ``speeds`` gives each train's velocity along x (negative:
+    running towards -x), ``rail_shift`` moves its wheels to the rails of its own track (2
+    for the second track: rails 2 and 3).
+
+    Parameters
+    ----------
+    trains
+        The trains (any :class:`~railvib_hpc.mbs.vehicles.Vehicle`). They must share the
+        Hertz constant, contact damping and conicity (the integrators use one value for all
+        wheels).
+    positions
+        Per train, (n_wheels,) wheel positions at t = 0 relative to ``x0`` [m].
+    speeds
+        Per train, its velocity along x [m/s].
+    rail_shift
+        Per train, added to its wheels' rail indices.
+
+    Examples
+    --------
+    Two thesis wheelsets, the second on track 2 running the other way:
+
+    >>> from railvib_hpc.mbs import SuspendedWheelset
+    >>> w = SuspendedWheelset(mass=1568.0, roll_inertia=656.0, wheel_radius=0.46,
+    ...                       contact_span=1.5, suspension_span=2.0, k_suspension=25e3,
+    ...                       c_suspension=1e3)
+    >>> both = Traffic([w, w], positions=[[0.0, 0.0], [30.0, 30.0]], speeds=[30.0, -30.0],
+    ...                rail_shift=[0, 2])
+    >>> both.n_dof, both.n_wheels, both.wheel_rail.tolist(), both.wheel_speeds.tolist()
+    (4, 4, [0, 1, 2, 3], [30.0, 30.0, -30.0, -30.0])
+    """
+
+    def __init__(self, trains: Sequence, positions: Sequence[Sequence[float]],
+                 speeds: Sequence[float], rail_shift: Sequence[int]):
+        self.trains = tuple(trains)
+        if not (len(self.trains) == len(positions) == len(speeds) == len(rail_shift) >= 1):
+            raise ValueError("one position list, speed and rail shift per train")
+        t0 = self.trains[0]
+        for i, v in enumerate(self.trains[1:], start=1):
+            if not np.isclose(v.hertz_constant, t0.hertz_constant, rtol=1e-12, atol=0.0) or \
+                    v.contact_damping != t0.contact_damping or v.conicity != t0.conicity:
+                raise ValueError(f"train {i} has a different Hertz constant, contact damping "
+                                 "or conicity than train 0")
+        self._positions = np.concatenate([np.asarray(p, dtype=float) for p in positions])
+        self._speeds = np.concatenate([np.full(v.n_wheels, float(s))
+                                       for v, s in zip(self.trains, speeds)])
+        self._rails = np.concatenate([np.asarray(v.wheel_rail, dtype=np.int64) + int(r)
+                                      for v, r in zip(self.trains, rail_shift)])
+        if self._positions.size != self._rails.size:
+            raise ValueError("each train needs one position per wheel")
+        self.conicity = t0.conicity
+        self.contact_damping = t0.contact_damping
+        self._hertz = t0.hertz_constant
+        self._wheel_start = np.concatenate([[0], np.cumsum([v.n_wheels for v in self.trains])])
+
+    @property
+    def n_dof(self) -> int:
+        """Total number of DOFs."""
+        return sum(v.n_dof for v in self.trains)
+
+    @property
+    def n_wheels(self) -> int:
+        """Total number of wheels."""
+        return int(self._wheel_start[-1])
+
+    @property
+    def wheel_start(self) -> np.ndarray:
+        """(n_trains + 1,) index of the first wheel of each train (and the total)."""
+        return self._wheel_start.copy()
+
+    @property
+    def dof_names(self) -> tuple[str, ...]:
+        """DOF names ``train<i>.<name>``."""
+        return tuple(f"train{i}.{n}" for i, v in enumerate(self.trains) for n in v.dof_names)
+
+    @property
+    def hertz_constant(self) -> float:
+        """Hertz constant ``K_H`` shared by all wheels [N/m^1.5]."""
+        return self._hertz
+
+    @property
+    def wheel_offsets(self) -> np.ndarray:
+        """(n_wheels,) wheel positions at t = 0 relative to ``x0`` [m]."""
+        return self._positions.copy()
+
+    @property
+    def wheel_speeds(self) -> np.ndarray:
+        """(n_wheels,) velocity of each wheel along x [m/s]."""
+        return self._speeds.copy()
+
+    @property
+    def wheel_rail(self) -> np.ndarray:
+        """(n_wheels,) rail index of each wheel."""
+        return self._rails.copy()
+
+    def mass_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) block-diagonal mass matrix."""
+        return _block_diag([v.mass_matrix() for v in self.trains])
+
+    def stiffness_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) block-diagonal stiffness matrix."""
+        return _block_diag([v.stiffness_matrix() for v in self.trains])
+
+    def damping_matrix(self) -> np.ndarray:
+        """(n_dof, n_dof) block-diagonal damping matrix."""
+        return _block_diag([v.damping_matrix() for v in self.trains])
+
+    def contact_matrix(self) -> np.ndarray:
+        """(n_dof, n_wheels) block-diagonal contact matrix B."""
+        return _block_diag([v.contact_matrix() for v in self.trains])
+
+    def external_force(self) -> np.ndarray:
+        """(n_dof,) gravity and preloads."""
+        return np.concatenate([v.external_force() for v in self.trains])
+
+    def static_wheel_loads(self) -> np.ndarray:
+        """(n_wheels,) each train's static wheel loads."""
+        return np.concatenate([v.static_wheel_loads() for v in self.trains])
+
+
+__all__ = ["RailVehicle", "Traffic", "Train"]

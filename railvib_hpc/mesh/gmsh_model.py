@@ -125,11 +125,12 @@ def build_geometry(gmsh, lay: Layout) -> None:
             c = geo.addLine(rail_pts[k + 1], point((ix[round(float(x), 9)], jy, zs)))
             geo.mesh.setTransfiniteCurve(c, 2)
             pad_curves.append(c)
-    js = [iy[round(float(y), 9)] for y in lay.sleeper_y]
-    for x in lay.sleeper_x:
-        i = ix[round(float(x), 9)]
-        for j in range(js[0], js[-1]):
-            sleeper_curves.append(abs(lines[((i, j, zs), (i, j + 1, zs))]))
+    for track_y in np.atleast_2d(lay.sleeper_y):
+        js = [iy[round(float(y), 9)] for y in track_y]
+        for x in lay.sleeper_x:
+            i = ix[round(float(x), 9)]
+            for j in range(js[0], js[-1]):
+                sleeper_curves.append(abs(lines[((i, j, zs), (i, j + 1, zs))]))
 
     geo.synchronize()
     for part, vols in by_part.items():

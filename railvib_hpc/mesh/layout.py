@@ -79,6 +79,10 @@ class Layout:
         x of the rail nodes that bound a rail *curve* (rigid ends and sleepers).
     rail_div
         Rail elements per sleeper bay.
+    rail_y
+        y of every rail, increasing (track 1's two, then track 2's).
+    sleeper_y
+        (n_tracks, 4) y of each track's sleeper ends and rail seats.
     """
 
     xb: np.ndarray
@@ -88,7 +92,7 @@ class Layout:
     blocks: list[Block]
     zdiv: dict[tuple[float, float], int]
     sleeper_x: np.ndarray
-    rail_y: tuple[float, float]
+    rail_y: tuple[float, ...]
     rail_z: float
     rail_div: int
     rigid_ends: tuple[float, float]
@@ -171,13 +175,18 @@ def build_layout(case: Case) -> Layout:
     xb = _merge([xmin, xmax, *sleeper_x, *bldg.x_lines()])
     ymin = g["ys4"] - d["extra_width"]
     hs, hg, toe = t["sleeper_length"] / 2, t["gauge"] / 2, -g["ys1"]
+    # track centre lines: track 1 at y = 0, track 2 track.spacing further from the building;
+    # one embankment carries both (its far toe at toe_far)
+    centres = [0.0] + ([t["spacing"]] if t["count"] == 2 else [])
+    toe_far = centres[-1] + toe
     tr, wib = case["trench"], case["wib"]
     measure_y = []
     if tr["width"] > 0:            # the trench's faces (also with type 'none': same mesh)
         measure_y += [-tr["distance"], -tr["distance"] - tr["width"]]
     if wib["width"] > 0:
         measure_y += [-wib["width"] / 2, wib["width"] / 2]
-    yb = _merge([ymin, g["ys0"], -toe, toe, -hs, hs, -hg, hg, *bldg.y_lines(), *measure_y])
+    track_y = [c + s * w for c in centres for w in (hs, hg) for s in (-1, 1)]
+    yb = _merge([ymin, g["ys0"], -toe, toe_far, *track_y, *bldg.y_lines(), *measure_y])
 
     # --- divisions per interval
     h_track = sp / m["soil_elements_per_bay"]
@@ -187,11 +196,12 @@ def build_layout(case: Case) -> Layout:
         for x0, x1 in zip(xb[:-1], xb[1:])])
 
     def ydiv(y0: float, y1: float) -> int:
-        if y0 >= -hg - _TOL and y1 <= hg + _TOL:
+        c = min(centres, key=lambda v: abs(0.5 * (y0 + y1) - v))    # the nearest track
+        if y0 - c >= -hg - _TOL and y1 - c <= hg + _TOL:
             return max(1, round(m["sleeper_middle_elements"] * r))
-        if y0 >= -hs - _TOL and y1 <= hs + _TOL:
+        if y0 - c >= -hs - _TOL and y1 - c <= hs + _TOL:
             return max(1, round(m["sleeper_outer_elements"] * r))
-        if y0 >= -toe - _TOL and y1 <= toe + _TOL:
+        if y0 >= -toe - _TOL and y1 <= toe_far + _TOL:
             return max(1, round(m["shoulder_elements"] * r))
         if y0 >= g["ys3"] - _TOL and y1 <= g["ys2"] + _TOL:
             return _ndiv(y1 - y0, m["size_building_y"], r)
@@ -199,7 +209,7 @@ def build_layout(case: Case) -> Layout:
 
     def ydiv_thesis(y0: float, y1: float) -> int:
         if y0 >= -toe - _TOL:
-            if y1 <= toe + _TOL:
+            if y1 <= toe_far + _TOL:
                 return ydiv(y0, y1)
             return _ndiv(y1 - y0, THESIS_DIVISIONS["far_track_side"], r)
         if y0 >= g["ys2"] - _TOL:
@@ -286,7 +296,7 @@ def build_layout(case: Case) -> Layout:
                 part = bldg.part(xc, yc, zc) if in_plan and zc > zbb else ground_part(yc, zc)
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
-            if abs(yc) < toe:
+            if -toe < yc < toe_far:
                 blocks.append(Block(i, j, g["z1"], g["z2"], "subballast"))
                 blocks.append(Block(i, j, g["z2"], g["z3"], "ballast"))
             if in_plan:
@@ -297,12 +307,12 @@ def build_layout(case: Case) -> Layout:
 
     # --- shoulder slopes: move the outer embankment vertices above Z1
     jlo = int(np.argmin(abs(yb + toe)))
-    jhi = int(np.argmin(abs(yb - toe)))
+    jhi = int(np.argmin(abs(yb - toe_far)))
     deform = {}
     slopes = ((g["z2"], g["ballast_bottom_half_width"]), (g["z3"], g["ballast_top_half_width"]))
     for z, hw in slopes:
         deform[(jlo, round(z, 9))] = -hw
-        deform[(jhi, round(z, 9))] = hw
+        deform[(jhi, round(z, 9))] = centres[-1] + hw
 
     # the ground between the embankment and the building; with a trench's lines (any type,
     # so that a measure and its same-mesh reference share the point) in front of the
@@ -317,16 +327,17 @@ def build_layout(case: Case) -> Layout:
         "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
         "ground_building": ((g["xbb"], g["ys2"], g["z1"]), "ground"),
         "ground_far": ((g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]), "ground"),
-        "ground_opposite": ((g["xbb"], 0.5 * (toe + g["ys0"]), g["z1"]), "ground"),
+        "ground_opposite": ((g["xbb"], 0.5 * (toe_far + g["ys0"]), g["z1"]), "ground"),
     }
     probes = {name: point for name, (point, _) in located.items()}
     probe_roles = {name: role for name, (_, role) in located.items()}
 
     return Layout(
         xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
-        rail_y=(-hg, hg), rail_z=g["z4"],
+        rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"],
         rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
-        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]), sleeper_y=np.array([-hs, -hg, hg, hs]),
+        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
+        sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
         sleeper_z=g["z3"], deform=deform,
         bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes,
         probe_roles=probe_roles)

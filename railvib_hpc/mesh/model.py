@@ -127,17 +127,19 @@ class Mesh:
         }
 
     def rail_nodes(self) -> np.ndarray:
-        """Flexible-rail nodes, shape (2, k): rail at negative y first, each sorted along x
-        (padded with -1 when the rails have different node counts)."""
+        """Flexible-rail nodes, shape (n_rails, k): one row per rail by increasing y (track
+        1's two rails, then track 2's), each sorted along x (padded with -1 when the rails
+        have different node counts)."""
         nodes = np.unique(self.lines[self.line_part == PART_ID["rail"]])
-        y = self.points[nodes, 1]
+        y = np.round(self.points[nodes, 1], 6)
         out = []
-        for side in (y < 0, y >= 0):
-            n = nodes[side]
+        for value in np.unique(y):
+            n = nodes[y == value]
             out.append(n[np.argsort(self.points[n, 0], kind="stable")])
-        if len(out[0]) != len(out[1]):
-            width = max(len(out[0]), len(out[1]))
-            out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
+        if not out:
+            return np.zeros((2, 0), dtype=np.int64)
+        width = max(len(o) for o in out)
+        out = [np.pad(o, (0, width - len(o)), constant_values=-1) for o in out]
         return np.array(out, dtype=np.int64)
 
     def nearest_node(self, xyz: tuple[float, float, float]) -> int:

@@ -52,12 +52,12 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     require_parts(mesh, ("rail",), "mbs.static_correction = true (unit loads on the rails)")
     rails = mesh.rail_nodes()
     if np.any(rails < 0):
-        raise ValueError("the two rails must have the same number of nodes")
+        raise ValueError("the rails must have the same number of nodes")
     comp = np.array([2, 4])                        # uz, ry in the node's 6 components
     nodes = np.repeat(rails.reshape(-1), 2)
     c = np.tile([0, 1], rails.size)
     dofs = dofmap.index[nodes, comp[c]]
-    table = np.stack([np.repeat(np.arange(2), rails.shape[1] * 2), nodes, c], axis=1)
+    table = np.stack([np.repeat(np.arange(rails.shape[0]), rails.shape[1] * 2), nodes, c], axis=1)
     return dofs.astype(np.int64), table.astype(np.int64)
 
 

@@ -76,7 +76,9 @@ class WheelCoupling:
     def __init__(self, rails: RailDofs, wheel_rail, conicity: float = 0.0):
         self.rails = rails
         self.wheel_rail = np.asarray(wheel_rail, dtype=np.int64)
-        self.lateral = -np.sign(rails.y)[self.wheel_rail] * float(conicity)
+        # the normals lean towards the track's centre: rails come in pairs, lower y first
+        side = np.where(np.arange(len(rails.y)) % 2 == 0, -1.0, 1.0)
+        self.lateral = -side[self.wheel_rail] * float(conicity)
 
     @property
     def n_wheels(self) -> int:

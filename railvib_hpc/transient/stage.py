@@ -490,7 +490,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
 def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
     from ..mbs.results import n_steps
-    from ..mbs.stage import build_irregularity, build_vehicle, passage
+    from ..mbs.stage import build_vehicle, passage, passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, case_dofmap
     from ..modal.petsc import assemble, assemble_damping
@@ -509,12 +509,12 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         raise TransientInputError(f"railvib transient: {exc}") from None
     vehicle = build_vehicle(case)
     run = passage(case, vehicle, float(rails.x.max()))
-    speed = case["vehicle.speed"]
+    speed = float(np.max(np.abs(run["speeds"])))
     h_min = float(np.diff(rails.x, axis=1).min())
     dt = time_step(case, h_min / speed, rep)
     nt = n_steps(run["t_end"], dt)
     times = np.arange(nt + 1) * dt
-    x = run["x_start"] + run["offsets"][None, :] + speed * times[:, None]
+    x = run["x_start"] + run["offsets"][None, :] + run["speeds"][None, :] * times[:, None]
     steps_out = output_steps(case, dt, nt)
     if case["output.stress_times"]:
         _check_stress_times(case, steps_out * dt)
@@ -545,10 +545,7 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
             return dofs, -coef * forces[:, None]
     else:
         coupling = WheelCoupling(rails, run["wheel_rail"], getattr(vehicle, "conicity", 0.0))
-        x_lo = float(x[0].min()) - 1.0
-        irregularity = build_irregularity(case, run["wheel_rail"],
-                                          (x_lo, run["x_end"] + speed * case["vehicle.t_after"]
-                                           + 1.0))
+        irregularity = passage_irregularity(case, vehicle, run)
         driver = VehicleDriver(vehicle, coupling, x, irregularity, dt)
         columns = RailColumns(system, rails, LOOKAHEAD_NODES)
     solver = DirectSolver(system, prescribed, driver, columns)

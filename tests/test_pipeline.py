@@ -35,7 +35,7 @@ def test_run_goes_end_to_end(shared_tmp, capsys):
 
 
 def _check_outputs(out: Path, text: str, rerun: str) -> None:
-    assert "pipeline complete: 10 probes assessed" in text
+    assert "pipeline complete: 14 probes assessed" in text
     assert "iso2631" in text and "slab1" in text and "comparison with the thesis" in text
     assert "reusing" in rerun
     for name in ("mesh.h5", "modes.h5", "static.h5", "mbs.h5", "fields.h5", "fields.xdmf",
@@ -62,7 +62,13 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
         pytest.approx(0.1 + 19.28 / 346.58, abs=1e-3)
     assert set(summary["verdict"]) == {"footing", "basement_wall", "basement_wall_far",
                                        "slab1", "slab2", "ground_toe", "ground_mid",
-                                       "ground_building", "ground_far", "ground_opposite"}
+                                       "ground_building", "ground_far", "ground_opposite",
+                                       *(f"slab{k}_x1y1_{w}" for k in (1, 2)
+                                         for w in ("mid", "corner"))}
+    # per floor: the basement (wall, footing) and the two slabs with their bay's probes
+    assert {k: len(v["probes"]) for k, v in summary["floors"].items()} == \
+        {"basement": 3, "floor 1": 3, "floor 2": 3}
+    assert "## Assessment per floor" in report
     assert summary["wave_speeds"]["c_P"] == pytest.approx(346.58, abs=0.01)
     assert summary["wave_speeds"]["c_S"] == pytest.approx(212.24, abs=0.01)
     # the fields hold every 40th MBS step (output.dt = 4 ms, MBS dt = 0.1 ms)
@@ -111,3 +117,37 @@ def test_static_correction_reaches_the_fields(shared_tmp):
             # and the static correction matters: the modal part alone is much smaller
             assert abs(q @ phi_z[:, node]) < 0.7 * abs(uz[node])
     comm.Barrier()
+
+
+@pytest.mark.mpi
+def test_two_trains_on_two_tracks_end_to_end(shared_tmp):
+    """Two tracks, the second train the other way 0.05 s later, with the static correction
+    (its residual flexibility spans all four rails): the run completes on every rank
+    count, each train keeps its own rails, and both load the track."""
+    out = shared_tmp / "two_tracks"
+    sets = [*COARSE, "--set", "track.count=2", "--set", "geometry.ys0=14.0",
+            "--set", "train2.t_start=0.05", "--set", "output.stress_times=[]"]
+    assert run(["run", str(BASELINE), *sets, "--out", str(out)]) == 0
+    if comm.rank == 0:
+        with h5py.File(out / "mbs.h5", "r") as f:
+            rails = f["wheels/rail_index"][()]
+            x = f["wheels/x"][()]
+            force = f["wheels/contact_force"][()]
+        assert rails.tolist() == [0, 1, 2, 3]
+        assert np.all(np.diff(x[:, :2], axis=0) > 0) and np.all(np.diff(x[:, 2:], axis=0) < 0)
+        # 0.05 s later at 30 m/s: 1.5 m behind the mirror image of the first train
+        mirror = BASELINE_X_LO + BASELINE_X_HI - x[:, 0]
+        assert x[:, 2] == pytest.approx(mirror + 1.5, abs=1e-9)
+        static = force[0, 0]
+        for w in range(4):            # every wheel feels the flexible track: its load varies
+            assert np.ptp(force[:, w]) > 1e-4 * static, w
+        with h5py.File(out / "modes.h5", "r") as f:
+            assert f["mesh/rail_nodes"].shape[0] == 4
+        summary = json.loads((out / "assessment.json").read_text())
+        assert summary["floors"]["floor 2"]["passed"] is True
+        assert "tracks               2, 4 m apart" in (out / "report.md").read_text()
+    comm.Barrier()
+
+
+#: The rails of the baseline: the rigid entry rail's start and the rigid exit rail's end.
+BASELINE_X_LO, BASELINE_X_HI = 0.0, 24.6 + 3.0

@@ -359,9 +359,11 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
              f"mesh                 refinement {case['mesh.refinement']}, hexahedra: "
              f"{case['modal.hex_formulation']}"]
     if solver == "transient":
+        lines.extend(_site_summary(case))
         lines.extend(_transient_summary(case, out_dir / "transient.h5"))
         return "\n".join(lines)
     lines.append(f"solver               {SOLVER_TEXT['modal']}")
+    lines.extend(_site_summary(case))
     modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
     if modes_path.exists():
         with h5py.File(modes_path, "r") as f:
@@ -398,6 +400,20 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
                      f"{'on' if case['mbs.static_correction'] else 'off'}, dt {dt:.2e} s, "
                      f"irregularity {case['irregularity.type']}")
     return "\n".join(lines)
+
+
+def _site_summary(case: Case) -> list[str]:
+    """The building and the tracks in one line each."""
+    from ..mesh.building import Building
+
+    out = [f"building             {Building.of_case(case).describe()}"]
+    if case["track.count"] == 2:
+        t2 = case["train2"]
+        out.append(f"tracks               2, {case['track.spacing']:g} m apart; "
+                   + ("track 2 unloaded" if not t2["enabled"] else
+                      f"train 2 {t2['direction']} direction, {t2['t_start']:g} s later, "
+                      f"{t2['speed'] or case['vehicle.speed']:g} m/s (wave arrivals: train 1)"))
+    return out
 
 
 def _transient_summary(case: Case, path: Path) -> list[str]:

@@ -41,8 +41,10 @@ def coarse():
 
 
 #: A site on the coarse model: two soil layers, an EPS-filled trench and a wave-impeding block
-#: (each its own part and material), and a 3-storey building of 2 x 1 bays on strip footings.
+#: (each its own part and material), a 3-storey building of 2 x 1 bays on strip footings and
+#: two tracks.
 SITE = ["building.storeys=3", "building.bays_x=2", "building.foundation=strip",
+        "track.count=2", "geometry.ys0=14.0",
         "soil.layers=[{thickness=1.5, c_s=150.0, nu=0.3, rho=1800.0}, "
         "{thickness=0.0, c_s=300.0, nu=0.3, rho=1950.0}]",
         "trench.type=filled", "trench.distance=6.0", "trench.width=1.2", "trench.depth=3.0",
@@ -74,6 +76,7 @@ def test_layered_site_with_measures_and_building_equals_serial(coarse_site):
     assert {PART_ID[p] for p in ("soil_layer_1", "soil_layer_2", "trench_fill", "wib")} <= present
     slab = mesh.points[np.unique(mesh.hexes[mesh.hex_part == PART_ID["slab"]])]
     assert len(np.unique(np.round(slab[:, 2], 6))) == 3 * 2          # three slabs' faces
+    assert mesh.rail_nodes().shape[0] == 4                           # two tracks
     _assert_equal_serial(case, mesh)
 
 

@@ -76,7 +76,7 @@ def test_stage_outputs_equal_serial_superposition(coarse_modes, shared_tmp):
     check_xdmf(out / "stress.xdmf", out / "fields.h5")
     with h5py.File(out / "probes.h5", "r") as f:
         names = [n.decode() for n in f["names"][()]]
-        assert names[-1] == "p1" and len(names) == 11  # 10 mesh probes + p1
+        assert names[-1] == "p1" and len(names) == 15  # 14 mesh probes + p1
         assert f["probes/p1/displacement"].shape == (46, 3)      # window, full resolution
         assert np.array_equal(f["probes/p1/time"][()], t[5:51])
         x = f["rail/x"][()]

@@ -190,7 +190,7 @@ def test_cli_transient_runs_and_assesses(tmp_path, capsys):
                 *SETS, "--set", "vehicle.type=moving_force"])
     assert code == 0
     text = capsys.readouterr().out
-    assert "transient complete: 10 probes assessed" in text
+    assert "transient complete: 14 probes assessed" in text
     assert "assessed the results of the full-order time integration (railvib transient)" in text
     report = (tmp_path / "report.md").read_text()
     assert "solver               full-order time integration (railvib transient)" in report

@@ -204,3 +204,23 @@ def test_cli_transient_runs_and_assesses(tmp_path, capsys):
     assert run(["transient", str(BASELINE), "--out", str(tmp_path),
                 *SETS, "--set", "vehicle.type=moving_force"]) == 0
     assert "reusing the transient results" in capsys.readouterr().out
+
+
+@pytest.mark.mpi
+def test_two_trains_run_the_full_order_model(shared_tmp):
+    """Two tracks, the second wheelset the other way: each wheel keeps its rail, train 2
+    runs the mirror image of train 1's path, both stay in contact on the flexible rail."""
+    out = shared_tmp / "transient_two_tracks"
+    assert run(["transient", str(BASELINE), "--out", str(out), *SETS,
+                "--set", "track.count=2", "--set", "geometry.ys0=14.0",
+                "--set", "output.stress_times=[]"]) == 0
+    if comm.rank == 0:
+        with h5py.File(out / "transient.h5", "r") as f:
+            w = f["wheels"]
+            rails, x, force = w["rail_index"][()], w["x"][()], w["contact_force"][()]
+        assert rails.tolist() == [0, 1, 2, 3]
+        assert x[:, 2] == pytest.approx(0.0 + 27.6 - x[:, 0], abs=1e-9)   # X0 + X4 + rigid
+        static = force[0, 0]
+        assert np.all(force > 0.5 * static)                             # no wheel lifts off
+        assert np.ptp(force[:, 2]) > 1e-3 * static                      # train 2 feels the track
+    comm.Barrier()

@@ -659,6 +659,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must lie between ballast_top_half_width = {g['ballast_top_half_width']:g} "
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
+    out.extend(_check_interfaces(case))
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
@@ -766,6 +767,16 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
                     f"must be > track.spacing + |YS1| = {t['spacing'] - g['ys1']:g} m (the soil "
                     "must extend beyond the embankment of the second track)"))
     return out
+
+
+def _check_interfaces(case: Case) -> list[tuple[str, Any, str]]:
+    """The elastic interfaces cut the generated mesh: not a user's ``mesh.file``."""
+    if not case["mesh.file"]:
+        return []
+    return [(f"{kind}.modulus", case[f"{kind}.modulus"],
+             "an elastic interface cuts the generated mesh; it cannot be added to mesh.file "
+             "(set the modulus to 0 or leave mesh.file out)")
+            for kind in ("usp", "ballast_mat", "isolation") if case[f"{kind}.modulus"] > 0]
 
 
 def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[str, Any, str]]:

@@ -88,10 +88,16 @@ MAX_SOIL_LAYERS = 8
 SOIL_LAYER_PARTS = tuple(f"soil_layer_{k}" for k in range(1, MAX_SOIL_LAYERS + 1))
 #: Parts of the model, in the order of their part ids (id = index + 1); the soil layers come
 #: last so that the thesis's part ids stay what they were.
+#: Elastic interfaces (``[usp]``, ``[ballast_mat]``, ``[isolation]``): three zero-length
+#: directional springs per node pair (:mod:`railvib_hpc.mesh.interfaces`).
+INTERFACE_PARTS: dict[str, tuple[str, str, str]] = {
+    kind: (f"{kind}_x", f"{kind}_y", f"{kind}_z") for kind in ("usp", "ballast_mat",
+                                                               "isolation")}
 PARTS: tuple[str, ...] = (
     "rail", "rigid_rail", "sleeper", "pad_x", "pad_y", "pad_z",
     "ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
     *SOIL_LAYER_PARTS, "trench_fill", "wib",
+    *(p for parts in INTERFACE_PARTS.values() for p in parts),
 )
 #: Mitigation measures in the soil (``[trench]``, ``[wib]``): parts of their own material.
 MEASURE_PARTS = ("trench_fill", "wib")
@@ -366,6 +372,54 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "depth": Param(0.0, "float", "m", "depth of the block's top below the ground",
                        "nonneg"),
         "thickness": Param(0.0, "float", "m", "block thickness", "nonneg"),
+    },
+    "usp": {
+        "modulus": Param(0.0, "float", "N/m^3",
+                         "under-sleeper pads: bedding modulus, vertical stiffness per unit area of"
+                         " the sleeper's bearing (EN 16730: soft 0.05-0.1e9, medium 0.1-0.2e9, "
+                         "stiff 0.2-0.3e9) (0: none)", "nonneg"),
+        "shear_ratio": Param(0.3, "float", "-",
+                             "stiffness along x and y over the vertical one (an elastomer's "
+                             "shear stiffness is a fraction of its compression stiffness)",
+                             "pos"),
+        "loss_factor": Param(0.1, "float", "-",
+                             "loss factor eta of the pads: damping ratio eta/2 of its strain "
+                             "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
+                             "elastomers", "fraction"),
+        "width": Param(0.27, "float", "m",
+                       "bearing width of the sleeper on the pads (its underside)", "pos"),
+    },
+    "ballast_mat": {
+        "modulus": Param(0.0, "float", "N/m^3",
+                         "ballast mat under the ballast (on the subballast, z = Z2): bedding "
+                         "modulus (typical 0.02-0.1e9) (0: none)", "nonneg"),
+        "shear_ratio": Param(0.3, "float", "-",
+                             "stiffness along x and y over the vertical one (an elastomer's "
+                             "shear stiffness is a fraction of its compression stiffness)",
+                             "pos"),
+        "loss_factor": Param(0.1, "float", "-",
+                             "loss factor eta of the mat: damping ratio eta/2 of its strain "
+                             "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
+                             "elastomers", "fraction"),
+    },
+    "isolation": {
+        "modulus": Param(0.0, "float", "N/m^3",
+                         "base isolation of the building: bedding modulus of the bearings over the"
+                         " area they carry (a vertical building frequency f needs about m (2 pi "
+                         "f)^2 / area) (0: none)", "nonneg"),
+        "shear_ratio": Param(0.3, "float", "-",
+                             "stiffness along x and y over the vertical one (an elastomer's "
+                             "shear stiffness is a fraction of its compression stiffness)",
+                             "pos"),
+        "loss_factor": Param(0.1, "float", "-",
+                             "loss factor eta of the bearings: damping ratio eta/2 of its strain "
+                             "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
+                             "elastomers", "fraction"),
+        "level": Param("ground", "str", "-",
+                       "where the bearings are: 'ground' (on top of the basement, under the "
+                       "ground-floor columns, Z1) or 'footings' (under everything of the "
+                       "building at its base ZBB; the basement walls stay bonded to the soil "
+                       "beside them)", choices=("ground", "footings")),
     },
     "domain": {
         "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),
@@ -882,6 +936,7 @@ SOURCES: dict[str, dict[str, str]] = {
            for d in "xy"},
         **{f"building.spans_{d}": f"{_APDL}: one span, X3 - X2 - FX1 = 6 m" for d in "xy"},
         "building.foundation": f"{_APDL}: four pad footings (FX1, FX4) with grade beams",
+        "usp.width": f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m",
         **{f"materials.{m}.{k}": f"{_APDL}: MP,{cmd},{n},{v}"
            for m, n, vals in (("rail", 1, ("210e9", "0.30", "7700")),
                               ("rigid_rail", 2, ("210e10", "0.30", "7700")),

@@ -334,11 +334,13 @@ def record_file(path: Path, comm=None) -> str:
 #: A selection of case keys: (dotted prefix, leaf names left out below it).
 Selection = tuple[tuple[str, tuple[str, ...]], ...]
 
-#: The mesh: its geometry and divisions, the soil layers, and the soils' E, nu, rho (the
-#: wavelength sizing, mesh.elements_per_wavelength, reads their shear-wave speeds).
+#: The mesh: its geometry and divisions, the soil layers, the elastic interfaces (they cut
+#: the mesh), and the soils' E, nu, rho (the wavelength sizing, mesh.elements_per_wavelength,
+#: reads their shear-wave speeds).
 _SOIL_WAVE_SPEED = ("damping_ratio",)
 _MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("domain", ()),
-         ("soil", ()), ("trench", ()), ("wib", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
+         ("soil", ()), ("trench", ()), ("wib", ()), ("usp", ()), ("ballast_mat", ()),
+         ("isolation", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
          ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).
@@ -355,7 +357,7 @@ _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
 _MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
                 ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
-                ("vehicle", ()), ("irregularity", ()), ("mbs", ()))
+                ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ()))
 _FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
                   ("output.static_correction_rates", ()))
 _PROBES = _MBS + (("output.window", ()), ("output.probes", ()),
@@ -405,7 +407,7 @@ class StageFile:
 #: The full-order solution (``railvib transient``): everything that changes K, M, C, the
 #: loads and the time step; ``transient.checkpoint_interval`` is how it runs, not what.
 _TRANSIENT = _MESH + (("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()),
-                      ("damping", ()), ("vehicle", ()), ("irregularity", ()),
+                      ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()),
                       ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
                       ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
                       ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),

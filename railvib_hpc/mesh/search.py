@@ -80,15 +80,20 @@ def boundary_faces(hexes: np.ndarray) -> np.ndarray:
     return faces[counts[inverse.ravel()] == 1]
 
 
-def nonconformal_faces(mesh: Mesh) -> int:
+def nonconformal_faces(mesh: Mesh, exclude_nodes: np.ndarray | None = None) -> int:
     """Number of unshared hex faces that lie inside the meshed volume.
 
     In a conformal mesh every unshared face is on the outer surface, so a point
     just outside its centre is outside every element. A hanging node or a
     duplicated node on an interface leaves unshared faces whose outside
-    neighbourhood is meshed; they are counted here.
+    neighbourhood is meshed; they are counted here, except faces whose four nodes are
+    all ``exclude_nodes`` (the elastic interfaces, joined by springs by design).
     """
     faces = boundary_faces(mesh.hexes)
+    if exclude_nodes is not None and len(exclude_nodes):
+        skip = np.zeros(mesh.n_nodes, dtype=bool)
+        skip[exclude_nodes] = True
+        faces = faces[~skip[faces].all(axis=1)]
     p = mesh.points[faces]                                        # (f, 4, 3)
     centre = p.mean(axis=1)
     normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])

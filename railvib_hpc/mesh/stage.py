@@ -18,6 +18,7 @@ from ..parallel import on_root
 from ..resources import check_memory
 from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
 from .gmsh_model import generate, read_msh
+from .interfaces import interface_nodes, split_interfaces
 from .layout import Layout, build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
@@ -28,7 +29,8 @@ if TYPE_CHECKING:
 
 #: Case sections that determine the mesh (see ``mesh.h5`` in
 #: :data:`railvib_hpc.io.stage_files.STAGE_FILES`).
-MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain", "soil", "trench", "wib")
+MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain", "soil", "trench", "wib",
+               "usp", "ballast_mat", "isolation")
 #: Memory per hexahedron while gmsh meshes and the mesh is extracted: 0.7 kB measured on the
 #: thesis model (52,056 hexahedra: +29 MB over 8,556), times 3 for the quality checks.
 MESH_BYTES_PER_HEX = 2.0e3
@@ -143,14 +145,17 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
         mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex)
+        mesh = split_interfaces(mesh, case)          # under-sleeper pads, mats, isolation
         source = "generated"
         mesh.probes = dict(layout.probes)
     mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
     t0 = time.perf_counter()
     quality = mesh.quality()
-    quality["duplicate_nodes"] = mesh.duplicate_nodes()
+    # the elastic interfaces' node pairs coincide and their faces are not shared, by design
+    joined = interface_nodes(mesh)
+    quality["duplicate_nodes"] = mesh.duplicate_nodes() - joined.size // 2
     quality["unused_nodes"] = mesh.unused_nodes()
-    quality["nonconformal_faces"] = nonconformal_faces(mesh)
+    quality["nonconformal_faces"] = nonconformal_faces(mesh, exclude_nodes=joined)
     quality["max_edge_per_soil_part"] = max_edge_per_soil_part(mesh)
     timings["quality"] = time.perf_counter() - t0
     if quality["n_inverted"]:

@@ -24,8 +24,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..config import Case, solid_material
-from .elements import PADS
+from ..config import Case
+from .elements import group_damping_ratio
 
 
 def rayleigh_coefficients(zeta: float, f1: float, f2: float) -> tuple[float, float]:
@@ -51,8 +51,7 @@ def material_rayleigh(case: Case, groups: Sequence[str]) -> dict[str, tuple[floa
     """``{group: (alpha_g, beta_g)}`` of ``damping.model = 'per_material'``."""
     out = {}
     for g in groups:
-        zeta = (case["modal.damping_ratio"] if g == PADS
-                else solid_material(case, g)["damping_ratio"])
+        zeta = group_damping_ratio(case, g)
         out[g] = rayleigh_coefficients(zeta, case["damping.f1"], case["damping.f2"])
     return out
 

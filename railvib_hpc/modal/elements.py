@@ -16,8 +16,9 @@ from ..config import Case, solid_material
 from ..fem.beam import beam_mass, beam_stiffness, shear_deformation_factors, shear_modulus
 from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
 from ..fem.spring import spring_matrices
+from ..mesh.interfaces import tributary_areas
 from ..mesh.model import Mesh
-from ..schema import PART_ID, SOLID_MATERIAL
+from ..schema import INTERFACE_PARTS, PART_ID, SOLID_MATERIAL
 
 BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
 PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
@@ -133,6 +134,27 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
         yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
                     spring_matrices(case[f"pads.{key}"], np.full(len(conn), direction)), None)
 
+    for kind, parts in INTERFACE_PARTS.items():
+        for direction, part in enumerate(parts):
+            sel = line_sel & (mesh.line_part == PART_ID[part])
+            if not sel.any():
+                continue
+            conn = mesh.lines[sel]
+            yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
+                        spring_matrices(interface_stiffness(mesh, case, kind, conn, direction),
+                                        np.full(len(conn), direction)), None)
+
+
+def interface_stiffness(mesh: Mesh, case: Case, kind: str, conn: np.ndarray,
+                        direction: int) -> np.ndarray:
+    """Stiffness of an elastic interface's springs ``conn`` (lower, upper node) along
+    ``direction``: the bedding modulus (times ``shear_ratio`` along x, y) times the upper
+    node's tributary area (:func:`railvib_hpc.mesh.interfaces.tributary_areas`)."""
+    width = case["usp.width"] if kind == "usp" else 0.0
+    area = tributary_areas(mesh, kind, width)[conn[:, 1]]
+    ratio = 1.0 if direction == 2 else case[f"{kind}.shear_ratio"]
+    return case[f"{kind}.modulus"] * ratio * area
+
 
 def _lump_beam(M: np.ndarray) -> np.ndarray:
     """Row-sum lumping of the translational part; rotary inertia keeps its diagonal."""
@@ -173,6 +195,16 @@ def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
 PADS = "pads"
 
 
+def group_damping_ratio(case: Case, group: str) -> float:
+    """Damping ratio of a material group: ``modal.damping_ratio`` for the rail pads, half the
+    loss factor for an elastic interface, the material's otherwise."""
+    if group == PADS:
+        return case["modal.damping_ratio"]
+    if group in INTERFACE_PARTS:
+        return 0.5 * case[f"{group}.loss_factor"]
+    return solid_material(case, group)["damping_ratio"]
+
+
 def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:
     """Material group -> the mesh parts it holds (groups without elements are left out)."""
     groups: dict[str, list[str]] = {}
@@ -181,6 +213,8 @@ def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:
     for part, (mat, _) in BEAM_MATERIAL.items():
         groups.setdefault(mat, []).append(part)
     groups[PADS] = list(PAD_DIRECTION)
+    for kind, parts in INTERFACE_PARTS.items():
+        groups[kind] = list(parts)
     present = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
     return {g: tuple(parts) for g, parts in groups.items()
             if any(PART_ID[p] in present for p in parts)}

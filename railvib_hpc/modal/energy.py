@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case, solid_material
+from ..config import Case
 from ..mesh.model import Mesh
 from .dofmap import DofMap
-from .elements import PADS, material_groups
+from .elements import group_damping_ratio, material_groups
 from .petsc import assemble
 
 if TYPE_CHECKING:
@@ -67,11 +67,11 @@ def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm
 def damping_from_energies(energies: dict[str, np.ndarray], case: Case) -> np.ndarray:
     """Modal damping ratios ``sum_g zeta_g E_ig / sum_g E_ig`` (pure numpy).
 
-    ``zeta_g`` is ``materials.<g>.damping_ratio``, and ``modal.damping_ratio`` for the pads.
+    ``zeta_g`` is ``materials.<g>.damping_ratio``, ``modal.damping_ratio`` for the pads and
+    half the loss factor for an elastic interface (:func:`.elements.group_damping_ratio`).
     """
     names = list(energies)
     e = np.stack([np.asarray(energies[g], dtype=float) for g in names], axis=1)
-    ratios = np.array([case["modal.damping_ratio"] if g == PADS
-                       else solid_material(case, g)["damping_ratio"] for g in names])
+    ratios = np.array([group_damping_ratio(case, g) for g in names])
     total = e.sum(axis=1)
     return (e @ ratios) / np.where(total > 0, total, 1.0)

@@ -41,10 +41,11 @@ def coarse():
 
 
 #: A site on the coarse model: two soil layers, an EPS-filled trench and a wave-impeding block
-#: (each its own part and material), a 3-storey building of 2 x 1 bays on strip footings and
-#: two tracks.
+#: (each its own part and material), a 3-storey building of 2 x 1 bays on strip footings,
+#: two tracks, and the three elastic interfaces (under-sleeper pads, a ballast mat, bearings).
 SITE = ["building.storeys=3", "building.bays_x=2", "building.foundation=strip",
-        "track.count=2", "geometry.ys0=14.0",
+        "track.count=2", "geometry.ys0=14.0", "usp.modulus=1e8", "ballast_mat.modulus=5e7",
+        "isolation.modulus=2e8",
         "soil.layers=[{thickness=1.5, c_s=150.0, nu=0.3, rho=1800.0}, "
         "{thickness=0.0, c_s=300.0, nu=0.3, rho=1950.0}]",
         "trench.type=filled", "trench.distance=6.0", "trench.width=1.2", "trench.depth=3.0",
@@ -57,8 +58,10 @@ def coarse_site():
     from railvib_hpc.mesh.layout import build_layout
     from railvib_hpc.parallel import on_root
 
+    from railvib_hpc.mesh.interfaces import split_interfaces
+
     case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
-    mesh = on_root(lambda: generate(build_layout(case))[0])
+    mesh = on_root(lambda: split_interfaces(generate(build_layout(case))[0], case))
     return case, mesh
 
 
@@ -68,7 +71,7 @@ def test_matrix_norms_and_eigenvalues_equal_serial(coarse):
 
 
 @pytest.mark.mpi
-def test_layered_site_with_measures_and_building_equals_serial(coarse_site):
+def test_site_with_measures_building_tracks_and_interfaces_equals_serial(coarse_site):
     from railvib_hpc.schema import PART_ID
 
     case, mesh = coarse_site
@@ -77,6 +80,8 @@ def test_layered_site_with_measures_and_building_equals_serial(coarse_site):
     slab = mesh.points[np.unique(mesh.hexes[mesh.hex_part == PART_ID["slab"]])]
     assert len(np.unique(np.round(slab[:, 2], 6))) == 3 * 2          # three slabs' faces
     assert mesh.rail_nodes().shape[0] == 4                           # two tracks
+    assert {PART_ID[f"{k}_z"] for k in ("usp", "ballast_mat", "isolation")} <= \
+        set(np.unique(mesh.line_part).tolist())
     _assert_equal_serial(case, mesh)
 
 

@@ -53,7 +53,7 @@ def springs(mesh: Mesh, kind: str) -> np.ndarray:
 
 
 def test_tributary_areas_add_up_to_the_interfaces(meshes):
-    plain, cut, _, base = meshes
+    _, cut, _, base = meshes
     # usp: 37 sleepers x 2.5 m x 0.27 m bearing width
     assert tributary_areas(cut, "usp", 0.27).sum() == \
         pytest.approx(37 * 2.5 * 0.27, rel=1e-12)

@@ -55,10 +55,9 @@ SITE = ["building.storeys=3", "building.bays_x=2", "building.foundation=strip",
 @pytest.fixture(scope="module")
 def coarse_site():
     from railvib_hpc.mesh.gmsh_model import generate
+    from railvib_hpc.mesh.interfaces import split_interfaces
     from railvib_hpc.mesh.layout import build_layout
     from railvib_hpc.parallel import on_root
-
-    from railvib_hpc.mesh.interfaces import split_interfaces
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
     mesh = on_root(lambda: split_interfaces(generate(build_layout(case))[0], case))

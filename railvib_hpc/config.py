@@ -440,6 +440,17 @@ def soil_layers(case: Case) -> list[dict[str, float]]:
     return out
 
 
+def track_lift(case: Case) -> float:
+    """How far a fill embankment lifts the track bed above ``geometry.z2, z3, z4`` [m]."""
+    return case["track.embankment_height"]
+
+
+def embankment_toe(case: Case) -> float:
+    """Half-width of the embankment's base on the ground on the building side [m]: |YS1|,
+    plus the fill's slope run."""
+    return -case["geometry.ys1"] + case["track.embankment_slope"] * track_lift(case)
+
+
 def solid_material(case: Case, name: str) -> dict[str, float]:
     """``E``, ``nu``, ``rho``, ``damping_ratio`` of a material: ``materials.<name>``, or a
     soil layer's (``name`` = ``soil_layer_<k>``, :func:`soil_layers`)."""
@@ -659,6 +670,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must lie between ballast_top_half_width = {g['ballast_top_half_width']:g} "
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
+    out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
@@ -762,11 +774,31 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("track.spacing", t["spacing"],
                     f"the two tracks' sleepers must not touch: spacing > track.sleeper_length "
                     f"= {t['sleeper_length']:g} m"))
-    elif not g["ys0"] > t["spacing"] - g["ys1"]:
+    elif not g["ys0"] > t["spacing"] + embankment_toe(case):
+        far = t["spacing"] + embankment_toe(case)
         out.append(("geometry.ys0", g["ys0"],
-                    f"must be > track.spacing + |YS1| = {t['spacing'] - g['ys1']:g} m (the soil "
+                    f"must be > track.spacing + the embankment toe = {far:g} m (the soil "
                     "must extend beyond the embankment of the second track)"))
     return out
+
+
+def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
+    """A fill embankment's base stays clear of the building and inside the soil."""
+    g, h = case["geometry"], track_lift(case)
+    if h == 0:
+        return []
+    toe = embankment_toe(case)
+    if not toe < -g["ys2"]:
+        return [("track.embankment_height", h,
+                 f"the embankment's toe ({toe:g} m from the track centre: |YS1| + "
+                 f"embankment_slope x height) reaches the building face |YS2| = "
+                 f"{-g['ys2']:g} m; lower it, steepen track.embankment_slope or move the "
+                 "building")]
+    if case["track.count"] == 1 and not g["ys0"] > toe:
+        return [("geometry.ys0", g["ys0"],
+                 f"must be > the embankment toe {toe:g} m (the soil must extend beyond the "
+                 "fill)")]
+    return []
 
 
 def _check_interfaces(case: Case) -> list[tuple[str, Any, str]]:
@@ -817,7 +849,7 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     embankment and the building."""
     out: list[tuple[str, Any, str]] = []
     g = case["geometry"]
-    toe, face = -g["ys1"], -g["ys2"]
+    toe, face = embankment_toe(case), -g["ys2"]
     soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
     tr = case["trench"]
     if tr["type"] != "none" or tr["width"] > 0:
@@ -825,7 +857,8 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
         if tr["distance"] < toe - 1e-9:
             out.append(("trench.distance", tr["distance"],
                         f"the trench's near face must lie beyond the embankment toe "
-                        f"(|geometry.ys1| = {toe:g} m from the track centreline)"))
+                        f"({toe:g} m from the track centreline: |geometry.ys1| plus a "
+                        "fill's slope)"))
         elif tr["distance"] + tr["width"] > face + 1e-9:
             out.append(("trench.width", tr["width"],
                         f"the trench (from {tr['distance']:g} to "

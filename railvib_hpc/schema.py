@@ -97,20 +97,20 @@ PARTS: tuple[str, ...] = (
     "rail", "rigid_rail", "sleeper", "pad_x", "pad_y", "pad_z",
     "ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
     *SOIL_LAYER_PARTS, "trench_fill", "wib",
-    *(p for parts in INTERFACE_PARTS.values() for p in parts),
+    *(p for parts in INTERFACE_PARTS.values() for p in parts), "fill",
 )
 #: Mitigation measures in the soil (``[trench]``, ``[wib]``): parts of their own material.
 MEASURE_PARTS = ("trench_fill", "wib")
 SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam", "slab", "wall",
-               *SOIL_LAYER_PARTS, *MEASURE_PARTS)
+               *SOIL_LAYER_PARTS, *MEASURE_PARTS, "fill")
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 #: Material of each solid part: ``materials.<name>``, or the soil layer of the same name
 #: (:func:`railvib_hpc.config.solid_material`).
 SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
                   **{p: "concrete" for p in BUILDING_PARTS}, **{p: p for p in SOIL_LAYER_PARTS},
-                  "trench_fill": "trench_fill", "wib": "wib"}
+                  "trench_fill": "trench_fill", "wib": "wib", "fill": "fill"}
 #: The soil parts (absorbing faces may cut only these).
-SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS, *MEASURE_PARTS)
+SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS, *MEASURE_PARTS, "fill")
 #: Keys of one ``[[soil.layers]]`` entry: (required, meaning). Exactly one of E and c_s.
 SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
     "thickness": (True, "thickness in m (> 0; the last layer may give 0: down to the base)"),
@@ -190,6 +190,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos"),
         "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos"),
         "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos"),
+        "embankment_height": Param(0.0, "float", "m",
+                                   "a fill embankment under the track bed: it lifts the "
+                                   "subballast, ballast, sleepers and rails (geometry.z2, z3, "
+                                   "z4) by this height (0: the thesis's track bed directly on "
+                                   "the ground, a track at grade)", "nonneg"),
+        "embankment_slope": Param(1.5, "float", "-",
+                                  "horizontal run of the fill's side slopes per unit height "
+                                  "(1.5: 1V:1.5H); the fill's top is the subballast's base "
+                                  "(half-width |YS1|)", "pos"),
         "count": Param(1, "int", "-",
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
                        "from the building, on the same embankment)", "pos"),
@@ -241,6 +250,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')"),
         # jet-grouted or cement-stabilised soil block (E 0.5-5 GPa)
         "wib": _mat(2e9, 0.25, 2100.0, "wave-impeding block ([wib])"),
+        # compacted granular embankment fill (E 50-200 MPa)
+        "fill": _mat(1.5e8, 0.30, 1900.0, "embankment fill (track.embankment_height)"),
     },
     "sections": {
         "rail": {
@@ -957,6 +968,12 @@ SOURCES: dict[str, dict[str, str]] = {
         **{f"materials.wib.{k}": "not in the thesis: jet-grouted / cement-stabilised soil "
            "(E 0.5-5 GPa, rho 2000-2200 kg/m^3)" for k in ("E", "nu", "rho")},
         "materials.wib.damping_ratio": "not in the thesis: the 3 % of the other materials",
+        **{f"materials.fill.{k}": "not in the thesis: compacted granular embankment fill "
+           "(E 50-200 MPa, rho 1800-2000 kg/m^3)" for k in ("E", "nu", "rho")},
+        "materials.fill.damping_ratio": "not in the thesis: the 3 % of the other materials",
+        "track.embankment_height": f"{_APDL}: the track bed on the ground (Z1 = top of the "
+                                   "subgrade), no fill",
+        "track.embankment_slope": "not in the thesis: 1V:1.5H, the usual fill slope",
         **{f"sections.rail.{k}": f"{_RAIL_SEC} (railvib_hpc.sections)" for k in (
             "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
         **{f"sections.sleeper.{k}": f"{_SLP_SEC} (railvib_hpc.sections)" for k in (

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, track_lift
 from ..errors import UserError
 from ..io.stage_checks import CHECKS
 from ..io.stage_files import forget, output_lock, provenance, require_inputs, write_json
@@ -276,7 +276,8 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     arrivals = {}
     for name, h in hist.items():
         r = float(np.linalg.norm(h["coords"] - np.array([x_entry, y_rail,
-                                                          case["geometry.z4"]])))
+                                                          case["geometry.z4"]
+                                                          + track_lift(case)])))
         t_det = wave_arrival(h["t"], h["acceleration"], t_entry, a["wave_threshold"])
         arrivals[name] = {"distance": r, "t_entry": t_entry, "detected": t_det,
                           "after_entry": t_det - t_entry,

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, track_lift
 
 #: What the thesis reports, with where (thesis.md / benchmarks.md section 2).
 THESIS = {
@@ -366,8 +366,9 @@ def thesis_clock_arrival(case: Case, hist: dict, probe: str = "basement_wall_far
     shift = x0 / v                      # thesis clock = run clock + x_start / v
     t_entry = case["geometry.x1"] / v
     g = 0.5 * case["track.gauge"]
-    near = np.array([case["geometry.x1"], -g, case["geometry.z4"]])
-    far = np.array([case["geometry.x1"], g, case["geometry.z4"]])
+    z_rail = case["geometry.z4"] + track_lift(case)
+    near = np.array([case["geometry.x1"], -g, z_rail])
+    far = np.array([case["geometry.x1"], g, z_rail])
     base = np.array([h["coords"][0], h["coords"][1], case["geometry.zbb"]])
     detected = wave_arrival(h["t"] + shift, h["acceleration"], t_entry,
                             case["assessment.wave_threshold"])

@@ -31,7 +31,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, track_lift
 from ..schema import BUILDING_PARTS, INTERFACE_PARTS, PART_ID
 from .model import Mesh
 
@@ -51,7 +51,7 @@ def active_interfaces(case: Case) -> list[str]:
 def interface_plane(case: Case, kind: str) -> tuple[float, tuple[str, ...]]:
     """z of a plane interface and the parts above it."""
     if kind == "ballast_mat":
-        return case["geometry.z2"], ("ballast",)
+        return case["geometry.z2"] + track_lift(case), ("ballast",)
     level = case["isolation.level"]
     z = case["geometry.z1"] if level == "ground" else case["geometry.zbb"]
     return z, BUILDING_PARTS

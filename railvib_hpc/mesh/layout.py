@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import Case, soil_layers, solid_material
+from ..config import Case, embankment_toe, soil_layers, solid_material, track_lift
 from ..fem.boundary import wave_speeds
 from .building import Building
 
@@ -174,10 +174,14 @@ def build_layout(case: Case) -> Layout:
     xmax = g["x4"] + d["extra_length"]
     xb = _merge([xmin, xmax, *sleeper_x, *bldg.x_lines()])
     ymin = g["ys4"] - d["extra_width"]
-    hs, hg, toe = t["sleeper_length"] / 2, t["gauge"] / 2, -g["ys1"]
+    hs, hg = t["sleeper_length"] / 2, t["gauge"] / 2
     # track centre lines: track 1 at y = 0, track 2 track.spacing further from the building;
-    # one embankment carries both (its far toe at toe_far)
+    # one embankment carries both. Its base on the ground reaches toe (near side) and
+    # toe_far; a fill (track.embankment_height) lifts the track bed by lift, its sides
+    # sloping in to the subballast's base half-width |YS1|.
     centres = [0.0] + ([t["spacing"]] if t["count"] == 2 else [])
+    lift = track_lift(case)
+    toe = embankment_toe(case)
     toe_far = centres[-1] + toe
     tr, wib = case["trench"], case["wib"]
     measure_y = []
@@ -225,7 +229,8 @@ def build_layout(case: Case) -> Layout:
     # --- soil layers (top down) and wavelength sizing (mesh.elements_per_wavelength)
     layers = soil_layers(case)
     soils = [x["part"] for x in layers] or ["subgrade"]
-    h_soft = min(wavelength_size(case, name) for name in (*soils, "ballast", "subballast"))
+    h_soft = min(wavelength_size(case, name) for name in
+                 (*soils, "ballast", "subballast", *(("fill",) if lift > 0 else ())))
     # horizontally: the softest soil (one grid for all layers)
     nx = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(nx, np.diff(xb))])
     ny = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(ny, np.diff(yb))])
@@ -258,7 +263,8 @@ def build_layout(case: Case) -> Layout:
         interfaces += [g["z1"] - wib["depth"], g["z1"] - wib["depth"] - wib["thickness"]]
     below = _merge([zbot, g["z0"], *bldg.levels_below(), g["z1"], *interfaces])
     below = below[(below <= g["z1"] + _TOL) & (below >= zbot - _TOL)]
-    embank = [g["z1"], g["z2"], g["z3"]]
+    embank = [g["z1"], *([g["z1"] + lift] if lift > 0 else []), g["z2"] + lift, g["z3"] + lift]
+    embank_parts = (*(("fill",) if lift > 0 else ()), "subballast", "ballast")
     above = _merge([g["z1"], *bldg.levels_above()])
     above = above[above >= g["z1"] - _TOL]
 
@@ -277,9 +283,10 @@ def build_layout(case: Case) -> Layout:
             _ndiv(z1 - z0, size, r), z1 - z0,
             wavelength_size(case, soil_part(0.5 * (z0 + z1))), r)
     n_layer = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
-    for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), ("subballast", "ballast")):
-        zdiv[zkey(z0, z1)] = _resolving_divisions(max(1, round(n_layer * r)), z1 - z0,
-                                                  wavelength_size(case, part), r)
+    for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), embank_parts):
+        n = (_ndiv(z1 - z0, THESIS_DIVISIONS["vertical_soil"] if thesis else m["size_deep"], r)
+             if part == "fill" else max(1, round(n_layer * r)))
+        zdiv[zkey(z0, z1)] = _resolving_divisions(n, z1 - z0, wavelength_size(case, part), r)
     for z0, z1 in zip(above[:-1], above[1:]):
         zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
 
@@ -297,8 +304,8 @@ def build_layout(case: Case) -> Layout:
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if -toe < yc < toe_far:
-                blocks.append(Block(i, j, g["z1"], g["z2"], "subballast"))
-                blocks.append(Block(i, j, g["z2"], g["z3"], "ballast"))
+                for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), embank_parts):
+                    blocks.append(Block(i, j, float(z0), float(z1), part))
             if in_plan:
                 for z0, z1 in zip(above[:-1], above[1:]):
                     part = bldg.part(xc, yc, 0.5 * (z0 + z1))
@@ -309,7 +316,9 @@ def build_layout(case: Case) -> Layout:
     jlo = int(np.argmin(abs(yb + toe)))
     jhi = int(np.argmin(abs(yb - toe_far)))
     deform = {}
-    slopes = ((g["z2"], g["ballast_bottom_half_width"]), (g["z3"], g["ballast_top_half_width"]))
+    slopes = (*(((g["z1"] + lift, -g["ys1"]),) if lift > 0 else ()),
+              (g["z2"] + lift, g["ballast_bottom_half_width"]),
+              (g["z3"] + lift, g["ballast_top_half_width"]))
     for z, hw in slopes:
         deform[(jlo, round(z, 9))] = -hw
         deform[(jhi, round(z, 9))] = centres[-1] + hw
@@ -334,10 +343,10 @@ def build_layout(case: Case) -> Layout:
 
     return Layout(
         xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
-        rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"],
+        rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
         rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
         rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
         sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
-        sleeper_z=g["z3"], deform=deform,
+        sleeper_z=g["z3"] + lift, deform=deform,
         bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes,
         probe_roles=probe_roles)

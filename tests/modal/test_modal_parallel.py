@@ -42,9 +42,11 @@ def coarse():
 
 #: A site on the coarse model: two soil layers, an EPS-filled trench and a wave-impeding block
 #: (each its own part and material), a 3-storey building of 2 x 1 bays on strip footings,
-#: two tracks, and the three elastic interfaces (under-sleeper pads, a ballast mat, bearings).
+#: two tracks on a 1 m fill embankment, and the three elastic interfaces (under-sleeper pads,
+#: a ballast mat, bearings).
 SITE = ["building.storeys=3", "building.bays_x=2", "building.foundation=strip",
-        "track.count=2", "geometry.ys0=14.0", "usp.modulus=1e8", "ballast_mat.modulus=5e7",
+        "track.count=2", "geometry.ys0=14.0", "track.embankment_height=1.0",
+        "usp.modulus=1e8", "ballast_mat.modulus=5e7",
         "isolation.modulus=2e8",
         "soil.layers=[{thickness=1.5, c_s=150.0, nu=0.3, rho=1800.0}, "
         "{thickness=0.0, c_s=300.0, nu=0.3, rho=1950.0}]",
@@ -75,7 +77,8 @@ def test_site_with_measures_building_tracks_and_interfaces_equals_serial(coarse_
 
     case, mesh = coarse_site
     present = set(np.unique(mesh.hex_part).tolist())
-    assert {PART_ID[p] for p in ("soil_layer_1", "soil_layer_2", "trench_fill", "wib")} <= present
+    assert {PART_ID[p] for p in ("soil_layer_1", "soil_layer_2", "trench_fill", "wib",
+                                 "fill")} <= present
     slab = mesh.points[np.unique(mesh.hexes[mesh.hex_part == PART_ID["slab"]])]
     assert len(np.unique(np.round(slab[:, 2], 6))) == 3 * 2          # three slabs' faces
     assert mesh.rail_nodes().shape[0] == 4                           # two tracks

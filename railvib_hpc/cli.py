@@ -129,8 +129,10 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
     from .config import soil_layers
     from .mesh.building import Building
+    from .mesh.interfaces import site_line
 
     rep.info(f"  building: {Building.of_case(case).describe()}")
+    rep.info(f"  track bed: {site_line(case)}")
     z1 = case["geometry.z1"]
     for x in soil_layers(case):
         rep.info(f"  soil: {x['part']} {z1 - x['z_top']:g}-{z1 - x['z_bottom']:g} m deep, "

@@ -406,8 +406,10 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
 def _site_summary(case: Case) -> list[str]:
     """The building and the tracks in one line each."""
     from ..mesh.building import Building
+    from ..mesh.interfaces import site_line
 
     out = [f"building             {Building.of_case(case).describe()}"]
+    out.append("track bed            " + site_line(case))
     if case["track.count"] == 2:
         t2 = case["train2"]
         out.append(f"tracks               2, {case['track.spacing']:g} m apart; "

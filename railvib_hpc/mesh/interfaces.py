@@ -43,6 +43,20 @@ _HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4],
                        [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
 
 
+def site_line(case: Case) -> str:
+    """One line: the track at grade or on its fill, and the elastic interfaces switched on."""
+    h = track_lift(case)
+    bed = (f"on a {h:g} m fill embankment (slopes 1:{case['track.embankment_slope']:g})"
+           if h > 0 else "at grade (the track bed on the ground)")
+    kinds = active_interfaces(case)
+    if not kinds:
+        return bed + "; no elastic interfaces"
+    text = ", ".join(f"{k} {case[f'{k}.modulus']:.3g} N/m^3" for k in kinds)
+    if "isolation" in kinds:
+        text += f" (bearings at the {case['isolation.level']} level)"
+    return f"{bed}; elastic interfaces: {text}"
+
+
 def active_interfaces(case: Case) -> list[str]:
     """The interfaces the case switches on (``modulus > 0``), in the order they are cut."""
     return [kind for kind in INTERFACE_PARTS if case[f"{kind}.modulus"] > 0]

@@ -9,7 +9,8 @@ Layout of ``modes.h5``::
     /mesh/points (n, 3), /mesh/node_ids (n,), /mesh/hexes, /mesh/hex_part, /mesh/lines,
     /mesh/line_part, /mesh/node_sets/*, /mesh/probes/*   as in mesh.h5 (probes/roles too)
     /mesh/rotation_nodes   (nr,)           nodes that carry rotations (rails, sleepers)
-    /mesh/rail_nodes       (2, k)          flexible-rail nodes of each rail, sorted along x
+    /mesh/rail_nodes       (r, k)          flexible-rail nodes of each rail (2 per track, by
+                                           increasing y), sorted along x
     /mesh/nodal_mass       (n,)            lumped translational mass per node [kg]
     /dofs/index            (n, 6)          global DOF number of each component, -1 if fixed
     /pads/nodes (p, 2), /pads/direction (p,), /pads/stiffness (p,), /pads/damping (p,)

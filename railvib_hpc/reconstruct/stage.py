@@ -28,12 +28,12 @@ Outputs (in ``out_dir``)
   ``fields.h5`` (attribute ``stress_complete`` is 0 while that happens);
 * ``probes.h5`` + ``probes/<name>.csv``: histories of the mesh probes and the user probes
   at every step of the window (full time resolution: probes are cheap), and in
-  ``probes.h5`` ``/rail``: the vertical bending moment of both rails (modal part only, the
-  static correction has no rotations), sagging positive (:func:`.stress.rail_bending_moment`):
-  ``time`` (nt,), ``x`` (2, k), ``y`` (2,), ``nodes`` (2, k), ``bending_moment``
-  (nt, 2, k) at the nodes (averaged where it jumps) and ``bending_moment_ends``
-  (nt, 2, k-1, 2) at both ends of every rail element (exact; the jump at a node is the
-  reaction moment where the rail rotations are fixed at the pads).
+  ``probes.h5`` ``/rail``: the vertical bending moment of every rail (r = 2 per track, by
+  increasing y; modal part only, the static correction has no rotations), sagging positive
+  (:func:`.stress.rail_bending_moment`): ``time`` (nt,), ``x`` (r, k), ``y`` (r,), ``nodes``
+  (r, k), ``bending_moment`` (nt, r, k) at the nodes (averaged where it jumps) and
+  ``bending_moment_ends`` (nt, r, k-1, 2) at both ends of every rail element (exact; the
+  jump at a node is the reaction moment where the rail rotations are fixed at the pads).
 
 Reuse
 -----

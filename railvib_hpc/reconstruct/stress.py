@@ -277,9 +277,10 @@ def rail_moment_modes(modes_path: str | os.PathLike, m: int, case: Case | None =
     Returns
     -------
     dict
-        ``x`` (2, k) node positions, ``y`` (2,) rail positions, ``nodes`` (2, k) node ids,
-        ``moment`` (m, 2, k) nodal moments and ``moment_ends`` (m, 2, k-1, 2) moments at
-        both ends of every rail element [N m per unit modal coordinate], ``EI``.
+        ``x`` (r, k) node positions, ``y`` (r,) rail positions, ``nodes`` (r, k) node ids,
+        ``moment`` (m, r, k) nodal moments and ``moment_ends`` (m, r, k-1, 2) moments at
+        both ends of every rail element [N m per unit modal coordinate], ``EI``; r = 2 rails
+        per track, by increasing y.
     """
     import h5py
 

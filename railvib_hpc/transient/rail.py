@@ -31,13 +31,13 @@ class RailDofs:
     Attributes
     ----------
     nodes
-        (2, k) node ids, rail at negative y first, sorted along x.
+        (r, k) node ids, one row per rail by increasing y (2 per track), sorted along x.
     x
-        (2, k) node positions along the track [m].
+        (r, k) node positions along the track [m].
     y
-        (2,) lateral positions of the rails [m].
+        (r,) lateral positions of the rails [m].
     dofs
-        (2, k, 4) global DOF numbers of ``uz, ry, uy, rz`` (-1 where constrained).
+        (r, k, 4) global DOF numbers of ``uz, ry, uy, rz`` (-1 where constrained).
     """
 
     nodes: np.ndarray

@@ -118,13 +118,11 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
              f"file {case.path or '<defaults>'})")
     rep.info(f"  track: {len(lay.sleeper_x)} sleepers, flexible rail "
              f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
-    if case["track.count"] == 2:
-        t2 = case["train2"]
-        second = ("unloaded" if not t2["enabled"] else
-                  f"a second train runs the {t2['direction']} direction, "
-                  f"{t2['t_start']:g} s later, at {t2['speed'] or case['vehicle.speed']:g} m/s")
-        rep.info(f"  tracks: 2, {case['track.spacing']:g} m apart (track 2 further from the "
-                 f"building); {second}")
+    from .mbs.stage import tracks_line
+
+    tracks = tracks_line(case)
+    if tracks:
+        rep.info(f"  tracks: {tracks}")
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
     from .config import soil_layers

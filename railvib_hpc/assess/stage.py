@@ -405,17 +405,15 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
 
 def _site_summary(case: Case) -> list[str]:
     """The building and the tracks in one line each."""
+    from ..mbs.stage import tracks_line
     from ..mesh.building import Building
     from ..mesh.interfaces import site_line
 
     out = [f"building             {Building.of_case(case).describe()}"]
     out.append("track bed            " + site_line(case))
-    if case["track.count"] == 2:
-        t2 = case["train2"]
-        out.append(f"tracks               2, {case['track.spacing']:g} m apart; "
-                   + ("track 2 unloaded" if not t2["enabled"] else
-                      f"train 2 {t2['direction']} direction, {t2['t_start']:g} s later, "
-                      f"{t2['speed'] or case['vehicle.speed']:g} m/s (wave arrivals: train 1)"))
+    tracks = tracks_line(case)
+    if tracks:
+        out.append(f"tracks               {tracks} (wave arrivals: train 1)")
     return out
 
 

@@ -205,6 +205,18 @@ def two_trains(case: Case) -> bool:
     return case["track.count"] == 2 and bool(case["train2.enabled"])
 
 
+def tracks_line(case: Case) -> str | None:
+    """One line on the second track and its train (None with one track)."""
+    if case["track.count"] != 2:
+        return None
+    t2 = case["train2"]
+    second = ("track 2 unloaded" if not t2["enabled"] else
+              f"train 2 runs the {t2['direction']} direction, {t2['t_start']:g} s later, at "
+              f"{t2['speed'] or case['vehicle.speed']:g} m/s")
+    return (f"2, {case['track.spacing']:g} m apart (track 2 further from the building); "
+            f"{second}")
+
+
 def mirror_x(case: Case, x: np.ndarray | float) -> np.ndarray | float:
     """``x`` mirrored about the middle of the rails (rigid entry rail start ``X0`` to rigid
     exit rail end ``X4 + rigid_length``): where an 'opposite' train is when [vehicle]'s

@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import MeshError
 from ..schema import BEAM_PARTS, PAD_PARTS, PART_ID, SOLID_PARTS
 from .layout import Layout
-from .model import Mesh
+from .model import Mesh, node_order
 
 NODE_SETS = ("bottom", "x_faces", "y_faces")
 
@@ -158,8 +158,7 @@ def extract_mesh(gmsh) -> Mesh:
     coords = np.asarray(coords).reshape(-1, 3)
     # Renumber nodes lexicographically by (x, y, z): contiguous node ranges are then compact
     # slabs along the track, which is how the parallel stages split ownership across ranks.
-    key = np.round(coords, 7)
-    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
+    order = node_order(coords)
     tags, coords = tags[order], coords[order]
     index = np.full(tags.max() + 1, -1, dtype=np.int64)
     index[tags] = np.arange(len(tags))

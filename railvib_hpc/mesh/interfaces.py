@@ -33,14 +33,12 @@ import numpy as np
 
 from ..config import Case, track_lift
 from ..schema import BUILDING_PARTS, INTERFACE_PARTS, PART_ID
-from .model import Mesh
+from .model import Mesh, node_order
+from .search import HEX_FACES
 
 #: Tolerance on the z of a node on an interface plane [m].
 PLANE_TOL = 1e-7
 
-#: Faces of a VTK hexahedron (local node indices).
-_HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4],
-                       [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
 
 
 def site_line(case: Case) -> str:
@@ -90,8 +88,7 @@ def split_interfaces(mesh: Mesh, case: Case) -> Mesh:
 
 def _renumber(mesh: Mesh) -> Mesh:
     """Nodes sorted by (x, y, z), ties by their current number."""
-    key = np.round(mesh.points, 7)
-    order = np.lexsort((np.arange(mesh.n_nodes), key[:, 2], key[:, 1], key[:, 0]))
+    order = node_order(mesh.points)
     index = np.empty(mesh.n_nodes, dtype=np.int64)
     index[order] = np.arange(mesh.n_nodes)
     return replace(mesh, points=mesh.points[order], hexes=index[mesh.hexes],
@@ -170,7 +167,7 @@ def tributary_areas(mesh: Mesh, kind: str, width: float = 0.0) -> np.ndarray:
     is_upper = np.zeros(mesh.n_nodes, dtype=bool)
     is_upper[upper] = True
     cand = mesh.hexes[is_upper[mesh.hexes].any(axis=1)]
-    faces = cand[:, _HEX_FACES].reshape(-1, 4)
+    faces = cand[:, HEX_FACES].reshape(-1, 4)
     faces = faces[is_upper[faces].all(axis=1)]
     p = mesh.points[faces]
     flat = np.ptp(p[:, :, 2], axis=1) < PLANE_TOL

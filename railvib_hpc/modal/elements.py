@@ -135,23 +135,24 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
                     spring_matrices(case[f"pads.{key}"], np.full(len(conn), direction)), None)
 
     for kind, parts in INTERFACE_PARTS.items():
-        for direction, part in enumerate(parts):
-            sel = line_sel & (mesh.line_part == PART_ID[part])
+        sels = [line_sel & (mesh.line_part == PART_ID[part]) for part in parts]
+        if not any(sel.any() for sel in sels):
+            continue
+        area = tributary_areas(mesh, kind, case["usp.width"] if kind == "usp" else 0.0)
+        for direction, sel in enumerate(sels):
             if not sel.any():
                 continue
             conn = mesh.lines[sel]
             yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
-                        spring_matrices(interface_stiffness(mesh, case, kind, conn, direction),
+                        spring_matrices(interface_stiffness(case, kind, area[conn[:, 1]],
+                                                            direction),
                                         np.full(len(conn), direction)), None)
 
 
-def interface_stiffness(mesh: Mesh, case: Case, kind: str, conn: np.ndarray,
-                        direction: int) -> np.ndarray:
-    """Stiffness of an elastic interface's springs ``conn`` (lower, upper node) along
-    ``direction``: the bedding modulus (times ``shear_ratio`` along x, y) times the upper
-    node's tributary area (:func:`railvib_hpc.mesh.interfaces.tributary_areas`)."""
-    width = case["usp.width"] if kind == "usp" else 0.0
-    area = tributary_areas(mesh, kind, width)[conn[:, 1]]
+def interface_stiffness(case: Case, kind: str, area: np.ndarray, direction: int) -> np.ndarray:
+    """Stiffness of an elastic interface's springs along ``direction`` from the tributary
+    ``area`` of their upper nodes (:func:`railvib_hpc.mesh.interfaces.tributary_areas`): the
+    bedding modulus, times ``shear_ratio`` along x and y, times the area."""
     ratio = 1.0 if direction == 2 else case[f"{kind}.shear_ratio"]
     return case[f"{kind}.modulus"] * ratio * area
 

@@ -130,6 +130,10 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     from .mesh.interfaces import site_line
 
     rep.info(f"  building: {Building.of_case(case).describe()}")
+    from .mesh.turn import turn_line
+
+    if turn_line(case):
+        rep.info(f"  {turn_line(case)}")
     rep.info(f"  track bed: {site_line(case)}")
     z1 = case["geometry.z1"]
     for x in soil_layers(case):

@@ -347,6 +347,37 @@ def _check_list(key: str, param: Param, value: Any, problems: list) -> Any:
     return out
 
 
+def _check_vehicle_table(key: str, param: Param, value: Any, problems: list) -> Any:
+    """The ``vehicle`` kind: a table of [vehicle] keys (``param.choices``), each checked
+    as [vehicle]'s own."""
+    if not isinstance(value, dict):
+        problems.append((key, value, f"expected a table of [vehicle] keys ([{key}])"))
+        return value
+    out = {}
+    for name, entry in value.items():
+        if name not in param.choices:
+            problems.append((f"{key}.{name}", entry,
+                             "not a key of the second train's own vehicle (its speed, cars "
+                             "and delay are train2.speed, n_cars, t_start; the model type and "
+                             "the wheel-rail contact law are [vehicle]'s); allowed: "
+                             + ", ".join(param.choices)))
+            continue
+        out[name] = check_value(f"{key}.{name}", ALL_KEYS[f"vehicle.{name}"], entry, problems)
+    return out
+
+
+def _group_tables(flat: dict[str, Any]) -> None:
+    """Gather the dotted keys of a table-valued key (``train2.vehicle.car_mass``) into it."""
+    for key, param in ALL_KEYS.items():
+        if param.kind != "vehicle":
+            continue
+        inner = {k[len(key) + 1:]: flat.pop(k) for k in [k for k in flat
+                                                         if k.startswith(key + ".")]}
+        if inner:
+            given = flat.get(key, {})
+            flat[key] = {**(given if isinstance(given, dict) else {}), **inner}
+
+
 #: Damping ratio of a soil layer that gives none (the materials' default).
 SOIL_LAYER_DAMPING_RATIO = 0.03
 
@@ -451,6 +482,112 @@ def embankment_toe(case: Case) -> float:
     return -case["geometry.ys1"] + case["track.embankment_slope"] * track_lift(case)
 
 
+#: Largest shear ``r dtheta/dr`` of the soil twisted round a turned building
+#: (``building.rotation``): a square element sheared by 1 keeps a scaled Jacobian of
+#: 1/sqrt(2) ~ 0.71, where the mesh check's aspect and Jacobian warnings stay quiet.
+MAX_TWIST_SHEAR = 1.0
+
+
+def twist_weight(r: Any, r_in: float, r_out: float) -> Any:
+    """Share of a turned building's rotation at distance ``r`` from its centre.
+
+    1 inside ``r_in`` (the building turns rigidly), 0 beyond ``r_out`` (the track-parallel
+    mesh is untouched) and the C1 smoothstep ``1 - s^2 (3 - 2 s)``, ``s = (r - r_in) /
+    (r_out - r_in)``, between. Works on numbers and numpy arrays alike.
+
+    Examples
+    --------
+    >>> [round(twist_weight(r, 2.0, 4.0), 3) for r in (1.0, 3.0, 5.0)]
+    [1.0, 0.5, 0.0]
+    """
+    s = (r - r_in) / (r_out - r_in)
+    s = s * (s > 0)
+    s = s - (s - 1) * (s > 1)          # clip to [0, 1] for floats and arrays without numpy
+    return 1.0 - s * s * (3.0 - 2.0 * s)
+
+
+@dataclass(frozen=True)
+class BuildingTurn:
+    """The turn of the building about its plan centre, and the ring of soil that twists.
+
+    Every point at distance ``r`` from ``centre`` turns by ``angle *`` :func:`twist_weight`
+    ``(r)`` about it: the building and the soil within ``r_in`` rigidly, nothing beyond
+    ``r_out``. The map keeps every circle round the centre and is area-preserving (polar
+    Jacobian ``[[1, 0], [r theta'(r), 1]]``), so it cannot fold the mesh; its shear
+    ``r theta'(r)`` is what limits the angle.
+
+    Attributes
+    ----------
+    centre
+        ``(XBB, YBB)``, the plan centre.
+    angle
+        Counter-clockwise seen from above [rad].
+    r_in
+        Distance of the plan's corners from the centre [m].
+    r_out
+        Distance to the nearest straight line the twist must not bend [m].
+    bound
+        What ``r_out`` reaches (for messages).
+    """
+
+    centre: tuple[float, float]
+    angle: float
+    r_in: float
+    r_out: float
+    bound: str
+
+    @property
+    def shear_per_radian(self) -> float:
+        """``max_r r |w'(r)|``: the soil's largest shear per radian of turn (inf: no room).
+
+        With ``s`` and ``rho = r_in / (r_out - r_in)``, ``r |w'| = 6 (rho + s) s (1 - s)``,
+        largest where ``3 s^2 + 2 (rho - 1) s - rho = 0``.
+        """
+        if not self.r_out > self.r_in:
+            return math.inf
+        rho = self.r_in / (self.r_out - self.r_in)
+        s = ((1 - rho) + math.sqrt((1 - rho) ** 2 + 3 * rho)) / 3
+        return 6 * (rho + s) * s * (1 - s)
+
+    @property
+    def max_angle(self) -> float:
+        """The largest turn [rad] that keeps the shear within :data:`MAX_TWIST_SHEAR`."""
+        return MAX_TWIST_SHEAR / self.shear_per_radian
+
+    @property
+    def shear(self) -> float:
+        """The soil's largest shear at this turn."""
+        return abs(self.angle) * self.shear_per_radian if self.angle else 0.0
+
+
+def building_turn(case: Case) -> BuildingTurn:
+    """The turn of a validated case's building (``building.rotation``) and its twist ring.
+
+    The ring ends at the nearest of the lines that must stay straight: the embankment's
+    toe (or a trench's far face beyond it) on the building side, and the domain's sides
+    and ends.
+    """
+    g, d = case["geometry"], case["domain"]
+    cx, cy = g["xbb"], g["ybb"]
+    near, what = embankment_toe(case), "the embankment toe"
+    tr = case["trench"]
+    if tr["width"] > 0 and tr["distance"] + tr["width"] > near:
+        near, what = tr["distance"] + tr["width"], "the trench's far face"
+    reach = [(-near - cy, what),
+             (cy - (g["ys4"] - d["extra_width"]), "the domain's side at YS4 - domain.extra_width"),
+             (cx - (g["x1"] - d["extra_length"]), "the domain's end at X1 - domain.extra_length"),
+             (g["x4"] + d["extra_length"] - cx, "the domain's end at X4 + domain.extra_length")]
+    r_out, bound = min(reach)
+    return BuildingTurn(centre=(cx, cy), angle=math.radians(case["building.rotation"]),
+                        r_in=0.5 * math.hypot(g["x3"] - g["x2"], g["ys2"] - g["ys3"]),
+                        r_out=r_out, bound=bound)
+
+
+def train2_vehicle(case: Case) -> dict[str, Any]:
+    """The second train's vehicle: ``[vehicle]`` with ``[train2.vehicle]``'s keys."""
+    return {**case["vehicle"], **case["train2.vehicle"]}
+
+
 def solid_material(case: Case, name: str) -> dict[str, float]:
     """``E``, ``nu``, ``rho``, ``damping_ratio`` of a material: ``materials.<name>``, or a
     soil layer's (``name`` = ``soil_layer_<k>``, :func:`soil_layers`)."""
@@ -471,6 +608,8 @@ def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
         return _check_list(key, param, value, problems)
     if kind == "layers":
         return _check_layers(key, value, problems)
+    if kind == "vehicle":
+        return _check_vehicle_table(key, param, value, problems)
     if kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             problems.append((key, value, f"expected a number{unit} ({param.doc})"))
@@ -518,6 +657,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
     for text in overrides or []:
         key, value = parse_override(text)
         flat[key] = value
+    _group_tables(flat)
     for key in list(flat):
         if key not in ALL_KEYS:
             table = next((k for k, prm in ALL_KEYS.items()
@@ -672,6 +812,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_tracks(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
+    out.extend(_check_rotation(case))
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
@@ -770,6 +911,13 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
                  "leave it out)")
                 for k, v in case["train2"].items() if v != ALL_KEYS[f"train2.{k}"].default]
     out = []
+    own = case["train2.vehicle"]
+    if own:
+        v1, v2 = case["vehicle"], train2_vehicle(case)
+        first = {k.rsplit(".", 1)[1] for k, _, _ in
+                 _vehicle_problems(v1, case["track.gauge"], "vehicle")}
+        out.extend(p for p in _vehicle_problems(v2, case["track.gauge"], "train2.vehicle")
+                   if p[0].rsplit(".", 1)[1] not in first)
     if not t["spacing"] > t["sleeper_length"]:
         out.append(("track.spacing", t["spacing"],
                     f"the two tracks' sleepers must not touch: spacing > track.sleeper_length "
@@ -798,6 +946,30 @@ def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
         return [("geometry.ys0", g["ys0"],
                  f"must be > the embankment toe {toe:g} m (the soil must extend beyond the "
                  "fill)")]
+    return []
+
+
+def _check_rotation(case: Case) -> list[tuple[str, Any, str]]:
+    """A turned building: a generated mesh, and room for the soil round it to twist."""
+    angle = case["building.rotation"]
+    if angle == 0:
+        return []
+    if case["mesh.file"]:
+        return [("building.rotation", angle, "turns the generated mesh's building; it cannot "
+                 "turn mesh.file's (leave it at 0 or leave mesh.file out)")]
+    turn = building_turn(case)
+    if not turn.r_out > turn.r_in:
+        return [("building.rotation", angle,
+                 f"no room to turn the building: its corners ({turn.r_in:.4g} m from its "
+                 f"centre) reach {turn.bound} ({turn.r_out:.4g} m from it); move the building "
+                 "away or widen the domain")]
+    limit = math.degrees(turn.max_angle)
+    if abs(angle) > limit:
+        return [("building.rotation", angle,
+                 f"at most +-{limit:.3g} deg here: the soil between the building's corners "
+                 f"({turn.r_in:.4g} m from its centre) and {turn.bound} ({turn.r_out:.4g} m "
+                 f"from it) twists to meet the track-parallel mesh, with shear <= "
+                 f"{MAX_TWIST_SHEAR:g}; move the building away or widen the domain")]
     return []
 
 
@@ -980,23 +1152,31 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _vehicle_problems(v: dict[str, Any], gauge: float, section: str
+                      ) -> list[tuple[str, Any, str]]:
+    """Cross-key checks of one vehicle's keys (``[vehicle]`` or the second train's)."""
+    out: list[tuple[str, Any, str]] = []
+    if any(o > 0 for o in v["axle_offsets"]) or not v["axle_offsets"]:
+        out.append((f"{section}.axle_offsets", v["axle_offsets"],
+                    "must be a non-empty list of offsets <= 0 (behind the leading axle)"))
+    if v["contact_span"] >= 2.0 * gauge:
+        out.append((f"{section}.contact_span", v["contact_span"],
+                    f"must be close to the track gauge ({gauge:g} m)"))
+    if v["wheelbase"] >= v["bogie_spacing"]:
+        out.append((f"{section}.wheelbase", v["wheelbase"],
+                    f"must be smaller than {section}.bogie_spacing = {v['bogie_spacing']:g} m"))
+    if v["bogie_spacing"] + v["wheelbase"] >= v["car_length"]:
+        out.append((f"{section}.car_length", v["car_length"],
+                    "must exceed bogie_spacing + wheelbase (the wheels of successive cars "
+                    "must not overlap)"))
+    return out
+
+
 def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     """Cross-key checks of [vehicle], [irregularity] and [mbs]."""
     out: list[tuple[str, Any, str]] = []
     v, irr, mbs = case["vehicle"], case["irregularity"], case["mbs"]
-    if any(o > 0 for o in v["axle_offsets"]) or not v["axle_offsets"]:
-        out.append(("vehicle.axle_offsets", v["axle_offsets"],
-                    "must be a non-empty list of offsets <= 0 (behind the leading axle)"))
-    if v["contact_span"] >= 2.0 * case["track.gauge"]:
-        out.append(("vehicle.contact_span", v["contact_span"],
-                    f"must be close to the track gauge ({case['track.gauge']:g} m)"))
-    if v["wheelbase"] >= v["bogie_spacing"]:
-        out.append(("vehicle.wheelbase", v["wheelbase"],
-                    f"must be smaller than vehicle.bogie_spacing = {v['bogie_spacing']:g} m"))
-    if v["bogie_spacing"] + v["wheelbase"] >= v["car_length"]:
-        out.append(("vehicle.car_length", v["car_length"],
-                    "must exceed bogie_spacing + wheelbase (the wheels of successive cars "
-                    "must not overlap)"))
+    out.extend(_vehicle_problems(v, case["track.gauge"], "vehicle"))
     if v["drop_height"] > 0 and v["type"] == "moving_force":
         out.append(("vehicle.drop_height", v["drop_height"],
                     "a drop needs a vehicle with masses: vehicle.type = 'wheelset' or "

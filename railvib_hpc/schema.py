@@ -236,6 +236,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
                             "pad footings under the columns, strip footings along every column "
                             "line, or a raft under the whole plan (footing_height thick)",
                             choices=FOUNDATION_TYPES),
+        "rotation": Param(0.0, "float", "deg",
+                          "turn of the building about its plan centre (XBB, YBB), "
+                          "counter-clockwise seen from above; the soil round it twists to "
+                          "meet the track-parallel mesh (docs/sites.md)"),
     },
     "materials": {
         "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),
@@ -879,6 +883,22 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
 }
 
+#: [vehicle] keys the second train shares with the first: how the run goes (its own
+#: speed, cars and delay are ``train2.speed``, ``n_cars``, ``t_start``), and the wheel-rail
+#: contact law, which the integrators apply to every wheel alike (one Hertz constant,
+#: contact damping and conicity; :class:`railvib_hpc.mbs.train.Traffic`). The model type
+#: is shared for the same reason: a wheelset's contact normals lean with its conicity, a
+#: car's (no lateral dynamics) do not.
+TRAIN2_SHARED_VEHICLE_KEYS = ("type", "speed", "x_start", "x_end", "t_after", "drop_height",
+                              "n_cars", "wheel_radius", "k_hertz", "contact_damping",
+                              "conicity")
+SCHEMA["train2"]["vehicle"] = Param(
+    {}, "vehicle", "-",
+    "the second train's own vehicle, of [vehicle]'s type: a [train2.vehicle] table of the "
+    "[vehicle] keys that differ (masses, inertias, suspension, spacings, axle_offsets, "
+    "force); {} = [vehicle]'s vehicle",
+    choices=tuple(k for k in SCHEMA["vehicle"] if k not in TRAIN2_SHARED_VEHICLE_KEYS))
+
 #: Values of the thesis's Table I where it differs from the APDL script
 #: (../shared/reference/benchmarks.md section 3). Layer depths are the same in
 #: both presets: Table I's "ballast 4.8 m" contradicts the APDL z-levels and
@@ -947,6 +967,7 @@ SOURCES: dict[str, dict[str, str]] = {
            for d in "xy"},
         **{f"building.spans_{d}": f"{_APDL}: one span, X3 - X2 - FX1 = 6 m" for d in "xy"},
         "building.foundation": f"{_APDL}: four pad footings (FX1, FX4) with grade beams",
+        "building.rotation": f"{_APDL}: the walls are parallel to the track (no rotation)",
         "usp.width": f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m",
         **{f"materials.{m}.{k}": f"{_APDL}: MP,{cmd},{n},{v}"
            for m, n, vals in (("rail", 1, ("210e9", "0.30", "7700")),

@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, train2_vehicle
 from ..constants import STANDARD_GRAVITY
 from ..errors import DataError, ResourceError, UserError
 from ..io.stage_checks import (
@@ -210,9 +210,13 @@ def tracks_line(case: Case) -> str | None:
     if case["track.count"] != 2:
         return None
     t2 = case["train2"]
+    own = t2["vehicle"]
+    vehicle = (f", its own {case['vehicle.type']} ("
+               + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                           for k, v in own.items()) + ")") if own else ""
     second = ("track 2 unloaded" if not t2["enabled"] else
               f"train 2 runs the {t2['direction']} direction, {t2['t_start']:g} s later, at "
-              f"{t2['speed'] or case['vehicle.speed']:g} m/s")
+              f"{t2['speed'] or case['vehicle.speed']:g} m/s{vehicle}")
     return (f"2, {case['track.spacing']:g} m apart (track 2 further from the building); "
             f"{second}")
 
@@ -240,22 +244,22 @@ def second_train_layout(case: Case, offsets: np.ndarray) -> tuple[np.ndarray, fl
 def build_vehicle(case: Case) -> Vehicle | None:
     """The vehicle of ``[vehicle]`` (None for ``moving_force``); with a second train on
     track 2 (:func:`two_trains`) both as one :class:`~.train.Traffic`."""
-    first = _build_train(case, case["vehicle.n_cars"])
+    first = _build_train(case["vehicle"], case["vehicle.n_cars"])
     if first is None or not two_trains(case):
         return first
     from .train import Traffic
 
-    second = _build_train(case, case["train2.n_cars"] or case["vehicle.n_cars"])
+    second = _build_train(train2_vehicle(case), case["train2.n_cars"] or case["vehicle.n_cars"])
     pos2, v2 = second_train_layout(case, second.wheel_offsets)
     return Traffic([first, second], positions=[first.wheel_offsets, pos2],
                    speeds=[case["vehicle.speed"], v2], rail_shift=[0, 2])
 
 
-def _build_train(case: Case, n_cars: int) -> Vehicle | None:
-    """One train of ``[vehicle]`` with ``n_cars`` cars (None for ``moving_force``)."""
+def _build_train(v: dict, n_cars: int) -> Vehicle | None:
+    """One train of the vehicle keys ``v`` (``[vehicle]``'s, or the second train's) with
+    ``n_cars`` cars (None for ``moving_force``)."""
     from .vehicles import SuspendedWheelset
 
-    v = case["vehicle"]
     kh = v["k_hertz"] if v["k_hertz"] > 0 else None
     if v["type"] == "moving_force":
         return None
@@ -344,16 +348,20 @@ def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.nda
     """Forces, offsets (relative to ``vehicle.x_start``), rails and velocities of the
     ``moving_force`` loads (one per rail and axle; with two trains, the second's on rails
     2 and 3)."""
-    v = case["vehicle"]
-    force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
-    offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
-    rails = np.tile([0, 1], len(v["axle_offsets"]))
-    speeds = np.full(offs.size, v["speed"])
+    def axles(v: dict) -> tuple[float, np.ndarray, np.ndarray]:
+        force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
+        offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
+        return force, offs, np.tile([0, 1], len(v["axle_offsets"]))
+
+    force, offs, rails = axles(case["vehicle"])
+    forces, speeds = np.full(offs.size, force), np.full(offs.size, case["vehicle.speed"])
     if two_trains(case):
-        pos2, v2 = second_train_layout(case, offs)
-        offs, rails = np.concatenate([offs, pos2]), np.concatenate([rails, rails + 2])
+        force2, offs2, rails2 = axles(train2_vehicle(case))
+        pos2, v2 = second_train_layout(case, offs2)
+        offs, rails = np.concatenate([offs, pos2]), np.concatenate([rails, rails2 + 2])
+        forces = np.concatenate([forces, np.full(pos2.size, force2)])
         speeds = np.concatenate([speeds, np.full(pos2.size, v2)])
-    return np.full(offs.size, force), offs, rails, speeds
+    return forces, offs, rails, speeds
 
 
 def passage(case: Case, vehicle, flexible_end: float) -> dict:

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import Case, track_lift
 from ..schema import BUILDING_PARTS, INTERFACE_PARTS, PART_ID
-from .model import Mesh, node_order
+from .model import Mesh, renumbered
 from .search import HEX_FACES
 
 #: Tolerance on the z of a node on an interface plane [m].
@@ -83,17 +83,7 @@ def split_interfaces(mesh: Mesh, case: Case) -> Mesh:
         else:
             upper = _plane_side(mesh, *interface_plane(case, kind))
         mesh = _duplicate(mesh, kind, *upper)
-    return _renumber(mesh) if kinds else mesh
-
-
-def _renumber(mesh: Mesh) -> Mesh:
-    """Nodes sorted by (x, y, z), ties by their current number."""
-    order = node_order(mesh.points)
-    index = np.empty(mesh.n_nodes, dtype=np.int64)
-    index[order] = np.arange(mesh.n_nodes)
-    return replace(mesh, points=mesh.points[order], hexes=index[mesh.hexes],
-                   lines=index[mesh.lines],
-                   node_sets={k: np.sort(index[v]) for k, v in mesh.node_sets.items()})
+    return renumbered(mesh) if kinds else mesh
 
 
 def _sleeper_side(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -6,7 +6,7 @@ from above, top face 4-5-6-7). All checks are vectorised over elements.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -158,3 +158,13 @@ class Mesh:
 
     def nearest_node(self, xyz: tuple[float, float, float]) -> int:
         return int(np.argmin(np.linalg.norm(self.points - np.asarray(xyz), axis=1)))
+
+
+def renumbered(mesh: Mesh) -> Mesh:
+    """The mesh with its nodes sorted by :func:`node_order` (a new Mesh)."""
+    order = node_order(mesh.points)
+    index = np.empty(mesh.n_nodes, dtype=np.int64)
+    index[order] = np.arange(mesh.n_nodes)
+    return replace(mesh, points=mesh.points[order], hexes=index[mesh.hexes],
+                   lines=index[mesh.lines],
+                   node_sets={k: np.sort(index[v]) for k, v in mesh.node_sets.items()})

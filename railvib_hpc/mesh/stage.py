@@ -23,6 +23,7 @@ from .layout import Layout, build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
 from .search import nonconformal_faces
+from .turn import turn_building, turn_line
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -145,9 +146,10 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
         mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex)
-        mesh = split_interfaces(mesh, case)          # under-sleeper pads, mats, isolation
-        source = "generated"
         mesh.probes = dict(layout.probes)
+        mesh = split_interfaces(mesh, case)          # under-sleeper pads, mats, isolation
+        mesh = turn_building(mesh, case)             # building.rotation
+        source = "generated"
     mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
     t0 = time.perf_counter()
     quality = mesh.quality()
@@ -176,6 +178,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         "parts": present_parts(mesh),
         "node_sets_derived": derived,
         "probes_outside": {k: list(v) for k, v in dropped.items()},
+        "turn": turn_line(case),
         "timings": timings,
     }
     return mesh, report
@@ -251,6 +254,8 @@ def format_report(report: dict) -> str:
         f"non-conformal faces {q['nonconformal_faces']}",
         "node sets: " + ", ".join(f"{k} {v}" for k, v in report["node_sets"].items()),
     ]
+    if report.get("turn"):
+        lines.append(report["turn"])
     lines += user_mesh_notes(report)
     return "\n".join(lines)
 

@@ -92,6 +92,74 @@ def test_opposite_train_on_the_mirrored_track_feels_the_same_forces(vehicle):
     assert np.max(np.abs(f1 - f2)) <= newton_bound(both, f1)
 
 
+#: A heavier second vehicle of each type: keys that differ from [vehicle]'s defaults.
+HEAVY = {"wheelset": {"wheelset_mass": 2400.0, "preload": 2.0e4, "k_suspension": 4.0e4},
+         "vehicle": {"car_mass": 45000.0, "k_primary": 2.0e6, "bogie_mass": 3000.0}}
+
+
+@pytest.mark.parametrize("vehicle", ["wheelset", "vehicle"])
+def test_own_vehicles_swap_under_the_mirror(vehicle):
+    """Train 2 with its own, heavier vehicle ([train2.vehicle]) on the mirrored track. By
+    the mirror symmetry, swapping the two vehicles between the trains swaps their contact
+    forces: what the heavy train feels on track 2 it feels on track 1, under the same
+    light train on the other track. Both runs go through the two-track code path with two
+    different vehicles."""
+    from railvib_hpc.config import ALL_KEYS
+
+    heavy = HEAVY[vehicle]
+    light = {k: ALL_KEYS[f"vehicle.{k}"].default for k in heavy}
+    base = {"vehicle.type": vehicle, "vehicle.x_start": 1.0, "train2.direction": "opposite"}
+    forces = []
+    for first, second in ((light, heavy), (heavy, light)):
+        case = thesis_case(**base, **{f"vehicle.{k}": v for k, v in first.items()},
+                           **{f"train2.vehicle.{k}": v for k, v in second.items()})
+        omega, rails = track_rails(case)
+        both = build_vehicle(case)
+        loads = [t.static_wheel_loads() for t in both.trains]
+        run = passage(case, both, rails[0].x_nodes[-1])
+        # 0.4 s: both trains on the flexible rail (a wheel reaching the rigid exit rail at
+        # ~0.45 s kicks the contact iterates apart by 3e-4 N, within but near the bound)
+        res = simulate_vehicle(omega, 0.02, rails, both, case["vehicle.x_start"],
+                               run["speeds"], 0.4, dt=2e-4)
+        n1 = both.trains[0].n_wheels
+        forces.append((res.contact_force[:, :n1], res.contact_force[:, n1:], both, loads))
+    (a1, a2, both, loads), (b1, b2, _, loads_b) = forces
+    # the heavy vehicle's static wheel loads are its own (hand counts in the next test)
+    assert loads[1].max() > 1.1 * loads[0].max()
+    assert loads_b[0] == pytest.approx(loads[1], rel=1e-14)
+    bound = newton_bound(both, a2)
+    assert np.abs(a2).max() > 1.1 * np.abs(a1).max()          # the heavy train presses harder
+    assert np.max(np.abs(a2 - b1)) <= bound and np.max(np.abs(a1 - b2)) <= bound
+
+
+def test_own_vehicle_static_loads_and_moving_forces_are_its_own():
+    """Static wheel loads against hand counts: a wheelset carries m g / 2 + preload per
+    wheel (the preload is per side); a car (body + 2 bogies + 4 wheelsets) / 8 of its
+    weight; a moving force train its own force and axles."""
+    from railvib_hpc.mbs.stage import moving_loads, static_wheel_load
+
+    g = 9.80665
+    case = thesis_case(**{"train2.vehicle.wheelset_mass": 2400.0,
+                          "train2.vehicle.preload": 2.0e4})
+    loads = [t.static_wheel_loads() for t in build_vehicle(case).trains]
+    assert loads[0] == pytest.approx(1568.0 * g / 2, rel=1e-12)
+    assert loads[1] == pytest.approx(2400.0 * g / 2 + 2.0e4, rel=1e-12)
+    assert static_wheel_load(case) == pytest.approx(2400.0 * g / 2 + 2.0e4, rel=1e-12)
+    case = thesis_case(**{"vehicle.type": "vehicle", "train2.vehicle.car_mass": 45000.0,
+                          "train2.vehicle.car_wheelset_mass": 2000.0})
+    loads = [t.static_wheel_loads() for t in build_vehicle(case).trains]
+    assert loads[0] == pytest.approx((32000 + 2 * 2615 + 4 * 1813) * g / 8, rel=1e-12)
+    assert loads[1] == pytest.approx((45000 + 2 * 2615 + 4 * 2000) * g / 8, rel=1e-12)
+    case = thesis_case(**{"vehicle.type": "moving_force", "vehicle.force": 5.0e4,
+                          "train2.vehicle.force": 8.0e4,
+                          "train2.vehicle.axle_offsets": [0.0, -2.5]})
+    forces, offsets, rails, _ = moving_loads(case)
+    assert forces.tolist() == [5.0e4] * 2 + [8.0e4] * 4
+    assert rails.tolist() == [0, 1, 2, 3, 2, 3]
+    far = mirror_x(case, case["vehicle.x_start"]) - case["vehicle.x_start"]
+    assert offsets[2:].tolist() == pytest.approx([far, far, far + 2.5, far + 2.5])
+
+
 def test_second_train_layout_same_direction_and_delay():
     case = thesis_case(**{"train2.direction": "same", "train2.t_start": 0.5,
                           "train2.speed": 20.0})
@@ -112,6 +180,13 @@ def test_second_train_layout_same_direction_and_delay():
     ({"track.spacing": 2.0}, "track.spacing", "sleepers must not touch"),
     ({"geometry.ys0": 8.25}, "geometry.ys0", "beyond the embankment of the second track"),
     ({"track.count": 1, "train2.t_start": 2.0}, "train2.t_start", "set track.count = 2"),
+    ({"track.count": 1, "train2.vehicle.car_mass": 4.0e4}, "train2.vehicle",
+     "set track.count = 2"),
+    ({"train2.vehicle.speed": 20.0}, "train2.vehicle.speed", "are train2.speed, n_cars"),
+    ({"train2.vehicle.type": "vehicle"}, "train2.vehicle.type", "the model type"),
+    ({"train2.vehicle.car_mass": -1.0}, "train2.vehicle.car_mass", "must be > 0"),
+    ({"vehicle.type": "vehicle", "train2.vehicle.bogie_spacing": 2.0},
+     "train2.vehicle.wheelbase", "must be smaller than train2.vehicle.bogie_spacing = 2 m"),
 ])
 def test_bad_tracks_get_one_clear_line(changes, key, words):
     with pytest.raises(CaseError) as info:

@@ -51,7 +51,8 @@ SITE = ["building.storeys=3", "building.bays_x=2", "building.foundation=strip",
         "soil.layers=[{thickness=1.5, c_s=150.0, nu=0.3, rho=1800.0}, "
         "{thickness=0.0, c_s=300.0, nu=0.3, rho=1950.0}]",
         "trench.type=filled", "trench.distance=6.0", "trench.width=1.2", "trench.depth=3.0",
-        "wib.type=block", "wib.width=6.0", "wib.depth=1.0", "wib.thickness=1.2"]
+        "wib.type=block", "wib.width=6.0", "wib.depth=1.0", "wib.thickness=1.2",
+        "building.rotation=6.0"]
 
 
 @pytest.fixture(scope="module")
@@ -59,10 +60,12 @@ def coarse_site():
     from railvib_hpc.mesh.gmsh_model import generate
     from railvib_hpc.mesh.interfaces import split_interfaces
     from railvib_hpc.mesh.layout import build_layout
+    from railvib_hpc.mesh.turn import turn_building
     from railvib_hpc.parallel import on_root
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
-    mesh = on_root(lambda: split_interfaces(generate(build_layout(case))[0], case))
+    mesh = on_root(lambda: turn_building(
+        split_interfaces(generate(build_layout(case))[0], case), case))
     return case, mesh
 
 
@@ -81,6 +84,10 @@ def test_site_with_measures_building_tracks_and_interfaces_equals_serial(coarse_
                                  "fill")} <= present
     slab = mesh.points[np.unique(mesh.hexes[mesh.hex_part == PART_ID["slab"]])]
     assert len(np.unique(np.round(slab[:, 2], 6))) == 3 * 2          # three slabs' faces
+    # the building turned by 6 degrees: its slab nodes no longer stand on x grid lines
+    # (a straight building's 6 slab faces share a few x values; turned, nearly every
+    # node of a face has its own)
+    assert len(np.unique(np.round(slab[:, 0], 6))) > 0.5 * len(slab) / 6
     assert mesh.rail_nodes().shape[0] == 4                           # two tracks
     assert {PART_ID[f"{k}_z"] for k in ("usp", "ballast_mat", "isolation")} <= \
         set(np.unique(mesh.line_part).tolist())

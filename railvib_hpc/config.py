@@ -583,6 +583,16 @@ def building_turn(case: Case) -> BuildingTurn:
                         r_out=r_out, bound=bound)
 
 
+def slab_bases(case: Case) -> list[float]:
+    """Underside of every slab above ZBB, bottom up [m]: ``building.slab_bases``, or
+    ``z_slab1_base`` and each further storey ``z_slab2_base - z_slab1_base`` higher."""
+    b = case["building"]
+    if b["slab_bases"]:
+        return [float(z) for z in b["slab_bases"]]
+    storey = b["z_slab2_base"] - b["z_slab1_base"]
+    return [b["z_slab1_base"] + k * storey for k in range(b["storeys"])]
+
+
 def train2_vehicle(case: Case) -> dict[str, Any]:
     """The second train's vehicle: ``[vehicle]`` with ``[train2.vehicle]``'s keys."""
     return {**case["vehicle"], **case["train2.vehicle"]}
@@ -838,29 +848,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("building.wall_thickness", wt,
                     f"the wall must not overlap the columns: wall_thickness <= "
                     f"(footing_size - column_size)/2 = {(fs - cs) / 2:g} m"))
-    basement = g["z1"] - g["zbb"]
-    levels = [
-        ("building.footing_height", b["footing_height"]),
-        ("building.beam_depth", b["footing_height"] + b["beam_depth"]),
-        ("geometry.zbb", basement),
-        ("building.z_slab1_base", b["z_slab1_base"] - b["beam_depth"]),
-        ("building.z_slab1_base", b["z_slab1_base"]),
-        ("building.slab_thickness", b["z_slab1_base"] + b["slab_thickness"]),
-        ("building.z_slab2_base", b["z_slab2_base"] - b["beam_depth"]),
-        ("building.z_slab2_base", b["z_slab2_base"]),
-    ]
-    names = ["footing top", "grade-beam top", "ground level (Z1 - ZBB)", "storey-1 beam underside",
-             "slab 1 underside", "slab 1 top", "storey-2 beam underside", "slab 2 underside"]
-    if b["storeys"] == 1:         # z_slab2_base is not used
-        levels, names = levels[:6], names[:6]
-    for i in range(1, len(levels)):
-        if not levels[i][1] >= levels[i - 1][1] - 1e-12 or (
-                i not in (2, 3) and not levels[i][1] > levels[i - 1][1]):
-            key = levels[i][0]
-            out.append((key, case[key],
-                        f"building levels overlap: {names[i]} ({levels[i][1]:g} m above ZBB) "
-                        f"must be above {names[i - 1]} ({levels[i - 1][1]:g} m)"))
-            break
+    out.extend(_check_levels(case))
     if g["x2"] <= g["x1"] or g["x3"] >= g["x4"]:
         out.append(("geometry.x2", g["x2"], "the building must lie inside the soil (X1 < X2, "
                     "X3 < X4)"))
@@ -981,6 +969,41 @@ def _check_interfaces(case: Case) -> list[tuple[str, Any, str]]:
              "an elastic interface cuts the generated mesh; it cannot be added to mesh.file "
              "(set the modulus to 0 or leave mesh.file out)")
             for kind in ("usp", "ballast_mat", "isolation") if case[f"{kind}.modulus"] > 0]
+
+
+def _check_levels(case: Case) -> list[tuple[str, Any, str]]:
+    """The building's levels bottom up: footing, grade beam, ground, then per storey the
+    beam underside, slab underside and slab top; the first overlap gets one line."""
+    g, b = case["geometry"], case["building"]
+    own = bool(b["slab_bases"])
+    if own and len(b["slab_bases"]) != b["storeys"]:
+        return [("building.slab_bases", b["slab_bases"],
+                 f"one slab per storey: {b['storeys']} entries (building.storeys)")]
+    if own:
+        given = [k for k in ("z_slab1_base", "z_slab2_base")
+                 if b[k] != ALL_KEYS[f"building.{k}"].default]
+        if given:
+            return [(f"building.{given[0]}", b[given[0]],
+                     "building.slab_bases gives every slab's level: leave z_slab1_base and "
+                     "z_slab2_base out (or slab_bases empty)")]
+    levels = [("building.footing_height", b["footing_height"], "footing top"),
+              ("building.beam_depth", b["footing_height"] + b["beam_depth"], "grade-beam top"),
+              ("geometry.zbb", g["z1"] - g["zbb"], "ground level (Z1 - ZBB)")]
+    for k, z in enumerate(slab_bases(case), start=1):
+        key = ("building.slab_bases" if own else
+               "building.z_slab1_base" if k == 1 else "building.z_slab2_base")
+        levels += [(key, z - b["beam_depth"], f"storey-{k} beam underside"),
+                   (key, z, f"slab {k} underside"),
+                   ("building.slab_thickness" if k == 1 else key, z + b["slab_thickness"],
+                    f"slab {k} top")]
+    for i in range(1, len(levels)):
+        (key, z, name), (_, below, name_below) = levels[i], levels[i - 1]
+        # the grade beams may reach the ground, and the storey-1 beams start at it
+        if not z >= below - 1e-12 or (i not in (2, 3) and not z > below):
+            return [(key, case[key],
+                     f"building levels overlap: {name} ({z:g} m above ZBB) must be above "
+                     f"{name_below} ({below:g} m)")]
+    return []
 
 
 def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[str, Any, str]]:

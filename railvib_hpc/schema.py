@@ -221,6 +221,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "repeats storey 2's height)", "pos"),
         "storeys": Param(2, "int", "-", "storeys above the basement, one slab on top of each",
                          "pos"),
+        "slab_bases": Param([], "floats", "m",
+                            "underside of every slab above ZBB, one per storey, bottom up, "
+                            "for storeys of their own heights (empty: z_slab1_base, then each "
+                            "storey z_slab2_base - z_slab1_base higher)", "pos"),
         "bays_x": Param(1, "int", "-", "bays along the track (x); bays_x + 1 column lines",
                         "pos"),
         "bays_y": Param(1, "int", "-", "bays across the track (y); bays_y + 1 column lines",
@@ -963,6 +967,7 @@ SOURCES: dict[str, dict[str, str]] = {
         "building.z_slab1_base": f"{_APDL}: Z_SLAB1_BASE=4.2",
         "building.z_slab2_base": f"{_APDL}: Z_SLAB2_BASE=8",
         "building.storeys": f"{_APDL}: two slabs (A_SLAB1, A_SLAB2); thesis Fig. 13",
+        "building.slab_bases": f"{_APDL}: Z_SLAB1_BASE=4.2, Z_SLAB2_BASE=8 (z_slab*_base)",
         **{f"building.bays_{d}": f"{_APDL}: one bay, four columns (CX1..CX2 at the corners)"
            for d in "xy"},
         **{f"building.spans_{d}": f"{_APDL}: one span, X3 - X2 - FX1 = 6 m" for d in "xy"},

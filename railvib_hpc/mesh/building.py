@@ -9,7 +9,7 @@ base (the underside of the footings) at ``ZBB``. It is a concrete frame:
   footing top to the underside of the top slab;
 * ``storeys`` slabs, ``slab_thickness`` thick, out to the outer column faces; slab 1's
   underside ``z_slab1_base`` above ZBB, each further storey ``z_slab2_base -
-  z_slab1_base`` higher;
+  z_slab1_base`` higher, or each at its own level (``slab_bases``);
 * beams ``beam_depth`` deep and ``column_size`` wide along every column line under every
   slab, and grade beams on the footings' top between the footings;
 * a basement wall ``wall_thickness`` thick round the plan, from the base to the ground;
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case
+from ..config import Case, slab_bases
 
 #: Role of the building's named probes (:data:`railvib_hpc.schema.PROBE_ROLES`).
 ROLE_FLOOR, ROLE_WALL, ROLE_FOUNDATION = "floor", "wall", "foundation"
@@ -89,8 +89,7 @@ class Building:
         g, b = case["geometry"], case["building"]
         cx = column_lines(g["x2"], g["x3"], b["footing_size"], b["bays_x"], b["spans_x"])
         cy = -column_lines(-g["ys2"], -g["ys3"], b["footing_size"], b["bays_y"], b["spans_y"])
-        storey = b["z_slab2_base"] - b["z_slab1_base"]
-        bases = b["z_slab1_base"] + storey * np.arange(b["storeys"])
+        bases = np.array(slab_bases(case))
         return cls(cx=cx, cy=cy, plan=(g["x2"], g["x3"], g["ys3"], g["ys2"]), zbb=g["zbb"],
                    z_ground=g["z1"], slab_bases=bases, footing_size=b["footing_size"],
                    footing_height=b["footing_height"], column_size=b["column_size"],

@@ -115,6 +115,42 @@ def test_probes_per_slab_and_bay():
         assert b.part(px, py, pz - 0.05) == "slab", name
 
 
+def test_storeys_of_their_own_heights():
+    """``building.slab_bases``: a 5.0 m ground storey under two of 3.2 m changes the
+    columns (hand count) and the slab probes' levels, nothing else; the thesis's own levels
+    given as a list reproduce its layout."""
+    bases = [5.0, 8.2, 11.4]
+    case = thesis_case().replace({**BIG, "building.slab_bases": bases})
+    got, ref = part_volumes(case), hand_counts("pad")
+    # footing top 0.6 to the top slab's underside, less the two lower slabs
+    assert got["column"] == pytest.approx(9 * 0.36 * (11.4 - 0.6 - 2 * 0.2), rel=1e-12)
+    for part in ("footing", "slab", "beam", "wall"):
+        assert got[part] == pytest.approx(ref[part], rel=1e-12), part
+    lay = build_layout(case)
+    for k, z in enumerate(bases, start=1):
+        assert lay.probes[f"slab{k}_x1y1_mid"][2] == pytest.approx(
+            case["geometry.zbb"] + z + 0.2)
+    same = thesis_case().replace({"building.slab_bases": [4.2, 8.0]})
+    a, b = build_layout(same), build_layout(thesis_case())
+    assert a.blocks == b.blocks and a.zdiv == b.zdiv and a.probes == b.probes
+
+
+@pytest.mark.parametrize("changes, key, words", [
+    ({"building.slab_bases": [4.2]}, "building.slab_bases", "2 entries (building.storeys)"),
+    ({"building.slab_bases": [4.2, 4.5]}, "building.slab_bases",
+     "storey-2 beam underside (3.9 m above ZBB) must be above slab 1 top (4.4 m)"),
+    ({"building.slab_bases": [4.2, 8.0], "building.z_slab2_base": 9.0},
+     "building.z_slab2_base", "leave z_slab1_base and z_slab2_base out"),
+    ({"building.z_slab2_base": 4.5}, "building.z_slab2_base", "storey-2 beam underside"),
+])
+def test_bad_levels_get_one_clear_line(changes, key, words):
+    with pytest.raises(CaseError) as info:
+        thesis_case().replace(changes)
+    text = str(info.value)
+    assert key in text and words in text
+    assert "\n" not in text.strip()
+
+
 def test_unequal_spans_place_the_column_lines():
     case = thesis_case().replace({**BIG, "building.spans_x": [4.0, 6.8]})
     b = Building.of_case(case)

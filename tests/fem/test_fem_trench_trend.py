@@ -68,12 +68,23 @@ def receiver_response(points, hexes, faces, blocks, trench_depth: float,
     centre = points[hexes].mean(axis=1)
     keep = ~((centre[:, 1] > Y_TRENCH) & (centre[:, 1] < Y_TRENCH + WIDTH)
              & (centre[:, 2] > DEPTH - trench_depth))
+    return slice_response(points, hexes, faces, blocks, freqs, keep=keep)
+
+
+def slice_response(points, hexes, faces, blocks, freqs: np.ndarray, keep=None,
+                   E_el=E, rho_el=RHO) -> np.ndarray:
+    """|u_z| at the receivers (len(freqs), n_receivers) of the slice with the elements
+    ``keep`` (all when None) of moduli ``E_el`` and densities ``rho_el`` (per element or
+    one value)."""
+    keep = np.ones(len(hexes), bool) if keep is None else keep
     hx = hexes[keep]
     n = 3 * len(points)
     x = points[hx]
     dofs = element_dofs(hx, 3)
-    K = assemble_matrix(dofs, hex8_stiffness(x, E, NU), n).tocsr()
-    M = assemble_matrix(dofs, hex8_mass(x, RHO), n).tocsr()
+    E_k = np.broadcast_to(E_el, (len(hexes),))[keep]
+    rho_k = np.broadcast_to(rho_el, (len(hexes),))[keep]
+    K = assemble_matrix(dofs, hex8_stiffness(x, E_k, NU), n).tocsr()
+    M = assemble_matrix(dofs, hex8_mass(x, rho_k), n).tocsr()
     rows, cols, vals = [], [], []
     for f, b in zip(faces, blocks):
         for a in range(4):

@@ -23,7 +23,7 @@ from typing import Any
 import tomllib
 
 from .errors import CaseError
-from .io.stage_files import digest, hash_file
+from .io.stage_files import digest, flat_case, hash_file
 from .schema import (
     MAX_SOIL_LAYERS,
     PRESETS,
@@ -149,8 +149,8 @@ class Case:
         CaseError
             Naming every invalid key and value.
         """
-        flat = dict(self.given) if self.given is not None else _flatten(self.data)
-        merged = _flatten({**dict(changes or {}), **sections})
+        flat = dict(self.given) if self.given is not None else flat_case(self.data)
+        merged = flat_case({**dict(changes or {}), **sections})
         flat.update(merged)
         return build_case(flat, None, self.path)
 
@@ -178,7 +178,7 @@ class Case:
 
     def flat(self) -> dict[str, Any]:
         """Every key as ``{dotted key: value}`` (copies)."""
-        return copy.deepcopy(_flatten(self.data))
+        return copy.deepcopy(flat_case(self.data))
 
     def digest(self, *sections: str, exclude: Collection[str] = ()) -> str:
         """SHA-256 of the given sections (all if none), for result reuse keys.
@@ -223,17 +223,6 @@ def _set(tree: dict[str, Any], dotted: str, value: Any) -> None:
     for p in parts[:-1]:
         tree = tree.setdefault(p, {})
     tree[parts[-1]] = value
-
-
-def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for k, v in tree.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, dict):
-            flat.update(_flatten(v, key + "."))
-        else:
-            flat[key] = v
-    return flat
 
 
 def _did_you_mean(key: str) -> str:
@@ -663,7 +652,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         With every problem found.
     """
     problems: list[tuple[str, Any, str]] = []
-    flat = _flatten(raw)
+    flat = flat_case(raw)
     for text in overrides or []:
         key, value = parse_override(text)
         flat[key] = value

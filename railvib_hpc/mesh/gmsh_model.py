@@ -214,8 +214,11 @@ def extract_mesh(gmsh) -> Mesh:
 
 
 def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
-             msh_size: int = 0) -> tuple[Mesh, dict]:
+             msh_size: int = 0, msh_map=None) -> tuple[Mesh, dict]:
     """Generate the model with gmsh; optionally write the ``.msh``. Returns mesh and timings.
+
+    ``msh_map`` (points (n, 3) -> points) moves the nodes of the written ``.msh`` only (a
+    turned building, :mod:`.turn`, which the caller applies to the returned mesh too).
 
     The ``.msh`` is written under a temporary name and renamed only after it was read
     back (``gmsh.write`` reports no errors: a full disk leaves a truncated file); with
@@ -254,6 +257,11 @@ def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
         timings["extract"] = time.perf_counter() - t0
         if tmp is not None:
             t0 = time.perf_counter()
+            if msh_map is not None:
+                tags, xyz, _ = gmsh.model.mesh.getNodes()
+                moved = msh_map(np.asarray(xyz, dtype=float).reshape(-1, 3))
+                for tag, p in zip(tags.tolist(), moved.tolist()):
+                    gmsh.model.mesh.setNode(tag, p, [])
             gmsh.option.setNumber("Mesh.Binary", 1)
             gmsh.write(str(tmp))
             timings["write_msh"] = time.perf_counter() - t0

@@ -23,7 +23,7 @@ from .layout import Layout, build_layout
 from .mesh_io import read_mesh_h5, write_mesh_files
 from .model import Mesh
 from .search import nonconformal_faces
-from .turn import turn_building, turn_line
+from .turn import turn_building, turn_line, turn_map
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -145,7 +145,8 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         derived = complete_node_sets(mesh)
         mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
-        mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex)
+        mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex,
+                                 msh_map=turn_map(case))
         mesh.probes = dict(layout.probes)
         mesh = split_interfaces(mesh, case)          # under-sleeper pads, mats, isolation
         mesh = turn_building(mesh, case)             # building.rotation

@@ -54,6 +54,14 @@ def turn_building(mesh: Mesh, case: Case) -> Mesh:
     return renumbered(replace(mesh, points=twist(mesh.points, turn), probes=probes))
 
 
+def turn_map(case: Case):
+    """The turn as a map of points (n, 3) (None when the building is not turned)."""
+    turn = building_turn(case)
+    if turn.angle == 0:
+        return None
+    return lambda points: twist(points, turn)
+
+
 def turn_line(case: Case) -> str:
     """One line on the turn for the mesh report and ``railvib check`` ('' when not turned)."""
     turn = building_turn(case)

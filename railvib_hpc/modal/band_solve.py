@@ -368,6 +368,13 @@ def _read_band(path: Path, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
         return f["eigenvalue"][()], f["modes"][r0:r1, :]
 
 
+def _record(cache: BandCache, rec: BandRecord) -> None:
+    """Put a solved band (and the inertia count at its shift) into the cache's index."""
+    cache.bands = [c for c in cache.bands if c.file != rec.file] + [rec]
+    if rec.band.shift_hz > 0:
+        cache.counts[float(rec.band.shift_hz)] = rec.n_below
+
+
 def _band_file(band: Band) -> str:
     return f"band_{band.lo_hz:.6f}_{band.hi_hz:.6f}_{band.shift_hz:.6f}.h5"
 
@@ -492,6 +499,11 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
             st.update(band_memory(sub, own_peak))
             if sub.rank == 0:
                 records.append(rec.to_json())
+            if groups == 1:
+                # recorded at once: an interrupted run (a job's time limit, a kill) keeps
+                # every band it finished for the rerun (band groups record at the end)
+                _record(cache, rec)
+                cache.save()
             if log is not None and groups == 1:
                 log(band_line(rec, n_bands))
         if groups > 1:
@@ -512,9 +524,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         r = BandRecord.from_json(rec)
         if log is not None and groups > 1:
             log(band_line(r, n_bands))
-        cache.bands = [c for c in cache.bands if c.file != r.file] + [r]
-        if r.band.shift_hz > 0:
-            cache.counts[float(r.band.shift_hz)] = r.n_below
+        _record(cache, r)
     cache.save()
     if s.band_only:
         return None

@@ -236,6 +236,33 @@ def test_bands_release_their_memory(shared_tmp):
 
 # --- caching, array jobs, the command ------------------------------------------------------
 
+def test_an_interrupted_band_solve_keeps_its_finished_bands(tmp_path):
+    """A run stopped in band 2 (here: its log raises, as a job's time limit would stop it)
+    has band 1 in the index; the rerun starts at band 2 and equals an uninterrupted run."""
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 30)
+    n, f_max = _cut(ref.frequencies_hz, 16)
+
+    class Stop(Exception):
+        pass
+
+    def stop_in_band_2(line: str) -> None:
+        if line.startswith("band 2/") and "factorising" in line:
+            raise Stop(line)
+
+    with pytest.raises(Stop):
+        solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=4,
+                     log=stop_in_band_2)
+    index = json.loads((tmp_path / "index.json").read_text())
+    assert [b["index"] for b in index["bands"]] == [1]
+    lines: list[str] = []
+    res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=4,
+                           log=lines.append)
+    assert not any(ln.startswith("band 1/") and "factorising" in ln for ln in lines)
+    assert [b["reused"] for b in res.stats["bands"]][:2] == [True, False]
+    _same_modes(res, ref, K, M, n, 4)
+
+
 def _block_msh(path: Path) -> None:
     """A 2 x 2 x 8 m block of 4 x 4 x 16 subgrade hexahedra as a user .msh."""
     from fem_tools import box_mesh

@@ -132,8 +132,9 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     rep.info(f"  building: {Building.of_case(case).describe()}")
     from .mesh.turn import turn_line
 
-    if turn_line(case):
-        rep.info(f"  {turn_line(case)}")
+    turned = turn_line(case)
+    if turned:
+        rep.info(f"  {turned}")
     rep.info(f"  track bed: {site_line(case)}")
     z1 = case["geometry.z1"]
     for x in soil_layers(case):

@@ -472,47 +472,78 @@ def embankment_toe(case: Case) -> float:
 
 
 #: Largest shear ``r dtheta/dr`` of the soil twisted round a turned building
-#: (``building.rotation``): a square element sheared by 1 keeps a scaled Jacobian of
-#: 1/sqrt(2) ~ 0.71 (corner angles 45 and 135 degrees), the least the straight thesis mesh
-#: already has (its embankment shoulders), so the twist adds no worse shape than the model's
-#: own.
-MAX_TWIST_SHEAR = 1.0
+#: (``building.rotation`` beyond whole quarter turns): a cube sheared by cot(25 deg) = 2.14
+#: has corner angles of 25 and 155 deg, the least the mesh may keep
+#: (:data:`railvib_hpc.mesh.turn.MIN_TWISTED_JACOBIAN`, checked on the mesh's own elements,
+#: which are seldom cubes). Measured on a homogeneous soil box (30 modes, docs/sites.md):
+#: shear 1 changes the eigenfrequencies by 0.66 times the mesh's own error (h against
+#: h/2), shear 2 by 4.2 times.
+MAX_TWIST_SHEAR = 1.0 / math.tan(math.radians(25.0))
 
 
-def twist_weight(r: Any, r_in: float, r_out: float) -> Any:
-    """Share of a turned building's rotation at distance ``r`` from its centre.
-
-    1 inside ``r_in`` (the building turns rigidly), 0 beyond ``r_out`` (the track-parallel
-    mesh is untouched) and the C1 smoothstep ``1 - s^2 (3 - 2 s)``, ``s = (r - r_in) /
-    (r_out - r_in)``, between. Works on numbers and numpy arrays alike.
+def quarter_turns(angle_deg: float) -> tuple[int, float]:
+    """``building.rotation`` split into whole quarter turns (0-3, counter-clockwise) and
+    the rest, within +-45 deg: the quarters turn the building's plan exactly (the
+    structured layout is symmetric under them), only the rest twists the soil.
 
     Examples
     --------
-    >>> [round(twist_weight(r, 2.0, 4.0), 3) for r in (1.0, 3.0, 5.0)]
-    [1.0, 0.5, 0.0]
+    >>> [quarter_turns(a) for a in (0.0, 30.0, 100.0, -100.0, 270.0)]
+    [(0, 0.0), (0, 30.0), (1, 10.0), (3, -10.0), (3, 0.0)]
     """
-    s = (r - r_in) / (r_out - r_in)
-    s = s * (s > 0)
-    s = s - (s - 1) * (s > 1)          # clip to [0, 1] for floats and arrays without numpy
-    return 1.0 - s * s * (3.0 - 2.0 * s)
+    k = round(angle_deg / 90.0)
+    return k % 4, angle_deg - 90.0 * k
+
+
+def turn_quarters(x: Any, y: Any, k: int, centre: tuple[float, float]) -> tuple[Any, Any]:
+    """``(x, y)`` turned by ``k`` quarter turns counter-clockwise about ``centre``, with
+    no round-off beyond the subtraction and addition of the centre (none at all for
+    ``k % 4 == 0``: the points come back as they are).
+
+    Examples
+    --------
+    >>> turn_quarters(3.0, 1.0, 1, (1.0, 1.0))
+    (1.0, 3.0)
+    """
+    if k % 4 == 0:
+        return x, y
+    dx, dy = x - centre[0], y - centre[1]
+    for _ in range(k % 4):
+        dx, dy = -dy, dx
+    return centre[0] + dx, centre[1] + dy
+
+
+def placed_plan(case: Case) -> tuple[float, float, float, float]:
+    """``(x_lo, x_hi, y_lo, y_hi)``: the building's excavation as meshed, i.e. ``[X2, X3]
+    x [YS3, YS2]`` turned by ``building.rotation``'s whole quarter turns about its centre
+    (:func:`quarter_turns`; an odd number exchanges its length and width)."""
+    g = case["geometry"]
+    k, _ = quarter_turns(case["building.rotation"])
+    if k % 2 == 0:
+        return g["x2"], g["x3"], g["ys3"], g["ys2"]
+    cx, cy = 0.5 * (g["x2"] + g["x3"]), 0.5 * (g["ys2"] + g["ys3"])
+    hx, hy = 0.5 * (g["x3"] - g["x2"]), 0.5 * (g["ys2"] - g["ys3"])
+    return cx - hy, cx + hy, cy - hx, cy + hx
 
 
 @dataclass(frozen=True)
 class BuildingTurn:
-    """The turn of the building about its plan centre, and the ring of soil that twists.
+    """The twist of the soil round a turned building: the part of the turn beyond its
+    whole quarter turns (:func:`quarter_turns`), about the plan centre.
 
-    Every point at distance ``r`` from ``centre`` turns by ``angle *`` :func:`twist_weight`
-    ``(r)`` about it: the building and the soil within ``r_in`` rigidly, nothing beyond
-    ``r_out``. The map keeps every circle round the centre and is area-preserving (polar
-    Jacobian ``[[1, 0], [r theta'(r), 1]]``), so it cannot fold the mesh; its shear
-    ``r theta'(r)`` is what limits the angle.
+    Every point at distance ``r`` from ``centre`` turns by ``angle * w(r)`` about it
+    (:func:`railvib_hpc.mesh.turn.twist_weight`): the building and the soil within
+    ``r_in`` rigidly, nothing beyond ``r_out``. The map keeps every circle round the
+    centre and is area-preserving (polar Jacobian ``[[1, 0], [r theta'(r), 1]]``), so it
+    cannot fold the mesh; its shear ``r theta'(r) = angle / ln(r_out / r_in)`` is what
+    limits the angle.
 
     Attributes
     ----------
     centre
         ``(XBB, YBB)``, the plan centre.
     angle
-        Counter-clockwise seen from above [rad].
+        Counter-clockwise seen from above [rad], within +-pi/4.
     r_in
         Distance of the plan's corners from the centre [m].
     r_out
@@ -529,30 +560,26 @@ class BuildingTurn:
 
     @property
     def shear_per_radian(self) -> float:
-        """``max_r r |w'(r)|``: the soil's largest shear per radian of turn (inf: no room).
-
-        With ``s`` and ``rho = r_in / (r_out - r_in)``, ``r |w'| = 6 (rho + s) s (1 - s)``,
-        largest where ``3 s^2 + 2 (rho - 1) s - rho = 0``.
-        """
+        """``r |w'(r)| = 1 / ln(r_out / r_in)``: the soil's shear per radian of turn
+        (inf: no room)."""
         if not self.r_out > self.r_in:
             return math.inf
-        rho = self.r_in / (self.r_out - self.r_in)
-        s = ((1 - rho) + math.sqrt((1 - rho) ** 2 + 3 * rho)) / 3
-        return 6 * (rho + s) * s * (1 - s)
+        return 1.0 / math.log(self.r_out / self.r_in)
 
     @property
     def max_angle(self) -> float:
-        """The largest turn [rad] that keeps the shear within :data:`MAX_TWIST_SHEAR`."""
+        """The largest twist [rad] that keeps the shear within :data:`MAX_TWIST_SHEAR`."""
         return MAX_TWIST_SHEAR / self.shear_per_radian
 
     @property
     def shear(self) -> float:
-        """The soil's largest shear at this turn."""
+        """The soil's shear at this turn."""
         return abs(self.angle) * self.shear_per_radian if self.angle else 0.0
 
 
 def building_turn(case: Case) -> BuildingTurn:
-    """The turn of a validated case's building (``building.rotation``) and its twist ring.
+    """The twist of a validated case's turned building (``building.rotation`` beyond its
+    whole quarter turns) and its ring.
 
     The ring ends at the nearest of the lines that must stay straight: the embankment's
     toe (or a trench's far face beyond it) on the building side, and the domain's sides
@@ -569,7 +596,8 @@ def building_turn(case: Case) -> BuildingTurn:
              (cx - (g["x1"] - d["extra_length"]), "the domain's end at X1 - domain.extra_length"),
              (g["x4"] + d["extra_length"] - cx, "the domain's end at X4 + domain.extra_length")]
     r_out, bound = min(reach)
-    return BuildingTurn(centre=(cx, cy), angle=math.radians(case["building.rotation"]),
+    _, rest = quarter_turns(case["building.rotation"])
+    return BuildingTurn(centre=(cx, cy), angle=math.radians(rest),
                         r_in=0.5 * math.hypot(g["x3"] - g["x2"], g["ys2"] - g["ys3"]),
                         r_out=r_out, bound=bound)
 
@@ -843,6 +871,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     if g["x2"] <= g["x1"] or g["x3"] >= g["x4"]:
         out.append(("geometry.x2", g["x2"], "the building must lie inside the soil (X1 < X2, "
                     "X3 < X4)"))
+    out.extend(_check_turned_plan(case))
 
     # mesh
     if m["file"]:
@@ -914,13 +943,13 @@ def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
     g, h = case["geometry"], track_lift(case)
     if h == 0:
         return []
-    toe = embankment_toe(case)
-    if not toe < -g["ys2"]:
+    toe, face = embankment_toe(case), -placed_plan(case)[3]
+    if not toe < face:
         return [("track.embankment_height", h,
                  f"the embankment's toe ({toe:g} m from the track centre: |YS1| + "
-                 f"embankment_slope x height) reaches the building face |YS2| = "
-                 f"{-g['ys2']:g} m; lower it, steepen track.embankment_slope or move the "
-                 "building")]
+                 f"embankment_slope x height) reaches the building face {face:g} m from it "
+                 "(|YS2|, turned with building.rotation); lower it, steepen "
+                 "track.embankment_slope or move the building")]
     if case["track.count"] == 1 and not g["ys0"] > toe:
         return [("geometry.ys0", g["ys0"],
                  f"must be > the embankment toe {toe:g} m (the soil must extend beyond the "
@@ -929,7 +958,8 @@ def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
 
 
 def _check_rotation(case: Case) -> list[tuple[str, Any, str]]:
-    """A turned building: a generated mesh, and room for the soil round it to twist."""
+    """A turned building: a generated mesh, and room for the soil round it to twist by the
+    turn's rest beyond whole quarter turns."""
     angle = case["building.rotation"]
     if angle == 0:
         return []
@@ -937,18 +967,49 @@ def _check_rotation(case: Case) -> list[tuple[str, Any, str]]:
         return [("building.rotation", angle, "turns the generated mesh's building; it cannot "
                  "turn mesh.file's (leave it at 0 or leave mesh.file out)")]
     turn = building_turn(case)
+    if turn.angle == 0:
+        return []
+    k, _ = quarter_turns(angle)
+    rest = (f"{math.degrees(turn.angle):+.4g} deg from the nearest whole quarter turn, "
+            f"{90 * k} deg, twists the soil")
     if not turn.r_out > turn.r_in:
         return [("building.rotation", angle,
-                 f"no room to turn the building: its corners ({turn.r_in:.4g} m from its "
-                 f"centre) reach {turn.bound} ({turn.r_out:.4g} m from it); move the building "
-                 "away or widen the domain")]
+                 f"{rest}, and there is no room for it: the building's corners "
+                 f"({turn.r_in:.4g} m from its centre) reach {turn.bound} ({turn.r_out:.4g} m "
+                 "from it); turn it by whole quarter turns only (0, 90, 180, 270 deg), move "
+                 "it away or widen the domain")]
     limit = math.degrees(turn.max_angle)
-    if abs(angle) > limit:
+    if abs(turn.angle) > turn.max_angle * (1 + 1e-12):
         return [("building.rotation", angle,
-                 f"at most +-{limit:.3g} deg here: the soil between the building's corners "
-                 f"({turn.r_in:.4g} m from its centre) and {turn.bound} ({turn.r_out:.4g} m "
-                 f"from it) twists to meet the track-parallel mesh, with shear <= "
-                 f"{MAX_TWIST_SHEAR:g}; move the building away or widen the domain")]
+                 f"{rest}; at most +-{limit:.3g} deg here: the soil between the building's "
+                 f"corners ({turn.r_in:.4g} m from its centre) and {turn.bound} "
+                 f"({turn.r_out:.4g} m from it) twists to meet the track-parallel mesh, with "
+                 f"shear <= {MAX_TWIST_SHEAR:.3g} (corner angles 25-155 deg); move the "
+                 "building away or widen the domain")]
+    return []
+
+
+def _check_turned_plan(case: Case) -> list[tuple[str, Any, str]]:
+    """A building turned by an odd number of quarter turns: its plan, length and width
+    exchanged, still inside the soil and clear of the embankment."""
+    k, _ = quarter_turns(case["building.rotation"])
+    if k % 2 == 0:
+        return []
+    g = case["geometry"]
+    x_lo, x_hi, y_lo, y_hi = placed_plan(case)
+    toe = embankment_toe(case)
+    room = [(x_lo > g["x1"], f"it reaches x = {x_lo:g} m, past X1 = {g['x1']:g} m"),
+            (x_hi < g["x4"], f"it reaches x = {x_hi:g} m, past X4 = {g['x4']:g} m"),
+            (y_lo > g["ys4"], f"it reaches y = {y_lo:g} m, past YS4 = {g['ys4']:g} m"),
+            (-y_hi > toe, f"its face comes to {-y_hi:g} m from the track, within the "
+                          f"embankment toe at {toe:g} m")]
+    short = [text for ok, text in room if not ok]
+    if short:
+        return [("building.rotation", case["building.rotation"],
+                 f"the plan turned by {k} quarter turn{'s' if k > 1 else ''} ({x_hi - x_lo:g} "
+                 f"x {y_hi - y_lo:g} m about its centre) must lie inside the soil and clear of "
+                 f"the embankment: {'; '.join(short)}; move the building or widen the "
+                 "domain")]
     return []
 
 
@@ -1035,7 +1096,7 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     embankment and the building."""
     out: list[tuple[str, Any, str]] = []
     g = case["geometry"]
-    toe, face = embankment_toe(case), -g["ys2"]
+    toe, face = embankment_toe(case), -placed_plan(case)[3]
     soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
     tr = case["trench"]
     if tr["type"] != "none" or tr["width"] > 0:
@@ -1049,7 +1110,8 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("trench.width", tr["width"],
                         f"the trench (from {tr['distance']:g} to "
                         f"{tr['distance'] + tr['width']:g} m) would cut through the building: "
-                        f"its face is at |geometry.ys2| = {face:g} m"))
+                        f"its face is {face:g} m from the track (|geometry.ys2|, turned with "
+                        "building.rotation)"))
         if tr["depth"] >= soil_depth - 1e-9:
             out.append(("trench.depth", tr["depth"],
                         f"must be less than the soil depth ({soil_depth:g} m to the base)"))

@@ -36,14 +36,16 @@ class Reporter:
             petsc_stage = sys.modules["petsc4py.PETSc"].Log.Stage(name)
             petsc_stage.push()
         t0 = time.perf_counter()
+        failed = True
         try:
             yield
+            failed = False
         finally:
             if petsc_stage is not None:
                 petsc_stage.pop()
             dt = time.perf_counter() - t0
             self.timings.append((name, dt))
-            self.info(f"[{name}] done in {dt:.2f} s")
+            self.info(f"[{name}] {'failed after' if failed else 'done in'} {dt:.2f} s")
 
     def progress(self, label: str, done: int, total: int, t_start: float) -> None:
         """One progress line: percent and ETA."""

@@ -243,7 +243,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "rotation": Param(0.0, "float", "deg",
                           "turn of the building about its plan centre (XBB, YBB), "
                           "counter-clockwise seen from above; the soil round it twists to "
-                          "meet the track-parallel mesh (docs/sites.md)"),
+                          "meet the track-parallel mesh beyond whole quarter turns "
+                          "(docs/sites.md)"),
     },
     "materials": {
         "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),

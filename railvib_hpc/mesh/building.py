@@ -28,6 +28,12 @@ centre) and, per slab and bay, ``slab<k>_x<i>y<j>_mid`` (top of the slab at mid-
 bay (i, j)) and ``slab<k>_x<i>y<j>_corner`` (top of the slab at the panel's corner by
 the column faces, on the side of the first column line and of the track). Bays count
 from X2 (``i``) and from the face nearest the track (``j``).
+
+A building turned by whole quarter turns (``building.rotation``,
+:func:`railvib_hpc.config.quarter_turns`) is laid out turned: the fields stay in its own
+frame, its lines, parts and probes come turned about the plan centre (the plan's length and
+width exchanged for an odd number, :func:`railvib_hpc.config.placed_plan`). The rest of the
+turn twists the mesh afterwards (:mod:`railvib_hpc.mesh.turn`).
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case, slab_bases
+from ..config import Case, quarter_turns, slab_bases, turn_quarters
 
 #: Role of the building's named probes (:data:`railvib_hpc.schema.PROBE_ROLES`).
 ROLE_FLOOR, ROLE_WALL, ROLE_FOUNDATION = "floor", "wall", "foundation"
@@ -67,6 +73,12 @@ class Building:
         Building base and ground level.
     slab_bases
         Underside of every slab above ZBB, bottom up.
+    quarters
+        Whole quarter turns of the building about ``centre``, counter-clockwise
+        (:func:`railvib_hpc.config.quarter_turns` of ``building.rotation``). The fields above
+        are in the building's own frame; its lines, parts and probes are given turned.
+    centre
+        The plan centre ``(XBB, YBB)``.
     """
 
     cx: np.ndarray
@@ -82,6 +94,8 @@ class Building:
     slab_thickness: float
     wall_thickness: float
     foundation: str
+    quarters: int = 0
+    centre: tuple[float, float] = (0.0, 0.0)
 
     @classmethod
     def of_case(cls, case: Case) -> Building:
@@ -94,16 +108,32 @@ class Building:
                    z_ground=g["z1"], slab_bases=bases, footing_size=b["footing_size"],
                    footing_height=b["footing_height"], column_size=b["column_size"],
                    beam_depth=b["beam_depth"], slab_thickness=b["slab_thickness"],
-                   wall_thickness=b["wall_thickness"], foundation=b["foundation"])
+                   wall_thickness=b["wall_thickness"], foundation=b["foundation"],
+                   quarters=quarter_turns(b["rotation"])[0],
+                   centre=(0.5 * (g["x2"] + g["x3"]), 0.5 * (g["ys2"] + g["ys3"])))
 
     # ------------------------------------------------------------------ lines and levels
     def x_lines(self) -> list[float]:
-        """Breakpoints along x: footing, column and wall faces."""
-        return self._lines(self.cx, self.plan[0], self.plan[1])
+        """Breakpoints along the model's x, the building turned: footing, column and wall
+        faces."""
+        return self._turned_lines(axis=0)
 
     def y_lines(self) -> list[float]:
-        """Breakpoints along y: footing, column and wall faces."""
-        return self._lines(self.cy, self.plan[2], self.plan[3])
+        """Breakpoints along the model's y, the building turned: footing, column and wall
+        faces."""
+        return self._turned_lines(axis=1)
+
+    def _turned_lines(self, axis: int) -> list[float]:
+        """The own frame's x lines (an even number of quarter turns) or y lines (odd) that
+        the turn lays along the model's ``axis``."""
+        x0, y0 = self.centre
+        if (self.quarters + axis) % 2 == 0:        # own x lines (constant own x)
+            own = self._lines(self.cx, self.plan[0], self.plan[1])
+            points = [turn_quarters(v, y0, self.quarters, self.centre) for v in own]
+        else:                                      # own y lines
+            own = self._lines(self.cy, self.plan[2], self.plan[3])
+            points = [turn_quarters(x0, v, self.quarters, self.centre) for v in own]
+        return [float(p[axis]) for p in points]
 
     def _lines(self, c: np.ndarray, lo: float, hi: float) -> list[float]:
         fs, cs, wt = self.footing_size, self.column_size, self.wall_thickness
@@ -143,10 +173,12 @@ class Building:
 
     # ------------------------------------------------------------------ classification
     def part(self, x: float, y: float, z: float) -> str | None:
-        """The part of a block centred at ``(x, y, z)`` in the plan above ZBB (None: empty).
+        """The part of a block centred at ``(x, y, z)`` (model axes) in the plan above ZBB
+        (None: empty).
 
         Footings take precedence over the wall, the wall over columns, columns over beams.
         """
+        x, y = turn_quarters(x, y, -self.quarters, self.centre)      # to the own frame
         w = z - self.zbb
         fs, cs, wt = self.footing_size, self.column_size, self.wall_thickness
         dx, dy = np.min(np.abs(self.cx - x)), np.min(np.abs(self.cy - y))
@@ -184,7 +216,16 @@ class Building:
 
     # ------------------------------------------------------------------ probes
     def probes(self) -> dict[str, tuple[tuple[float, float, float], str]]:
-        """The building's named probes: name -> (point, role)."""
+        """The building's named probes: name -> (point, role), named in its own frame and
+        placed turned by its quarter turns."""
+        out = {}
+        for name, ((x, y, z), role) in self._own_probes().items():
+            xt, yt = turn_quarters(x, y, self.quarters, self.centre)
+            out[name] = ((float(xt), float(yt), z), role)
+        return out
+
+    def _own_probes(self) -> dict[str, tuple[tuple[float, float, float], str]]:
+        """The named probes in the building's own frame."""
         x_lo, x_hi, y_lo, y_hi = self.plan
         xc, yc = 0.5 * (x_lo + x_hi), 0.5 * (y_lo + y_hi)
         z_wall = self.zbb + 0.5 * (self.z_ground - self.zbb)

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import Case, embankment_toe, soil_layers, solid_material, track_lift
+from ..config import Case, embankment_toe, placed_plan, soil_layers, solid_material, track_lift
 from ..fem.boundary import wave_speeds
 from .building import Building
 
@@ -167,8 +167,10 @@ def build_layout(case: Case) -> Layout:
     nbays = int(round(t["rail_length"] / sp))
     sleeper_x = g["x1"] + sp * np.arange(nbays + 1)
 
-    # --- building lines: footing, column and wall faces (mesh.building)
+    # --- building lines: footing, column and wall faces (mesh.building), and its plan,
+    # both turned by building.rotation's whole quarter turns
     bldg = Building.of_case(case)
+    plan_x2, plan_x3, plan_ys3, plan_ys2 = placed_plan(case)
 
     xmin = g["x1"] - d["extra_length"]
     xmax = g["x4"] + d["extra_length"]
@@ -196,7 +198,7 @@ def build_layout(case: Case) -> Layout:
     h_track = sp / m["soil_elements_per_bay"]
     h_bldg = sp / m["soil_elements_per_bay_building"]
     nx = np.array([
-        _ndiv(x1 - x0, h_bldg if (x0 >= g["x2"] - _TOL and x1 <= g["x3"] + _TOL) else h_track, r)
+        _ndiv(x1 - x0, h_bldg if (x0 >= plan_x2 - _TOL and x1 <= plan_x3 + _TOL) else h_track, r)
         for x0, x1 in zip(xb[:-1], xb[1:])])
 
     def ydiv(y0: float, y1: float) -> int:
@@ -207,7 +209,7 @@ def build_layout(case: Case) -> Layout:
             return max(1, round(m["sleeper_outer_elements"] * r))
         if y0 >= -toe - _TOL and y1 <= toe_far + _TOL:
             return max(1, round(m["shoulder_elements"] * r))
-        if y0 >= g["ys3"] - _TOL and y1 <= g["ys2"] + _TOL:
+        if y0 >= plan_ys3 - _TOL and y1 <= plan_ys2 + _TOL:
             return _ndiv(y1 - y0, m["size_building_y"], r)
         return _ndiv(y1 - y0, m["size_far"], r)
 
@@ -216,9 +218,9 @@ def build_layout(case: Case) -> Layout:
             if y1 <= toe_far + _TOL:
                 return ydiv(y0, y1)
             return _ndiv(y1 - y0, THESIS_DIVISIONS["far_track_side"], r)
-        if y0 >= g["ys2"] - _TOL:
+        if y0 >= plan_ys2 - _TOL:
             return _ndiv(y1 - y0, THESIS_DIVISIONS["toe_to_building"], r)
-        if y0 >= g["ys3"] - _TOL:
+        if y0 >= plan_ys3 - _TOL:
             return ydiv(y0, y1)
         return _ndiv(y1 - y0, THESIS_DIVISIONS["beyond_building"], r)
 
@@ -294,10 +296,10 @@ def build_layout(case: Case) -> Layout:
     blocks: list[Block] = []
     for i in range(len(xb) - 1):
         xc = 0.5 * (xb[i] + xb[i + 1])
-        in_x = g["x2"] < xc < g["x3"]
+        in_x = plan_x2 < xc < plan_x3
         for j in range(len(yb) - 1):
             yc = 0.5 * (yb[j] + yb[j + 1])
-            in_plan = in_x and g["ys3"] < yc < g["ys2"]
+            in_plan = in_x and plan_ys3 < yc < plan_ys2
             for z0, z1 in zip(below[:-1], below[1:]):
                 zc = 0.5 * (z0 + z1)
                 part = bldg.part(xc, yc, zc) if in_plan and zc > zbb else ground_part(yc, zc)
@@ -326,7 +328,7 @@ def build_layout(case: Case) -> Layout:
     # the ground between the embankment and the building; with a trench's lines (any type,
     # so that a measure and its same-mesh reference share the point) in front of the
     # trench when the middle would fall into it
-    y_mid = 0.5 * (-toe + g["ys2"])
+    y_mid = 0.5 * (-toe + plan_ys2)
     if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
         y_mid = -0.5 * (toe + tr["distance"])
     # the named probes: point and role (railvib_hpc.schema.PROBE_ROLES)
@@ -334,8 +336,8 @@ def build_layout(case: Case) -> Layout:
         **bldg.probes(),
         "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
         "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
-        "ground_building": ((g["xbb"], g["ys2"], g["z1"]), "ground"),
-        "ground_far": ((g["xbb"], 0.5 * (g["ys3"] + ymin), g["z1"]), "ground"),
+        "ground_building": ((g["xbb"], plan_ys2, g["z1"]), "ground"),
+        "ground_far": ((g["xbb"], 0.5 * (plan_ys3 + ymin), g["z1"]), "ground"),
         "ground_opposite": ((g["xbb"], 0.5 * (toe_far + g["ys0"]), g["z1"]), "ground"),
     }
     probes = {name: point for name, (point, _) in located.items()}

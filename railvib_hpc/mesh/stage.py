@@ -308,7 +308,12 @@ def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
     if verdict.kind != "missing":
         reporter.info(f"recomputing {h5}: {verdict.reason}")
     forget(h5)
-    mesh, report = make_mesh(case, msh)
+    try:
+        mesh, report = make_mesh(case, msh)
+    except MeshError:
+        if msh is not None:                 # mesh.msh is only ever left with its mesh.h5
+            msh.unlink(missing_ok=True)
+        raise
     t0 = time.perf_counter()
     sha = write_mesh_files(out_dir, mesh, provenance("mesh.h5", case, {}))
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0

@@ -1,26 +1,38 @@
 """A building turned against the track (``building.rotation``, ``railvib_hpc.mesh.turn``).
 
-The twist keeps every circle round the plan centre and every area, so: the building and
-every part keep their volume to round-off, the building's nodes are its unturned nodes
-rotated rigidly, nothing beyond the ring moves (track, embankment, domain faces), no
-element folds, the mesh stays conformal, and it still passes the patch test (a linear
-displacement field leaves no residual at interior nodes). Bad input gets one line.
+Whole quarter turns are exact: the building's parts and probes are the unturned ones
+turned, and no soil twists. The rest twists the soil round the building. The twist keeps
+every circle round the plan centre and every area, so: the building and every part keep
+their volume to round-off, the building's nodes are its unturned nodes rotated rigidly,
+nothing beyond the ring moves (track, embankment, domain faces), no element folds, the mesh
+stays conformal, and it still passes the patch test (a linear displacement field leaves no
+residual at interior nodes). Bad input gets one line.
 """
 
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from railvib_hpc.config import MAX_TWIST_SHEAR, BuildingTurn, Case, building_turn, twist_weight
-from railvib_hpc.errors import CaseError
+from railvib_hpc.config import (
+    MAX_TWIST_SHEAR,
+    BuildingTurn,
+    Case,
+    building_turn,
+    placed_plan,
+    turn_quarters,
+)
+from railvib_hpc.errors import CaseError, MeshError
 from railvib_hpc.fem import assemble_matrix, element_dofs, hex8_stiffness
+from railvib_hpc.mesh.building import Building
 from railvib_hpc.mesh.search import boundary_faces
 from railvib_hpc.mesh.stage import format_report, make_mesh
-from railvib_hpc.mesh.turn import twist
+from railvib_hpc.mesh.turn import MIN_TWISTED_JACOBIAN, twist, twist_weight
 from railvib_hpc.schema import BUILDING_PARTS, PART_ID
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -58,16 +70,18 @@ def sorted_rows(p: np.ndarray) -> np.ndarray:
 
 
 def test_twist_weight_and_shear_bound():
-    """w is 1 inside, 0 outside, C1 at both ends; the closed-form largest shear equals the
-    sampled max of r |w'(r)|."""
+    """w is 1 inside, 0 outside, continuous; its shear r |w'(r)| is the same all across the
+    ring and equals the closed form 1 / ln(r_out / r_in)."""
     r_in, r_out = 5.0, 9.0
     r = np.linspace(0, 12, 240001)
     w = twist_weight(r, r_in, r_out)
     assert np.all(w[r <= r_in] == 1) and np.all(w[r >= r_out] == 0)
-    dw = np.gradient(w, r)
-    assert abs(dw[np.searchsorted(r, r_in)]) < 1e-3 and abs(dw[np.searchsorted(r, r_out)]) < 1e-3
+    assert np.abs(np.diff(w)).max() < 1e-3
+    ring = (r > r_in + 1e-3) & (r < r_out - 1e-3)
+    shear = (r * np.abs(np.gradient(w, r)))[ring]
     turn = BuildingTurn((0.0, 0.0), 1.0, r_in, r_out, "x")
-    assert turn.shear_per_radian == pytest.approx(np.max(r * np.abs(dw)), rel=1e-6)
+    assert np.allclose(shear, turn.shear_per_radian, rtol=1e-6)
+    assert turn.shear_per_radian == pytest.approx(1 / math.log(r_out / r_in), rel=1e-15)
     assert turn.max_angle * turn.shear_per_radian == pytest.approx(MAX_TWIST_SHEAR)
 
 
@@ -163,14 +177,31 @@ def test_turned_mesh_passes_the_patch_test(meshes):
     assert np.abs(r[on_boundary]).max() > 1e3 * tol
 
 
+# a trench whose far face is 7 m from the building's centre: the ring is 5.09-7 m
+NEAR_TRENCH = {"trench.type": "open", "trench.distance": 4.5, "trench.width": 2.0,
+               "trench.depth": 1.0}
+
+
 @pytest.mark.parametrize(("changes", "needle"), [
-    ({"building.rotation": 30.0}, "building.rotation = 30.0: at most +-18.5 deg here"),
+    ({"building.rotation": 44.0, **NEAR_TRENCH},
+     "building.rotation = 44.0: +44 deg from the nearest whole quarter turn, 0 deg, twists "
+     "the soil; at most +-39.1 deg here: the soil between the building's corners (5.091 m "
+     "from its centre) and the trench's far face (7 m from it)"),
+    ({"building.rotation": -50.0, **NEAR_TRENCH},
+     "building.rotation = -50.0: +40 deg from the nearest whole quarter turn, 270 deg, "
+     "twists the soil; at most +-39.1 deg here"),
     ({"building.rotation": 10.0, "trench.type": "open", "trench.distance": 5.0,
       "trench.width": 3.5, "trench.depth": 1.0},
-     "building.rotation = 10.0: no room to turn the building: its corners (5.091 m from its "
+     "building.rotation = 10.0: +10 deg from the nearest whole quarter turn, 0 deg, twists "
+     "the soil, and there is no room for it: the building's corners (5.091 m from its "
      "centre) reach the trench's far face (5 m from it)"),
     ({"building.rotation": 5.0, "mesh.file": "../meshes/tiny_user_mesh.msh"},
      "building.rotation = 5.0: turns the generated mesh's building"),
+    ({"building.rotation": 90.0, "geometry.x2": 3.6, "geometry.x3": 24.0,
+      "geometry.xbb": 13.8},
+     "building.rotation = 90.0: the plan turned by 1 quarter turn (7.2 x 20.4 m about its "
+     "centre) must lie inside the soil and clear of the embankment: its face comes to 3.3 m "
+     "from the track, within the embankment toe at 4.25 m"),
 ])
 def test_bad_turns_get_one_line(changes, needle):
     with pytest.raises(CaseError) as err:
@@ -184,3 +215,92 @@ def test_room_grows_with_the_domain():
     small = building_turn(thesis_case(**{"building.rotation": 10.0}))
     big = building_turn(thesis_case(**{"building.rotation": 10.0, "domain.extra_length": 12.0}))
     assert big.r_out > small.r_out and big.max_angle > small.max_angle
+
+
+def test_the_elements_bound_the_twist(tmp_path):
+    """45 deg passes the ring's shear bound on the thesis site (1.57 <= 2.14) but not its
+    mesh: the straight mesh's long thin soil elements across the ring (0.15 x 4 m beyond
+    the building) would shear past corner angles of 25-155 deg. One line with the largest
+    twist the elements allow, exit code 2, and no mesh.msh left behind; that largest twist
+    meshes."""
+    case = thesis_case(**{"building.rotation": 45.0})
+    assert building_turn(case).shear < MAX_TWIST_SHEAR
+    with pytest.raises(MeshError) as err:
+        make_mesh(case)
+    text = str(err.value)
+    assert text.startswith("building.rotation = 45.0: twisting the soil by +45 deg from 0 deg")
+    assert "\n" not in text
+    largest = float(text.split("allow at most ")[1].split(" deg")[0])
+    assert 25.0 < largest < 30.0
+    _, rep = make_mesh(thesis_case(**{"building.rotation": largest}))
+    assert rep["quality"]["min_scaled_jacobian"] >= MIN_TWISTED_JACOBIAN
+    # the command line: one line, exit code 2, nothing half-written
+    proc = subprocess.run([sys.executable, "-m", "railvib_hpc", "mesh",
+                           str(ROOT / "jobs" / "thesis_baseline.toml"), "--out", str(tmp_path),
+                           "--set", "building.rotation=45"], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 2
+    assert [ln for ln in proc.stderr.splitlines() if "error" in ln] == [
+        f"railvib mesh: error: {text}"]
+    assert "Traceback" not in proc.stderr
+    assert not (tmp_path / "mesh.msh").exists() and not (tmp_path / "mesh.h5").exists()
+
+
+# a rectangular building with unequal spans, 2 x 1 bays: quarter turns exchange its length
+# and width, so the layout around it changes, but its parts and probes must be the
+# unturned ones turned
+OBLONG = {"geometry.x3": 22.2, "geometry.xbb": 17.4, "building.bays_x": 2,
+          "building.spans_x": [3.0, 5.4], "mesh.refinement": 0.5}
+
+
+@pytest.fixture(scope="module")
+def oblong():
+    return {deg: make_mesh(thesis_case(**OBLONG, **{"building.rotation": deg}))[0]
+            for deg in (0.0, 90.0, 180.0, 270.0, 100.0)}
+
+
+@pytest.mark.parametrize("quarters", [1, 2, 3])
+def test_quarter_turns_are_exact(oblong, quarters):
+    """Every building element of the turned mesh, turned back, lies in the unturned
+    building's part of the same name; every part keeps its volume; the building's probes
+    are the unturned ones turned; the plan's length and width are exchanged."""
+    case = thesis_case(**OBLONG, **{"building.rotation": 90.0 * quarters})
+    m0, m1 = oblong[0.0], oblong[90.0 * quarters]
+    own = Building.of_case(thesis_case(**OBLONG))
+    centre = own.centre
+    ids = {PART_ID[p]: p for p in BUILDING_PARTS}
+    in_building = np.isin(m1.hex_part, list(ids))
+    centroids = m1.points[m1.hexes[in_building]].mean(axis=1)
+    x, y = turn_quarters(centroids[:, 0], centroids[:, 1], -quarters, centre)
+    parts = [own.part(a, b, c) for a, b, c in zip(x, y, centroids[:, 2])]
+    assert parts == [ids[i] for i in m1.hex_part[in_building]]
+    for pid, name in ids.items():
+        v = [float(np.sum(_volumes(m.points[m.hexes[m.hex_part == pid]]))) for m in (m0, m1)]
+        assert v[1] == pytest.approx(v[0], rel=1e-12), name
+    for name, p in m0.probes.items():
+        if name.startswith(("slab", "footing", "basement")):
+            expect = turn_quarters(p[0], p[1], quarters, centre)
+            assert np.allclose(m1.probes[name][:2], expect, atol=1e-12, rtol=0), name
+            assert m1.probes[name][2] == p[2]
+    x_lo, x_hi, y_lo, y_hi = placed_plan(case)
+    if quarters % 2:
+        assert (x_hi - x_lo, y_hi - y_lo) == pytest.approx((7.2, 9.6), abs=1e-12)
+    assert m1.probes["ground_building"][1] == pytest.approx(y_hi, abs=1e-12)
+
+
+def test_a_quarter_turn_and_a_rest(oblong):
+    """100 deg: the 90 deg mesh's building twisted rigidly by 10 deg."""
+    m90, m100 = oblong[90.0], oblong[100.0]
+    turn = building_turn(thesis_case(**OBLONG, **{"building.rotation": 100.0}))
+    assert turn.angle == pytest.approx(math.radians(10.0), rel=1e-15)
+    ids = [PART_ID[p] for p in BUILDING_PARTS]
+    b90 = m90.points[np.unique(m90.hexes[np.isin(m90.hex_part, ids)])]
+    b100 = m100.points[np.unique(m100.hexes[np.isin(m100.hex_part, ids)])]
+    assert np.abs(sorted_rows(rotation(10.0, turn.centre)(b90)) - sorted_rows(b100)).max() \
+        < 64 * EPS * 30
+
+
+def _volumes(x: np.ndarray) -> np.ndarray:
+    """Volumes of hexahedra (n, 8, 3) that are boxes (the straight building's)."""
+    span = x.max(axis=1) - x.min(axis=1)
+    return span.prod(axis=1)

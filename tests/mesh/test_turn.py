@@ -46,10 +46,24 @@ def thesis_case(**changes) -> Case:
 
 @pytest.fixture(scope="module")
 def meshes():
-    """The thesis mesh unturned and turned by ANGLE degrees, with their reports."""
-    straight = make_mesh(thesis_case())
-    turned = make_mesh(thesis_case(**{"building.rotation": ANGLE}))
+    """The thesis mesh turned by ANGLE degrees and its straight twin (the same layout, with
+    the ring's extra divisions, not twisted), with their reports."""
+    case = thesis_case(**{"building.rotation": ANGLE})
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("railvib_hpc.mesh.stage.turn_map", lambda case: None)
+        mp.setattr("railvib_hpc.mesh.stage.turn_building", lambda mesh, case: mesh)
+        straight = make_mesh(case)
+    turned = make_mesh(case)
     return straight, turned
+
+
+def test_the_ring_is_divided_in_proportion_to_the_twist():
+    """The unturned thesis mesh is the thesis's (41,880 hexahedra); a twist divides the
+    soil across its ring more finely, the more the larger the twist; quarter turns do not."""
+    counts = {a: make_mesh(thesis_case(**{"building.rotation": a, "mesh.refinement": 1.0})
+                           )[1]["quality"]["n_hexes"] for a in (0.0, 90.0, 15.0, 30.0)}
+    assert counts[0.0] == counts[90.0] == 41880
+    assert 41880 < counts[15.0] < counts[30.0]
 
 
 def rotation(deg: float, centre) -> np.ndarray:
@@ -219,8 +233,8 @@ def test_room_grows_with_the_domain():
 
 def test_the_elements_bound_the_twist(tmp_path):
     """45 deg passes the ring's shear bound on the thesis site (1.57 <= 2.14) but not its
-    mesh: the straight mesh's long thin soil elements across the ring (0.15 x 4 m beyond
-    the building) would shear past corner angles of 25-155 deg. One line with the largest
+    mesh: its soil elements by the building's corners would shear past corner angles of
+    25-155 deg. One line with the largest
     twist the elements allow, exit code 2, and no mesh.msh left behind; that largest twist
     meshes."""
     case = thesis_case(**{"building.rotation": 45.0})
@@ -231,7 +245,7 @@ def test_the_elements_bound_the_twist(tmp_path):
     assert text.startswith("building.rotation = 45.0: twisting the soil by +45 deg from 0 deg")
     assert "\n" not in text
     largest = float(text.split("allow at most ")[1].split(" deg")[0])
-    assert 25.0 < largest < 30.0
+    assert 30.0 < largest < 40.0
     _, rep = make_mesh(thesis_case(**{"building.rotation": largest}))
     assert rep["quality"]["min_scaled_jacobian"] >= MIN_TWISTED_JACOBIAN
     # the command line: one line, exit code 2, nothing half-written

@@ -138,6 +138,7 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         check_memory(n_hex * MESH_BYTES_PER_HEX, f"the mesh ({n_hex:.3g} hexahedra at "
                      f"mesh.refinement = {case['mesh.refinement']:g})",
                      "check mesh.refinement and the [mesh] element counts and sizes")
+    twist_map = None
     if case["mesh.file"]:
         mesh = read_msh(case.resolve(case["mesh.file"]))
         timings = {"read_msh": time.perf_counter() - t0}
@@ -145,11 +146,12 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         derived = complete_node_sets(mesh)
         mesh.probes, dropped = probes_inside(mesh, layout.probes)
     else:
+        twist_map = turn_map(case, layout)
         mesh, timings = generate(layout, msh_path, msh_size=MSH_BYTES_PER_HEX * n_hex,
-                                 msh_map=turn_map(case))
+                                 msh_map=twist_map)
         mesh.probes = dict(layout.probes)
         mesh = split_interfaces(mesh, case)          # under-sleeper pads, mats, isolation
-        mesh = turn_building(mesh, case)             # building.rotation
+        mesh = turn_building(mesh, case, layout, twist_map)  # building.rotation
         source = "generated"
     mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
     t0 = time.perf_counter()
@@ -179,7 +181,9 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         "parts": present_parts(mesh),
         "node_sets_derived": derived,
         "probes_outside": {k: list(v) for k, v in dropped.items()},
-        "turn": turn_line(case),
+        "turn": turn_line(case) + ("; the ring's soil relaxed to keep corner angles within "
+                                   "25-155 deg" if twist_map is not None and twist_map.relaxed
+                                   else ""),
         "timings": timings,
     }
     return mesh, report

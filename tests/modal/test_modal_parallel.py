@@ -64,8 +64,9 @@ def coarse_site():
     from railvib_hpc.parallel import on_root
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
+    layout = build_layout(case)
     mesh = on_root(lambda: turn_building(
-        split_interfaces(generate(build_layout(case))[0], case), case))
+        split_interfaces(generate(layout)[0], case), case, layout))
     return case, mesh
 
 

@@ -22,6 +22,7 @@ MODULES = [
     "railvib_hpc.io.run_record",
     "railvib_hpc.io.stage_files",
     "railvib_hpc.reconstruct.probes",
+    "railvib_hpc.mesh.turn",
 ]
 
 

@@ -154,11 +154,9 @@ def _ring_divisions(n: np.ndarray, lines: np.ndarray, centre: float, r_out: floa
                     h_ring: float) -> np.ndarray:
     """``n``, or more so that the intervals of ``lines`` within ``r_out`` of ``centre`` have
     elements at most ``h_ring`` long."""
-    out = n.copy()
-    for k, (a, b) in enumerate(zip(lines[:-1], lines[1:])):
-        if b > centre - r_out and a < centre + r_out:
-            out[k] = max(n[k], int(np.ceil((b - a) / h_ring - 1e-9)))
-    return out
+    return np.array([_resolving_divisions(k, b - a, h_ring, 1.0)
+                     if b > centre - r_out and a < centre + r_out else k
+                     for k, a, b in zip(n, lines[:-1], lines[1:])])
 
 
 def wavelength_size(case: Case, material: str) -> float:

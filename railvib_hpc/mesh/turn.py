@@ -256,19 +256,22 @@ def turn_building(mesh: Mesh, case: Case, layout: Layout,
 
     twist_map = TwistMap(case, layout, turn) if twist_map is None else twist_map
 
-    def worst(angle: float) -> tuple[int, float]:
-        """Elements below their floor at ``angle``, and the least scaled Jacobian."""
-        moving = twist_map if angle == turn.angle else TwistMap(
-            case, layout, replace(turn, angle=angle))
-        sj = replace(mesh, points=moving(mesh.points)).scaled_jacobians()
+    def worst(points: np.ndarray) -> tuple[int, float]:
+        """Elements below their floor with the nodes at ``points``, and the least scaled
+        Jacobian."""
+        sj = replace(mesh, points=points).scaled_jacobians()
         return int(np.count_nonzero(sj < floor)), float(sj.min())
 
-    n_bad, least = worst(turn.angle)
+    def twisted_by(angle: float) -> np.ndarray:
+        return TwistMap(case, layout, replace(turn, angle=angle))(mesh.points)
+
+    points = twist_map(mesh.points)
+    n_bad, least = worst(points)
     if n_bad:
         ok, bad = 0.0, 1.0                                # shares of the twist
         for _ in range(_BISECTION_STEPS):
             mid = 0.5 * (ok + bad)
-            ok, bad = (mid, bad) if worst(mid * turn.angle)[0] == 0 else (ok, mid)
+            ok, bad = (mid, bad) if worst(twisted_by(mid * turn.angle))[0] == 0 else (ok, mid)
         k, _ = quarter_turns(case["building.rotation"])
         raise MeshError(
             f"building.rotation = {case['building.rotation']}: twisting the soil by "
@@ -281,7 +284,7 @@ def turn_building(mesh: Mesh, case: Case, layout: Layout,
     names = list(mesh.probes)
     moved = twist(np.array([mesh.probes[k] for k in names], dtype=float).reshape(-1, 3), turn)
     probes = {k: tuple(float(v) for v in p) for k, p in zip(names, moved)}
-    return renumbered(replace(mesh, points=twist_map(mesh.points), probes=probes))
+    return renumbered(replace(mesh, points=points, probes=probes))
 
 
 def turn_map(case: Case, layout: Layout):

@@ -397,7 +397,11 @@ def test_slurm_array_templates_run_the_bands_and_the_merge(tmp_path):
                    cwd=root, env=dict(env, **fields))
     lam, st = _modes(out)
     assert st["n_bands"] == 3 and all(b["reused"] for b in st["bands"])
+    # each task counted its own band, so its first basis held it
+    assert [b["stats"]["basis_attempts"] for b in st["bands"]] == [1, 1, 1]
     edges = [float(e) for e in fields["EDGES"].split(";")]
+    index = json.loads((out / "bands" / "index.json").read_text())
+    assert {float(f) for f in index["counts"]} >= set(edges)
     one = tmp_path / "one"
     assert run(["modal", str(BASELINE), "--set", sets[0], "--set", sets[1], "--set",
                 "modal.f_max=100", "--set", f"modal.bands={edges}", "--out", str(one)]) == 0

@@ -23,6 +23,7 @@ MODULES = [
     "railvib_hpc.io.stage_files",
     "railvib_hpc.reconstruct.probes",
     "railvib_hpc.mesh.turn",
+    "railvib_hpc.modal.block_lanczos",
 ]
 
 

@@ -556,7 +556,17 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     cache.save()
     if s.band_only:
         return None
+    if log is not None:
+        log(f"merging {n_bands} band(s): {sum(cache.find(b).n_modes for b in bands)} band modes, "
+            f"{K.getSize()[0]:,} DOFs (Rayleigh-Ritz with K and M, duplicates, inertia "
+            "check) ...")
+    t_m = time.perf_counter()
     result = _merge(K, M, comm, bands, cache, s, n_total)
+    if log is not None:
+        st = result.stats
+        log(f"  {len(result.eigenvalues)} modes, {st['n_duplicates']} duplicate(s) dropped, "
+            f"max |Phi^T M Phi - I| = {st['max_orthonormality_error']:.1e} (merged in "
+            f"{time.perf_counter() - t_m:.1f} s)")
     result.static = static
     computed = {b.index for b in todo}
     for d in result.stats["bands"]:
@@ -572,12 +582,14 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
 
 
 def merge_memory_gb(n_dofs: int, n_candidates: int, n_modes: int) -> float:
-    """Dense memory of the merge [GB, all ranks]: the candidates, the merged modes, and the
+    """Dense memory of the merge [GB, all ranks]: the candidates (the merged modes are formed
+    in their memory, :func:`~railvib_hpc.modal.block_lanczos.rotate_narrowing`), and the
     chunks of K Phi and M Phi in :func:`~railvib_hpc.modal.eigen.normalise_and_check` and
-    of the Gram products (8 bytes each); the matrices and the mesh are already there."""
+    of the Gram products (8 bytes each); the matrices and the mesh are already there.
+    ``n_modes`` (<= ``n_candidates``) takes no memory of its own."""
     from .ritz import NORMALISE_CHUNK
 
-    return 8.0 * n_dofs * (n_candidates + n_modes + 4 * NORMALISE_CHUNK) / 1e9
+    return 8.0 * n_dofs * (max(n_candidates, n_modes) + 4 * NORMALISE_CHUNK) / 1e9
 
 
 def _gram(A, Phi: np.ndarray, comm, chunk: int = 256) -> np.ndarray:
@@ -600,7 +612,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     counted against the inertia of every stretch."""
     from scipy.linalg import eigh
 
-    from .block_lanczos import available_memory_gb
+    from .block_lanczos import available_memory_gb, rotate_narrowing
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()
@@ -653,7 +665,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
             "modal.band_modes) or a larger modal.block_size (repeated eigenvalues of a "
             "multiplicity above the block size)")
     Z = W @ Y[:, :n_total]
-    Phi = Phi @ Z
+    Phi = rotate_narrowing(Phi, Z)          # in the candidates' memory: no second n x m
     t_rr = time.perf_counter() - t1
     stats = {"bands": [r.to_json() for r in per_band],
              "n_bands": len(bands), "n_candidates": int(W.shape[0]), "n_duplicates": n_dup,

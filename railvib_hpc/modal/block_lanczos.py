@@ -640,6 +640,32 @@ def rotate_in_place(A: np.ndarray, Z: np.ndarray) -> None:
         A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z
 
 
+def rotate_narrowing(A: np.ndarray, Z: np.ndarray) -> np.ndarray:
+    """``A @ Z`` for a C-contiguous A (n, k) and Z (k, p), p <= k, in A's own memory.
+
+    Returns a C-contiguous (n, p) array on A's buffer (A is overwritten). Row slice
+    ``r:r+R`` of the result occupies the first ``(r + R) p <= (r + R) k`` values of the
+    buffer, so it only overwrites rows of A that have already been multiplied.
+
+    >>> import numpy as np
+    >>> A = np.arange(12.0).reshape(4, 3)
+    >>> Z = np.array([[1.0], [0.0], [1.0]])
+    >>> expected = A @ Z
+    >>> out = rotate_narrowing(A, Z)
+    >>> bool(np.array_equal(out, expected)), out.shape, np.shares_memory(out, A)
+    (True, (4, 1), True)
+    """
+    n, k = A.shape
+    p = Z.shape[1]
+    if p > k or not A.flags.c_contiguous:
+        raise ValueError(f"rotate_narrowing: needs a C-contiguous (n, k) A and p <= k columns, "
+                         f"got {A.shape} and {Z.shape}")
+    out = A.reshape(-1)[:n * p].reshape(n, p)
+    for r in range(0, n, ROTATE_ROWS):
+        out[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z    # (the product is computed first)
+    return out
+
+
 def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False,
                        select: Callable[[np.ndarray], np.ndarray] | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

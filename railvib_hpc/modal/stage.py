@@ -27,6 +27,7 @@ from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
 from ..resources import peak_memory_gb
 from .boundary import case_dofmap
+from .dofmap import NODE_ARRAY_CHUNK
 from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
@@ -204,6 +205,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
     with rep.stage("write modes"):
         translation, rotation, rot_nodes, rot_range, nodes = dofmap.node_arrays(result.phi,
                                                                                  comm.rank)
+        result.phi = None           # the node arrays hold the modes now (n x m doubles freed)
         mask = np.zeros(mesh.n_nodes, dtype=bool)
         mask[nodes] = True
         masses = nodal_masses(mesh, case, mask)[nodes]
@@ -287,7 +289,11 @@ def _check_modes_before_writing(comm: MPI.Comm, eigenvalues, translation, masses
                                 path: Path) -> None:
     """The data checks of ``modes.h5`` on the computed arrays (collective): a NaN or an
     implausible mode never reaches the file."""
-    problems = check_eigenvalues(eigenvalues) + check_mode_shapes(translation, masses)
+    problems = check_eigenvalues(eigenvalues)
+    for j in range(0, translation.shape[0], NODE_ARRAY_CHUNK):    # temporaries: a chunk's
+        problems += check_mode_shapes(translation[j:j + NODE_ARRAY_CHUNK], masses, first=j)
+        if problems:
+            break
     everywhere = [p for ps in comm.allgather(problems) for p in ps]
     if everywhere:
         raise DataError(f"the computed modes fail their data checks ({everywhere[0]}); "

@@ -298,6 +298,7 @@ def test_raising_f_max_adds_bands_and_array_jobs_merge(shared_tmp, block_case, c
     assert run([*modal, "--set", "modal.f_max=90", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "band 1/" in printed and "ETA" in printed
+    assert "merging" in printed and "duplicate(s) dropped" in printed
     lam40, st40 = _modes(out)
     assert len(lam40) >= 20 and st40["n_bands"] >= 2
     assert run([*modal, "--set", "modal.f_max=120", "--out", str(out)]) == 0
@@ -406,3 +407,21 @@ def test_slurm_array_templates_run_the_bands_and_the_merge(tmp_path):
     assert run(["modal", str(BASELINE), "--set", sets[0], "--set", sets[1], "--set",
                 "modal.f_max=100", "--set", f"modal.bands={edges}", "--out", str(one)]) == 0
     assert np.allclose(lam, _modes(one)[0], rtol=1e-12)
+
+
+@pytest.mark.parametrize("n, k, p", [(1, 1, 1), (9000, 40, 40), (9000, 40, 33), (4097, 7, 1)])
+def test_rotate_narrowing_equals_the_product_in_place(n, k, p):
+    """The merge forms its modes in the candidates' memory: equal to ``A @ Z`` (row slices
+    across :data:`ROTATE_ROWS` included), on A's buffer."""
+    from railvib_hpc.modal.block_lanczos import ROTATE_ROWS, rotate_narrowing
+
+    assert n < ROTATE_ROWS or n % ROTATE_ROWS
+    rng = np.random.default_rng(n + k + p)
+    A, Z = rng.standard_normal((n, k)), rng.standard_normal((k, p))
+    expected = A @ Z
+    out = rotate_narrowing(A, Z)
+    assert out.shape == (n, p) and out.flags.c_contiguous and np.shares_memory(out, A)
+    assert np.allclose(out, expected, rtol=0, atol=64 * k * np.finfo(float).eps *
+                       np.abs(A).max() * np.abs(Z).max() * 4)
+    with pytest.raises(ValueError, match="p <= k"):
+        rotate_narrowing(np.ones((3, 2)), np.ones((2, 3)))

@@ -45,6 +45,19 @@ def test_energies_add_up_to_the_eigenvalues():
     assert np.all(np.abs(total - res.eigenvalues) <= allowed)
 
 
+def test_energies_by_mode_chunks_equal_all_modes_at_once():
+    """The modes go through the products a chunk at a time (memory): chunks of 1 and 2
+    columns give the energies of one product with every mode to round-off."""
+    from mpi4py import MPI
+
+    res, energies, case, (mesh, dofmap) = _two_layer(32)
+    _, allowed = energy_sum_allowance(mesh, case, dofmap, res.phi)
+    for chunk in (1, 2):
+        chunked = group_strain_energies(mesh, case, dofmap, MPI.COMM_SELF, res.phi, chunk)
+        for group, e in energies.items():
+            assert np.all(np.abs(chunked[group] - e) <= allowed)
+
+
 def test_layer_shares_converge_to_the_analytic_ones_at_rate_two():
     sizes, errors = [], []
     for nz in (16, 32, 64):

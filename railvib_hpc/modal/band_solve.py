@@ -592,11 +592,16 @@ def merge_memory_gb(n_dofs: int, n_candidates: int, n_modes: int) -> float:
     return 8.0 * n_dofs * (max(n_candidates, n_modes) + 4 * NORMALISE_CHUNK) / 1e9
 
 
-def _gram(A, Phi: np.ndarray, comm, chunk: int = 256) -> np.ndarray:
-    """``Phi^T A Phi`` (all ranks), A applied ``chunk`` columns at a time."""
+def _gram(A, Phi: np.ndarray, comm, chunk: int = 0) -> np.ndarray:
+    """``Phi^T A Phi`` (all ranks), A applied ``chunk`` columns at a time (0: the
+    :data:`~railvib_hpc.modal.ritz.NORMALISE_CHUNK` that :func:`merge_memory_gb` counts;
+    the product's three blocks of 256 columns were 3 GB a rank beyond it at 1M DOFs)."""
     from mpi4py import MPI
 
     from .block_lanczos import sparse_times_block
+    from .ritz import NORMALISE_CHUNK
+
+    chunk = chunk or NORMALISE_CHUNK
 
     m = Phi.shape[1]
     G = np.empty((m, m))

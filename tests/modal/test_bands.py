@@ -217,11 +217,13 @@ def test_bands_release_their_memory(shared_tmp):
     res, *_ = solve_banded(mesh, soil_case(), rules, f_max, shared_tmp / "mem", comm=comm,
                            band_modes=4, log=lines.append)
     bands = [b["stats"] for b in res.stats["bands"]]
-    # the log: the count at f_max (2 lines), then each band's start and its result
+    # the log: the count at f_max (2 lines), each band's start and its result, the merge's
+    # start and its result
     assert lines[0].startswith("counting the modes below modal.f_max")
     assert "modes below" in lines[1] and "counted in" in lines[1]
+    assert lines[-2].startswith("merging 5 band(s)") and "merged in" in lines[-1]
     starts = [ln for ln in lines if "factorising K - sigma M" in ln]
-    results = [ln for ln in lines[2:] if ln not in starts]
+    results = [ln for ln in lines[2:-2] if ln not in starts]
     assert len(bands) == 5 and len(starts) == 5 and len(results) == 5
     assert all("freed" in ln and "peak" in ln for ln in results)
     factor = min(st["factor_memory_gb"] for st in bands)

@@ -19,6 +19,15 @@ it + MUMPS estimate + dense arrays; merge: candidates + modes), and
 the largest relative eigenvalue difference to the first configuration. Per band (comment
 lines): the resident memory before it, its own peak (``VmHWM`` since its start), the
 predictor, the resident memory after it is freed and the peak so far.
+
+A second table splits each run's eigensolve into its phases (bands summed; issue 26):
+all block solves (Lanczos and purification), orthogonalisation (Gram-Schmidt, thick
+restarts, Ritz vectors), Lanczos's Rayleigh-Ritz convergence tests (and how many), the
+purification's K and M products and solve residuals, the final Rayleigh-Ritz step
+(projection, dense eigenproblem, rotation), the checks (``normalise_and_check``: K Phi and
+M Phi afresh, orthonormality, residuals, round-off floors) and the share of the last four
+in the eigensolve. The load average (``/proc/loadavg``) before and after each run goes
+with it: other processes on the cores slow every phase.
 """
 
 from __future__ import annotations
@@ -42,6 +51,48 @@ CASE = ROOT / "jobs" / "thesis_baseline.toml"
 ONE_BAND_MODES = 10**7
 
 
+def loadavg() -> str:
+    """The 1-minute load average (``/proc/loadavg``), or "?"."""
+    try:
+        return Path("/proc/loadavg").read_text().split()[0]
+    except OSError:
+        return "?"
+
+
+#: The phase columns of the second table: (heading, statistics summed over the bands).
+PHASES = (("solves [s]", ("time_block_solves",)),
+          ("orthogonalisation [s]", ("time_orthogonalization",)),
+          ("Lanczos RR [s]", ("time_lanczos_ritz",)),
+          ("purification [s]", ("time_purify_products",)),
+          ("final RR [s]", ("time_rayleigh_ritz",)),
+          ("checks [s]", ("time_checks",)))
+
+
+def phase_row(name: str, r: dict) -> str:
+    """The second table's row: the eigensolve's phases (bands summed, the merge's Rayleigh-
+    Ritz step and checks added)."""
+    if "error" in r:
+        return f"| {name} | failed |"
+    st = r["stats"]
+    parts = [b["stats"] for b in st.get("bands", [])] or [st]
+
+    def total(keys) -> float:
+        return float(sum(p.get(k, 0.0) for p in parts for k in keys))
+
+    cols = [total(keys) for _, keys in PHASES]
+    if not st.get("bands"):           # one shift: time_block_solves is the Lanczos's only
+        cols[0] += st.get("time_purify_solves", 0.0)
+    if st.get("bands"):                                  # the merge: its RR and its checks
+        cols[4] += st.get("time_merge_rayleigh_ritz", 0.0)
+        cols[5] += st.get("time_checks", 0.0)
+    tests = int(total(("lanczos_ritz_steps",)))
+    eig = st.get("time_solve", 0.0)
+    share = sum(cols[2:]) / eig if eig else float("nan")
+    body = " | ".join(f"{c:.1f}" for c in cols)
+    return (f"| {name} | {eig:.1f} | {body} | {tests} | {100 * share:.1f} % | "
+            f"{r.get('silence_s', float('nan')):.1f} | {r.get('load', '?')} |")
+
+
 def run(out: Path, ranks: int, sets: list[str], petsc: list[str], timeout: float) -> dict:
     env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
     cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, "-m", "railvib_hpc",
@@ -51,16 +102,54 @@ def run(out: Path, ranks: int, sets: list[str], petsc: list[str], timeout: float
     if petsc:
         cmd += ["--", *petsc]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=timeout)
+    load0 = loadavg()
+    proc, lines = run_timed(cmd, env, timeout)
     wall = time.perf_counter() - t0
+    load = f"{load0} / {loadavg()}"
     if proc.returncode != 0:
-        return {"error": (proc.stderr.strip().splitlines() or ["?"])[-1], "wall": wall}
+        return {"error": (proc.stderr.strip().splitlines() or ["?"])[-1], "wall": wall,
+                "load": load}
     with h5py.File(out / "modes.h5", "r") as f:
         stats = json.loads(f.attrs["stats"])
         lam = f["modes/eigenvalue"][()]
     progress = [ln for ln in proc.stdout.splitlines() if "ETA" in ln]
     return {"wall": wall, "stats": stats, "lam": lam, "progress_lines": len(progress),
-            "last_progress": progress[-1].strip() if progress else ""}
+            "last_progress": progress[-1].strip() if progress else "", "load": load,
+            "silence_s": longest_silence(lines)}
+
+
+def run_timed(cmd: list[str], env: dict, timeout: float):
+    """Run ``cmd``; returns the completed process (stdout, stderr as text) and the stdout
+    lines with their arrival times."""
+    import threading
+
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env, bufsize=1)
+    lines: list[tuple[float, str]] = []
+    err: list[str] = []
+    reader = threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True)
+    reader.start()
+    timer = threading.Timer(timeout, proc.kill)
+    timer.start()
+    try:
+        for ln in proc.stdout:
+            lines.append((time.perf_counter(), ln.rstrip("\n")))
+        proc.wait()
+    finally:
+        timer.cancel()
+    reader.join()
+    return (subprocess.CompletedProcess(cmd, proc.returncode, "\n".join(ln for _, ln in lines),
+                                        "".join(err)), lines)
+
+
+def longest_silence(lines: list[tuple[float, str]]) -> float:
+    """The longest gap [s] between two output lines (``(time, line)``, as they arrived)
+    from "[eigensolve] ..." to its "done" line: what a user watches in silence."""
+    inside = [t for t, ln in lines if "[eigensolve]" in ln]
+    if len(inside) < 2:
+        return float("nan")
+    ts = [t for t, _ in lines if inside[0] <= t <= inside[-1]]
+    return max((b - a for a, b in zip(ts, ts[1:])), default=0.0)
 
 
 def row(name: str, r: dict, ref: np.ndarray | None) -> str:
@@ -139,6 +228,7 @@ def main() -> None:
           "peak [GB] | predicted [GB] (band / merge) | max rel. eigenvalue diff. |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     ref_lam = None
+    phase_rows = []
     for name, sets in configs:
         if ref_counts is not None:
             sets = [s.replace("@N", str(ref_counts)) for s in sets]
@@ -148,6 +238,7 @@ def main() -> None:
         finally:
             shutil.rmtree(out, ignore_errors=True)
         print(row(name, r, ref_lam), flush=True)
+        phase_rows.append(phase_row(name, r))
         if args.json and "error" not in r:
             with open(args.json, "a") as fj:
                 fj.write(json.dumps({"name": name, "ranks": args.ranks, "wall": r["wall"],
@@ -175,6 +266,12 @@ def main() -> None:
                       f"{st.get('predicted_peak_gb', 0):.2f} GB, after freeing "
                       f"{st.get('rss_after_free_gb', float('nan')):.2f} GB, peak so far "
                       f"{st.get('peak_rss_gb', 0):.2f} GB -->", flush=True)
+    print("\n| run | eigensolve [s] | " + " | ".join(h for h, _ in PHASES) +
+          " | RR tests | purification + RR + checks | longest silence [s] | "
+          "load (1 min, before / after) |")
+    print("|---" * (len(PHASES) + 6) + "|")
+    for line in phase_rows:
+        print(line, flush=True)
     if "eigsh" in args.reference:
         if ref_lam is None:
             print("| scipy eigsh | not run: no PETSc run gave the mode count |")

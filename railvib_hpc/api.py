@@ -92,6 +92,89 @@ def _frozen(values: Any) -> np.ndarray:
     return arr
 
 
+class FrozenDict(dict):
+    """A read-only ``dict``: the mappings of the results (``verdict``, ``probes``,
+    ``summary``, ...).
+
+    Reading works as for a ``dict`` (and ``json.dumps``, pickling and ``==`` with a plain
+    ``dict`` too); every change raises ``TypeError``. ``dict(d)`` or ``d.copy()`` gives a
+    mutable copy.
+
+    Examples
+    --------
+    >>> d = FrozenDict({"slab1": True})
+    >>> d["slab1"], d == {"slab1": True}
+    (True, True)
+    >>> d["slab1"] = False
+    Traceback (most recent call last):
+    ...
+    TypeError: a result's mapping is read-only (results are frozen); copy it with dict(...)
+    """
+
+    __slots__ = ()
+
+    def _readonly(self, *args: Any, **kwargs: Any) -> Any:
+        raise TypeError("a result's mapping is read-only (results are frozen); copy it "
+                        "with dict(...)")
+
+    __setitem__ = __delitem__ = __ior__ = _readonly
+    clear = pop = popitem = setdefault = update = _readonly
+
+    def __init__(self, *args: Any, **kwargs: Any):
+        if len(self):                  # dict.__init__ would fill it again
+            self._readonly()
+        super().__init__(*args, **kwargs)
+
+    def __reduce__(self):              # picklable (MPI broadcasts): rebuilt, not filled
+        return (type(self), (dict(self),))
+
+    def __copy__(self) -> FrozenDict:
+        return self
+
+    def __deepcopy__(self, memo: dict) -> FrozenDict:
+        return self
+
+    def __repr__(self) -> str:
+        return f"FrozenDict({dict.__repr__(self)})"
+
+
+def _freeze(value: Any) -> Any:
+    """``value`` made deeply immutable: mappings as :class:`FrozenDict`, lists and tuples
+    as tuples, sets as frozensets, numpy arrays as read-only copies (frozen dataclasses,
+    paths, numbers and strings as they are)."""
+    if isinstance(value, FrozenDict):
+        return value
+    if isinstance(value, Mapping):
+        return FrozenDict({k: _freeze(v) for k, v in value.items()})
+    if isinstance(value, list | tuple):
+        return tuple(_freeze(v) for v in value)
+    if isinstance(value, set | frozenset):
+        return frozenset(_freeze(v) for v in value)
+    if isinstance(value, np.ndarray):
+        arr = np.array(value, copy=True)
+        arr.flags.writeable = False
+        return arr
+    return value
+
+
+class _Frozen:
+    """Mixin of the frozen result dataclasses: every field deeply immutable
+    (:func:`_freeze`), so ``r.assess.verdict["slab1"] = False`` raises instead of changing
+    ``r.passed``."""
+
+    def __post_init__(self) -> None:
+        import dataclasses
+
+        for f in dataclasses.fields(self):
+            object.__setattr__(self, f.name, _freeze(getattr(self, f.name)))
+
+    def __reduce__(self):
+        """Pickled (``comm.allgather``) and rebuilt through ``__init__``: frozen again."""
+        import dataclasses
+
+        return (type(self), tuple(getattr(self, f.name) for f in dataclasses.fields(self)))
+
+
 def _path(out_dir: Path, name: str) -> Path | None:
     p = out_dir / name
     return p if p.exists() else None
@@ -107,8 +190,11 @@ def _as_case(case: Case | str | os.PathLike) -> Case:
 
 # ----------------------------------------------------------------------------- results
 @dataclass(frozen=True)
-class StageResult:
+class StageResult(_Frozen):
     """What every stage call returns.
+
+    Every result is deeply immutable: mappings are :class:`FrozenDict`, lists tuples and
+    arrays read-only copies (``r.verdict["slab1"] = False`` raises ``TypeError``).
 
     Attributes
     ----------
@@ -238,7 +324,7 @@ class MBSResult(StageResult):
 
 
 @dataclass(frozen=True)
-class ProbePeak:
+class ProbePeak(_Frozen):
     """Peak response at one probe (from ``probes.h5``).
 
     Attributes
@@ -324,7 +410,7 @@ class AssessResult(StageResult):
 
 
 @dataclass(frozen=True)
-class RunResult:
+class RunResult(_Frozen):
     """:meth:`Pipeline.run`: every stage's result.
 
     Attributes
@@ -365,7 +451,7 @@ class RunResult:
 
 
 @dataclass(frozen=True)
-class StagesResult:
+class StagesResult(_Frozen):
     """:meth:`Pipeline.run_stages`: the results of a sequence of stages.
 
     Attributes
@@ -700,7 +786,7 @@ class Pipeline:
 
 # ----------------------------------------------------------------------------- studies
 @dataclass(frozen=True)
-class VariantStatus:
+class VariantStatus(_Frozen):
     """One variant of a study.
 
     Attributes
@@ -724,7 +810,7 @@ class VariantStatus:
 
 
 @dataclass(frozen=True)
-class StudyTable:
+class StudyTable(_Frozen):
     """A table of a study's report (the values as printed)."""
 
     title: str
@@ -737,7 +823,7 @@ class StudyTable:
 
 
 @dataclass(frozen=True)
-class StudyResult:
+class StudyResult(_Frozen):
     """:func:`run_study`: the variants, the verdict and the report.
 
     Attributes
@@ -756,7 +842,9 @@ class StudyResult:
     merged
         Whether the report was written (not for ``variants=``, ``prepare`` or ``list_only``).
     verdict
-        The study's verdict: ``text`` and the numbers behind it (None when not merged).
+        The study's verdict: ``text`` and the numbers behind it (None when not merged);
+        ``complete`` and ``missing`` (the variants not finished), ``band_warning`` (when a
+        variant's modes end below the assessment band, else None).
     tables
         The report's tables.
     rows

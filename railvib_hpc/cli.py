@@ -59,7 +59,8 @@ def _parser() -> argparse.ArgumentParser:
         "assess": "evaluate the building response against vibration standards",
         "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
         "transient": "direct time integration of the full FE model (absorbing faces, "
-                     "causal waves), then assess; results in <out>/transient",
+                     "causal waves), then assess; results in --out itself (default: "
+                     "results/<case.name>/transient)",
         "study": "convergence / modes / reflection / speed / thesis-comparison studies",
     }
     for name, text in helps.items():
@@ -81,7 +82,8 @@ def _parser() -> argparse.ArgumentParser:
                                  "(repeatable; see jobs/README.md)")
         sp.add_argument("case", help="case file (TOML)")
         sp.add_argument("--out", type=Path, default=None,
-                        help="output folder (default: results/<case.name>)")
+                        help="output folder (default: results/<case.name>"
+                             + ("/transient)" if name == "transient" else ")"))
         sp.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE",
                         help="override a case key, e.g. --set mesh.refinement=2 (repeatable)")

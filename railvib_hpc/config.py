@@ -20,12 +20,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import tomllib
 
 from .errors import CaseError
 from .io.stage_files import digest, flat_case, hash_file
 from .schema import (
+    MAX_ROTATION_DEG,
     MAX_SOIL_LAYERS,
+    MIN_SOIL_LAYER_THICKNESS,
     PRESETS,
     SCHEMA,
     SOIL_LAYER_KEYS,
@@ -38,6 +41,37 @@ ALL_KEYS: dict[str, Param] = dict(iter_params())
 #: Shortest wavelength of the FRA spectra's fitted range (5 ft; Hamid et al., FRA 1980) [m].
 FRA_FITTED_WAVELENGTH_MIN = 1.524
 _SECTION_KEYS = {k.rsplit(".", 1)[0] for k in ALL_KEYS}
+
+
+class CaseKeyError(KeyError):
+    """A key that is not in the case (``case["mesh.nope"]``), with a did-you-mean.
+
+    A :class:`KeyError`, so :meth:`Case.get`, ``in`` and mapping code treat it as a missing
+    key; not a :class:`~railvib_hpc.errors.UserError`: a wrong key in the program's own
+    code stays an internal error ("please report"), not a one-line user error.
+
+    Parameters
+    ----------
+    key
+        The dotted key asked for.
+    hint
+        What is wrong (default: the did-you-mean of a case-file key).
+    """
+
+    def __init__(self, key: str, hint: str | None = None):
+        self.key, self.hint = key, hint or _did_you_mean(key)
+        super().__init__(f"case key {key!r}: {self.hint}")
+
+    def __str__(self) -> str:                 # KeyError would quote the whole message
+        return str(self.args[0])
+
+    def __reduce__(self):
+        return (type(self), (self.key, self.hint))
+
+
+#: Why :meth:`Case.from_dict` refuses an empty mapping (as :func:`load_case` an empty file).
+_EMPTY_CASE = ("sets no key: it would run the built-in defaults; to run the thesis baseline "
+               "use Case.defaults() (or jobs/thesis_baseline.toml)")
 
 
 @dataclass(frozen=True)
@@ -123,7 +157,20 @@ class Case:
         >>> case = Case.from_dict({"case": {"name": "soft"}, "vehicle.speed": 25.0})
         >>> case["case.name"], case["vehicle.speed"]
         ('soft', 25.0)
+
+        Raises
+        ------
+        CaseError
+            Every invalid entry; an empty mapping, like an empty case file, is refused (it
+            would silently be the thesis baseline: :meth:`defaults` says so).
+        TypeError
+            When ``mapping`` is not a mapping (e.g. a :class:`Case`).
         """
+        if not isinstance(mapping, Mapping):
+            raise TypeError(f"Case.from_dict takes a mapping of case keys, not "
+                            f"{type(mapping).__name__}")
+        if not mapping:
+            raise CaseError([("case dict", {}, _EMPTY_CASE)])
         return build_case(dict(mapping), None, Path(path).resolve() if path else None)
 
     @classmethod
@@ -148,7 +195,15 @@ class Case:
         ------
         CaseError
             Naming every invalid key and value.
+        TypeError
+            When ``changes`` is not a mapping, e.g. another :class:`Case` (which has no
+            "changes": use it as it is, or pass ``other.given``, the entries it sets).
         """
+        if changes is not None and not isinstance(changes, Mapping):
+            also = (" (another case: use it as it is, or pass its .given, the entries it "
+                    "sets)" if isinstance(changes, Case) else "")
+            raise TypeError("Case.replace takes {dotted key: value} changes, not "
+                            f"{type(changes).__name__}{also}")
         flat = dict(self.given) if self.given is not None else flat_case(self.data)
         merged = flat_case({**dict(changes or {}), **sections})
         flat.update(merged)
@@ -156,10 +211,31 @@ class Case:
 
     # --------------------------------------------------------------- reading
     def __getitem__(self, dotted: str) -> Any:
+        """The value of a dotted key, or a copy of a section (``case["geometry"]``).
+
+        Raises
+        ------
+        CaseKeyError
+            A :class:`KeyError` naming the key and the nearest case key.
+        """
+        if not isinstance(dotted, str):
+            raise CaseKeyError(repr(dotted), "case keys are dotted strings, e.g. "
+                                             "'vehicle.speed'")
         node: Any = self.data
-        for part in dotted.split("."):
+        for k, part in enumerate(parts := dotted.split(".")):
+            if not isinstance(node, dict):
+                raise CaseKeyError(dotted, f"{'.'.join(parts[:k])} is a value, not a section")
+            if part not in node:
+                raise CaseKeyError(dotted)
             node = node[part]
         return copy.deepcopy(node) if isinstance(node, dict | list) else node
+
+    def __contains__(self, dotted: object) -> bool:
+        try:
+            self[dotted]  # type: ignore[index]
+        except KeyError:
+            return False
+        return True
 
     def get(self, dotted: str, default: Any = None) -> Any:
         """``case[dotted]``, or ``default`` when the key does not exist."""
@@ -271,6 +347,25 @@ def toml_value(raw: str) -> Any:
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays as the Python values a TOML file gives (``np.int64(20)``
+    -> 20, ``np.float32`` -> float, ``np.bool_`` -> bool, an array -> a list), also inside
+    lists and tables; anything else as it is."""
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, np.floating):
+        return float(value)
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, list):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
 def _number(v: Any) -> bool:
     return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
 
@@ -296,6 +391,11 @@ def _range_problem(param: Param, value: Any) -> str | None:
         return "must satisfy 0 <= value <= 1"
     if check == "refinement" and not (0.0 < value <= 6.0):
         return f"must satisfy 0 < value <= 6 ({param.doc})"
+    if check == "angle" and not abs(value) <= MAX_ROTATION_DEG:
+        return (f"must satisfy -{MAX_ROTATION_DEG:g} <= value <= {MAX_ROTATION_DEG:g} "
+                f"{param.unit} (one whole turn either way)")
+    if param.maximum is not None and not value <= param.maximum:
+        return f"must be <= {param.maximum:g}{unit} ({param.doc})"
     if check == "name" and not _NAME.match(value):
         return "must be a name (letters, digits, '_.+-')"
     return None
@@ -410,7 +510,7 @@ def _check_layers(key: str, value: Any, problems: list) -> Any:
                 continue
             v = float(v)
             last = k == len(value) - 1
-            bad = {"thickness": not (v > 0 or (last and v == 0)),
+            bad = {"thickness": not (v >= MIN_SOIL_LAYER_THICKNESS or (last and v == 0)),
                    "nu": not 0.0 <= v < 0.5, "damping_ratio": not 0.0 <= v < 1.0,
                    }.get(name, not v > 0)
             if bad:
@@ -481,18 +581,39 @@ def embankment_toe(case: Case) -> float:
 MAX_TWIST_SHEAR = 1.0 / math.tan(math.radians(25.0))
 
 
+#: Smallest twist [deg]: a rest beyond whole quarter turns below it is no twist (the turn
+#: line of ``railvib check`` and the mesh report says so). A micro-degree moves the corners
+#: of the thesis's plan (5.1 m from its centre) by 0.09 um, less than the 0.1 um within
+#: which the layouts merge levels (:func:`railvib_hpc.mesh.layout._merge`). (Such twists
+#: divided the ring into 0 elements: a ZeroDivisionError, issue 26.)
+TWIST_RESOLUTION_DEG = 1e-6
+
+
 def quarter_turns(angle_deg: float) -> tuple[int, float]:
     """``building.rotation`` split into whole quarter turns (0-3, counter-clockwise) and
     the rest, within +-45 deg: the quarters turn the building's plan exactly (the
-    structured layout is symmetric under them), only the rest twists the soil.
+    structured layout is symmetric under them), only the rest twists the soil. A rest
+    below :data:`TWIST_RESOLUTION_DEG` is 0.
+
+    Within the schema's +-:data:`~railvib_hpc.schema.MAX_ROTATION_DEG` the split is exact
+    (``90 k`` and the rest are exact in floating point).
+
+    Raises
+    ------
+    ValueError
+        For an angle beyond +-:data:`~railvib_hpc.schema.MAX_ROTATION_DEG` or not finite,
+        where a floating-point remainder is no longer exact (a validated case has none).
 
     Examples
     --------
-    >>> [quarter_turns(a) for a in (0.0, 30.0, 100.0, -100.0, 270.0)]
-    [(0, 0.0), (0, 30.0), (1, 10.0), (3, -10.0), (3, 0.0)]
+    >>> [quarter_turns(a) for a in (0.0, 30.0, 100.0, -100.0, 270.0, 1e-9)]
+    [(0, 0.0), (0, 30.0), (1, 10.0), (3, -10.0), (3, 0.0), (0, 0.0)]
     """
+    if not abs(angle_deg) <= MAX_ROTATION_DEG:
+        raise ValueError(f"building.rotation = {angle_deg!r}: beyond +-{MAX_ROTATION_DEG:g} deg")
     k = round(angle_deg / 90.0)
-    return k % 4, angle_deg - 90.0 * k
+    rest = angle_deg - 90.0 * k
+    return k % 4, (0.0 if abs(rest) < TWIST_RESOLUTION_DEG else rest)
 
 
 def turn_quarters(x: Any, y: Any, k: int, centre: tuple[float, float]) -> tuple[Any, Any]:
@@ -630,9 +751,13 @@ def solid_material(case: Case, name: str) -> dict[str, float]:
 
 
 def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
-    """Type-check and convert one value; append problems; return the converted value."""
+    """Type-check and convert one value; append problems; return the converted value.
+
+    numpy scalars count as the Python numbers they hold (:func:`_plain`; a numpy bool is
+    still no number)."""
     unit = "" if param.unit in ("-", "%") else f" in {param.unit}"
     kind = param.kind
+    value = _plain(value)
     if kind in ("floats", "ints", "bools", "strs", "triples"):
         return _check_list(key, param, value, problems)
     if kind == "layers":
@@ -682,7 +807,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         With every problem found.
     """
     problems: list[tuple[str, Any, str]] = []
-    flat = flat_case(raw)
+    flat = {key: _plain(value) for key, value in flat_case(raw).items()}
     for text in overrides or []:
         key, value = parse_override(text)
         flat[key] = value
@@ -1014,7 +1139,16 @@ def _check_turned_plan(case: Case) -> list[tuple[str, Any, str]]:
 
 
 def _check_interfaces(case: Case) -> list[tuple[str, Any, str]]:
-    """The elastic interfaces cut the generated mesh: not a user's ``mesh.file``."""
+    """The elastic interfaces cut the generated mesh: not a user's ``mesh.file``; the
+    under-sleeper pads bear on a sleeper's underside, narrower than the sleeper spacing
+    (wider, the pads of neighbouring sleepers would overlap and their area, ``usp.width``
+    times the sleeper length, would count ground that no sleeper covers)."""
+    spacing = case["track.sleeper_spacing"]
+    if case["usp.modulus"] > 0 and not case["usp.width"] < spacing:
+        return [("usp.width", case["usp.width"],
+                 f"the sleeper's bearing width must be less than track.sleeper_spacing = "
+                 f"{spacing:g} m (the sleepers would overlap; the thesis's sleeper is "
+                 f"{ALL_KEYS['usp.width'].default:g} m wide)")]
     if not case["mesh.file"]:
         return []
     return [(f"{kind}.modulus", case[f"{kind}.modulus"],
@@ -1143,10 +1277,11 @@ def _check_soil(case: Case) -> list[tuple[str, Any, str]]:
     depth = case["geometry.z1"] - (case["geometry.z0"] - case["domain.extra_depth"])
     slack = 1e-9 * max(depth, 1.0)
     total = sum(x["thickness"] for x in layers)
+    below = (f"{depth:g} m below the ground (geometry.z1 - geometry.z0 + "
+             "domain.extra_depth)")
     if layers[-1]["thickness"] > 0 and total < depth - slack:
         out.append(("soil.layers", f"{len(layers)} layer(s), {total:g} m thick",
-                    f"do not reach the base: it lies {depth:g} m below the ground "
-                    "(geometry.z1 - geometry.z0 + domain.extra_depth); make the last layer "
+                    f"do not reach the base: it lies {below}; make the last layer "
                     "thicker or give it thickness = 0 (down to the base)"))
         return out
     top = 0.0
@@ -1156,7 +1291,19 @@ def _check_soil(case: Case) -> list[tuple[str, Any, str]]:
             out.append((f"soil.layers[{k + 2}]", f"starts {top:g} m deep",
                         f"lies below the base ({depth:g} m below the ground): remove it or "
                         "make the layers above thinner"))
-            break
+            return out
+    # what the mesh gets of the last layer: down to the base, never cut
+    last, rest = len(layers), depth - top
+    if len(layers) > 1 and rest < MIN_SOIL_LAYER_THICKNESS - slack:
+        out.append((f"soil.layers[{last}]", f"starts {top:g} m deep",
+                    f"leaves {rest:g} m down to the base ({depth:g} m below the ground), "
+                    f"thinner than a soil layer may be ({MIN_SOIL_LAYER_THICKNESS:g} m): "
+                    "remove it or make the layers above thinner"))
+    elif layers[-1]["thickness"] > 0 and total > depth + slack:
+        out.append((f"soil.layers[{last}].thickness", layers[-1]["thickness"],
+                    f"the layers reach {total:g} m deep, past the base {below}, where they "
+                    f"would be cut; give the last layer thickness = {rest:g} m, or 0 (down "
+                    "to the base)"))
     return out
 
 

@@ -45,11 +45,15 @@ class Param:
     check
         ``"pos"`` (> 0), ``"nonneg"`` (>= 0), ``"poisson"`` (0 <= nu < 0.5),
         ``"fraction"`` (0 <= x < 1), ``"unit"`` (0 <= x <= 1), ``"refinement"`` (0 < x <= 6),
-        ``"name"`` (letters, digits and ``_.+-``) or ``None``; applied to every entry of a list.
+        ``"angle"`` (``|x| <=`` :data:`MAX_ROTATION_DEG`), ``"name"`` (letters, digits and
+        ``_.+-``) or ``None``; applied to every entry of a list.
     choices
         Allowed values for strings (or list items).
     unique
         Lists only: at least one entry, all distinct.
+    maximum
+        Largest allowed value (numbers; ``None``: no bound beyond ``check``); its reason
+        belongs in ``doc``.
     """
 
     default: Any
@@ -59,6 +63,7 @@ class Param:
     check: str | None = None
     choices: tuple[str, ...] = field(default_factory=tuple)
     unique: bool = False
+    maximum: float | None = None
 
 
 #: Probes of the building whose responses the studies compare (names of the mesh probes).
@@ -69,6 +74,14 @@ def _study_probes() -> Param:
     return Param(list(BUILDING_PROBES), "strs", "-",
                  "mesh probes whose responses are compared (the building probes)", "name",
                  unique=True)
+
+
+def _study_solver(what: str) -> Param:
+    """``study.<kind>.solver`` of the studies that can run their variants either way."""
+    return Param("modal", "str", "-",
+                 "modal (modes + mbs, the thesis's method) or direct (railvib transient: the "
+                 f"full model in the time domain, causal, resolved up to transient.f_max; {what})",
+                 choices=("modal", "direct"))
 
 
 def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
@@ -84,6 +97,23 @@ def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
 
 #: Most soil layers a case may give (``[[soil.layers]]``); each is a part of its own.
 MAX_SOIL_LAYERS = 8
+#: Thinnest soil layer [m] (``[[soil.layers]]``, also the last one's share down to the
+#: base): a program limit. A layer is at least one band of elements; thinner than 0.1 m
+#: it would be a band of hexahedra flatter than 1:3 even at the 0.3 m the layouts use
+#: across the building (``mesh.size_building_y``), 1:6 at the far field's 0.6 m
+#: (``mesh.size_far``). (Below 0.1 um the layouts merged it away: it vanished.)
+MIN_SOIL_LAYER_THICKNESS = 0.1
+#: Largest ``|building.rotation|`` [deg]: one whole turn either way. Beyond it a float no
+#: longer holds the angle to a degree (at 1e17 deg the spacing of floats is 16 deg), so
+#: the whole quarter turns and the rest (:func:`railvib_hpc.config.quarter_turns`) would
+#: be wrong; within it they are exact.
+MAX_ROTATION_DEG = 360.0
+#: Most storeys of the building (``building.storeys``): a program limit. The layout's
+#: cost grows with the square of the storeys (``railvib check``: about 4 s at 100, 25 s at
+#: 300, 107 s at 1000, out of memory at 1e8: issue 26), and 100 storeys (380 m at the
+#: thesis's storey height) is far beyond what the model's frame, one column size and one
+#: slab thickness for every storey, represents.
+MAX_STOREYS = 100
 #: Parts of the layered soil, top down (they replace ``subgrade`` when layers are given).
 SOIL_LAYER_PARTS = tuple(f"soil_layer_{k}" for k in range(1, MAX_SOIL_LAYERS + 1))
 #: Parts of the model, in the order of their part ids (id = index + 1); the soil layers come
@@ -113,7 +143,8 @@ SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": 
 SOIL_PARTS = ("ballast", "subballast", "subgrade", *SOIL_LAYER_PARTS, *MEASURE_PARTS, "fill")
 #: Keys of one ``[[soil.layers]]`` entry: (required, meaning). Exactly one of E and c_s.
 SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
-    "thickness": (True, "thickness in m (> 0; the last layer may give 0: down to the base)"),
+    "thickness": (True, f"thickness in m (>= {MIN_SOIL_LAYER_THICKNESS:g}; the last layer may "
+                        "give 0: down to the base)"),
     "E": (False, "Young's modulus in Pa (> 0; or c_s)"),
     "c_s": (False, "shear-wave speed in m/s (> 0; or E): E = 2 rho c_s^2 (1 + nu)"),
     "nu": (True, "Poisson's ratio (0 <= nu < 0.5)"),
@@ -219,8 +250,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "z_slab2_base": Param(8.0, "float", "m",
                               "Z_SLAB2_BASE: underside of slab 2 above ZBB (each storey above "
                               "repeats storey 2's height)", "pos"),
-        "storeys": Param(2, "int", "-", "storeys above the basement, one slab on top of each",
-                         "pos"),
+        "storeys": Param(2, "int", "-",
+                         f"storeys above the basement, one slab on top of each; at most "
+                         f"{MAX_STOREYS}, a program limit",
+                         "pos", maximum=MAX_STOREYS),
         "slab_bases": Param([], "floats", "m",
                             "underside of every slab above ZBB, one per storey, bottom up, "
                             "for storeys of their own heights (empty: z_slab1_base, then each "
@@ -241,10 +274,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
                             "line, or a raft under the whole plan (footing_height thick)",
                             choices=FOUNDATION_TYPES),
         "rotation": Param(0.0, "float", "deg",
-                          "turn of the building about its plan centre (XBB, YBB), "
-                          "counter-clockwise seen from above; the soil round it twists to "
-                          "meet the track-parallel mesh beyond whole quarter turns "
-                          "(docs/sites.md)"),
+                          f"turn of the building about its plan centre (XBB, YBB), "
+                          f"counter-clockwise seen from above, -{MAX_ROTATION_DEG:g} to "
+                          f"{MAX_ROTATION_DEG:g}; the soil round it twists to meet the "
+                          f"track-parallel mesh beyond whole quarter turns (docs/sites.md)",
+                          "angle"),
     },
     "materials": {
         "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),
@@ -407,7 +441,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
                              "elastomers", "fraction"),
         "width": Param(0.27, "float", "m",
-                       "bearing width of the sleeper on the pads (its underside)", "pos"),
+                       "bearing width of the sleeper on the pads (its underside; less than "
+                       "track.sleeper_spacing)", "pos"),
     },
     "ballast_mat": {
         "modulus": Param(0.0, "float", "N/m^3",
@@ -796,6 +831,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
             "formal_order": Param(2.0, "float", "-", "order assumed with two levels or when "
                                   "the observed order is unreliable (trilinear hexahedra: 2)",
                                   "pos"),
+            "solver": _study_solver("no natural frequencies are then compared"),
             "probes": _study_probes(),
         },
         "modes": {
@@ -844,6 +880,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
             "speeds": Param([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats", "m/s",
                             "vehicle speeds (one MBS run each on the same modes)", "pos",
                             unique=True),
+            "solver": _study_solver("every speed is then a full-order run, no shared modes"),
             "probes": _study_probes(),
         },
         "mitigation": {
@@ -865,6 +902,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                "wib.*) with a reference on its own mesh (the same lines, no "
                                "measure) instead of the baseline: the insertion loss is then "
                                "the measure's, not the mesh's"),
+            "solver": _study_solver("every variant, the references included"),
             "probes": _study_probes(),
         },
         "thesis": {

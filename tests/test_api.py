@@ -188,7 +188,7 @@ def test_run_study_returns_a_result(shared_tmp):
     assert res.verdict_text.startswith("largest building acceleration at")
     assert [r["speed"] for r in res.rows] == [20.0, 60.0]
     assert res.tables and res.tables[0].head and res.report["json"].exists()
-    assert res.settings["speeds"] == [20.0, 60.0]
+    assert res.settings["speeds"] == (20.0, 60.0)          # frozen: tuples, not lists
     if comm.rank == 0:                  # every stage call recorded: shared modes, each passage
         shared = rv.read_run_record(shared_tmp / "speed" / "model")
         assert shared["stages"]["modal"]["command"] == "railvib study speed: shared model"

@@ -111,10 +111,11 @@ differs and the command to run (:func:`require_inputs`).
 
 Writes
 ------
-Every file is written under :func:`temp_path` (``.<name>.part-<host>-<pid>``), checked
-(it exists, is not empty, re-reads; HDF5 files are created, reserved with ``fallocate``
-for their predicted size and only then filled, so a full disk fails before any data is
-written), flushed to disk (``fsync``), renamed and then recorded. Free space is checked
+Every file is written under :func:`temp_path`
+(``.<name>.part-<host>-<pid>_t<thread>_<random>``, unique per writer, threads included),
+checked (it exists, is not empty, re-reads; HDF5 files are created, reserved with
+``fallocate`` for their predicted size and only then filled, so a full disk fails before
+any data is written), flushed to disk (``fsync``), renamed and then recorded. Free space is checked
 against the predicted size first. A stage deletes a stale result before recomputing it,
 so an interrupted run never leaves a stale file that looks current.
 
@@ -122,11 +123,13 @@ Locks
 -----
 One lock per output folder (:func:`output_lock`): ``fcntl.flock`` on
 ``<out>/.railvib/lock``, held by rank 0 for the whole command and re-entrant within the
-process; the holder writes its pid, host and command into the file. A second command
-into the same folder refuses at once naming the holder, or waits with ``wait=True``
-(``--wait``). Taking the lock removes the temporary files of dead processes. (``flock``
-works across the nodes of a cluster on NFSv4 and Lustre; on file systems without
-distributed locks, concurrent jobs must use different ``--out`` folders.)
+thread that took it; the holder writes its pid, host and command into the file. A second
+command into the same folder -- another process, or another thread of this process (a
+second :class:`~railvib_hpc.api.Pipeline` on the same folder) -- refuses at once naming
+the holder, or waits with ``wait=True`` (``--wait``). Taking the lock removes the
+temporary files of dead processes. (``flock`` works across the nodes of a cluster on
+NFSv4 and Lustre; on file systems without distributed locks, concurrent jobs must use
+different ``--out`` folders.)
 
 API
 ---
@@ -158,6 +161,8 @@ import os
 import re
 import shutil
 import socket
+import threading
+import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -834,11 +839,17 @@ def _host() -> str:
 
 
 def temp_path(path: str | os.PathLike, suffix: bool = False) -> Path:
-    """The temporary name of ``path`` while it is written: ``.<name>.part-<host>-<pid>``
-    (with ``suffix``, the file's extension again at the end, for writers such as gmsh that
-    choose the format by it)."""
+    """The temporary name of ``path`` while it is written:
+    ``.<name>.part-<host>-<pid>_t<thread>_<random>`` (with ``suffix``, the file's extension
+    again at the end, for writers such as gmsh that choose the format by it).
+
+    Unique per writer: two threads of one process (two :class:`~railvib_hpc.api.Pipeline`
+    objects), or two writes of one thread, never share a temporary name. The pid stays in
+    the name for :func:`remove_stale_temps`.
+    """
     path = Path(path)
-    return path.with_name(f".{path.name}.part-{_host()}-{os.getpid()}"
+    token = f"{os.getpid()}_t{threading.get_native_id()}_{uuid.uuid4().hex[:12]}"
+    return path.with_name(f".{path.name}.part-{_host()}-{token}"
                           + (path.suffix if suffix else ""))
 
 
@@ -868,7 +879,10 @@ def resume_path(path: str | os.PathLike) -> Path:
     return path.with_name(f".{path.name}{_RESUME_SUFFIX}")
 
 
-_TEMP_RE = re.compile(r"^\..+\.(?:part|copy)-(?:(?P<host>.+)-)?(?P<pid>\d+)(?:\.[A-Za-z0-9]+)?$")
+#: A temporary name of :func:`temp_path`: ``.<name>.part-<host>-<pid>[_t<tid>_<hex>][.ext]``
+#: (the older ``.<name>.part-<host>-<pid>`` and ``.<name>.part-<pid>`` included).
+_TEMP_RE = re.compile(r"^\..+\.(?:part|copy)-(?:(?P<host>.+)-)?(?P<pid>\d+)"
+                      r"(?:_t\d+_[0-9a-f]+)?(?:\.[A-Za-z0-9]+)?$")
 _OLD_GMSH_TEMP = re.compile(r"^.+\.part\.msh$")
 
 
@@ -1263,7 +1277,12 @@ def write_h5(path: str | os.PathLike, comm, fill: Callable[[Any, bool], None], *
 
 
 # ----------------------------------------------------------------------------- locks
+#: The folder locks this process holds: ``{realpath: [fd, depth, thread ident, holder]}``
+#: (fd None while the owning thread is still taking the file lock; holder: who, in
+#: words). Guarded by :data:`_HELD_COND`.
 _HELD: dict[str, list] = {}
+#: Guards :data:`_HELD`; threads waiting for a folder held by another thread wait on it.
+_HELD_COND = threading.Condition()
 
 
 def _holder_text(lock: Path) -> str:
@@ -1277,79 +1296,128 @@ def _holder_text(lock: Path) -> str:
             f"{info.get('started')})")
 
 
+def _locked_error(out_dir: Path, holder: str) -> OutputLockedError:
+    return OutputLockedError(f"the output folder {out_dir} is in use by {holder}; wait for "
+                             "it to finish, use another --out, or add --wait")
+
+
+def _claim(key: str, out_dir: Path, command: str, wait: bool,
+           notify: Callable[[str], None] | None) -> bool:
+    """Claim ``key`` for this thread in :data:`_HELD`: True when this thread already holds
+    it (one level more), False when it is newly claimed (the file lock is still to take).
+    Another thread of this process holding it refuses like another process, or waits."""
+    me = threading.get_ident()
+    with _HELD_COND:
+        held = _HELD.get(key)
+        if held is not None and held[2] == me:
+            held[1] += 1
+            return True
+        if held is not None:
+            holder = held[3]
+            if not wait:
+                raise _locked_error(out_dir, holder)
+            if notify is not None:
+                notify(f"waiting for the output folder {out_dir}, in use by {holder}")
+            _HELD_COND.wait_for(lambda: key not in _HELD)
+        _HELD[key] = [None, 1, me, f"thread {threading.get_native_id()} of this process "
+                      f"(pid {os.getpid()}, '{command}', since {_now()})"]
+        return False
+
+
+def _unclaim(key: str) -> None:
+    with _HELD_COND:
+        _HELD.pop(key, None)
+        _HELD_COND.notify_all()
+
+
 def acquire_lock(out_dir: Path, command: str, wait: bool = False,
                  notify: Callable[[str], None] | None = None) -> tuple[int, int]:
-    """Take the lock of ``out_dir`` for this process (re-entrant); rank 0 only.
+    """Take the lock of ``out_dir`` for this thread (re-entrant within it); rank 0 only.
 
-    Creates the folder. Returns the number and bytes of stale temporary files removed.
+    Another process, or another thread of this process, holding it refuses (or, with
+    ``wait``, waits). Creates the folder. Returns the number and bytes of stale temporary
+    files removed.
 
     Raises
     ------
     OutputLockedError
-        When another process holds it and ``wait`` is False.
+        When another process or thread holds it and ``wait`` is False.
     OutputError
         When the folder cannot be created or used.
     """
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         key = os.path.realpath(out_dir)
-        if key in _HELD:
-            _HELD[key][1] += 1
-            return 0, 0
-        (out_dir / RECORD_DIR).mkdir(exist_ok=True)
-        lock = out_dir / RECORD_DIR / "lock"
-        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as exc:
-        reason = os.strerror(exc.errno) if exc.errno else os_error_text(exc)
-        where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(out_dir) \
-            else ""
-        raise OutputError(f"cannot use the output folder {out_dir}: {reason}{where}") \
-            from None
+        raise _folder_error(out_dir, exc) from None
+    lock = out_dir / RECORD_DIR / "lock"
+    if _claim(key, out_dir, command, wait, notify):
+        return 0, 0
     try:
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = _holder_text(lock)
-            if not wait:
-                raise OutputLockedError(
-                    f"the output folder {out_dir} is in use by {holder}; wait for it to "
-                    "finish, use another --out, or add --wait") from None
-            if notify is not None:
-                notify(f"waiting for the output folder {out_dir}, in use by {holder}")
-            fcntl.flock(fd, fcntl.LOCK_EX)
-        info = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
-                "started": _now()}
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, json.dumps(info).encode(), 0)
-        _HELD[key] = [fd, 1]
+            (out_dir / RECORD_DIR).mkdir(exist_ok=True)
+            fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise _folder_error(out_dir, exc) from None
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                holder = _holder_text(lock)
+                if not wait:
+                    raise _locked_error(out_dir, holder) from None
+                if notify is not None:
+                    notify(f"waiting for the output folder {out_dir}, in use by {holder}")
+                fcntl.flock(fd, fcntl.LOCK_EX)
+            info = {"pid": os.getpid(), "host": socket.gethostname(), "command": command,
+                    "thread": threading.get_native_id(), "started": _now()}
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(info).encode(), 0)
+        except BaseException:
+            os.close(fd)
+            raise
     except BaseException:
-        os.close(fd)
+        _unclaim(key)
         raise
+    with _HELD_COND:
+        _HELD[key][0] = fd
     try:
         return remove_stale_temps(out_dir)
     except OSError:
         return 0, 0
 
 
+def _folder_error(out_dir: Path, exc: OSError) -> OutputError:
+    reason = os.strerror(exc.errno) if exc.errno else os_error_text(exc)
+    where = f" ({exc.filename})" if exc.filename and str(exc.filename) != str(out_dir) \
+        else ""
+    return OutputError(f"cannot use the output folder {out_dir}: {reason}{where}")
+
+
 def release_lock(out_dir: Path) -> None:
-    """Release one level of this process's lock of ``out_dir`` (rank 0)."""
+    """Release one level of this thread's lock of ``out_dir`` (rank 0); a lock that another
+    thread holds is left alone."""
     key = os.path.realpath(out_dir)
-    held = _HELD.get(key)
-    if held is None:
-        return
-    held[1] -= 1
-    if held[1] <= 0:
+    with _HELD_COND:
+        held = _HELD.get(key)
+        if held is None or held[2] != threading.get_ident() or held[0] is None:
+            return
+        held[1] -= 1
+        if held[1] > 0:
+            return
         fd = held[0]
-        del _HELD[key]
         with contextlib.suppress(OSError):
             os.ftruncate(fd, 0)
             fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
+        del _HELD[key]
+        _HELD_COND.notify_all()
 
 
 def holds_lock(out_dir: Path) -> bool:
-    """True when this process holds the lock of ``out_dir``."""
-    return os.path.realpath(out_dir) in _HELD
+    """True when this thread holds the lock of ``out_dir``."""
+    held = _HELD.get(os.path.realpath(out_dir))
+    return held is not None and held[2] == threading.get_ident() and held[0] is not None
 
 
 @contextlib.contextmanager
@@ -1357,8 +1425,9 @@ def output_lock(out_dir: str | os.PathLike, comm, command: str, wait: bool = Fal
                 rep=None) -> Iterator[None]:
     """Hold the lock of ``out_dir`` for the block (collective; rank 0 holds it).
 
-    Re-entrant: stages called by a command that holds the lock do not lock again.
-    Prints how many temporary files of interrupted runs were removed.
+    Re-entrant within a thread: stages called by a command that holds the lock do not lock
+    again. Another thread of this process is kept out like another process. Prints how
+    many temporary files of interrupted runs were removed.
     """
     from ..parallel import on_root
 

@@ -267,7 +267,8 @@ def build_layout(case: Case) -> Layout:
     # (mesh.turn bounds the elements' corner angles)
     turn = building_turn(case)
     if turn.angle != 0 and turn.r_out > turn.r_in:
-        n_ring = math.ceil(TWIST_RING_ELEMENTS * abs(turn.angle) / (math.pi / 4) - 1e-9)
+        n_ring = max(1, math.ceil(TWIST_RING_ELEMENTS * abs(turn.angle) / (math.pi / 4)
+                                  - 1e-9))
         h_ring = (turn.r_out - turn.r_in) / n_ring
         nx = _ring_divisions(nx, xb, turn.centre[0], turn.r_out, h_ring)
         ny = _ring_divisions(ny, yb, turn.centre[1], turn.r_out, h_ring)

@@ -24,14 +24,15 @@ from numpy.typing import ArrayLike
 
 from ..config import (
     MAX_TWIST_SHEAR,
+    TWIST_RESOLUTION_DEG,
     BuildingTurn,
     Case,
     building_turn,
     placed_plan,
     quarter_turns,
 )
-from ..errors import MeshError
-from .layout import Layout
+from ..errors import CaseError, MeshError
+from .layout import Layout, build_layout
 from .model import Mesh, renumbered
 
 #: Least scaled Jacobian a hexahedron may fall to by the twist (one that had less before
@@ -57,6 +58,13 @@ _RELAX_STEPS = (0.5, 0.25, 0.1, 0.05, 0.02, 0.01)
 
 #: Tolerance [m] for finding a node on the soil's plan grid (gmsh's round-off is ~1e-14).
 _GRID_TOL = 1e-7
+
+#: Step [deg] of the largest twist a site allows (:func:`largest_twist`): the limit the mesh
+#: error states is a multiple of it, found by bisection over 0-45 deg in these steps.
+TWIST_LIMIT_STEP_DEG = 0.1
+
+#: :func:`largest_twist` per (case without its rotation, quarter turns, direction).
+_LARGEST_TWISTS: dict[tuple[str, int, int], float] = {}
 
 
 def twist_weight(r: ArrayLike, r_in: float, r_out: float) -> np.ndarray:
@@ -233,6 +241,47 @@ class TwistMap:
         return out
 
 
+def _twist_meshes(case: Case, k: int, sign: int, steps: int) -> bool:
+    """Whether ``k`` quarter turns and a rest of ``sign * steps`` :data:`TWIST_LIMIT_STEP_DEG`
+    keep every soil cell of that turn's own layout (its ring divided for that twist) within
+    corner angles of 25-155 deg, relaxed where needed (:class:`TwistMap`), and within the
+    ring's shear bound (a case ``railvib check`` refuses does not mesh). The soil's
+    hexahedra in the ring are vertical prisms on the plan grid's cells, so their scaled
+    Jacobians are the cells'; the building turns rigidly."""
+    if steps == 0:
+        return True
+    try:
+        trial = case.replace({"building.rotation":
+                              90.0 * k + sign * steps * TWIST_LIMIT_STEP_DEG})
+    except CaseError:                  # beyond the ring's shear bound (railvib check)
+        return False
+    grid = TwistMap(trial, build_layout(trial)).grid
+    return bool(quad_jacobians(grid).min() >= MIN_TWISTED_JACOBIAN - 64 * np.finfo(float).eps)
+
+
+def largest_twist(case: Case) -> float:
+    """The largest rest beyond the case's whole quarter turns, in the direction of its own
+    [deg, >= 0, a multiple of :data:`TWIST_LIMIT_STEP_DEG`], that the site's soil elements
+    allow, each twist on its own layout (the ring divided for it).
+
+    It depends on the site, the mesh settings, the quarter turns and the direction only,
+    not on the rest asked for: a bisection over 0-45 deg in steps of
+    :data:`TWIST_LIMIT_STEP_DEG` (45 deg taken as too far), every step checked on the twist's
+    plan grid; the value it returns was checked (at most 44.9 deg). Cached per site (a
+    failed mesh and its rerun ask twice in one process).
+    """
+    k, rest = quarter_turns(case["building.rotation"])
+    sign = 1 if rest >= 0 else -1
+    key = (case.digest(exclude=("rotation",)), k, sign)
+    if key not in _LARGEST_TWISTS:
+        ok, bad = 0, round(45.0 / TWIST_LIMIT_STEP_DEG)
+        while bad - ok > 1:
+            mid = (ok + bad) // 2
+            ok, bad = (mid, bad) if _twist_meshes(case, k, sign, mid) else (ok, mid)
+        _LARGEST_TWISTS[key] = round(ok * TWIST_LIMIT_STEP_DEG, 6)
+    return _LARGEST_TWISTS[key]
+
+
 def turn_building(mesh: Mesh, case: Case, layout: Layout,
                   twist_map: TwistMap | None = None) -> Mesh:
     """The mesh with the case's building twisted by the turn's rest beyond its whole
@@ -247,7 +296,8 @@ def turn_building(mesh: Mesh, case: Case, layout: Layout,
     MeshError
         When a twisted element's scaled Jacobian falls below
         :data:`MIN_TWISTED_JACOBIAN` (or below its own, when that was less), also after
-        the ring's relaxation: one line with the largest twist this mesh allows.
+        the ring's relaxation: one line with the largest twist the site allows in that
+        direction (:func:`largest_twist`, the same whatever twist was asked for).
     """
     turn = building_turn(case)
     if turn.angle == 0:
@@ -268,19 +318,28 @@ def turn_building(mesh: Mesh, case: Case, layout: Layout,
     points = twist_map(mesh.points)
     n_bad, least = worst(points)
     if n_bad:
-        ok, bad = 0.0, 1.0                                # shares of the twist
-        for _ in range(_BISECTION_STEPS):
-            mid = 0.5 * (ok + bad)
-            ok, bad = (mid, bad) if worst(twisted_by(mid * turn.angle))[0] == 0 else (ok, mid)
         k, _ = quarter_turns(case["building.rotation"])
+        way = "counter-clockwise" if turn.angle > 0 else "clockwise"
+        limit = largest_twist(case)
+        if limit < math.degrees(abs(turn.angle)):
+            allow = (f"the site's soil elements across the ring allow at most {limit:.1f} deg "
+                     f"{way} from a quarter turn (each twist on its own ring divisions, this "
+                     f"mesh.refinement, to {TWIST_LIMIT_STEP_DEG:g} deg)")
+        else:       # the plan grid allows what the mesh did not: this mesh's own limit
+            ok, bad = 0.0, 1.0                            # shares of the twist
+            for _ in range(_BISECTION_STEPS):
+                mid = 0.5 * (ok + bad)
+                ok, bad = (mid, bad) if worst(twisted_by(mid * turn.angle))[0] == 0 \
+                    else (ok, mid)
+            allow = (f"this mesh's elements across the ring allow at most "
+                     f"{math.floor(10 * math.degrees(ok * abs(turn.angle))) / 10:.1f} deg "
+                     f"{way} from a quarter turn")
         raise MeshError(
             f"building.rotation = {case['building.rotation']}: twisting the soil by "
             f"{math.degrees(turn.angle):+.4g} deg from {90 * k} deg leaves {n_bad} hexahedra "
             f"with corner angles beyond 25-155 deg (scaled Jacobian down to {least:.3g}, "
-            f"allowed {MIN_TWISTED_JACOBIAN:.3f}), also with the ring relaxed: this mesh's "
-            f"elements across the ring allow at most "
-            f"{math.degrees(ok * abs(turn.angle)):.3g} deg from a quarter turn; turn less, "
-            "move the building away or widen the domain")
+            f"allowed {MIN_TWISTED_JACOBIAN:.3f}), also with the ring relaxed: {allow}; turn "
+            "less, move the building away or widen the domain")
     names = list(mesh.probes)
     moved = twist(np.array([mesh.probes[k] for k in names], dtype=float).reshape(-1, 3), turn)
     probes = {k: tuple(float(v) for v in p) for k, p in zip(names, moved)}
@@ -305,7 +364,9 @@ def turn_line(case: Case) -> str:
     text = (f"building turned {angle:g} deg about ({turn.centre[0]:g}, {turn.centre[1]:g}): "
             f"{k} quarter turn{'' if k == 1 else 's'} (exact)")
     if turn.angle == 0:
-        return text + ", no twist"
+        rest = angle - 90.0 * round(angle / 90.0)
+        return text + (", no twist" if rest == 0 else f", no twist (the rest, {rest:g} deg, "
+                       f"is below the {TWIST_RESOLUTION_DEG:g} deg a twist needs)")
     return (text + f", then {np.degrees(turn.angle):g} deg twisting the soil between "
             f"{turn.r_in:.4g} and {turn.r_out:.4g} m from it (to {turn.bound}), shear "
             f"{turn.shear:.3f} (at most {MAX_TWIST_SHEAR:.3g}: +-{np.degrees(turn.max_angle):.3g} "

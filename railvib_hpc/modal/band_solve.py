@@ -78,6 +78,15 @@ SHIFT_NUDGE = 1e-6
 #: in 5 bands, 2 x needed 5-7 restarts per band and 7-9.5 right-hand sides per mode.
 BASIS_FACTOR = 3
 
+#: The most modes a band-sliced solve computes, as a share of the model's free DOFs. A mesh
+#: resolves only the bottom of its spectrum: at ``mesh.min_elements_per_wavelength`` = 6,
+#: Weyl's law for shear waves (two polarisations, N(f) = 8 pi V f^3 / (3 c_S^3)) puts
+#: about 4 % of the elements, 1-2 % of the DOFs, below the resolved frequency. Above a
+#: quarter of the DOFs the modes are mesh artefacts, the Weyl band plan misjudges the
+#: saturated top of a discrete spectrum, and the merge's dense eigenproblem (cubic in the
+#: count) dominates; a higher ``modal.f_max`` is refused before the bands are solved.
+MAX_MODE_SHARE = 0.25
+
 
 @dataclass
 class BandRecord:
@@ -197,7 +206,8 @@ def count_below(K, M, comm, f_hz: float, out_of_core: str) -> int:
         op.destroy()
 
 
-def count_band(K, M, comm, band: Band, cache: BandCache, out_of_core: str, log=None) -> int:
+def count_band(K, M, comm, band: Band, cache: BandCache, out_of_core: str, log=None,
+               f_max: float = math.inf) -> int:
     """The modes in ``band``: ``N(hi) - N(lo)`` by inertia (one factorisation per edge not in
     the cache, none for ``lo = 0``), recorded in the cache (collective).
 
@@ -217,7 +227,40 @@ def count_band(K, M, comm, band: Band, cache: BandCache, out_of_core: str, log=N
             if log is not None:
                 log(f"  {n} modes below {f:g} Hz (counted in {time.perf_counter() - t0:.1f} s)")
         counts.append(n)
+    check_mode_count("modal.f_max" if band.hi_hz >= f_max else "modal.bands", band.hi_hz,
+                     counts[1], K.getSize()[0], comm)
     return max(1, counts[1] - counts[0])
+
+
+def mode_count_limit(n_dofs: int, avail_gb: float) -> tuple[int, str]:
+    """The most modes a band-sliced solve of ``n_dofs`` DOFs may compute, and why: the
+    smaller of :data:`MAX_MODE_SHARE` of the DOFs and what the merge's dense arrays
+    (:func:`merge_memory_gb`) leave of 90 % of ``avail_gb``."""
+    from .ritz import NORMALISE_CHUNK
+
+    by_share = int(MAX_MODE_SHARE * n_dofs)
+    by_memory = max(0, int(0.9 * avail_gb * 1e9 / (8.0 * n_dofs)) - 4 * NORMALISE_CHUNK)
+    if by_memory < by_share:
+        return by_memory, (f"the merge holds them all, {8.0 * n_dofs / 1e9:.2g} GB per mode, "
+                           f"and {avail_gb:.1f} GB are available")
+    return by_share, (f"{100 * MAX_MODE_SHARE:g} % of its {n_dofs:,} free DOFs; a mesh "
+                      "resolves only the lowest 1-2 % of its spectrum")
+
+
+def check_mode_count(key: str, f_hz: float, n_below: int, n_dofs: int, comm) -> None:
+    """Refuse (:class:`EigenSolveError`, one line) a band plan up to ``f_hz`` (the value of
+    the case key ``key``) whose inertia count ``n_below`` exceeds :func:`mode_count_limit`;
+    called before any band is solved (collective)."""
+    from .block_lanczos import available_memory_gb
+
+    limit, why = mode_count_limit(n_dofs, available_memory_gb(comm))
+    if n_below <= limit:
+        return
+    every = ": every DOF of the model" if n_below >= n_dofs else ""
+    raise EigenSolveError(
+        f"{key} = {f_hz:g} Hz: {n_below:,} modes lie below it (inertia count{every}), more "
+        f"than the {limit:,} a band-sliced solve of this model may compute ({why}); use a "
+        f"lower {key}")
 
 
 def _band_estimate(band: Band, f_max: float, n_total: int | None) -> int:
@@ -229,11 +272,13 @@ def _band_estimate(band: Band, f_max: float, n_total: int | None) -> int:
 
 
 def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=None,
-               static_rhs: np.ndarray | None = None) -> tuple[ModalResult, int, dict]:
+               static_rhs: np.ndarray | None = None, progress=None
+               ) -> tuple[ModalResult, int, dict]:
     """One band: factor, block Lanczos to the band's radius, purify. Collective on ``comm``.
 
     Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
-    ``N(sigma)`` and statistics.
+    ``N(sigma)`` and statistics. ``progress``:
+    :data:`~railvib_hpc.modal.block_lanczos.Progress` of the phases after the expansions.
     """
     from mpi4py import MPI
 
@@ -256,10 +301,11 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
                                          K.getOwnershipRange()[0], block=b, tol=lanczos_tol,
                                          max_basis=max_basis, max_restarts=s.max_restarts,
                                          monitor=monitor, theta_cut=band.theta_cut,
-                                         margin=EDGE_MARGIN, guard=b)
+                                         margin=EDGE_MARGIN, guard=b, progress=progress)
                 t_p = time.perf_counter()
                 window = band_window(band)
-                result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st, window)
+                result = purified_modes(op, X, st["block_size"], K, M, comm, s.tol, st, window,
+                                        progress=progress)
                 X = None                   # overwritten by the modes (and guards)
                 st["time_purify_project"] = time.perf_counter() - t_p
                 st["lanczos_tol"] = lanczos_tol
@@ -277,7 +323,7 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
         try:
             if static_rhs is not None and op.sigma == 0.0:
                 t_s = time.perf_counter()
-                result.static = op.solve(static_rhs)
+                result.static = op.solve(static_rhs, progress=progress, phase="static solves")
                 st["time_static_solves"] = time.perf_counter() - t_s
             n_below = 0 if op.n_below is None else op.n_below
             st["linear_solves"] = op.n_solves            # Lanczos, purification, static
@@ -421,7 +467,8 @@ def plan_for(cache: BandCache, s: BandSettings, n_total: int) -> list[Band]:
 
 
 def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
-                static_rhs: np.ndarray | None = None, log=None) -> ModalResult | None:
+                static_rhs: np.ndarray | None = None, log=None,
+                progress=None) -> ModalResult | None:
     """Every mode below ``s.f_max`` by band slicing (collective on ``comm``).
 
     Parameters
@@ -439,6 +486,9 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     log
         ``log(line)``: one line per solved band (modes, time, memory: :func:`band_line`);
         the numbers are also in the band's ``stats`` (:func:`band_memory`).
+    progress
+        ``progress(phase, done, total)``: the phases after each band's expansions and the
+        merge's (:data:`~railvib_hpc.modal.block_lanczos.Progress`).
 
     Returns
     -------
@@ -466,6 +516,8 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     t_count = time.perf_counter() - t0
     if n_total == 0:
         raise EigenSolveError(f"modal.f_max = {s.f_max}: no mode below this frequency")
+    if n_total is not None:                  # before any band: a plan that cannot be solved
+        check_mode_count("modal.f_max", s.f_max, n_total, K.getSize()[0], comm)
     bands = plan_for(cache, s, n_total or 0)
     n_bands = len(bands)
     if s.band_only and not 1 <= s.band_only <= n_bands:
@@ -480,7 +532,8 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     exact: dict[int, int] = {}
     if n_total is None:
         for band in todo:
-            exact[band.index] = count_band(K, M, comm, band, cache, s.out_of_core, log)
+            exact[band.index] = count_band(K, M, comm, band, cache, s.out_of_core, log,
+                                           s.f_max)
     done_modes = {"n": sum(min(r.n_modes, _band_estimate(r.band, s.f_max, n_total))
                            for b in bands if (r := cache.find(b)) is not None)}
     color = comm.rank * groups // comm.size
@@ -502,6 +555,10 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
                             label=f"{band.label(n_bands)}: {nconv}/{nev} converged, "
                                   f"basis {basis}")
 
+            def band_progress(phase, done, total, band=band):
+                if progress is not None:
+                    progress(f"{band.label(n_bands)}: {phase}", done, total)
+
             rhs = static_rhs if (groups == 1 and band.shift_hz == 0.0) else None
             if log is not None and groups == 1:
                 log(f"{band.label(n_bands)}: factorising K - sigma M at {band.shift_hz:.2f} Hz, "
@@ -509,7 +566,8 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
             free_memory(sub)       # (what came before: the heap trimmed, the count's factor)
             rss_before = _total(sub, current_memory_gb())
             own_peak = sub.allreduce(reset_peak_memory(), op=MPI.LAND)
-            result, n_below, st = solve_band(Kg, Mg, sub, band, est, s, band_monitor, rhs)
+            result, n_below, st = solve_band(Kg, Mg, sub, band, est, s, band_monitor, rhs,
+                                             band_progress)
             if rhs is not None:
                 static = result.static
             done_modes["n"] += est
@@ -561,7 +619,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
             f"{K.getSize()[0]:,} DOFs (Rayleigh-Ritz with K and M, duplicates, inertia "
             "check) ...")
     t_m = time.perf_counter()
-    result = _merge(K, M, comm, bands, cache, s, n_total)
+    result = _merge(K, M, comm, bands, cache, s, n_total, progress)
     if log is not None:
         st = result.stats
         log(f"  {len(result.eigenvalues)} modes, {st['n_duplicates']} duplicate(s) dropped, "
@@ -592,27 +650,32 @@ def merge_memory_gb(n_dofs: int, n_candidates: int, n_modes: int) -> float:
     return 8.0 * n_dofs * (max(n_candidates, n_modes) + 4 * NORMALISE_CHUNK) / 1e9
 
 
-def _gram(A, Phi: np.ndarray, comm, chunk: int = 0) -> np.ndarray:
+def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
+          phase: str = "merge: Gram products") -> np.ndarray:
     """``Phi^T A Phi`` (all ranks), A applied ``chunk`` columns at a time (0: the
     :data:`~railvib_hpc.modal.ritz.NORMALISE_CHUNK` that :func:`merge_memory_gb` counts;
-    the product's three blocks of 256 columns were 3 GB a rank beyond it at 1M DOFs)."""
+    the product's three blocks of 256 columns were 3 GB a rank beyond it at 1M DOFs).
+    Chunk ``j`` against the chunks up to ``j`` only (the upper triangle: half the
+    products), with ``progress``."""
     from mpi4py import MPI
 
-    from .block_lanczos import sparse_times_block
+    from .block_lanczos import no_progress, sparse_times_block, symmetric_from_upper
     from .ritz import NORMALISE_CHUNK
 
     chunk = chunk or NORMALISE_CHUNK
-
+    progress = progress or no_progress
     m = Phi.shape[1]
-    G = np.empty((m, m))
+    G = np.zeros((m, m))
     for j in range(0, m, chunk):
-        G[:, j:j + chunk] = Phi.T @ sparse_times_block(A, Phi[:, j:j + chunk], comm)
+        c = slice(j, min(j + chunk, m))
+        G[:c.stop, c] = Phi[:, :c.stop].T @ sparse_times_block(A, Phi[:, c], comm)
+        progress(phase, c.stop, m)
     comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
-    return 0.5 * (G + G.T)
+    return symmetric_from_upper(G)
 
 
 def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
-           n_total: int) -> ModalResult:
+           n_total: int, progress=None) -> ModalResult:
     """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
     counted against the inertia of every stretch."""
     from scipy.linalg import eigh
@@ -649,8 +712,8 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
         del rows
     t_read = time.perf_counter() - t0
     t1 = time.perf_counter()
-    GM = _gram(M, Phi, comm)
-    GK = _gram(K, Phi, comm)
+    GM = _gram(M, Phi, comm, progress=progress, phase="merge: M-Gram products")
+    GK = _gram(K, Phi, comm, progress=progress, phase="merge: K-Gram products")
     w, U = eigh(GM)
     good = w > DUPLICATE_GRAM * w.max()
     W = U[:, good] / np.sqrt(w[good])
@@ -670,7 +733,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
             "modal.band_modes) or a larger modal.block_size (repeated eigenvalues of a "
             "multiplicity above the block size)")
     Z = W @ Y[:, :n_total]
-    Phi = rotate_narrowing(Phi, Z)          # in the candidates' memory: no second n x m
+    Phi = rotate_narrowing(Phi, Z, progress, "merge: rotation")   # in the candidates' memory
     t_rr = time.perf_counter() - t1
     stats = {"bands": [r.to_json() for r in per_band],
              "n_bands": len(bands), "n_candidates": int(W.shape[0]), "n_duplicates": n_dup,
@@ -685,7 +748,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
              "time_solve": float(sum(r.stats.get("time_band", 0.0) for r in per_band)),
              "time_extract": 0.0}
     result = ModalResult(lam[:n_total], np.ascontiguousarray(Phi), stats)
-    normalise_and_check(result, K, M, comm, tol=s.tol)
+    normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
     result.warnings = convergence_verdict(result, s.tol)
     return result
 

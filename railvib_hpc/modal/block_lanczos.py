@@ -38,6 +38,15 @@ if TYPE_CHECKING:
     from mpi4py import MPI
 
 
+#: Progress callback of the long phases: ``progress(phase, done, total)`` (units of work
+#: done of ``total``; rank 0 prints it, throttled, with the phase's percent and ETA).
+Progress = Callable[[str, int, int], None]
+
+
+def no_progress(phase: str, done: int, total: int) -> None:
+    """The default :data:`Progress`: nothing."""
+
+
 def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
     """A PETSc dense matrix holding this rank's rows ``arr`` (n_local, b) of a block."""
     from petsc4py import PETSc
@@ -101,8 +110,8 @@ MUMPS_TRIPLE_BYTES = 16
 #: pages in its heap between them.
 LANCZOS_WORK_BLOCKS = 12
 
-#: Work blocks of the purification phase besides its three n x ``wanted`` arrays (the
-#: solves of one block and their K and M products, measured as above).
+#: Work blocks of the purification phase besides its n x ``wanted`` arrays (the solves of
+#: one block and their K and M products; the checks' chunks of K Phi and M Phi).
 PURIFY_WORK_BLOCKS = 12
 
 
@@ -119,14 +128,15 @@ def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: in
 
     * Lanczos: the basis (``basis + block``), :data:`LANCZOS_WORK_BLOCKS` work blocks and
       the Ritz vectors ``wanted`` (guards included) formed from the basis at its end;
-    * purification (:func:`purify_and_project`, in place): the Ritz vectors, their K and M
-      products and the round-off bound of :func:`~railvib_hpc.modal.ritz.normalise_and_check`
-      (4 x ``wanted``) and :data:`PURIFY_WORK_BLOCKS` work blocks;
+    * purification (:func:`purify_and_project`, in place): the Ritz vectors and the
+      round-off bound of :func:`~railvib_hpc.modal.ritz.normalise_and_check` (2 x
+      ``wanted``; the K and M products go by blocks) and :data:`PURIFY_WORK_BLOCKS` work
+      blocks;
     * static solves: the modes, right-hand sides and solutions of ``static_cols`` loads and
       the solve's work blocks.
     """
     lanczos = basis + (1 + LANCZOS_WORK_BLOCKS) * block + wanted
-    purify = 4 * wanted + PURIFY_WORK_BLOCKS * block
+    purify = 2 * wanted + PURIFY_WORK_BLOCKS * block
     static = wanted + 2 * static_cols + PURIFY_WORK_BLOCKS * block
     return BYTES_PER_DOUBLE * n_global * max(lanczos, purify, static) / BYTES_PER_GB
 
@@ -395,8 +405,10 @@ class BlockOperator:
         """``(K - sigma M)^-1 M X`` for a block X (n_local, b)."""
         return self.solve(self.mass(X), chunk=max(X.shape[1], 1))
 
-    def solve(self, B: np.ndarray, chunk: int = 64) -> np.ndarray:
-        """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time."""
+    def solve(self, B: np.ndarray, chunk: int = 64, progress: Progress | None = None,
+              phase: str = "solves") -> np.ndarray:
+        """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time
+        (``progress``: :data:`Progress` after each chunk)."""
         from petsc4py import PETSc
 
         out = np.empty(B.shape)
@@ -414,6 +426,8 @@ class BlockOperator:
             out[:, c0:c0 + chunk] = Y.getDenseArray()
             Bd.destroy()
             Y.destroy()
+            if progress is not None:
+                progress(phase, min(c0 + chunk, B.shape[1]), B.shape[1])
         return out
 
     def destroy(self) -> None:
@@ -451,11 +465,105 @@ def start_block(n_global: int, r0: int, r1: int, b: int, seed: int = 20261123) -
     return out
 
 
+#: Block Lanczos's Rayleigh-Ritz step (the eigendecomposition of the m x m projected matrix,
+#: on every rank: 0.05-0.5 s at m = 400-900 whatever the DOFs, 30-40 times a solve) only
+#: tests convergence until the last one. When the residual estimates of the wanted pairs,
+#: extrapolated geometrically from the last two tests, need ``k`` more expansions, the next
+#: test comes after ``k // 2`` of them, at most :data:`RR_MAX_GAP` (the forecast is
+#: pessimistic: Lanczos converges superlinearly). A test always precedes a restart, and a
+#: late test costs at most a few extra expansions, never an unconverged pair.
+RR_MAX_GAP = 4
+
+
+def ritz_step(T: np.ndarray, m: int, keep: int, b: int, two_sided: bool
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ``keep`` Ritz pairs of largest ``|theta|`` of ``T[:m, :m]`` (upper triangle) and
+    their residual estimates ``|| T[m:m+b, :m] y ||``."""
+    S = np.triu(T[:m, :m]) + np.triu(T[:m, :m], 1).T
+    if two_sided:
+        theta, Y = eigh(S)
+        order = np.argsort(-np.abs(theta), kind="stable")[:min(m, keep)]
+        theta, Y = theta[order], np.asfortranarray(Y[:, order])
+    else:
+        theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
+        theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])      # + strides
+    # the coupling to the next block touches the last block of columns only
+    lo = max(0, m - b)
+    res = np.linalg.norm(T[m:m + b, lo:m] @ Y[lo:m], axis=0)
+    return theta, Y, res
+
+
+def rr_gap(history: list[tuple[int, float]]) -> int:
+    """Expansions until the next convergence test (:data:`RR_MAX_GAP`), from the last two
+    ``(expansion, q)`` of the worst wanted ratio ``q = residual / (tol |theta|)``."""
+    if len(history) < 2:
+        return 1
+    (e0, q0), (e1, q1) = history[-2:]
+    if not (q1 > 1.0 and q0 > q1 and e1 > e0):
+        return 1
+    rate = np.log(q0 / q1) / (e1 - e0)            # natural decades per expansion
+    return int(max(1, min(RR_MAX_GAP, np.log(q1) / rate // 2)))
+
+
+def rows_product(A: np.ndarray, Z: np.ndarray, out: np.ndarray, progress: Progress,
+                 phase: str) -> None:
+    """``out[:] = A @ Z`` by slices of :data:`ROTATE_ROWS` rows; ``out`` may be A's own
+    leading columns (each slice is read before it is written), with progress."""
+    n = A.shape[0]
+    for r in range(0, n, ROTATE_ROWS):
+        out[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z
+        progress(phase, min(r + ROTATE_ROWS, n), n)
+
+
+def _allsum(comm, a: np.ndarray) -> np.ndarray:
+    """``a`` summed over the ranks (in place, contiguous)."""
+    from mpi4py import MPI
+
+    a = np.ascontiguousarray(a)
+    comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
+    return a
+
+
+def m_orthonormalize_block(op: BlockOperator, V: np.ndarray, W: np.ndarray, m: int, r0: int,
+                           local_from: int | None = None
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Gram-Schmidt against V[:, :m], then SVQB; returns Q, coefficients C (m, b), R (b, b).
+
+    With ``local_from`` the first pass only covers V[:, local_from:m] (the blocks the
+    Lanczos recurrence couples to) and the second pass is a full reorthogonalization;
+    otherwise two full passes (CGS2). ``r0``: this rank's first global row (the random
+    replacements of directions lost to a (nearly) invariant subspace).
+    """
+    comm, n = op.comm, op.n_global
+    C = np.zeros((m, W.shape[1]))
+    passes = ((0, m), (0, m)) if local_from is None else ((local_from, m), (0, m))
+    for lo, hi in passes:
+        if hi > lo:
+            h = _allsum(comm, V[:, lo:hi].T @ op.mass(W))
+            W = W - V[:, lo:hi] @ h
+            C[lo:hi] += h
+    G = _allsum(comm, W.T @ op.mass(W))
+    s, U = np.linalg.eigh(0.5 * (G + G.T))
+    good = s > 1e-13 * max(s.max(), 1e-300)
+    Q = W @ (U / np.sqrt(np.where(good, s, 1.0)))
+    R = U.T * np.sqrt(np.where(good, s, 0.0))[:, None]     # W = Q R
+    if not good.all():
+        # (nearly) invariant subspace: replace the lost directions by random vectors
+        nbad = int((~good).sum())
+        rnd = start_block(n, r0, r0 + op.n_local, nbad, seed=int(m) + 7)
+        basis = np.hstack([V[:, :m], Q[:, good]])
+        for _ in range(2):
+            rnd = rnd - basis @ _allsum(comm, basis.T @ op.mass(rnd))
+        s2, U2 = np.linalg.eigh(_allsum(comm, rnd.T @ op.mass(rnd)))
+        Q[:, ~good] = rnd @ (U2 / np.sqrt(s2))
+    return Q, C, R
+
+
 def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: float = 1e-8,
                   max_basis: int = 0, max_restarts: int = 50,
                   monitor: Callable[[int, int, int], None] | None = None,
-                  theta_cut: float | None = None, margin: int = 1, guard: int = 0
-                  ) -> tuple[np.ndarray, np.ndarray, dict]:
+                  theta_cut: float | None = None, margin: int = 1, guard: int = 0,
+                  progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Largest ``nev`` eigenvalues ``theta`` (in modulus) of the M-self-adjoint ``op.apply``.
 
     With a shift inside the spectrum (``op.sigma > 0``) ``theta = 1 / (lambda - sigma)``
@@ -466,7 +574,9 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     extreme ``|theta|`` first, so the band is then complete (the caller checks it with
     inertia counts). Raises :class:`NotConverged` when the band does not fit ``max_basis``.
     ``guard``: up to this many further (unconverged) Ritz vectors are appended to ``X``
-    (``stats["n_guard"]``), for a later Rayleigh-Ritz step that needs them.
+    (``stats["n_guard"]``), for a later Rayleigh-Ritz step that needs them. The convergence
+    test (a Rayleigh-Ritz step, :func:`ritz_step`) is skipped while its forecast says that
+    it cannot pass yet (:data:`RR_MAX_GAP`).
 
     Parameters
     ----------
@@ -485,7 +595,10 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     max_restarts
         Give up after this many restarts.
     monitor
-        Called as ``monitor(n_converged, nev, basis_size)`` after each expansion.
+        Called as ``monitor(n_converged, nev, basis_size)`` after each expansion (the
+        count of the last convergence test).
+    progress
+        :data:`Progress` of the long dense products (thick restarts, the Ritz vectors).
 
     Returns
     -------
@@ -493,9 +606,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     X : (n_local, nev) M-orthonormal Ritz vectors
     stats : dict
     """
-    from mpi4py import MPI
-
-    comm = op.comm
+    progress = progress or no_progress
     n = op.n_global
     b = max(1, min(block, n // 4 if n >= 8 else 1))
     if max_basis <= 0:
@@ -507,52 +618,20 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     two_sided = op.sigma != 0.0          # theta of both signs: order by modulus
     V = np.zeros((op.n_local, max_basis + b), order="F")   # column slices stay contiguous
     T = np.zeros((max_basis + b, max_basis + b))
-    t_orth = 0.0
+    t_orth = t_ritz = 0.0
 
-    def allsum(a: np.ndarray) -> np.ndarray:
-        a = np.ascontiguousarray(a)
-        comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-        return a
-
-    def m_orthonormalize(W: np.ndarray, m: int, local_from: int | None = None
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Gram-Schmidt against V[:, :m], then SVQB; returns Q, coefficients C (m, b), R (b, b).
-
-        With ``local_from`` the first pass only covers V[:, local_from:m] (the blocks the
-        Lanczos recurrence couples to) and the second pass is a full reorthogonalization;
-        otherwise two full passes (CGS2).
-        """
-        C = np.zeros((m, W.shape[1]))
-        passes = ((0, m), (0, m)) if local_from is None else ((local_from, m), (0, m))
-        for lo, hi in passes:
-            if hi > lo:
-                h = allsum(V[:, lo:hi].T @ op.mass(W))
-                W = W - V[:, lo:hi] @ h
-                C[lo:hi] += h
-        G = allsum(W.T @ op.mass(W))
-        s, U = np.linalg.eigh(0.5 * (G + G.T))
-        good = s > 1e-13 * max(s.max(), 1e-300)
-        Q = W @ (U / np.sqrt(np.where(good, s, 1.0)))
-        R = U.T * np.sqrt(np.where(good, s, 0.0))[:, None]     # W = Q R
-        if not good.all():
-            # (nearly) invariant subspace: replace the lost directions by random vectors
-            nbad = int((~good).sum())
-            rnd = start_block(n, r0, r0 + op.n_local, nbad, seed=int(m) + 7)
-            basis = np.hstack([V[:, :m], Q[:, good]])
-            for _ in range(2):
-                rnd = rnd - basis @ allsum(basis.T @ op.mass(rnd))
-            s2, U2 = np.linalg.eigh(allsum(rnd.T @ op.mass(rnd)))
-            Q[:, ~good] = rnd @ (U2 / np.sqrt(s2))
-        return Q, C, R
+    def m_orthonormalize(W: np.ndarray, m: int, local_from: int | None = None):
+        return m_orthonormalize_block(op, V, W, m, r0, local_from)
 
     t0 = time.perf_counter()
     Q, _, _ = m_orthonormalize(start_block(n, r0, r0 + op.n_local, b), 0)
     t_orth += time.perf_counter() - t0
     V[:, :b] = Q
     m = 0                                   # vectors whose A-image is in T
-    restarts, expansions = 0, 0
+    restarts, expansions, tests = 0, 0, 0
     theta = Y = res = None
-    nconv = 0
+    fresh = -1                              # the basis size of the last Ritz step
+    nconv, next_test, history = 0, 0, []
     just_restarted = False
     while True:
         # expand the block V[:, m:m+b]
@@ -566,17 +645,12 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
         V[:, m + b:m + 2 * b] = Q
         m += b
         expansions += 1
-        # Rayleigh-Ritz on the m vectors whose images are known
-        if m >= nev + b:
-            S = np.triu(T[:m, :m]) + np.triu(T[:m, :m], 1).T
-            if two_sided:
-                theta, Y = eigh(S)
-                order = np.argsort(-np.abs(theta), kind="stable")[:min(m, keep)]
-                theta, Y = theta[order], np.asfortranarray(Y[:, order])
-            else:
-                theta, Y = eigh(S, subset_by_index=[m - min(m, keep), m - 1])
-                theta, Y = theta[::-1].copy(), np.asfortranarray(Y[:, ::-1])  # + strides
-            res = np.linalg.norm(T[m:m + b, :m] @ Y, axis=0)
+        restart_due = m + 2 * b > max_basis
+        # Rayleigh-Ritz on the m vectors whose images are known: the convergence test
+        if m >= nev + b and (expansions >= next_test or restart_due):
+            t0 = time.perf_counter()
+            theta, Y, res = ritz_step(T, m, keep, b, two_sided)
+            fresh, tests = m, tests + 1
             ok = res <= tol * np.abs(theta)
             nconv = int(np.argmin(ok)) if not ok.all() else len(ok)
             if theta_cut is not None:
@@ -589,24 +663,33 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
                 if want > nev:
                     nev = want
                     keep = min(nev + b, max_basis - 2 * b)
+            if nev <= len(theta):
+                history.append((expansions, float(np.max(
+                    res[:nev] / (tol * np.abs(theta[:nev]))))))
+            next_test = expansions + rr_gap(history)
+            t_ritz += time.perf_counter() - t0
             if monitor:
                 monitor(min(nconv, nev), nev, m)
             if nconv >= nev:
                 break
         elif monitor:
-            monitor(0, nev, m)
-        if m + 2 * b > max_basis:
+            monitor(min(nconv, nev), nev, m)
+        if restart_due:
             if restarts >= max_restarts:
                 raise NotConverged(f"block Lanczos: {nconv} of {nev} modes converged after "
                                    f"{restarts} restarts")
+            if fresh != m or len(theta) < min(keep, m):
+                # the band grew at the last test (more vectors to keep than it computed)
+                t0 = time.perf_counter()
+                theta, Y, res = ritz_step(T, m, keep, b, two_sided)
+                fresh = m
+                t_ritz += time.perf_counter() - t0
             # thick restart: keep the best `keep` Ritz vectors, then the next block
             p = min(keep, len(theta))
             t0 = time.perf_counter()
-            Vk = V[:, :m] @ Y[:, :p]
             coupling = T[m:m + b, :m] @ Y[:, :p]
             nxt = V[:, m:m + b].copy()
-            V[:, :p] = Vk
-            del Vk
+            rows_product(V[:, :m], Y[:, :p], V[:, :p], progress, "thick restart")
             V[:, p:p + b] = nxt
             T[:] = 0.0
             T[np.arange(p), np.arange(p)] = theta[:p]
@@ -619,11 +702,13 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
         nev = nconv
     n_guard = max(0, min(guard, Y.shape[1] - nev))
     t0 = time.perf_counter()
-    X = V[:, :m] @ Y[:, :nev + n_guard]
+    X = np.empty((op.n_local, nev + n_guard))
+    rows_product(V[:, :m], Y[:, :nev + n_guard], X, progress, "Ritz vectors")
     t_orth += time.perf_counter() - t0
     stats = {"block_size": b, "max_basis": max_basis, "restarts": restarts,
              "expansions": expansions, "basis_size": m, "linear_solves": op.n_solves,
              "time_block_solves": op.time_solves, "time_orthogonalization": t_orth,
+             "time_lanczos_ritz": t_ritz, "lanczos_ritz_steps": tests,
              "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max()),
              "n_wanted": int(nev), "n_guard": int(n_guard)}
     return theta[:nev], X, stats
@@ -634,18 +719,20 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
 ROTATE_ROWS = 4096
 
 
-def rotate_in_place(A: np.ndarray, Z: np.ndarray) -> None:
+def rotate_in_place(A: np.ndarray, Z: np.ndarray, progress: Progress | None = None,
+                    phase: str = "rotation") -> None:
     """``A[:] = A @ Z`` for a square Z, by slices of :data:`ROTATE_ROWS` rows (no n x k copy)."""
-    for r in range(0, A.shape[0], ROTATE_ROWS):
-        A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z
+    rows_product(A, Z, A, progress or no_progress, phase)
 
 
-def rotate_narrowing(A: np.ndarray, Z: np.ndarray) -> np.ndarray:
+def rotate_narrowing(A: np.ndarray, Z: np.ndarray, progress: Progress | None = None,
+                     phase: str = "rotation") -> np.ndarray:
     """``A @ Z`` for a C-contiguous A (n, k) and Z (k, p), p <= k, in A's own memory.
 
     Returns a C-contiguous (n, p) array on A's buffer (A is overwritten). Row slice
     ``r:r+R`` of the result occupies the first ``(r + R) p <= (r + R) k`` values of the
-    buffer, so it only overwrites rows of A that have already been multiplied.
+    buffer, so it only overwrites rows of A that have already been multiplied. ``progress``:
+    :data:`Progress` by row slices.
 
     >>> import numpy as np
     >>> A = np.arange(12.0).reshape(4, 3)
@@ -660,58 +747,102 @@ def rotate_narrowing(A: np.ndarray, Z: np.ndarray) -> np.ndarray:
     if p > k or not A.flags.c_contiguous:
         raise ValueError(f"rotate_narrowing: needs a C-contiguous (n, k) A and p <= k columns, "
                          f"got {A.shape} and {Z.shape}")
+    progress = progress or no_progress
     out = A.reshape(-1)[:n * p].reshape(n, p)
     for r in range(0, n, ROTATE_ROWS):
         out[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS] @ Z    # (the product is computed first)
+        progress(phase, min(r + ROTATE_ROWS, n), n)
     return out
 
 
+def symmetric_from_upper(A: np.ndarray) -> np.ndarray:
+    """The symmetric matrix whose upper triangle (diagonal included) is A's."""
+    return np.triu(A) + np.triu(A, 1).T
+
+
+def permute_columns(A: np.ndarray, order: np.ndarray) -> None:
+    """``A[:] = A[:, order]`` by slices of :data:`ROTATE_ROWS` rows (no n x k copy)."""
+    for r in range(0, A.shape[0], ROTATE_ROWS):
+        A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS][:, order]
+
+
 def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False,
-                       select: Callable[[np.ndarray], np.ndarray] | None = None
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                       select: Callable[[np.ndarray], np.ndarray] | None = None,
+                       progress: Progress | None = None, timings: dict | None = None,
+                       fixed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One more operator application (purification), then Rayleigh-Ritz with K and M.
 
     Applying ``(K - sigma M)^-1 M`` once more damps the high-frequency error left in the
     Ritz vectors (what SLEPc calls purification); the final Rayleigh-Ritz step makes the
-    modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues, modes ``Phi``, the
-    products ``K Phi`` and ``M Phi``, and for every mode an upper bound of the norm of its
-    solve residual ``M X - (K - sigma M) X_p`` (the accuracy of the factorisation: a floor
-    for the eigen-residual, since ``K phi - lambda M phi`` contains it). ``refine``: one step
-    of iterative refinement per solve (``X_p += (K - sigma M)^-1 s``), which brings an
-    inaccurate factor's solves to working accuracy.
+    modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues, modes ``Phi`` and
+    for every mode an upper bound of the norm of its solve residual ``M X - (K - sigma M)
+    X_p`` (the accuracy of the factorisation: a floor for the eigen-residual, since ``K phi
+    - lambda M phi`` contains it). ``refine``: one step of iterative refinement per solve
+    (``X_p += (K - sigma M)^-1 s``), which brings an inaccurate factor's solves to working
+    accuracy.
+
+    ``fixed = (KC, MC, bounds)``: the first ``c = len(bounds)`` columns of X are modes kept
+    as they are (converged ones of an earlier pass, with their projections ``KC = X_c^T K
+    X_c``, ``MC = X_c^T M X_c`` and solve-residual bounds): only the others are purified,
+    and the Rayleigh-Ritz step works in the span of both.
+
+    The projected matrices ``X_p^T K X_p`` and ``X_p^T M X_p`` are accumulated block by
+    block while the K and M products of the block are at hand, their upper triangles only
+    (block ``j`` against the blocks up to ``j``: half the products of the full matrices);
+    the products are not kept: the checks form ``K Phi`` and ``M Phi`` of the final modes
+    afresh (:func:`~railvib_hpc.modal.ritz.normalise_and_check`).
 
     Memory: ``X`` is overwritten: it becomes ``Phi`` (the purified vectors are written over
-    the block just solved with, and all three blocks are rotated in place,
-    :func:`rotate_in_place`), so the phase holds ``X``, ``K Phi`` and ``M Phi`` and a few
-    solve blocks. ``select(lam)``: the order of the returned pairs, a permutation of
-    ``range(k)`` (default: ascending eigenvalues).
+    the block just solved with, then rotated in place, :func:`rotate_in_place`), so the
+    phase holds ``X`` and a few solve blocks. ``select(lam)``: the order of the returned
+    pairs, a permutation of ``range(k)`` (default: ascending eigenvalues). ``progress``:
+    :data:`Progress` (phases "purification" and "Rayleigh-Ritz"); ``timings``: seconds
+    added under ``"solves"``, ``"products"`` (the K and M products and solve residuals) and
+    ``"rayleigh_ritz"`` (projection, dense eigenproblem, rotation).
     """
     from mpi4py import MPI
 
-    Xp = X
-    KX = np.empty_like(X)
-    MX = np.empty_like(X)
-    sres = np.zeros(X.shape[1])
-    for j in range(0, X.shape[1], block):
-        B = op.mass(X[:, j:j + block])
+    progress = progress or no_progress
+    timings = {} if timings is None else timings
+    clock = dict.fromkeys(("solves", "products", "rayleigh_ritz"), 0.0)
+    k = X.shape[1]
+    kp = np.zeros((k, k))
+    mp = np.zeros((k, k))
+    sres = np.zeros(k)
+    n_fixed = 0 if fixed is None else len(fixed[2])
+    for j in range(n_fixed, k, block):
+        c = slice(j, min(j + block, k))
+        t0, s0 = time.perf_counter(), op.time_solves
+        B = op.mass(X[:, c])
         Y = op.solve(B, chunk=max(B.shape[1], 1))
         KY, MY = op.stiffness(Y), op.mass(Y)
         if refine:
             Y += op.solve(B - (KY - op.sigma * MY), chunk=max(B.shape[1], 1))
             KY, MY = op.stiffness(Y), op.mass(Y)
         S = B - (KY - op.sigma * MY)
-        sres[j:j + block] = np.sum(S**2, axis=0)
-        Xp[:, j:j + block], KX[:, j:j + block], MX[:, j:j + block] = Y, KY, MY
-    op.comm.Allreduce(MPI.IN_PLACE, sres, op=MPI.SUM)
-    kp = np.ascontiguousarray(Xp.T @ KX)
-    mp = np.ascontiguousarray(Xp.T @ MX)
-    op.comm.Allreduce(MPI.IN_PLACE, kp, op=MPI.SUM)
-    op.comm.Allreduce(MPI.IN_PLACE, mp, op=MPI.SUM)
-    lam, Z = eigh(0.5 * (kp + kp.T), 0.5 * (mp + mp.T))
+        sres[c] = np.sum(S**2, axis=0)
+        X[:, c] = Y
+        t1 = time.perf_counter()
+        clock["solves"] += op.time_solves - s0
+        clock["products"] += t1 - t0 - (op.time_solves - s0)
+        kp[:c.stop, c] = X[:, :c.stop].T @ KY
+        mp[:c.stop, c] = X[:, :c.stop].T @ MY
+        clock["rayleigh_ritz"] += time.perf_counter() - t1
+        progress("purification", c.stop - n_fixed, k - n_fixed)
+    t0 = time.perf_counter()
+    for a in (sres, kp, mp):
+        op.comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
+    if n_fixed:
+        kp[:n_fixed, :n_fixed], mp[:n_fixed, :n_fixed] = fixed[0], fixed[1]
+        sres[:n_fixed] = fixed[2] ** 2
+    lam, Z = eigh(symmetric_from_upper(kp), symmetric_from_upper(mp))
     if select is not None:
         perm = np.asarray(select(lam))
         lam, Z = lam[perm], Z[:, perm]
-    for A in (Xp, KX, MX):
-        rotate_in_place(A, Z)
+    rotate_in_place(X, Z, progress, "Rayleigh-Ritz")
+    clock["rayleigh_ritz"] += time.perf_counter() - t0
+    for key, value in clock.items():
+        timings[key] = timings.get(key, 0.0) + value
     # ||S z_i|| <= sum_j |z_ji| ||s_j|| (triangle inequality; S itself is not kept)
-    return lam, Xp, KX, MX, np.abs(Z).T @ np.sqrt(sres)
+    return lam, X, np.abs(Z).T @ np.sqrt(sres)

@@ -16,9 +16,13 @@ Each face is
   material of the element behind each face, and optionally springs
   (``boundary.virtual_thickness``);
 * ``caughey``: fixed, with a graded Caughey absorbing layer (CALM, Semblat et al. 2011): the
-  elements within ``boundary.layer_thickness`` of the face get Rayleigh damping whose ratio
-  grows quadratically from 0 at the layer's inner edge to ``boundary.layer_damping`` at the
-  face (:func:`layer_weights`; assembled by :func:`~.petsc.assemble_damping`).
+  ground elements (:data:`LAYER_PARTS`) within ``boundary.layer_thickness`` of the face get
+  Rayleigh damping whose ratio grows quadratically from 0 at the layer's inner edge to
+  ``boundary.layer_damping`` at the face (:func:`layer_weights`; assembled by
+  :func:`~.petsc.assemble_damping`). The building, the track bed (ballast, subballast,
+  embankment fill) and the mitigation measures are never damped by a layer, however thick;
+  a layer that holds no ground element is refused (:func:`check_layers`): the face would
+  be a plain fixed face.
 
 The thesis defaults (rollers, fixed base) give exactly the constraint rules of
 :data:`railvib_hpc.modal.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
@@ -36,12 +40,18 @@ from ..fem.boundary import face_impedance, wave_speeds
 from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
-from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_PARTS
+from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_LAYER_PARTS, SOIL_PARTS
 from .dofmap import COMPONENTS
 from .elements import SOLID_MATERIAL
 
 #: Normal displacement component of each face (roller).
 _NORMAL = {"x_min": "ux", "x_max": "ux", "y_min": "uy", "y_max": "uy", "base": "uz"}
+#: Coordinate axis normal to each face.
+FACE_AXIS = {"x_min": 0, "x_max": 0, "y_min": 1, "y_max": 1, "base": 2}
+#: Parts a Caughey layer may damp: the ground (the subgrade or the soil layers), which the
+#: layer stands in for. Not the building, the track bed (ballast, subballast, embankment
+#: fill) or the mitigation measures, which are the model, not its truncation.
+LAYER_PARTS = ("subgrade", *SOIL_LAYER_PARTS)
 
 
 class BoundaryError(UserError):
@@ -230,39 +240,214 @@ def boundary_summary(mesh: Mesh, case: Case) -> dict[str, dict]:
 def case_dofmap(mesh: Mesh, case: Case, size: int = 1):
     """The DOF map of a case: its ``[boundary]`` constraints and the modal switches.
 
-    Checks the absorbing faces first (:func:`absorbing_faces`), so a face without soil
-    behind it stops the run before anything is computed or written.
+    Checks the absorbing faces and the Caughey layers first (:func:`absorbing_faces`,
+    :func:`check_layers`), so a face without soil behind it, or a layer without an element,
+    stops the run before anything is computed or written.
     """
     from .dofmap import build_dofmap
 
     if has_absorbing(case):
         absorbing_faces(mesh, case)
+    if "caughey" in face_types(case).values():
+        check_layers(mesh, case)
     return build_dofmap(mesh, size, case["modal.fix_sleeper_rotations"],
                         case["modal.fix_rail_rotations_at_pads"], rules=constraint_rules(case),
                         node_sets=face_node_sets(mesh))
 
 
-def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None) -> np.ndarray:
-    """Weight of hexahedra in the Caughey layers, in [0, 1].
-
-    ``w = (1 - d / L)^2`` for an element centroid at distance ``d < L`` from a ``caughey``
-    face (``L = boundary.layer_thickness``), the largest over the faces; 0 elsewhere.
-    ``centres`` (k, 3): the centroids to weigh (default: every hexahedron's).
-    """
+def _layer_distances(mesh: Mesh, case: Case, centres: np.ndarray | None
+                     ) -> dict[str, np.ndarray]:
+    """``{caughey face: distance of each centroid to its plane}`` (default: every hexahedron)."""
     if centres is None:
         centres = mesh.points[mesh.hexes].mean(axis=1)
-    out = np.zeros(len(centres))
-    faces = [f for f, kind in face_types(case).items() if kind == "caughey"]
-    if not faces:
-        return out
-    thickness = case["boundary.layer_thickness"]
     sets = face_node_sets(mesh)
-    axis = {"x_min": 0, "x_max": 0, "y_min": 1, "y_max": 1, "base": 2}
-    for face in faces:
+    out = {}
+    for face, kind in face_types(case).items():
+        if kind != "caughey":
+            continue
         nodes = sets[face]
         if nodes.size == 0:
             raise BoundaryError(f"boundary.{face} = 'caughey': the mesh has no nodes on it")
-        plane = float(mesh.points[nodes, axis[face]].mean())
-        d = np.abs(centres[:, axis[face]] - plane)
-        out = np.maximum(out, np.where(d < thickness, (1.0 - d / thickness) ** 2, 0.0))
+        plane = float(mesh.points[nodes, FACE_AXIS[face]].mean())
+        out[face] = np.abs(centres[:, FACE_AXIS[face]] - plane)
     return out
+
+
+def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None,
+                  parts: np.ndarray | None = None) -> np.ndarray:
+    """Weight of hexahedra in the Caughey layers, in [0, 1].
+
+    ``w = (1 - d / L)^2`` for a ground element (:data:`LAYER_PARTS`) whose centroid lies at
+    distance ``d < L`` from a ``caughey`` face (``L = boundary.layer_thickness``), the
+    largest over the faces; 0 elsewhere, and 0 for every other part (building, track bed,
+    mitigation measures) whatever its distance.
+
+    Parameters
+    ----------
+    mesh, case
+        The model and its ``[boundary]``.
+    centres
+        (k, 3) centroids to weigh (default: every hexahedron's).
+    parts
+        (k,) part ids of those elements (default: ``mesh.hex_part`` when ``centres`` is
+        None; with ``centres`` given and no ``parts``, the caller has chosen ground
+        elements only).
+
+    Returns
+    -------
+    ndarray (k,)
+        The weights.
+    """
+    if centres is None and parts is None:
+        parts = mesh.hex_part
+    distances = _layer_distances(mesh, case, centres)
+    n = len(mesh.hexes) if centres is None else len(centres)
+    out = np.zeros(n)
+    thickness = case["boundary.layer_thickness"]
+    for d in distances.values():
+        out = np.maximum(out, np.where(d < thickness, (1.0 - d / thickness) ** 2, 0.0))
+    if parts is not None:
+        out[~np.isin(parts, [PART_ID[p] for p in LAYER_PARTS])] = 0.0
+    return out
+
+
+def check_layers(mesh: Mesh, case: Case) -> dict[str, dict]:
+    """Check the Caughey layers against the mesh and describe them.
+
+    Returns
+    -------
+    dict
+        ``{face: {"elements": ground elements in its layer, "skipped": {part: elements
+        within the thickness that are not ground, left undamped}}}`` per caughey face.
+
+    Raises
+    ------
+    BoundaryError
+        A layer that holds no ground element (its centroids all lie at least
+        ``boundary.layer_thickness`` from the face): the face would silently act as a
+        fixed one. Names the thickness that reaches the first element layer.
+    """
+    thickness = case["boundary.layer_thickness"]
+    ground = np.isin(mesh.hex_part, [PART_ID[p] for p in LAYER_PARTS])
+    out = {}
+    for face, d in _layer_distances(mesh, case, None).items():
+        inside = d < thickness
+        if not (inside & ground).any():
+            if not ground.any():
+                raise BoundaryError(f"boundary.{face} = 'caughey': the model has no ground "
+                                    "element (subgrade or soil layer) for a Caughey layer "
+                                    "to damp; allowed: fixed, roller, free, absorbing")
+            nearest = float(d[ground].min())
+            raise BoundaryError(
+                f"boundary.layer_thickness = {thickness:g}: the Caughey layer of "
+                f"boundary.{face} holds no ground element (the nearest centroid lies "
+                f"{nearest:.4g} m from the face), so the face would act as a plain fixed "
+                f"face; allowed: more than {nearest:.4g} m (several element layers absorb "
+                "better), or another face type")
+        skipped = {PARTS[int(p) - 1]: int(c) for p, c in
+                   zip(*np.unique(mesh.hex_part[inside & ~ground], return_counts=True))}
+        out[face] = {"elements": int((inside & ground).sum()), "skipped": skipped}
+    return out
+
+
+def layer_line(mesh: Mesh, case: Case) -> str:
+    """One line on the Caughey layers (empty without caughey faces), after
+    :func:`check_layers`: the ground elements damped, the other parts left undamped."""
+    info = check_layers(mesh, case)
+    if not info:
+        return ""
+    parts = sorted({p for v in info.values() for p in v["skipped"]})
+    n_skip = sum(c for v in info.values() for c in v["skipped"].values())
+    text = (f"Caughey layers ({case['boundary.layer_thickness']:g} m): "
+            + ", ".join(f"{face} {v['elements']} ground elements" for face, v in info.items()))
+    if parts:
+        text += (f"; {n_skip} elements of {', '.join(parts)} within the thickness are not "
+                 "damped (a layer damps the ground only)")
+    return text
+
+
+#: The six rigid-body motions of the soil box (rotations about axes through its centre).
+RIGID_MOTIONS = ("translation along x", "translation along y", "translation along z",
+                 "rotation about x", "rotation about y", "rotation about z")
+#: A rigid-body motion counts as restrained when it moves a restrained DOF of a face by
+#: more than this share of its largest displacement over the box (relative round-off of
+#: the node coordinates is far smaller; a face's extent far larger).
+SUPPORT_TOL = 1e-6
+
+
+def restrained_components(case: Case) -> dict[str, tuple[int, ...]]:
+    """Displacement components (0, 1, 2 = x, y, z) each face restrains.
+
+    ``fixed`` and ``caughey`` all three, ``roller`` its normal one, ``absorbing`` all three
+    (dashpots normal and tangential, springs too when ``boundary.virtual_thickness > 0``),
+    ``free`` none.
+    """
+    out = {}
+    for face, kind in face_types(case).items():
+        if kind in ("fixed", "caughey", "absorbing"):
+            out[face] = (0, 1, 2)
+        elif kind == "roller":
+            out[face] = (COMPONENTS.index(_NORMAL[face]),)
+        else:
+            out[face] = ()
+    return out
+
+
+def unsupported_motions(mesh: Mesh, case: Case) -> list[str]:
+    """The rigid-body motions of the soil box that no truncation face restrains.
+
+    The restrained DOFs of the faces (:func:`restrained_components`) are tested against
+    the six rigid-body motions ``t + w x (p - c)`` (``c``: the centre of the model's
+    nodes). Only the faces count: the fixed ends of the rigid rails hold the box through
+    the rail pads alone, which lets it float and drift under the loads.
+
+    Returns
+    -------
+    list of str
+        Names from :data:`RIGID_MOTIONS` of the canonical motions left free, then
+        ``"k other rigid-body motion(s)"`` for free combinations not among them; empty
+        when the faces support the box in every direction.
+    """
+    used = np.unique(mesh.hexes)
+    pts = mesh.points[used] if used.size else mesh.points
+    centre = pts.mean(axis=0)
+    scale = float(np.ptp(pts, axis=0).max()) or 1.0
+    sets = face_node_sets(mesh)
+    rows = []
+    for face, comps in restrained_components(case).items():
+        p = (mesh.points[sets[face]] - centre) / scale
+        for c in comps:
+            r = np.zeros((len(p), 6))
+            r[:, c] = 1.0                                  # translation along c
+            e = np.zeros(3)
+            e[c] = 1.0
+            for k in range(3):                             # (w_k e_k x p)_c
+                w = np.zeros(3)
+                w[k] = 1.0
+                r[:, 3 + k] = np.cross(w, p) @ e
+            rows.append(r)
+    a = np.concatenate(rows) if rows else np.zeros((0, 6))
+    if a.shape[0] == 0:
+        return list(RIGID_MOTIONS)
+    free = [RIGID_MOTIONS[j] for j in range(6) if np.abs(a[:, j]).max() <= SUPPORT_TOL]
+    sv = np.linalg.svd(a, compute_uv=False)
+    n_free = int(np.sum(sv <= SUPPORT_TOL * sv.max())) + 6 - len(sv)
+    if n_free > len(free):
+        k = n_free - len(free)
+        free.append(f"{k} other rigid-body motion{'s' if k > 1 else ''}")
+    return free
+
+
+def support_warning(mesh: Mesh, case: Case) -> str | None:
+    """A one-line warning when the faces leave a rigid-body motion of the box free (else
+    None; :func:`unsupported_motions`)."""
+    free = unsupported_motions(mesh, case)
+    if not free:
+        return None
+    faces = ", ".join(f"{f} {k}" for f, k in face_types(case).items())
+    what = ("rigid-body motions (translations and rotations)" if len(free) == len(RIGID_MOTIONS)
+            else ", ".join(free))
+    return (f"warning: no truncation face restrains the soil box's {what} "
+            f"([boundary]: {faces}): it rests on the rails' fixed ends alone, floats and "
+            "drifts under the loads, and its response is not that of supported ground; "
+            "make the base (or enough faces) fixed, roller, absorbing or caughey")

@@ -82,7 +82,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
                 monitor=None, static_rhs: np.ndarray | None = None,
                 out_of_core: str = "auto", bands=None, assemble=None,
-                log=None) -> ModalResult | None:
+                log=None, progress=None) -> ModalResult | None:
     """Extract mass-normalised modes.
 
     Parameters
@@ -126,6 +126,11 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         ``assemble(subcomm) -> (K, M)``: the matrices on a sub-communicator (band groups).
     log
         Band-sliced: ``log(line)`` gets one line per solved band (modes, time, memory).
+    progress
+        ``progress(phase, done, total)``: the phases after (and between) the Lanczos
+        expansions, which ``monitor`` does not cover: thick restarts, Ritz vectors,
+        purification, Rayleigh-Ritz, residual checks, round-off floors, the band merge
+        (:data:`~railvib_hpc.modal.block_lanczos.Progress`).
 
     Raises
     ------
@@ -142,17 +147,25 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         raise EigenSolveError(f"modal.n_modes = {n_modes}: must be smaller than the number of "
                               f"free DOFs ({n_global})")
     if method == "block_lanczos" and f_max <= 0:
+        b = max(1, min(PETSc.Options(PREFIX).getInt("bl_block_size", block_size),
+                       n_global // 4 if n_global >= 8 else 1))
+        if n_modes + 3 * b > n_global:      # block Lanczos: nev + 2 b <= basis <= n - b
+            raise EigenSolveError(
+                f"modal.n_modes = {n_modes}: block Lanczos with blocks of {b} finds at most "
+                f"{max(n_global - 3 * b, 0)} modes of {n_global} free DOFs (n_modes + 3 x "
+                "block size <= DOFs); use fewer modes or modal.method = 'krylovschur'")
         return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
-                            monitor, static_rhs, out_of_core)
+                            monitor, static_rhs, out_of_core, progress)
     if method == "block_lanczos":
         return _solve_bands(K, M, comm, f_max, tol, max_it, block_size, monitor, static_rhs,
-                            out_of_core, bands, assemble, log)
+                            out_of_core, bands, assemble, log, progress)
     ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
     set_ooc = out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
     if set_ooc:
         PETSc.Options().setValue(ooc_name, 1)
     try:
-        return _solve_slepc(K, M, comm, n_modes, f_max, shift_hz, tol, max_it, mpd, monitor)
+        return _solve_slepc(K, M, comm, n_modes, f_max, shift_hz, tol, max_it, mpd, monitor,
+                            progress)
     finally:
         if set_ooc:
             PETSc.Options().delValue(ooc_name)
@@ -160,7 +173,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
 
 def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, block_size: int,
                  monitor, static_rhs, out_of_core: str, bands, assemble,
-                 log=None) -> ModalResult | None:
+                 log=None, progress=None) -> ModalResult | None:
     """Band-sliced block Lanczos (:mod:`.band_solve`); a temporary cache without settings."""
     import shutil
     import tempfile
@@ -181,7 +194,7 @@ def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, bl
                              out_of_core=out_of_core, cache_dir=Path(tmp), key="temporary")
     try:
         return solve_bands(K, M, comm, bands, assemble=assemble, monitor=monitor,
-                           static_rhs=static_rhs, log=log)
+                           static_rhs=static_rhs, log=log, progress=progress)
     finally:
         comm.Barrier()
         if tmp is not None and comm.rank == 0:
@@ -189,7 +202,7 @@ def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, bl
 
 
 def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
-                 max_it: int, mpd: int, monitor) -> ModalResult:
+                 max_it: int, mpd: int, monitor, progress=None) -> ModalResult:
     """SLEPc Krylov-Schur (or spectrum slicing when ``f_max > 0``)."""
     from petsc4py import PETSc
 
@@ -241,14 +254,15 @@ def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: flo
             A.destroy()
     eps.destroy()
     result = ModalResult(lam, phi, stats)
-    normalise_and_check(result, K, M, comm, tol=stats["tol"])
+    normalise_and_check(result, K, M, comm, tol=stats["tol"], progress=progress)
     result.warnings = convergence_verdict(result, stats["tol"])
     return result
 
 
 def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
-                 static_rhs: np.ndarray | None = None, out_of_core: str = "auto") -> ModalResult:
+                 static_rhs: np.ndarray | None = None, out_of_core: str = "auto",
+                 progress=None) -> ModalResult:
     from mpi4py import MPI
     from petsc4py import PETSc
 
@@ -284,9 +298,10 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
             result = X = None              # a retry's Lanczos run reuses their memory
             _, X, st = block_lanczos(op, n_modes, r0, block=block_size, tol=lanczos_tol,
                                      max_basis=max_basis, max_restarts=max_restarts,
-                                     monitor=monitor, guard=block_size)
+                                     monitor=monitor, guard=block_size, progress=progress)
             t_p = time.perf_counter()
-            result = purified_modes(op, X, st["block_size"], K, M, comm, tol, st)
+            result = purified_modes(op, X, st["block_size"], K, M, comm, tol, st,
+                                    progress=progress)
             st["time_purify_project"] = time.perf_counter() - t_p
             st["lanczos_tol"] = lanczos_tol
             if not hopeless(result, tol).any():
@@ -294,7 +309,7 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
         static = None
         if static_rhs is not None and sigma == 0.0:
             t_s = time.perf_counter()
-            static = op.solve(static_rhs)
+            static = op.solve(static_rhs, progress=progress, phase="static solves")
             st["time_static_solves"] = time.perf_counter() - t_s
     except NotConverged as exc:
         raise EigenSolveError(f"{exc}; try a larger -{PREFIX}bl_max_basis or fewer modes "

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -61,8 +61,8 @@ EXTRA_PURIFICATIONS = 2
 
 
 def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: float,
-                   stats: dict | None = None,
-                   window: tuple[float, float] | None = None) -> ModalResult:
+                   stats: dict | None = None, window: tuple[float, float] | None = None,
+                   progress=None) -> ModalResult:
     """Purify and project Ritz vectors, normalise, and purify again (at most
     :data:`EXTRA_PURIFICATIONS` times, with iterative refinement) while some true residual
     is above ``tol`` and above its round-off floor. Needs the factor of ``op``; returns the
@@ -72,22 +72,34 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     guard vectors (the next Ritz vectors): the first pass projects on the wanted ones only;
     the extra passes include the guards, so that the components of the next modes, which
     purification damps only by lambda_i / lambda_j ~ 1 near the top of the set, are removed
-    by the Rayleigh-Ritz step instead; the ``n_wanted`` nearest to the shift are kept.
+    by the Rayleigh-Ritz step instead; the ``n_wanted`` nearest to the shift are kept. An
+    extra pass purifies only the modes still above the tolerance (in ``window``) and the
+    guards: the converged modes enter its Rayleigh-Ritz step as they are, with the
+    projections and solve-residual bounds the last pass measured (``stats
+    ["repurified_modes"]``: how many modes the extra passes redid; before, every pass redid
+    all modes and guards, two solves each). Every pass ends with the full checks of all
+    modes (:func:`normalise_and_check`).
     ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a band; the pairs beyond
-    its edges belong to the neighbouring bands).
+    its edges belong to the neighbouring bands). ``progress``:
+    :data:`~railvib_hpc.modal.block_lanczos.Progress` of the phases (purification,
+    Rayleigh-Ritz, residual checks, round-off floors).
+
+    Statistics (added to ``stats``, seconds summed over the passes):
+    ``time_purify_solves``, ``time_purify_products`` (K and M products, solve residuals),
+    ``time_rayleigh_ritz`` (projection, dense eigenproblem, rotation) and ``time_checks``
+    (:func:`normalise_and_check`).
 
     Memory: every pass works in ``X`` itself (it is overwritten; afterwards its first
-    columns are the modes, the rest the rotated guards), plus the K and M products of the
-    pass (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project`): three blocks of X's
-    width in all, not the five of purified, rotated and selected copies.
+    columns are the modes, the rest the rotated guards); the K and M products go by blocks
+    (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project`).
     """
-    from mpi4py import MPI
-
-    from .block_lanczos import purify_and_project
+    from .block_lanczos import permute_columns, purify_and_project
 
     stats = {} if stats is None else stats
     n_wanted = int(stats.get("n_wanted", X.shape[1]))
     n_guard = X.shape[1] - n_wanted
+    timings: dict[str, float] = {}
+    t_checks = 0.0
 
     def nearest_first(lam: np.ndarray) -> np.ndarray:
         """The n_wanted nearest to the shift (all of them on the first pass), ascending,
@@ -96,24 +108,40 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
         order = near[np.argsort(lam[near], kind="stable")]
         return np.concatenate([order, np.setdiff1d(np.arange(len(lam)), order)])
 
+    fixed = result = checks = bounds = None
     for attempt in range(EXTRA_PURIFICATIONS + 1):
         # X[:, :n_wanted] holds the wanted vectors (pass 0: Ritz vectors, later: the modes)
         # and X[:, n_wanted:] the guards (pass 0: Lanczos's, later: the rotated rest)
         basis = X[:, :n_wanted] if attempt == 0 or n_guard == 0 else X
-        lam, Xp, KX, MX, solve_res = purify_and_project(op, basis, block, refine=attempt > 0,
-                                                        select=nearest_first)
-        KX, MX = KX[:, :n_wanted], MX[:, :n_wanted]
-        # the solves' own residuals are a floor too (relative to ||K phi||; scale-free)
-        solve_floor = solve_res[:n_wanted] / np.sqrt(
-            comm.allreduce(np.sum(KX**2, axis=0), op=MPI.SUM))
+        if attempt:
+            # the converged modes stay as they are (first, with their projections); the
+            # others and the guards are purified again
+            redo = unconverged(result, tol) & in_window(result, window)
+            kept = np.flatnonzero(~redo)
+            permute_columns(basis, np.concatenate([kept, np.flatnonzero(redo),
+                                                   np.arange(n_wanted, basis.shape[1])]))
+            fixed = (checks.stiff[np.ix_(kept, kept)], checks.gram[np.ix_(kept, kept)],
+                     bounds[kept])
+            stats["repurified_modes"] = stats.get("repurified_modes", 0) + int(redo.sum())
+        lam, Xp, solve_res = purify_and_project(op, basis, block, refine=attempt > 0,
+                                                select=nearest_first, progress=progress,
+                                                timings=timings, fixed=fixed)
         result = ModalResult(lam[:n_wanted], Xp[:, :n_wanted], {})
-        normalise_and_check(result, K, M, comm, KX, MX, tol=tol)    # scales X's columns
-        del KX, MX, Xp
+        t0 = time.perf_counter()
+        checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress)
+        t_checks += time.perf_counter() - t0
+        # the solves' own residuals are a floor too (relative to ||K phi||; scale-free)
+        bounds = solve_res[:n_wanted] * checks.scale       # (of the scaled modes)
+        solve_floor = bounds / checks.knorm
+        del Xp
         stats["extra_purifications"] = attempt
         if not (unconverged(result, tol) & in_window(result, window)).any():
             break
     result.residual_floors = np.maximum(result.residual_floors, solve_floor)
     stats["max_solve_residual"] = float(solve_floor.max())
+    stats.update(time_purify_solves=timings["solves"],
+                 time_purify_products=timings["products"],
+                 time_rayleigh_ritz=timings["rayleigh_ritz"], time_checks=t_checks)
     # the modes without the guards behind them (a view would keep them alive)
     result.phi = np.ascontiguousarray(result.phi)
     return result
@@ -197,15 +225,29 @@ def convergence_verdict(result: ModalResult, tol: float) -> list[str]:
     return out
 
 
-#: Columns per chunk when normalise_and_check forms K Phi and M Phi itself.
+class Checks(NamedTuple):
+    """What :func:`normalise_and_check` measured besides the residuals (see there)."""
+
+    scale: np.ndarray
+    knorm: np.ndarray
+    gram: np.ndarray
+    stiff: np.ndarray
+
+
+#: Columns per chunk when normalise_and_check forms K Phi and M Phi.
 NORMALISE_CHUNK = 64
 
 
-def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndarray | None = None,
-                        MPhi: np.ndarray | None = None, tol: float = 0.0) -> None:
+def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, tol: float = 0.0,
+                        progress=None) -> Checks:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
 
-    ``KPhi``/``MPhi`` may be given when already computed (they are scaled along, in place).
+    One pass over :data:`NORMALISE_CHUNK` columns at a time forms ``K Phi`` and ``M Phi``
+    afresh (one sparse product with each per chunk) and from them the upper triangles of
+    ``Phi^T M Phi`` and ``Phi^T K Phi`` (chunk ``j`` against the chunks up to ``j``: half
+    the products of the full matrices) and the residual norms; the modal masses are the
+    diagonal of the first, so the scaling to unit modal mass is applied to all of them
+    afterwards (exact up to rounding: ``(D Phi)^T M (D Phi) = D Phi^T M Phi D``).
 
     Records the relative residuals ``rho_i = ||K phi_i - lambda_i M phi_i|| / ||K phi_i||``
     (``result.residuals``) and, for the modes with ``rho_i > tol``, their round-off floor
@@ -214,74 +256,83 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, KPhi: np.ndar
     the error of evaluating the residual in double precision, below which no solver can
     verify an eigenpair. (Computing it needs |K| and |M|, so it is only done when needed.)
     Memory: ``result.phi`` is scaled in place and every other n x m temporary is formed
-    :data:`NORMALISE_CHUNK` columns at a time.
+    :data:`NORMALISE_CHUNK` columns at a time (the floors' bound: n x the modes above
+    ``tol``). ``progress``: :data:`~railvib_hpc.modal.block_lanczos.Progress` (phases
+    "residual checks" and "round-off floors").
+
+    Returns
+    -------
+    Checks
+        ``scale`` (m,): the factors the modes were scaled by; ``knorm`` (m,): ``||K
+        phi_i||`` of the scaled modes; ``gram``, ``stiff`` (m, m): ``Phi^T M Phi`` and
+        ``Phi^T K Phi`` of the scaled modes (symmetric, from their upper triangles).
     """
     from mpi4py import MPI
 
-    from .. import tolerances
+    from .block_lanczos import no_progress, sparse_times_block
 
+    progress = progress or no_progress
     t0 = time.perf_counter()
-    from .block_lanczos import abs_matrix, longest_row, sparse_times_block
-
     phi = result.phi
     lam = result.eigenvalues
-    chunk = NORMALISE_CHUNK
-    cols = [slice(j, j + chunk) for j in range(0, phi.shape[1], chunk)]
-    if KPhi is None and MPhi is None:
-        # column chunks: no (n, m) copies of K Phi and M Phi (many modes of a big model)
-        modal_mass = np.concatenate([np.einsum("ij,ij->j", phi[:, c], sparse_times_block(
-            M, phi[:, c], comm)) for c in cols]) if cols else np.zeros(0)
-        phi *= 1.0 / np.sqrt(comm.allreduce(modal_mass, op=MPI.SUM))
-        gram = np.empty((len(lam), len(lam)))
-        stiff = np.empty_like(gram)
-        res = np.empty(len(lam))
-        knorm = np.empty(len(lam))
-        for c in cols:
-            MP, KP = sparse_times_block(M, phi[:, c], comm), sparse_times_block(K, phi[:, c], comm)
-            gram[:, c], stiff[:, c] = phi.T @ MP, phi.T @ KP
-            res[c] = np.sum((KP - MP * lam[c]) ** 2, axis=0)
-            knorm[c] = np.sum(KP**2, axis=0)
-        for a in (gram, stiff, res, knorm):
-            comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-    else:
-        if MPhi is None:
-            MPhi = sparse_times_block(M, phi, comm)
-        modal_mass = comm.allreduce(np.einsum("ij,ij->j", phi, MPhi), op=MPI.SUM)
-        scale = 1.0 / np.sqrt(modal_mass)
-        phi *= scale
-        MPhi *= scale
-        if KPhi is None:
-            KPhi = sparse_times_block(K, phi, comm)
-        else:
-            KPhi *= scale
-        gram = comm.allreduce(phi.T @ MPhi, op=MPI.SUM)
-        stiff = comm.allreduce(phi.T @ KPhi, op=MPI.SUM)
-        res = np.empty(len(lam))
-        knorm = np.empty(len(lam))
-        for c in cols:
-            res[c] = np.sum((KPhi[:, c] - MPhi[:, c] * lam[c]) ** 2, axis=0)
-            knorm[c] = np.sum(KPhi[:, c] ** 2, axis=0)
-        for a in (res, knorm):
-            comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-    result.residuals = np.sqrt(res / knorm)
-    floor = np.zeros(len(lam))
-    need = np.flatnonzero(result.residuals > tol)
-    if need.size:
-        k = max(longest_row(K, comm), longest_row(M, comm)) + 1
-        bound = np.zeros((phi.shape[0], need.size))
-        for A, w in ((K, np.ones(need.size)), (M, np.abs(lam[need]))):
-            Aabs = abs_matrix(A, comm)
-            for j in range(0, need.size, chunk):
-                c = slice(j, j + chunk)
-                bound[:, c] += sparse_times_block(Aabs, np.abs(phi[:, need[c]]), comm) * w[c]
-            Aabs.destroy()
-        floor[need] = tolerances.gamma(k) * np.sqrt(
-            comm.allreduce(np.einsum("ij,ij->j", bound, bound), op=MPI.SUM) / knorm[need])
-    result.residual_floors = floor
+    m = len(lam)
+    gram = np.zeros((m, m))
+    stiff = np.zeros((m, m))
+    res = np.zeros(m)
+    knorm = np.zeros(m)
+    for j in range(0, m, NORMALISE_CHUNK):
+        c = slice(j, min(j + NORMALISE_CHUNK, m))
+        MP, KP = sparse_times_block(M, phi[:, c], comm), sparse_times_block(K, phi[:, c], comm)
+        gram[:c.stop, c], stiff[:c.stop, c] = phi[:, :c.stop].T @ MP, phi[:, :c.stop].T @ KP
+        res[c] = np.sum((KP - MP * lam[c]) ** 2, axis=0)
+        knorm[c] = np.sum(KP**2, axis=0)
+        progress("residual checks", c.stop, m)
+    for a in (gram, stiff, res, knorm):
+        comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
+    scale = 1.0 / np.sqrt(np.diag(gram).copy())
+    phi *= scale
+    outer = np.triu(np.outer(scale, scale))
+    gram, stiff = gram * outer, stiff * outer            # (upper triangles)
+    knorm = np.sqrt(knorm) * scale
+    result.residuals = np.sqrt(res) * scale / knorm
+    result.residual_floors = _residual_floors(result, K, M, comm, tol, knorm, progress)
+    upper = np.triu(np.ones((m, m), dtype=bool))
     result.stats.update({
-        "max_orthonormality_error": float(np.abs(gram - np.eye(len(lam))).max()),
-        "max_stiffness_diag_error": float(np.abs(stiff - np.diag(lam)).max() / lam.max()),
-        "max_relative_residual": float(result.residuals.max()),
-        "max_residual_floor": float(floor.max()),
+        "max_orthonormality_error": float(np.abs(gram - np.eye(m))[upper].max(initial=0.0)),
+        "max_stiffness_diag_error": float(np.abs(stiff - np.diag(lam))[upper].max(initial=0.0)
+                                          / lam.max()) if m else 0.0,
+        "max_relative_residual": float(result.residuals.max(initial=0.0)),
+        "max_residual_floor": float(result.residual_floors.max(initial=0.0)),
         "time_checks": time.perf_counter() - t0,
     })
+    return Checks(scale, knorm, gram + np.triu(gram, 1).T, stiff + np.triu(stiff, 1).T)
+
+
+def _residual_floors(result: ModalResult, K, M, comm: MPI.Comm, tol: float,
+                     knorm: np.ndarray, progress) -> np.ndarray:
+    """The round-off floors of :func:`normalise_and_check` for the modes above ``tol``
+    (0 elsewhere); ``knorm``: ``||K phi_i||``."""
+    from mpi4py import MPI
+
+    from .. import tolerances
+    from .block_lanczos import abs_matrix, longest_row, sparse_times_block
+
+    phi, lam = result.phi, result.eigenvalues
+    floor = np.zeros(len(lam))
+    need = np.flatnonzero(result.residuals > tol)
+    if not need.size:
+        return floor
+    chunk = NORMALISE_CHUNK
+    k = max(longest_row(K, comm), longest_row(M, comm)) + 1
+    bound = np.zeros((phi.shape[0], need.size))
+    for step, (A, w) in enumerate(((K, np.ones(need.size)), (M, np.abs(lam[need])))):
+        Aabs = abs_matrix(A, comm)
+        for j in range(0, need.size, chunk):
+            c = slice(j, j + chunk)
+            bound[:, c] += sparse_times_block(Aabs, np.abs(phi[:, need[c]]), comm) * w[c]
+            progress("round-off floors", step * need.size + min(j + chunk, need.size),
+                     2 * need.size)
+        Aabs.destroy()
+    floor[need] = tolerances.gamma(k) * np.sqrt(
+        comm.allreduce(np.einsum("ij,ij->j", bound, bound), op=MPI.SUM)) / knorm[need]
+    return floor

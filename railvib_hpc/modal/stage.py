@@ -56,19 +56,47 @@ def _max_basis(case: Case, n_dofs: int) -> int:
                case["modal.n_modes"] + 3 * case["modal.block_size"])
 
 
-def _progress(rep: Reporter):
-    t_start = time.perf_counter()
-    state = {"last": -1e9}
+class EigenProgress:
+    """The eigensolve's progress lines on rank 0, at most one per :data:`PROGRESS_INTERVAL_S`.
 
-    def monitor(nconv: int, nev: int, basis: int, label: str | None = None) -> None:
+    Called as the Lanczos monitor (``self(nconv, nev, basis, label=None)``: converged
+    modes, percent and ETA of the whole eigensolve) and, through :meth:`phase`, by the
+    phases after the expansions (thick restarts, Ritz vectors, purification, Rayleigh-Ritz,
+    residual checks, round-off floors, the band merge: their own percent and ETA). Both
+    share one clock: no two lines within the interval, but a phase that has printed a line
+    also prints its end (100 %), and the monitor its last expansion.
+    """
+
+    def __init__(self, rep: Reporter):
+        self.rep = rep
+        self.t_start = time.perf_counter()
+        self.last = -1e9
+        self.current: str | None = None     # the phase in progress
+        self.t_phase = self.t_start
+        self.shown = False                  # the phase has printed a line
+
+    def __call__(self, nconv: int, nev: int, basis: int, label: str | None = None) -> None:
         now = time.perf_counter()
-        if now - state["last"] < PROGRESS_INTERVAL_S and nconv < nev:
+        if now - self.last < PROGRESS_INTERVAL_S and nconv < nev:
             return
-        state["last"] = now
-        rep.progress(label or f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
-                     max(nconv, 0), nev, t_start)
+        self.last = now
+        self.rep.progress(label or f"eigensolve: {nconv}/{nev} modes converged, basis {basis}",
+                          max(nconv, 0), nev, self.t_start)
 
-    return monitor
+    def phase(self, name: str, done: int, total: int) -> None:
+        """``done`` of ``total`` units of the phase ``name`` (a new name starts its clock)."""
+        now = time.perf_counter()
+        if name != self.current:
+            self.current, self.t_phase, self.shown = name, now, False
+        finished = done >= total
+        if now - self.last < PROGRESS_INTERVAL_S and not (finished and self.shown):
+            return
+        if finished and not self.shown and now - self.t_phase < PROGRESS_INTERVAL_S:
+            return                          # a short phase: no line of its own
+        self.last, self.shown = now, True
+        self.rep.progress(f"eigensolve, {name} ({done}/{total})", done, total, self.t_phase)
+        if finished:
+            self.current = None
 
 
 def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
@@ -162,15 +190,17 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         load_dofs, table = rail_load_dofs(mesh, dofmap)
         static_rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
     with rep.stage("eigensolve"):
+        progress = EigenProgress(rep)
         result = solve_modes(
             K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
             shift_hz=case["modal.shift_hz"], tol=case["modal.tol"],
             max_it=case["modal.max_restarts"], method=case["modal.method"],
             block_size=case["modal.block_size"],
-            max_basis=_max_basis(case, dofmap.n_dofs), monitor=_progress(rep),
+            max_basis=_max_basis(case, dofmap.n_dofs), monitor=progress,
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
             bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
-                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info)
+                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info,
+            progress=progress.phase)
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
         M.destroy()

@@ -538,6 +538,106 @@ def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm: MPI.Comm, rep
     raise StudyError(f"the modes did not reach {band_hz:g} Hz after {attempts} solves")
 
 
+#: The assessment band [Hz]: the one-third-octave bands of the criteria (VC curves, the
+#: ISO 2631 / DIN 4150-2 weightings) and the spectra of the studies.
+ASSESSMENT_BAND_HZ = (1.0, 80.0)
+
+
+def band_resolved(nominal_hz: float, f_max_hz: float | None) -> bool:
+    """Whether a one-third-octave band (nominal centre) lies in a solution's band
+    ``f_max_hz`` -- the convention of :func:`~railvib_hpc.assess.weighting.
+    third_octave_bands` and ``transient.f_max`` (80 Hz: the 80 Hz band is the top one)."""
+    return f_max_hz is None or float(nominal_hz) <= float(f_max_hz) * (1 + 1e-9)
+
+
+def resolved_up_to(result: dict) -> float | None:
+    """The highest frequency a variant's solution resolves [Hz]: its highest mode used
+    (modal), ``transient.f_max`` (``solver = direct``); None when unknown."""
+    f = (result.get("model") or {}).get("f_max_hz")
+    return float(f) if f is not None else None
+
+
+def resolved_spectra(result: dict) -> dict:
+    """``result`` with its spectra cut to the one-third-octave bands its solution resolves
+    (nominal centre at most :func:`resolved_up_to`, :func:`band_resolved`); the bands left
+    out are listed in ``unresolved_bands_hz`` ``{probe: [nominal Hz]}``. The result itself
+    is not changed."""
+    top = resolved_up_to(result)
+    if top is None or not result.get("spectra"):
+        return result
+    spectra, dropped = {}, {}
+    for probe, spec in result["spectra"].items():
+        if not spec:
+            spectra[probe] = spec
+            continue
+        keep = [i for i, f in enumerate(spec["bands_hz"]) if band_resolved(f, top)]
+        spectra[probe] = {**spec, "bands_hz": [spec["bands_hz"][i] for i in keep],
+                          "acc_rms": {c: [vals[i] for i in keep]
+                                      for c, vals in spec["acc_rms"].items()},
+                          "resolved_up_to_hz": top}
+        gone = [f for i, f in enumerate(spec["bands_hz"]) if i not in set(keep)]
+        if gone:
+            dropped[probe] = gone
+    return {**result, "spectra": spectra, "unresolved_bands_hz": dropped}
+
+
+def band_coverage(plan: StudyPlan, results: dict[str, dict]) -> dict:
+    """Which frequencies the finished variants resolve, against the assessment band.
+
+    Returns
+    -------
+    dict
+        ``assessment_band_hz`` ``[low, high]``; ``variants``: per finished variant its
+        ``solver``, ``modes`` used, lowest natural frequency ``f1_hz`` (modal) and
+        ``f_max_hz`` (highest mode used, or ``transient.f_max``), ``top_band_hz`` (the
+        highest one-third-octave band reported); ``f_max_hz``: the lowest of them;
+        ``warning``: a sentence when a variant's band ends below the top of the assessment
+        band (else None).
+    """
+    lo, hi = ASSESSMENT_BAND_HZ
+    per = []
+    for v in plan.variants:
+        r = results.get(v.name)
+        if r is None:
+            continue
+        m = r.get("model") or {}
+        direct = m.get("solver") == "direct"
+        freqs = [f for f in (m.get("frequencies_hz") or []) if f is not None]
+        top = resolved_up_to(r)
+        bands = [f for f in _third_octave_nominals(lo, hi) if band_resolved(f, top)]
+        per.append({"variant": v.name, "solver": "direct" if direct else "modal",
+                    "modes": m.get("modes_used"), "f1_hz": None if direct or not freqs
+                    else freqs[0], "f_max_hz": top,
+                    "top_band_hz": bands[-1] if bands else None})
+    tops = [p for p in per if p["f_max_hz"] is not None]
+    short = [p for p in tops if not band_resolved(hi, p["f_max_hz"])]
+    warning = None
+    if short:
+        worst = min(short, key=lambda p: p["f_max_hz"])
+        what = ("transient.f_max" if worst["solver"] == "direct" else
+                f"{worst['modes']} modes, {fmt_hz(worst['f1_hz'])}–"
+                f"{fmt_hz(worst['f_max_hz'])} Hz")
+        warning = (f"the solution of {len(short)} of {len(per)} finished variants does not "
+                   f"cover the assessment band {lo:g}–{hi:g} Hz ({worst['variant']}: "
+                   f"{what}, resolved up to {fmt_hz(worst['f_max_hz'])} Hz): one-third-octave "
+                   "bands above a variant's band are not reported, and its peaks and "
+                   f"assessment miss the response above {fmt_hz(worst['f_max_hz'])} Hz; use "
+                   f"more modes (e.g. modal.f_max = {hi:g}) or solver = direct")
+    return {"assessment_band_hz": [lo, hi], "variants": per,
+            "f_max_hz": min((p["f_max_hz"] for p in tops), default=None), "warning": warning}
+
+
+def fmt_hz(f: float | None) -> str:
+    """A frequency for a sentence (``'–'`` when unknown)."""
+    return "–" if f is None else f"{f:.3g}"
+
+
+def _third_octave_nominals(lo: float, hi: float) -> list[float]:
+    from ..assess.weighting import third_octave_bands
+
+    return [float(f) for f in third_octave_bands(lo, hi).nominal]
+
+
 def relative(a: float | None, b: float | None) -> float | None:
     """``|a - b| / |b|`` or None."""
     if a is None or b is None or not math.isfinite(a) or not math.isfinite(b) or b == 0:

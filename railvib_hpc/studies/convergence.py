@@ -8,7 +8,9 @@ relative changes; on the finest level: a Richardson estimate per quantity
 levels when available, else the formal order 2).
 
 Verdict: "converged within X %", X the largest estimated error of the finest level over
-the compared quantities; it passes when X <= ``tolerance``. The number of modes is the
+the compared quantities; it passes when X <= ``tolerance``. ``solver = direct`` runs every
+level with the full-order time integration (``railvib transient``): the responses are
+compared, no natural frequencies. The number of modes is the
 case's at every level, so each level's band ends at its own highest frequency (listed).
 """
 
@@ -36,8 +38,9 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
 
 
 def _quantities(res: dict, settings: dict) -> dict[str, float]:
-    out = {f"f{i + 1} [Hz]": f for i, f in
-           enumerate(res["model"]["frequencies_hz"][:settings["n_frequencies"]])}
+    out = {f"f{i + 1} [Hz]": f for i, f in       # none with solver = direct
+           enumerate(res["model"]["frequencies_hz"][:settings["n_frequencies"]])
+           if f is not None}
     out.update(response_quantities(res, settings["probes"]))
     return out
 

@@ -21,6 +21,12 @@ Insertion loss (positive: the measure reduces the vibration), per building probe
 * the assessment itself: the largest utilisation (value / limit of the binding standards of
   ``[assessment]``) before and after, and whether every probe passes.
 
+Only the one-third-octave bands that both variants of a comparison resolve are reported
+(the study runner cuts each variant's spectra at its highest mode used, see
+:func:`~.common.resolved_spectra`). ``solver = direct`` runs every variant, the references
+included, with the full-order time integration (``railvib transient``) instead of modes +
+multibody.
+
 Ranking: by the largest utilisation over the probes after the measure (lowest first: the
 measure that brings the building furthest under the limits), ties by the mean insertion
 loss on the peak total acceleration. Verdict: the best measure and the measures under which
@@ -223,7 +229,9 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
          **dict(zip(("head", "rows"), transpose(["measure", *keys], peaks)))},
         {"title": "Insertion loss per one-third-octave band [dB], mean over the probes",
          "head": ["measure", *(f"{f:g} Hz" for f in bands)], "rows": mean_band,
-         "note": "Total acceleration, RMS over the record, 1–80 Hz."},
+         "note": "Total acceleration, RMS over the record, 1–80 Hz: only the bands both "
+                 "variants resolve (up to their highest mode used, or transient.f_max with "
+                 "solver = direct; see 'Frequency band of each variant')."},
     ]
     mesh_share = _mesh_share(plan_, results, probes)
     if mesh_share:

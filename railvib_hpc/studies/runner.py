@@ -35,14 +35,16 @@ from .common import (
     SHARED_DIR,
     StudyError,
     StudyPlan,
+    band_coverage,
     prepare_shared,
     read_failure,
     read_result,
+    resolved_spectra,
     run_variant,
     variant_case,
     variant_digest,
 )
-from .report import text_table, write_report
+from .report import fmt, text_table, write_report
 from .settings import StudySettingsError, study_settings
 
 if TYPE_CHECKING:
@@ -128,11 +130,36 @@ def status(plan: StudyPlan, case: Case, root: Path, settings: dict) -> tuple[lis
 
 
 def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
-          rep: Reporter) -> dict:
-    """Analyse the finished variants and write the report (rank 0)."""
+          rep: Reporter, merge_only: bool = False) -> dict:
+    """Analyse the finished variants and write the report (rank 0).
+
+    The analysis sees each variant's spectra cut to the bands its solution resolves
+    (:func:`~.common.resolved_spectra`); the report adds the band of every variant, a
+    warning when one ends below the assessment band, and says how many variants are not
+    finished (the verdict then covers the finished ones only).
+
+    Raises
+    ------
+    StudyError
+        With ``merge_only`` (``--merge``) when no variant has finished: there is nothing
+        to report.
+    """
     mod = STUDY_MODULES[kind]
     entries, results = status(plan, case, root, settings)
-    analysis = mod.analyse(plan, results, settings)
+    if merge_only and not results:
+        counts: dict[str, int] = {}
+        for e in entries:
+            counts[e["status"]] = counts.get(e["status"], 0) + 1
+        raise StudyError(
+            f"study {kind} --merge: none of the {len(entries)} variants has finished ("
+            + ", ".join(f"{n} {st}" for st, n in counts.items()) + f") in {root}: compute "
+            f"them first (railvib study {kind} CASE --out ..., without --merge)")
+    coverage = band_coverage(plan, results)
+    shown = {name: resolved_spectra(r) for name, r in results.items()}
+    analysis = _annotate(mod.analyse(plan, shown, settings), entries, coverage)
+    if coverage["warning"]:
+        rep.info(f"WARNING: {coverage['warning']}")
+    results = shown
     fig_dir = root / "figures"
     if kind == "reflection":
         figs = mod.figures(analysis, results, settings, fig_dir)
@@ -152,6 +179,42 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     return {"verdict": analysis["verdict"], "files": {k: str(p) for k, p in files.items()},
             "variants": entries, "tables": analysis.get("tables", []),
             "rows": analysis.get("rows", []), "figures": [str(p) for p in figs]}
+
+
+def _annotate(analysis: dict, entries: list[dict], coverage: dict) -> dict:
+    """The analysis with what every study's report says: the unfinished variants (in the
+    verdict), the band of each finished variant (a table) and the band warning."""
+    analysis = dict(analysis)
+    verdict = dict(analysis["verdict"])
+    missing = [e for e in entries if e["status"] != "finished"]
+    finished = len(entries) - len(missing)
+    verdict["complete"] = not missing
+    verdict["missing"] = [e["name"] for e in missing]
+    if missing:
+        shown = ", ".join(f"{e['name']} {e['status']}" for e in missing[:8]) \
+            + (", ..." if len(missing) > 8 else "")
+        verdict["text"] = (f"INCOMPLETE: {len(missing)} of {len(entries)} variants not "
+                           f"finished ({shown}); from the {finished} finished only: "
+                           + verdict["text"])
+    verdict["band_warning"] = coverage["warning"]
+    if coverage["warning"]:
+        verdict["text"] += f" [WARNING: {coverage['warning']}]"
+    analysis["verdict"] = verdict
+    analysis["band_coverage"] = coverage
+    if coverage["variants"]:
+        lo, hi = coverage["assessment_band_hz"]
+        rows = [[p["variant"], p["solver"], fmt(p["modes"]), fmt(p["f1_hz"]),
+                 fmt(p["f_max_hz"]), fmt(p["top_band_hz"])] for p in coverage["variants"]]
+        analysis["tables"] = [*analysis.get("tables", []), {
+            "title": "Frequency band of each variant",
+            "head": ["variant", "solver", "modes", "f1 [Hz]", "resolved up to [Hz]",
+                     "highest band reported [Hz]"], "rows": rows,
+            "note": f"The assessment band is {lo:g}–{hi:g} Hz. resolved up to: the highest "
+                    "mode used (modal) or transient.f_max (direct). One-third-octave bands "
+                    "above it are not reported; peaks and assessments miss the response "
+                    "above it." + (f" WARNING: {coverage['warning']}."
+                                   if coverage["warning"] else "")}]
+    return analysis
 
 
 def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
@@ -243,7 +306,8 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
     merged = None
     if merge_only or not (chosen or prepare):
         with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):
-            merged = on_root(lambda: merge(kind, plan, case, root, cfg, rep), comm)
+            merged = on_root(lambda: merge(kind, plan, case, root, cfg, rep,
+                                           merge_only=merge_only), comm)
     rep.info(f"{kind} study command finished in {time.perf_counter() - t0:.1f} s"
              + (f"; failed variants: {', '.join(failed)} (see their {FAILED_NAME})"
                 if failed else ""))

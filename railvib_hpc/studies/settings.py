@@ -68,6 +68,16 @@ def parse_study_set(kind: str, text: str) -> tuple[str, Any]:
     return key, toml_value(raw)
 
 
+def _thaw(value: Any) -> Any:
+    """Tuples as lists and read-only mappings as dicts: the frozen ``settings`` of a
+    :class:`~railvib_hpc.api.StudyResult` given back as settings."""
+    if isinstance(value, tuple | list):
+        return [_thaw(v) for v in value]
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    return value
+
+
 def study_settings(kind: str, overrides: Sequence[str] = (),
                    values: Mapping[str, Any] | None = None,
                    case: Case | None = None) -> dict[str, Any]:
@@ -102,7 +112,7 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
     prefix = f"study.{kind}."
     base = case.section(f"study.{kind}") if case is not None else {
         k: json.loads(json.dumps(p.default)) for k, p in spec.items()}
-    given: dict[str, Any] = dict(values or {})
+    given: dict[str, Any] = {k: _thaw(v) for k, v in (values or {}).items()}
     for text in overrides:
         key, value = parse_study_set(kind, text)
         given[key] = value

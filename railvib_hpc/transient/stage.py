@@ -28,6 +28,10 @@ Every file carries its provenance and is written checked, atomically and recorde
 (:mod:`railvib_hpc.io.stage_files`); the mesh is ``mesh.h5`` of the same folder (built or
 reused as by ``railvib mesh``).
 
+Size: before the mesh is built, the number of steps and the memory of the histories are
+checked (:func:`precheck_size`, :data:`MAX_TRANSIENT_STEPS`); a run that would exceed them
+is refused in one line (exit 2), and again with the exact step once the mesh is known.
+
 Reuse: a rerun reuses the three products when all are current and sound for the case
 (:func:`previous_results`); otherwise it says why in one line (``recomputing the transient
 results in OUT: transient.h5 was computed with vehicle.speed = 30, the case says 20``) and
@@ -36,7 +40,11 @@ recomputes all three (they come from one time integration). Changed
 
 Checkpoints: an interrupted run resumes from its last checkpoint
 (``transient_checkpoint.h5``, every ``transient.checkpoint_interval`` seconds) and gives
-the same answer: the state is stored exactly, the factor is recomputed deterministically.
+the same answer, bit for bit on one rank: the state is stored exactly, the factor is
+recomputed deterministically and the rail columns are computed in fixed blocks
+(:class:`~.integrate.RailColumns`). On several ranks MUMPS's parallel factorization is
+reproducible only to its round-off (two uninterrupted 2-rank runs differ by ~4e-9
+relative), and a resumed run lies within that spread (docs/transient.md).
 The checkpoint is a stage file too: it is resumed only when it is current for the case,
 computed from the same ``mesh.h5``, unchanged and sound, and when the partial
 ``fields.h5`` (``.fields.h5.resume``) carries its run id; otherwise the run starts at
@@ -54,7 +62,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Case
-from ..errors import UserError
+from ..errors import ResourceError, UserError
 from ..io.stage_checks import CHECKS, check_checkpoint, check_transient
 from ..io.stage_files import (
     digest,
@@ -72,7 +80,7 @@ from ..io.stage_files import (
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
-from ..resources import peak_memory_gb
+from ..resources import check_memory, peak_memory_gb
 from .integrate import (
     DirectSolver,
     RailColumns,
@@ -94,6 +102,14 @@ CHECKPOINT = "transient_checkpoint.h5"
 FIELD_BLOCK = 16
 #: Rail nodes ahead of each wheel whose columns are computed in one block.
 LOOKAHEAD_NODES = 12
+#: Largest number of time steps of one run: 100 times the thesis passage's 1840 steps,
+#: about 7.5 hours at the 7.4 steps/s measured for the thesis model on 2 ranks
+#: (docs/transient.md). Checked before anything is built or allocated
+#: (:func:`check_run_size`).
+MAX_TRANSIENT_STEPS = 200_000
+#: Copies of rank 0's histories held at once at the end of a run (the histories and the
+#: rail bending moments and file buffers computed from them while the files are written).
+HISTORY_COPIES = 2
 
 
 class TransientInputError(UserError):
@@ -241,6 +257,107 @@ def _resumable(case: Case, out_dir: Path, mesh_sha: str, n_fields: tuple, nt: in
 
 
 # --------------------------------------------------------------------------- setup
+def history_bytes(nt: int, n_wheels: int, n_dof: int, n_probes: int, n_rails: int,
+                  n_rail_nodes: int) -> float:
+    """Rank 0's memory for the per-step histories of a run of ``nt`` steps [bytes].
+
+    Parameters
+    ----------
+    nt
+        Time steps.
+    n_wheels, n_dof
+        Wheels (or moving forces) and vehicle DOFs.
+    n_probes
+        Probes (mesh probes and ``output.probes``).
+    n_rails, n_rail_nodes
+        Flexible rails and nodes per rail.
+
+    Returns
+    -------
+    float
+        The :class:`Recorder`'s arrays, the times, wheel positions and output index,
+        times :data:`HISTORY_COPIES`.
+    """
+    per_step = (4 * n_wheels + 3 * n_dof + 9 * n_probes + 2 * n_rails * n_rail_nodes
+                + n_wheels + 2)
+    return HISTORY_COPIES * 8.0 * (nt + 1) * per_step
+
+
+def check_run_size(case: Case, run: dict, dt: float, how: str, n_wheels: int, n_dof: int,
+                   n_probes: int, n_rails: int, n_rail_nodes: int) -> int:
+    """Refuse a run with too many steps or histories larger than the memory (one line).
+
+    Parameters
+    ----------
+    case
+        The case.
+    run
+        :func:`~railvib_hpc.mbs.stage.passage` of the case.
+    dt
+        The time step (or an upper bound of it: the count is then a lower bound).
+    how
+        Where ``dt`` comes from, for the message (``transient.dt = 1e-07 s``).
+    n_wheels, n_dof, n_probes, n_rails, n_rail_nodes
+        Sizes of the histories (:func:`history_bytes`).
+
+    Returns
+    -------
+    int
+        The number of steps.
+
+    Raises
+    ------
+    ResourceError
+        More than :data:`MAX_TRANSIENT_STEPS` steps, or histories beyond the available
+        memory (:func:`~railvib_hpc.resources.check_memory`).
+    """
+    from ..mbs.results import n_steps
+
+    t_end, t_after = run["t_end"], case["vehicle.t_after"]
+    nt = n_steps(t_end, dt)
+    advice = ("shorten the passage (vehicle.t_after, vehicle.x_start, vehicle.x_end, "
+              "train2.t_start) or use a larger transient.dt (0 = automatic)")
+    if nt > MAX_TRANSIENT_STEPS:
+        raise ResourceError(
+            f"the passage lasts {t_end:.4g} s ({t_end - t_after:.4g} s until the last wheel "
+            f"reaches x = {run['x_end']:g} m at up to {float(np.abs(run['speeds']).max()):g} "
+            f"m/s, then vehicle.t_after = {t_after:g} s): {nt:.3g} steps of {how}, more than "
+            f"the limit of {MAX_TRANSIENT_STEPS:,} (about 7.5 hours at thesis size); "
+            + advice)
+    need = history_bytes(nt, n_wheels, n_dof, n_probes, n_rails, n_rail_nodes)
+    check_memory(need, f"the transient histories ({nt:.3g} steps)", advice)
+    return nt
+
+
+def precheck_size(case: Case) -> None:
+    """:func:`check_run_size` from the case and its layout alone, before the mesh is built.
+
+    The automatic step is bounded above by the band and ``output.dt`` (the rail elements
+    can only shorten it), so the count is a lower bound of the run's: a refusal here is
+    one the exact check after the mesh would give too.
+    """
+    from ..mbs.stage import build_vehicle, passage
+    from ..mesh.layout import build_layout
+
+    lay = build_layout(case)
+    vehicle = build_vehicle(case)
+    flexible_end = float(np.max(lay.sleeper_x))
+    run = passage(case, vehicle, flexible_end)
+    if not run["t_end"] > 0:
+        return                      # an empty passage: refused later with its own message
+    tr = case["transient"]
+    if tr["dt"] > 0:
+        dt, how = tr["dt"], f"transient.dt = {tr['dt']:g} s"
+    else:
+        dt = choose_time_step(tr["f_max"], tr["steps_per_period"], case["output.dt"])
+        how = f"the automatic step (at most {dt:.3g} s)"
+    n_user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3).shape[0]
+    n_rail_nodes = lay.rail_div * max(len(lay.sleeper_x) - 1, 1) + 1
+    check_run_size(case, run, dt, how, run["wheel_rail"].size,
+                   0 if vehicle is None else vehicle.n_dof, len(lay.probes) + n_user,
+                   len(lay.rail_y), n_rail_nodes)
+
+
 def time_step(case: Case, element_time: float, rep: Reporter) -> float:
     """``transient.dt`` or the automatic step; warns when it is too coarse for the band."""
     tr = case["transient"]
@@ -353,6 +470,7 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
 def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps: int | None,
                stop_after: int | None) -> dict:
     t_wall = time.perf_counter()
+    on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
     init = _setup(case, out_dir, comm, rep)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
@@ -489,10 +607,9 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
 
 def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
-    from ..mbs.results import n_steps
     from ..mbs.stage import build_vehicle, passage, passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
-    from ..modal.boundary import boundary_summary, case_dofmap
+    from ..modal.boundary import boundary_summary, case_dofmap, layer_line, support_warning
     from ..modal.petsc import assemble, assemble_damping
     from .petsc import TransientSystem
 
@@ -503,6 +620,12 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "
                  "faces: " + ", ".join(f"{k} {v['type']}" for k, v in
                                        boundary_summary(mesh, case).items()))
+        layers = layer_line(mesh, case)
+        if layers:
+            rep.info(f"  {layers}")
+        unsupported = support_warning(mesh, case)
+        if unsupported:
+            rep.info(unsupported)
     try:
         rails = RailDofs.from_mesh(mesh, dofmap.index)
     except ValueError as exc:
@@ -512,7 +635,13 @@ def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
     speed = float(np.max(np.abs(run["speeds"])))
     h_min = float(np.diff(rails.x, axis=1).min())
     dt = time_step(case, h_min / speed, rep)
-    nt = n_steps(run["t_end"], dt)
+    how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
+           else f"the automatic step {dt:.3g} s")
+    # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
+    nt = on_root(lambda: check_run_size(case, run, dt, how, run["wheel_rail"].size,
+                                        0 if vehicle is None else vehicle.n_dof,
+                                        len(probe_points(mesh, case)[0]), rails.x.shape[0],
+                                        rails.n_nodes), comm)
     times = np.arange(nt + 1) * dt
     x = run["x_start"] + run["offsets"][None, :] + run["speeds"][None, :] * times[:, None]
     steps_out = output_steps(case, dt, nt)

@@ -74,7 +74,8 @@ def test_records_trust_size_and_mtime_and_detect_changes(tmp_path):
 
 def test_temporary_names_round_trip_and_dead_ones_are_removed(tmp_path):
     t = sf.temp_path(tmp_path / "fields.h5")
-    assert t.name.startswith(".fields.h5.part-") and t.name.endswith(f"-{os.getpid()}")
+    assert t.name.startswith(".fields.h5.part-") and f"-{os.getpid()}_t" in t.name
+    assert t != sf.temp_path(tmp_path / "fields.h5")      # unique per writer (issue 26)
     assert sf.final_name(t.name) == "fields.h5"
     assert sf.final_name(sf.temp_path(tmp_path / "mesh.msh", suffix=True).name) == "mesh.msh"
     dead = tmp_path / ".x.h5.part-somehost-1"

@@ -30,8 +30,10 @@ thesis: setup
 	$(MPIRUN) $(PY) -m railvib_hpc study thesis jobs/thesis_comparison.toml --out results/studies
 
 # Two tiers. `make test` (the README's test command) is the quick tier: every test not marked
-# `slow`, serially and then the `-m mpi` ones under mpirun -n 2; about 10 min on an idle 2-core
-# machine. `make test-slow` runs the long physics checks (`-m slow`); CI (.ci/run) runs both.
+# `slow`, serially and then the `-m mpi` ones under mpirun -n 2; under 12 min on an idle 2-core
+# machine. `make test-slow` runs the long physics and end-to-end checks (`-m slow`): serially
+# the ones not marked `mpi`, and the `mpi` ones under mpirun -n 2 only (most compare N ranks
+# with one, which a serial run cannot). CI (.ci/run) runs both tiers.
 # Hangs are caught per test by pytest-timeout (pyproject.toml: `timeout`, thread method: a
 # hung collective dumps every stack and ends the pass), with a limit far above any test's own
 # time, not by a pass-wide kill near the total. PYTEST_ARGS adds options (e.g. --durations=20).
@@ -44,7 +46,7 @@ test: setup-test
 	$(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
 
 test-slow: setup-test
-	$(PYTEST) -m slow $(ALLOW_EMPTY)
+	$(PYTEST) -m "slow and not mpi" $(ALLOW_EMPTY)
 	$(MPIRUN) $(PYTEST) -m "mpi and slow" -p no:cacheprovider $(ALLOW_EMPTY)
 
 test-serial: setup-test

@@ -95,6 +95,7 @@ def test_pipeline_refuses_bad_options_and_copies_them(tmp_path):
 
 
 # ----------------------------------------------------------------------------- Pipeline
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_pipeline_results_match_the_files_on_every_rank(shared_tmp):
     case = rv.Case.from_file(BASELINE).replace(TINY)
@@ -176,6 +177,7 @@ def test_pipeline_errors_reach_every_rank_and_are_recorded(shared_tmp):
 
 
 # ----------------------------------------------------------------------------- studies
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_run_study_returns_a_result(shared_tmp):
     case = rv.Case.from_file(BASELINE).replace(TINY)

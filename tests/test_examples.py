@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "examples" / "pad_stiffness.py"
 NOTEBOOK = SCRIPT.with_suffix(".ipynb")
@@ -52,6 +54,7 @@ def test_notebook_is_generated_from_the_script():
     assert all(not c.get("outputs") for c in cells if c["cell_type"] == "code")
 
 
+@pytest.mark.slow
 def test_pad_stiffness_script_then_notebook(tmp_path):
     """The script computes every variant; the notebook runs next in the same folder and
     reuses every stage's files (as a user re-running it would), assessing again."""

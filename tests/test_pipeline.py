@@ -21,6 +21,7 @@ COARSE = ["--set", "mesh.refinement=0.5", "--set", "modal.n_modes=12",
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_run_goes_end_to_end(shared_tmp, capsys):
     out = shared_tmp / "run"
@@ -83,6 +84,7 @@ def _check_outputs(out: Path, text: str, rerun: str) -> None:
     assert len(grids) == shape[0]
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_static_correction_reaches_the_fields(shared_tmp):
     """A wheelset standing above a sleeper: the rail displacement in fields.h5 equals the MBS one.
@@ -119,6 +121,7 @@ def test_static_correction_reaches_the_fields(shared_tmp):
     comm.Barrier()
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_two_trains_on_two_tracks_end_to_end(shared_tmp):
     """Two tracks, the second train the other way 0.05 s later, with the static correction

@@ -77,6 +77,7 @@ def _system_state() -> dict:
     return {p: os.stat(p).st_mtime_ns for p in paths if os.path.exists(p)}
 
 
+@pytest.mark.slow
 def test_own_stack_with_petsc_dir_installs_into_the_venv_only(tmp_path):
     petsc, slepc = _debian_dirs()
     stubs = _stubs(tmp_path / "stubs")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import doctest
 
 import numpy as np
+import pytest
 import scipy.linalg as la
 import scipy.sparse as sp
 from fem_tools import box_mesh, solid_matrices
@@ -43,6 +44,7 @@ def test_normwise_bound_covers_a_backward_error_perturbation():
     assert rtol[0] > 100 * rtol[-1]
 
 
+@pytest.mark.slow
 def test_lambda_max_sparse_is_an_upper_bound_within_the_mass_conditioning():
     pts, hexes = box_mesh(4, 4, 60, 1.0, 1.0, 6.0)        # 2,745 DOFs: the sparse branch
     K, M = solid_matrices(pts, hexes, 2e8, 0.2, 1850.0)

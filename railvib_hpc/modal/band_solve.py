@@ -393,6 +393,8 @@ def _trim(result: ModalResult, band: Band) -> ModalResult:
                       result.stats, result.static)
     out.residuals = result.residuals[keep]
     out.residual_floors = result.residual_floors[keep]
+    if result.roundoff_floors is not None:
+        out.roundoff_floors = result.roundoff_floors[keep]
     return out
 
 
@@ -540,6 +542,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     sub = comm.Split(color, comm.rank) if groups > 1 else comm
     error = None
     records: list[dict] = []
+    proven: dict[int, BandChecks] = {}      # the checks of the bands solved here
     static = None
     try:
         Kg, Mg = (K, M) if groups == 1 else assemble(sub)
@@ -572,6 +575,8 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
                 static = result.static
             done_modes["n"] += est
             result = _trim(result, band)
+            if groups == 1 and result.roundoff_floors is not None:
+                proven[band.index] = BandChecks.of(result)
             name = _band_file(band)
             st["rss_before_gb"] = rss_before
             _write_band(s.cache_dir / name, sub, band, result, n_below, st)
@@ -619,7 +624,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
             f"{K.getSize()[0]:,} DOFs (Rayleigh-Ritz with K and M, duplicates, inertia "
             "check) ...")
     t_m = time.perf_counter()
-    result = _merge(K, M, comm, bands, cache, s, n_total, progress)
+    result = _merge(K, M, comm, bands, cache, s, n_total, progress, proven)
     if log is not None:
         st = result.stats
         log(f"  {len(result.eigenvalues)} modes, {st['n_duplicates']} duplicate(s) dropped, "
@@ -675,12 +680,14 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
 
 
 def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
-           n_total: int, progress=None) -> ModalResult:
+           n_total: int, progress=None, proven: dict | None = None) -> ModalResult:
     """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
-    counted against the inertia of every stretch."""
+    counted against the inertia of every stretch. A one-band plan skips the Rayleigh-Ritz
+    step (:func:`_merge_one_band`; ``proven``: :class:`BandChecks` by band index, of the
+    bands solved in this run)."""
     from scipy.linalg import eigh
 
-    from .block_lanczos import available_memory_gb, rotate_narrowing
+    from .block_lanczos import available_memory_gb, narrow_columns, rotate_narrowing
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()
@@ -711,6 +718,32 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
         col += len(keep)
         del rows
     t_read = time.perf_counter() - t0
+    points = [0.0] + sorted(r.band.shift_hz for r in per_band
+                            if 0 < r.band.shift_hz < s.f_max) + [s.f_max]
+    counts = [0] + [r.n_below for r in sorted(per_band, key=lambda r: r.band.shift_hz)
+                    if 0 < r.band.shift_hz < s.f_max] + [n_total]
+    stats = {"bands": [r.to_json() for r in per_band],
+             "n_bands": len(bands), "inertia_points_hz": points, "inertia_counts": counts,
+             "merge_predicted_gb": need, "available_gb": avail,
+             "eps_type": "block_lanczos_bands", "st_type": "sinvert", "factor_solver": "mumps",
+             "tol": s.tol, "nconv": int(n_total), "time_merge_read": t_read,
+             "linear_solves": int(sum(r.stats.get("linear_solves", 0) for r in per_band)),
+             "time_factorization": float(sum(r.stats.get("time_factorization", 0.0)
+                                             for r in per_band)),
+             "time_solve": float(sum(r.stats.get("time_band", 0.0) for r in per_band)),
+             "time_extract": 0.0}
+    if len(per_band) == 1:
+        lam1 = _read_band(s.cache_dir / per_band[0].file, r0, r0)[0][keeps[0]]
+        if len(lam1) >= n_total and (np.diff(lam1) >= 0).all():
+            # the modes above the count are not needed: the first n_total, in place
+            Phi = narrow_columns(Phi, n_total)
+            band_checks = (proven or {}).get(bands[0].index)
+            result = _merge_one_band(K, M, comm, Phi, lam1, points, counts, n_total, s,
+                                     stats, progress,
+                                     None if band_checks is None else
+                                     band_checks.subset(keeps[0][:n_total]))
+            if result is not None:
+                return result
     t1 = time.perf_counter()
     GM = _gram(M, Phi, comm, progress=progress, phase="merge: M-Gram products")
     GK = _gram(K, Phi, comm, progress=progress, phase="merge: K-Gram products")
@@ -720,35 +753,105 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     lam, Y = eigh(W.T @ GK @ W)
     n_dup = int((~good).sum())
     # the counted points: 0, every positive shift below f_max, f_max
-    points = [0.0] + sorted(r.band.shift_hz for r in per_band
-                            if 0 < r.band.shift_hz < s.f_max) + [s.f_max]
-    counts = [0] + [r.n_below for r in sorted(per_band, key=lambda r: r.band.shift_hz)
-                    if 0 < r.band.shift_hz < s.f_max] + [n_total]
+    _check_merged_counts(points, counts, lam, n_total, s.f_max)
+    Z = W @ Y[:, :n_total]
+    Phi = rotate_narrowing(Phi, Z, progress, "merge: rotation")   # in the candidates' memory
+    t_rr = time.perf_counter() - t1
+    stats.update(n_candidates=int(W.shape[0]), n_duplicates=n_dup,
+                 time_merge_rayleigh_ritz=t_rr, merge_rayleigh_ritz="full")
+    result = ModalResult(lam[:n_total], np.ascontiguousarray(Phi), stats)
+    normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
+    result.warnings = convergence_verdict(result, s.tol)
+    return result
+
+
+def _check_merged_counts(points: list[float], counts: list[int], lam: np.ndarray,
+                         n_total: int, f_max: float) -> None:
+    """Raise :class:`EigenSolveError` when the merged eigenvalues ``lam`` (ascending) do not
+    match the inertia ``counts`` at ``points`` [Hz] or are fewer than ``n_total``."""
     bad = check_counts(points, counts, hz(lam))
     if bad or len(lam) < n_total:
-        lo, hi, expected, found = bad[0] if bad else (0.0, s.f_max, n_total, len(lam))
+        lo, hi, expected, found = bad[0] if bad else (0.0, f_max, n_total, len(lam))
         raise EigenSolveError(
             f"band-sliced eigensolve: {found} distinct modes found in [{lo:.4f}, {hi:.4f}] Hz "
             f"but the inertia counts say {expected}; use more bands (smaller "
             "modal.band_modes) or a larger modal.block_size (repeated eigenvalues of a "
             "multiplicity above the block size)")
-    Z = W @ Y[:, :n_total]
-    Phi = rotate_narrowing(Phi, Z, progress, "merge: rotation")   # in the candidates' memory
-    t_rr = time.perf_counter() - t1
-    stats = {"bands": [r.to_json() for r in per_band],
-             "n_bands": len(bands), "n_candidates": int(W.shape[0]), "n_duplicates": n_dup,
-             "inertia_points_hz": points, "inertia_counts": counts,
-             "merge_predicted_gb": need, "available_gb": avail,
-             "eps_type": "block_lanczos_bands", "st_type": "sinvert", "factor_solver": "mumps",
-             "tol": s.tol, "nconv": int(n_total), "time_merge_read": t_read,
-             "time_merge_rayleigh_ritz": t_rr,
-             "linear_solves": int(sum(r.stats.get("linear_solves", 0) for r in per_band)),
-             "time_factorization": float(sum(r.stats.get("time_factorization", 0.0)
-                                             for r in per_band)),
-             "time_solve": float(sum(r.stats.get("time_band", 0.0) for r in per_band)),
-             "time_extract": 0.0}
-    result = ModalResult(lam[:n_total], np.ascontiguousarray(Phi), stats)
-    normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
+
+
+#: A one-band plan skips the merge's Rayleigh-Ritz step when the checks measure
+#: ``max_i sum_j |(Phi^T M Phi - I)_ij|`` (Gershgorin) of the band's modes below this: the
+#: M-Gram eigenvalues then lie in [0.5, 1.5] (no duplicate: :data:`DUPLICATE_GRAM`), and
+#: the Rayleigh-Ritz eigenvalues of a basis whose Gram matrices are I and diag(lambda) up
+#: to ``e`` differ from the band's by O(e) (measured: 1e-14 relative).
+ONE_BAND_GRAM = 1e-8
+
+
+@dataclass
+class BandChecks:
+    """What a band's own checks (:func:`~railvib_hpc.modal.ritz.normalise_and_check`)
+    measured of the modes it wrote (its band file's columns, in order): the relative
+    residuals, their round-off floors (without the solves' floors: the merge's own checks
+    would not count them) and the largest errors of the whole set."""
+
+    residuals: np.ndarray
+    floors: np.ndarray
+    max_orthonormality_error: float
+    max_stiffness_diag_error: float
+
+    @classmethod
+    def of(cls, result: ModalResult) -> BandChecks:
+        st = result.stats
+        return cls(result.residuals.copy(), result.roundoff_floors.copy(),
+                   float(st["max_orthonormality_error"]),
+                   float(st["max_stiffness_diag_error"]))
+
+    def subset(self, cols: np.ndarray) -> BandChecks:
+        """The checks of the columns ``cols`` (the set's maxima bound the subset's)."""
+        return BandChecks(self.residuals[cols], self.floors[cols],
+                          self.max_orthonormality_error, self.max_stiffness_diag_error)
+
+
+def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[float],
+                    counts: list[int], n_total: int, s: BandSettings, stats: dict,
+                    progress=None, proven: BandChecks | None = None) -> ModalResult | None:
+    """The merge of a one-band plan: the band's modes ``Phi`` with its eigenvalues ``lam``
+    (its own Rayleigh-Ritz step made them M-orthonormal and K-orthogonal), checked by one
+    :func:`~railvib_hpc.modal.ritz.normalise_and_check` (K Phi and M Phi afresh from the
+    band file: orthonormality, K-orthogonality, residuals, round-off floors) instead of
+    the M and K Gram products, the merge's Rayleigh-Ritz step, and the same checks again.
+    With ``proven`` (the band was solved in this run: its checks measured the vectors of
+    its file) even that is skipped: the band's residuals, floors and maxima are the
+    merge's (``stats["merge_checks"]``: "the band's" or "afresh").
+    ``lam``: the band's kept eigenvalues, ascending (all of them are counted against the
+    inertia); ``Phi`` holds the modes of the ``n_total`` lowest. Returns ``None`` (the
+    caller runs the full merge on ``Phi``, scaled to unit modal mass) when the measured
+    Gram matrix does not prove the band orthonormal (:data:`ONE_BAND_GRAM`).
+    """
+    from .ritz import normalise_and_check
+
+    t0 = time.perf_counter()
+    result = ModalResult(lam[:n_total].copy(), Phi, stats)
+    if proven is not None:
+        # the band's checks measured these very vectors (the band file holds them
+        # bit for bit): its residuals, floors and maxima stand
+        result.residuals, result.residual_floors = proven.residuals, proven.floors
+        stats.update(max_orthonormality_error=proven.max_orthonormality_error,
+                     max_stiffness_diag_error=proven.max_stiffness_diag_error,
+                     max_relative_residual=float(proven.residuals.max(initial=0.0)),
+                     max_residual_floor=float(proven.floors.max(initial=0.0)),
+                     time_checks=0.0, merge_checks="the band's")
+        if n_total * proven.max_orthonormality_error > ONE_BAND_GRAM:   # (Gershgorin)
+            return None
+    else:
+        checks = normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
+        off = np.abs(checks.gram - np.eye(n_total)).sum(axis=1)
+        stats["merge_checks"] = "afresh"
+        if n_total and off.max() > ONE_BAND_GRAM:
+            return None
+    _check_merged_counts(points, counts, lam, n_total, s.f_max)
+    stats.update(n_candidates=n_total, n_duplicates=0, merge_rayleigh_ritz="skipped: one band",
+                 time_merge_rayleigh_ritz=0.0, time_merge_checks=time.perf_counter() - t0)
     result.warnings = convergence_verdict(result, s.tol)
     return result
 

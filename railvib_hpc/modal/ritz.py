@@ -37,6 +37,9 @@ class ModalResult:
     static: np.ndarray | None = None   # (n_local_dofs, k) K^-1 static_rhs, when asked for
     residuals: np.ndarray | None = None        # (m,) relative residuals (normalise_and_check)
     residual_floors: np.ndarray | None = None  # (m,) their round-off floors (where > tol)
+    #: (m,) the round-off floors alone, where purified_modes added the solves' floors to
+    #: residual_floors (a one-band merge judges by these, as its own checks would)
+    roundoff_floors: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)   # see convergence_verdict
 
     @property
@@ -78,9 +81,10 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     projections and solve-residual bounds the last pass measured (``stats
     ["repurified_modes"]``: how many modes the extra passes redid; before, every pass redid
     all modes and guards, two solves each). Every pass ends with the full checks of all
-    modes (:func:`normalise_and_check`).
-    ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a band; the pairs beyond
-    its edges belong to the neighbouring bands). ``progress``:
+    modes (:func:`normalise_and_check`); the first pass's checks reuse its K products,
+    rotated with the modes (``purify_and_project``'s ``kx``), for ``K Phi``, and form
+    ``M Phi`` afresh. ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a
+    band; the pairs beyond its edges belong to the neighbouring bands). ``progress``:
     :data:`~railvib_hpc.modal.block_lanczos.Progress` of the phases (purification,
     Rayleigh-Ritz, residual checks, round-off floors).
 
@@ -91,7 +95,8 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
 
     Memory: every pass works in ``X`` itself (it is overwritten; afterwards its first
     columns are the modes, the rest the rotated guards); the K and M products go by blocks
-    (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project`).
+    (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project`), except the first pass's
+    ``K Phi`` (one n x ``n_wanted`` array until its checks are done).
     """
     from .block_lanczos import permute_columns, purify_and_project
 
@@ -123,12 +128,15 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
             fixed = (checks.stiff[np.ix_(kept, kept)], checks.gram[np.ix_(kept, kept)],
                      bounds[kept])
             stats["repurified_modes"] = stats.get("repurified_modes", 0) + int(redo.sum())
+        # the first pass keeps K Phi (its K products, rotated with the modes) for the checks
+        kx = np.empty(basis.shape) if fixed is None and basis.shape[1] == n_wanted else None
         lam, Xp, solve_res = purify_and_project(op, basis, block, refine=attempt > 0,
                                                 select=nearest_first, progress=progress,
-                                                timings=timings, fixed=fixed)
+                                                timings=timings, fixed=fixed, kx=kx)
         result = ModalResult(lam[:n_wanted], Xp[:, :n_wanted], {})
         t0 = time.perf_counter()
-        checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress)
+        checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress, KPhi=kx)
+        del kx
         t_checks += time.perf_counter() - t0
         # the solves' own residuals are a floor too (relative to ||K phi||; scale-free)
         bounds = solve_res[:n_wanted] * checks.scale       # (of the scaled modes)
@@ -137,6 +145,7 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
         stats["extra_purifications"] = attempt
         if not (unconverged(result, tol) & in_window(result, window)).any():
             break
+    result.roundoff_floors = result.residual_floors
     result.residual_floors = np.maximum(result.residual_floors, solve_floor)
     stats["max_solve_residual"] = float(solve_floor.max())
     stats.update(time_purify_solves=timings["solves"],
@@ -234,20 +243,24 @@ class Checks(NamedTuple):
     stiff: np.ndarray
 
 
-#: Columns per chunk when normalise_and_check forms K Phi and M Phi.
+#: Columns per chunk when normalise_and_check forms M Phi (and K Phi).
 NORMALISE_CHUNK = 64
 
 
 def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, tol: float = 0.0,
-                        progress=None) -> Checks:
+                        progress=None, KPhi: np.ndarray | None = None) -> Checks:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
 
-    One pass over :data:`NORMALISE_CHUNK` columns at a time forms ``K Phi`` and ``M Phi``
-    afresh (one sparse product with each per chunk) and from them the upper triangles of
-    ``Phi^T M Phi`` and ``Phi^T K Phi`` (chunk ``j`` against the chunks up to ``j``: half
-    the products of the full matrices) and the residual norms; the modal masses are the
-    diagonal of the first, so the scaling to unit modal mass is applied to all of them
-    afterwards (exact up to rounding: ``(D Phi)^T M (D Phi) = D Phi^T M Phi D``).
+    One pass over :data:`NORMALISE_CHUNK` columns at a time forms ``M Phi`` (and ``K Phi``
+    unless ``KPhi`` is given) afresh, one sparse product per chunk, and from them the upper
+    triangles of ``Phi^T M Phi`` and ``Phi^T K Phi`` (chunk ``j`` against the chunks up to
+    ``j``: half the products of the full matrices) and the residual norms; the modal masses
+    are the diagonal of the first, so the scaling to unit modal mass is applied to all of
+    them afterwards (exact up to rounding: ``(D Phi)^T M (D Phi) = D Phi^T M Phi D``).
+    ``KPhi``: ``K Phi`` of the modes as given, when already at hand (the purification's
+    K products rotated along with the modes, :func:`~railvib_hpc.modal.block_lanczos.
+    purify_and_project`'s ``kx``; not scaled here); ``M Phi`` is always formed afresh, so
+    the orthonormality check and the modal masses stay an independent measurement.
 
     Records the relative residuals ``rho_i = ||K phi_i - lambda_i M phi_i|| / ||K phi_i||``
     (``result.residuals``) and, for the modes with ``rho_i > tol``, their round-off floor
@@ -282,7 +295,8 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, tol: float = 
     knorm = np.zeros(m)
     for j in range(0, m, NORMALISE_CHUNK):
         c = slice(j, min(j + NORMALISE_CHUNK, m))
-        MP, KP = sparse_times_block(M, phi[:, c], comm), sparse_times_block(K, phi[:, c], comm)
+        MP = sparse_times_block(M, phi[:, c], comm)
+        KP = sparse_times_block(K, phi[:, c], comm) if KPhi is None else KPhi[:, c]
         gram[:c.stop, c], stiff[:c.stop, c] = phi[:, :c.stop].T @ MP, phi[:, :c.stop].T @ KP
         res[c] = np.sum((KP - MP * lam[c]) ** 2, axis=0)
         knorm[c] = np.sum(KP**2, axis=0)

@@ -62,7 +62,7 @@ from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
 from ..io.stage_files import final_name
 from ..log import Reporter
 from ..parallel import check_collective, on_root
-from ..schema import PART_ID
+from ..schema import MIN_SOIL_LAYER_THICKNESS, PART_ID
 from .fields import node_range
 
 if TYPE_CHECKING:
@@ -350,13 +350,12 @@ def case_from_modes(f) -> Case:
             # needed here, so the levels are set to ones that pass the checks
             n = len(layers)
             keep["soil"] = {"layers": [{**x, "thickness": 0.0 if k == n - 1 else
-                                        _SOME_THICKNESS / n} for k, x in enumerate(layers)]}
-            keep["domain"] = {**keep.get("domain", {}), "extra_depth": _SOME_THICKNESS}
+                                        MIN_SOIL_LAYER_THICKNESS}
+                                       for k, x in enumerate(layers)]}
+            # a base below every layer but the last, with room for the last one
+            keep["domain"] = {**keep.get("domain", {}),
+                              "extra_depth": n * MIN_SOIL_LAYER_THICKNESS}
     return build_case(keep)
-
-
-#: Layer thickness [m] that fits any valid geometry (see :func:`case_from_modes`).
-_SOME_THICKNESS = 1e-3
 
 
 # --------------------------------------------------------------------------- parallel driver

@@ -32,6 +32,7 @@ deep trench in the high band reaches the >= 12 dB of D / lambda_R > 1.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from fem_tools import box_mesh
@@ -119,6 +120,7 @@ def insertion_loss(ref: np.ndarray, with_trench: np.ndarray) -> float:
     return float(20 * np.log10(np.sqrt(np.mean(ref ** 2)) / np.sqrt(np.mean(with_trench ** 2))))
 
 
+@pytest.mark.slow
 def test_open_trench_screens_more_when_deeper_and_at_shorter_wavelengths():
     model = slice_model()
     il = {}

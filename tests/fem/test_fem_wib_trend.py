@@ -30,6 +30,7 @@ mechanism, not their values.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from test_fem_trench_trend import (
     DEPTH,
     HIGH,
@@ -47,6 +48,7 @@ E_WIB, RHO_WIB = 2.0e9, 2100.0
 WIB_WIDTH, WIB_THICKNESS = 6.0, 1.0
 
 
+@pytest.mark.slow
 def test_block_is_invisible_to_long_waves_and_screens_short_ones_near_the_surface():
     points, hexes, faces, blocks = slice_model()
     centre = points[hexes].mean(axis=1)

@@ -17,6 +17,7 @@ COARSE = ["--set", "mesh.refinement=0.5", "--set", "modal.n_modes=8",
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_mbs_on_all_ranks_equals_serial(shared_tmp):
     par = shared_tmp / "par"
@@ -43,6 +44,7 @@ def test_mbs_on_all_ranks_equals_serial(shared_tmp):
         assert np.all(np.isfinite(x_par)) and np.abs(t_par).max() > 0
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_static_solutions_equal_serial(shared_tmp):
     """static.h5 written by 2 ranks equals the one written by 1 rank (MPI.COMM_SELF)."""

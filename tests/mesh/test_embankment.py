@@ -24,6 +24,7 @@ def thesis_case(**changes) -> Case:
     return Case.from_file(ROOT / "jobs" / "thesis_baseline.toml").replace(changes)
 
 
+@pytest.mark.slow
 def test_fill_lifts_the_track_and_has_the_trapezoid_volume():
     h, slope = 2.0, 1.5
     case = thesis_case(**{"mesh.refinement": 0.5, "track.embankment_height": h,

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 from railvib_hpc.cli import run
 from railvib_hpc.mesh.mesh_io import read_mesh_h5
@@ -36,6 +37,7 @@ def test_mesh_command_writes_consistent_xdmf_and_h5(tmp_path):
     assert np.all(mesh.hex_volumes() > 0)
 
 
+@pytest.mark.slow
 def test_rerun_reuses_and_changed_input_rebuilds(tmp_path, capsys):
     out = tmp_path / "res"
     args = ["mesh", str(BASELINE), "--set", "mesh.refinement=0.5", "--out", str(out)]
@@ -53,6 +55,7 @@ def test_rerun_reuses_and_changed_input_rebuilds(tmp_path, capsys):
     assert not list(out.glob(".*part*"))
 
 
+@pytest.mark.slow
 def test_corrupt_previous_result_is_rebuilt(tmp_path):
     out = tmp_path / "res"
     args = ["mesh", str(BASELINE), "--set", "mesh.refinement=0.5", "--out", str(out)]

@@ -164,6 +164,7 @@ def test_probes_lie_in_the_model(baseline_mesh):
     assert part_of["footing"] in (PART_ID["footing"], PART_ID["column"])
 
 
+@pytest.mark.slow
 def test_refinement_increases_counts():
     counts = []
     for r in (0.5, 1.0, 2.0):

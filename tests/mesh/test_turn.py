@@ -65,6 +65,7 @@ def meshes():
     return straight, turned
 
 
+@pytest.mark.slow
 def test_the_ring_is_divided_in_proportion_to_the_twist():
     """The unturned thesis mesh is the thesis's (41,880 hexahedra); a twist divides the
     soil across its ring more finely, the more the larger the twist; quarter turns do not."""
@@ -239,6 +240,7 @@ def test_room_grows_with_the_domain():
     assert big.r_out > small.r_out and big.max_angle > small.max_angle
 
 
+@pytest.mark.slow
 def test_the_elements_bound_the_twist(tmp_path):
     """45 deg passes the ring's shear bound on the thesis site (1.57 <= 2.14) but not its
     mesh: its soil elements by the building's corners would shear past corner angles of
@@ -389,6 +391,7 @@ def test_a_relaxed_ring_turns_by_45_degrees(relaxed, tmp_path):
         **{"building.rotation": ANGLE, "mesh.refinement": 0.5}))[1])
 
 
+@pytest.mark.slow
 def test_the_written_msh_carries_the_relaxed_ring(tmp_path):
     """mesh.msh gets the same map as the mesh (the relaxed ring, not the bare twist)."""
     from railvib_hpc.mesh.gmsh_model import read_msh

@@ -343,6 +343,7 @@ def test_bands_on_two_ranks_and_band_groups_equal_serial(shared_tmp):
         _same_modes(res, ref, K, M, n, 12)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_coarse_thesis_bands_with_static_correction_equal_single_shift(shared_tmp):
     """The thesis model (refinement 0.5) on all ranks: 25 Hz by bands = the same number of
@@ -364,6 +365,7 @@ def test_coarse_thesis_bands_with_static_correction_equal_single_shift(shared_tm
     assert np.allclose(xb, xs, rtol=1e-9, atol=1e-12 * np.abs(xs).max())
 
 
+@pytest.mark.slow
 def test_slurm_array_templates_run_the_bands_and_the_merge(tmp_path):
     """jobs/slurm/submit_bands.sh with a fake sbatch that records the submissions; the
     recorded array tasks and the merge then run here (srun -> plain command): the merged
@@ -427,3 +429,73 @@ def test_rotate_narrowing_equals_the_product_in_place(n, k, p):
                        np.abs(A).max() * np.abs(Z).max() * 4)
     with pytest.raises(ValueError, match="p <= k"):
         rotate_narrowing(np.ones((3, 2)), np.ones((2, 3)))
+
+
+@pytest.mark.parametrize("n, k, p", [(1, 1, 1), (9000, 40, 40), (9000, 40, 33), (4097, 7, 1)])
+def test_narrow_columns_keeps_the_leading_columns_in_place(n, k, p):
+    """A one-band merge keeps the first n_total candidates in their own memory (issue 26)."""
+    from railvib_hpc.modal.block_lanczos import narrow_columns
+
+    A = np.random.default_rng(n + k + p).standard_normal((n, k))
+    expected = A[:, :p].copy()
+    out = narrow_columns(A, p)
+    assert out.shape == (n, p) and out.flags.c_contiguous and np.shares_memory(out, A)
+    assert np.array_equal(out, expected)
+    with pytest.raises(ValueError, match="p <= k"):
+        narrow_columns(np.ones((3, 2)), 3)
+
+
+def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
+    """Issue 26: a one-band plan's merge does not repeat the band's Rayleigh-Ritz step; its
+    checks are the band's when the band was solved in this run, measured afresh (K Phi and
+    M Phi from the band file) when the band comes from the cache, and the full merge runs
+    when the measured Gram matrix does not prove the band orthonormal. The same modes and
+    the same verdicts come out every time."""
+    import railvib_hpc.modal.band_solve as band_solve
+
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    runs = {}
+    for name, folder in (("solved", tmp_path / "a"), ("cached", tmp_path / "a"),
+                         ("full", tmp_path / "b")):
+        if name == "full":
+            monkeypatch.setattr(band_solve, "ONE_BAND_GRAM", -1.0)
+        res, *_ = solve_banded(mesh, soil_case(), rules, f_max, folder, band_modes=1000)
+        _same_modes(res, ref, K, M, n, 12)
+        assert res.stats["n_bands"] == 1
+        # (this column at tol = 1e-10: some modes sit at their round-off floor, warned)
+        assert np.all(res.residuals <= np.maximum(1e-10, res.residual_floors))
+        runs[name] = res
+    st = {k: r.stats for k, r in runs.items()}
+    assert [st["solved"]["bands"][0].get("reused"), st["cached"]["bands"][0]["reused"]] == \
+        [False, True]
+    assert st["solved"]["merge_rayleigh_ritz"] == "skipped: one band"
+    assert st["solved"]["merge_checks"] == "the band's"
+    assert st["cached"]["merge_rayleigh_ritz"] == "skipped: one band"
+    assert st["cached"]["merge_checks"] == "afresh"
+    assert st["full"]["merge_rayleigh_ritz"] == "full"
+    for name in ("cached", "full"):
+        lam = runs["solved"].eigenvalues          # (to their componentwise round-off)
+        rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
+        assert np.all(np.abs(runs[name].eigenvalues / lam - 1) <= rtol)
+        # the same verdicts (the residuals at the round-off floor differ by rounding)
+        assert [w.split(":")[0] for w in runs[name].warnings] == \
+            [w.split(":")[0] for w in runs["solved"].warnings]
+
+
+def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():
+    """Issue 26: the single-shift checks take K Phi from the purification (its K products
+    rotated with the modes) and M Phi afresh; checking the returned modes again with both
+    products afresh gives the same residuals (to their round-off floors) and orthonormality."""
+    from railvib_hpc.modal.ritz import ModalResult, normalise_and_check
+
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    res, K, M, _ = solve(mesh, soil_case(), rules, 20)
+    again = ModalResult(res.eigenvalues.copy(), res.phi.copy(), {})
+    checks = normalise_and_check(again, K, M, MPI.COMM_SELF, tol=0.0)
+    assert np.allclose(checks.scale, 1.0, rtol=0, atol=1e-12)      # already unit modal mass
+    floors = again.residual_floors                 # (tol = 0: the floor of every mode)
+    assert np.all(np.abs(res.residuals - again.residuals) <= 2 * floors + 1e-14)
+    assert again.stats["max_orthonormality_error"] <= ORTHONORMAL
+    assert res.stats["max_orthonormality_error"] <= ORTHONORMAL

@@ -94,6 +94,7 @@ def test_mesh_check_thresholds():
                                                                       1e-8)[0]
 
 
+@pytest.mark.slow
 def test_sliver_in_the_model_warns_in_mesh_and_modal(tmp_path, capsys):
     """A 1e-7 m slab: the mesh check names the aspect ratio and the tiny elements, the
     modal stage the round-off-limited modes (the run still completes: the eigenvalues are
@@ -115,6 +116,7 @@ def test_sliver_in_the_model_warns_in_mesh_and_modal(tmp_path, capsys):
     assert stats["convergence_warnings"]
 
 
+@pytest.mark.slow
 def test_unconverged_stage_exits_2_with_one_line(tmp_path, capsys, monkeypatch):
     _early_stop(monkeypatch, 1e-1)
     monkeypatch.setattr(eigen, "EXTRA_PURIFICATIONS", 0)

@@ -70,11 +70,13 @@ def coarse_site():
     return case, mesh
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_matrix_norms_and_eigenvalues_equal_serial(coarse):
     _assert_equal_serial(*coarse)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_site_with_measures_building_tracks_and_interfaces_equals_serial(coarse_site):
     from railvib_hpc.schema import PART_ID
@@ -165,6 +167,7 @@ def _assert_equal_serial(case, mesh):
     assert assert_same_subspaces(K1, M1, lam, serial.phi, phi_n, rtol) >= 15
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coarse):
     import h5py
@@ -229,6 +232,7 @@ def _compare_with_serial(coarse, shared_tmp, out, freq):
     energy_tolerance(groups, K, M, lam, phi_1, phi_n, e_1, e_n, rtol)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
     """Incompatible-modes hexahedra assembled on N ranks give the serial matrices and

@@ -98,6 +98,7 @@ def test_reuse_rewrites_modes_xdmf_of_the_earlier_form(modal_run, capsys):
     assert len(read_xdmf(modal_run / "modes.xdmf")) == 12
 
 
+@pytest.mark.slow
 def test_rerun_reuses_and_physics_change_recomputes(modal_run, capsys):
     stamp = (modal_run / "modes.h5").stat().st_mtime_ns
     capsys.readouterr()
@@ -113,6 +114,7 @@ def test_rerun_reuses_and_physics_change_recomputes(modal_run, capsys):
             f.attrs["case_toml"]
 
 
+@pytest.mark.slow
 def test_incomplete_file_is_recomputed_and_failed_write_leaves_nothing(tmp_path, monkeypatch):
     from railvib_hpc.io import modes_io
 
@@ -147,6 +149,7 @@ def test_eigensolver_failure_is_reported(tmp_path, capsys):
     assert not (tmp_path / "modes.h5").exists()
 
 
+@pytest.mark.slow
 def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path, capsys):
     """modes.h5 holds the strain energy of every mode per material, summing to omega^2;
     the MBS turns them into damping ratios; an older modes.h5 without them is recomputed

@@ -116,6 +116,7 @@ def test_stages_that_need_rails_say_so_in_one_line(column_msh, shared_tmp, capsy
     assert "mbs.static_correction = true (unit loads on the rails) needs the part(s) rail" in err
 
 
+@pytest.mark.slow
 def test_track_without_building_runs_the_whole_pipeline(shared_tmp, capsys):
     """The thesis track and soil (coarse) without the building, as a user .msh: modal, mbs,
     reconstruct and assess complete; the building probes are left out."""

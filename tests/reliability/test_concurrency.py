@@ -47,6 +47,7 @@ def _slab1(out: Path) -> float:
     return doc["thesis_comparison"]["slab1_vertical_acceleration"]["railvib"]
 
 
+@pytest.mark.slow
 @serial_only
 def test_second_run_refuses_then_waits_and_each_report_is_its_own(work, prepared, tally):
     """The issue: run (30 m/s) and, 0.5 s later, run at 20 m/s into the same --out: the 20

@@ -122,6 +122,7 @@ def test_garbage_hexes_without_record_are_found_by_the_data_check(prepared, tmp_
     assert check_mesh(out / "mesh.h5")
 
 
+@pytest.mark.slow
 def test_owner_recomputes_corrupt_modes_with_identical_numbers(prepared, tmp_path, capsys,
                                                                tally):
     out = copy_results(prepared, tmp_path / "o")
@@ -167,6 +168,7 @@ def test_reconstruct_recomputes_its_corrupt_outputs(name, kind, prepared, tmp_pa
     assert ok, text
 
 
+@pytest.mark.slow
 def test_huge_modal_coordinate_never_reaches_a_report(prepared, tmp_path, capsys, tally):
     """The issue: mbs.h5 with modal/q[400] = 1e300 gave exit 0, "no limit exceeded" and a
     building displacement of 1e298 m. Without its record only the plausibility bound can

@@ -67,6 +67,7 @@ def _same(a: Path, b: Path, name: str, dataset: str, rtol: float = 0.0) -> bool:
                                    np.allclose(x, y, rtol=rtol, atol=rtol * np.abs(y).max()))
 
 
+@pytest.mark.slow
 @serial_only
 def test_killed_eigensolve_resumes_with_identical_modes(prepared, tmp_path, tally):
     out = copy_results(prepared, tmp_path / "o", MESH)
@@ -80,6 +81,7 @@ def test_killed_eigensolve_resumes_with_identical_modes(prepared, tmp_path, tall
     assert not [p for p in out.iterdir() if ".part" in p.name]
 
 
+@pytest.mark.slow
 @serial_only
 @pytest.mark.parametrize("ranks", [1, 2])
 def test_killed_reconstruction_resumes(ranks, prepared, tmp_path, tally):

@@ -214,7 +214,6 @@ def _mbs_intact(path: Path) -> bool:
 
 
 @serial_only
-@pytest.mark.slow
 def test_two_pipelines_in_threads_never_lose_mbs(work, tally):
     """The issue: two Pipeline(...).mbs() on one folder in two threads both failed and
     mbs.h5 was gone. Now one runs, the other is refused at once (or, with wait=True, runs

@@ -12,6 +12,7 @@ import shutil
 
 import h5py
 import numpy as np
+import pytest
 from faults import BASELINE, COARSE, cli, copy_results, serial_only
 
 from railvib_hpc.cli import run
@@ -116,6 +117,7 @@ def test_missing_upstream_is_named(tmp_path, capsys, tally):
         assert f"{name} not found: run 'railvib modal' first" in _one_error(err)
 
 
+@pytest.mark.slow
 def test_run_recomputes_what_is_stale_and_says_why(work, prepared, capsys, tally):
     """run with a new speed: mesh and modes reused, mbs/fields/probes recomputed, each
     with its reason; the report carries the new speed's numbers."""
@@ -139,6 +141,7 @@ def test_run_recomputes_what_is_stale_and_says_why(work, prepared, capsys, tally
         new["provenance"]["case_toml"]
 
 
+@pytest.mark.slow
 @serial_only
 def test_issue_repro_sequence_on_two_ranks(prepared, tmp_path, tally):
     """The issue's four commands (run, mbs, reconstruct, assess) under mpirun -n 2."""

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 from faults import ENV, serial_only
 
 from railvib_hpc.cli import run
@@ -19,6 +20,7 @@ TINY = ["--set", "mesh.refinement=0.25", "--set", "modal.n_modes=8",
         "--set", "modal.block_size=8"]
 
 
+@pytest.mark.slow
 @serial_only
 def test_corrupt_shared_model_and_result_are_recomputed_and_busy_variants_refused(
         tmp_path, capsys, tally):

@@ -115,6 +115,7 @@ def _one_error(err: str) -> str:
 
 
 # --------------------------------------------------------------------------- stale inputs
+@pytest.mark.slow
 def test_stale_input_recomputes_all_three_with_the_reason(twork, capsys, tally):
     code, out, err = _run(capsys, twork, "--set", "vehicle.speed=20")
     line = _line(out, "recomputing the transient results")
@@ -314,6 +315,7 @@ def _start(args: list[str]) -> subprocess.Popen:
                             env=ENV, start_new_session=True)
 
 
+@pytest.mark.slow
 @serial_only
 def test_second_concurrent_transient_is_refused(tmp_path, tally):
     out = tmp_path / "busy"
@@ -344,6 +346,7 @@ def test_second_concurrent_transient_is_refused(tmp_path, tally):
             first.kill()
 
 
+@pytest.mark.slow
 @serial_only
 def test_killed_run_resumes_from_its_checkpoint(tmp_path, tprepared, tally):
     """SIGKILL during the time integration (checkpoints every 0.2 s of wall clock: not an

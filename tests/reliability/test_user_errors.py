@@ -207,6 +207,7 @@ def test_unused_petsc_option_is_reported(work, capsys, tally):
     assert ok, err
 
 
+@pytest.mark.slow
 @serial_only
 def test_petsc_option_typo_and_bad_value_in_a_real_solve(prepared, tmp_path, tally):
     """A fresh modal solve (another mode count): the used option is not reported, the

@@ -13,6 +13,7 @@ from railvib_hpc.cli import run
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_convergence_study_reports_and_resumes(shared_tmp, capsys):
     args = ["study", "convergence", str(BASELINE), *TINY, "--out", str(shared_tmp),

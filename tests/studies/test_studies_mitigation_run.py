@@ -15,6 +15,7 @@ from railvib_hpc.cli import run
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_mitigation_study_ranks_the_measures(shared_tmp, capsys):
     measures = ("measures=['soft: pads.kz=1.2e8', 'trench: trench.type=open; "

@@ -14,6 +14,7 @@ from railvib_hpc.cli import run
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_modes_study_shares_the_modes_and_resumes(shared_tmp, capsys):
     args = ["study", "modes", str(BASELINE), *TINY, "--out", str(shared_tmp),
@@ -47,6 +48,7 @@ def test_modes_study_shares_the_modes_and_resumes(shared_tmp, capsys):
     comm.Barrier()
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_modes_study_with_the_full_damping_matrix(shared_tmp, capsys):
     """modal.damping = 'full' (absorbing faces): every variant reads the shared

@@ -13,6 +13,7 @@ from railvib_hpc.cli import run
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_reflection_study_compares_domains_and_resumes(shared_tmp, capsys):
     args = ["study", "reflection", str(BASELINE), *TINY, "--out", str(shared_tmp),
@@ -42,6 +43,7 @@ def test_reflection_study_compares_domains_and_resumes(shared_tmp, capsys):
     comm.Barrier()
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_reflection_study_with_a_band_uses_band_sliced_modes(shared_tmp, capsys):
     """band_hz: every domain gets all its modes below the band (modal.f_max, inertia
@@ -63,6 +65,7 @@ def test_reflection_study_with_a_band_uses_band_sliced_modes(shared_tmp, capsys)
     comm.Barrier()
 
 
+@pytest.mark.slow
 def test_reflection_study_with_boundary_types_and_the_direct_solver(shared_tmp, capsys):
     """Boundary type as a dimension, every variant by the full-order time integration."""
     short = ["--set", "vehicle.x_start=2.7", "--set", "vehicle.x_end=4.2", "--set",

@@ -13,6 +13,7 @@ from railvib_hpc.cli import run
 comm = MPI.COMM_WORLD
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_thesis_study_count_band_and_drop(shared_tmp, capsys):
     # modal.n_modes >= 10: SLEPc's spectrum slicing (modal.f_max) refuses nev < 10

@@ -84,6 +84,7 @@ def test_all_modes_with_the_full_damping_matrix_reproduce_the_direct_solution():
     assert np.abs(out["diagonal"] - direct).max() > 10 * np.abs(out["full"] - direct).max()
 
 
+@pytest.mark.slow
 def test_modal_stage_writes_the_projected_parts_and_mbs_integrates_them(tmp_path):
     args = ["--out", str(tmp_path), "--set", "mesh.refinement=0.25", "--set",
             "modal.n_modes=30", "--set", "modal.damping=full", "--set",
@@ -114,6 +115,7 @@ def test_modal_stage_writes_the_projected_parts_and_mbs_integrates_them(tmp_path
         assert np.all(np.isfinite(f["modal/q"][()]))
 
 
+@pytest.mark.slow
 def test_static_correction_with_full_damping_damps_the_residual_modes(tmp_path):
     """``modal.damping = 'full'`` with the static correction: the parts are projected on the
     modes and the deflated static fields, rebuilt the same from reused modes, and the

@@ -98,6 +98,7 @@ def test_interrupted_run_resumes_to_the_same_answer(reference, tmp_path):
         np.testing.assert_array_equal(new[k], ref[k], err_msg=k)
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_two_ranks_give_the_serial_answer(tmp_path_factory):
     init_petsc([])                 # collective: before rank 0 works alone on COMM_SELF
@@ -119,6 +120,7 @@ def test_two_ranks_give_the_serial_answer(tmp_path_factory):
             assert np.abs(b[k] - a[k]).max() <= 1e-8 * scale, k
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factory):
     """The checkpoint is written collectively (mpio) by global DOF: a run interrupted on 2
@@ -185,6 +187,7 @@ def test_time_step_must_divide_the_output_step(capsys):
     assert "transient.dt = 0.0015: must divide output.dt = 0.002 s" in err
 
 
+@pytest.mark.slow
 def test_cli_transient_runs_and_assesses(tmp_path, capsys):
     code = run(["transient", str(BASELINE), "--out", str(tmp_path),
                 *SETS, "--set", "vehicle.type=moving_force"])
@@ -206,6 +209,7 @@ def test_cli_transient_runs_and_assesses(tmp_path, capsys):
     assert "reusing the transient results" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_two_trains_run_the_full_order_model(shared_tmp):
     """Two tracks, the second wheelset the other way: each wheel keeps its rail, train 2

@@ -151,6 +151,8 @@ def _freeze(value: Any) -> Any:
     if isinstance(value, set | frozenset):
         return frozenset(_freeze(v) for v in value)
     if isinstance(value, np.ndarray):
+        if not value.flags.writeable and value.flags.owndata:
+            return value               # already frozen (:func:`_frozen`): no second copy
         arr = np.array(value, copy=True)
         arr.flags.writeable = False
         return arr

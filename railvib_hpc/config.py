@@ -807,7 +807,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         With every problem found.
     """
     problems: list[tuple[str, Any, str]] = []
-    flat = {key: _plain(value) for key, value in flat_case(raw).items()}
+    flat = flat_case(raw)          # values made plain by check_value (_plain)
     for text in overrides or []:
         key, value = parse_override(text)
         flat[key] = value

@@ -78,6 +78,10 @@ from ..parallel import on_root
 if TYPE_CHECKING:
     from mpi4py import MPI
 
+#: The assessment band [Hz]: the one-third-octave bands of the criteria (VC curves, the
+#: ISO 2631 / DIN 4150-2 weightings) and the spectra of the studies.
+ASSESSMENT_BAND_HZ = (1.0, 80.0)
+
 #: Bumped when the content of ``result.json`` changes (part of the variant digest).
 RESULT_FORMAT = "railvib_hpc.study/1"
 RESULT_NAME = "result.json"
@@ -329,7 +333,8 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
                    if u is not None and not res["standards"][s]["comparison_only"]]
         assessment[name] = {"passed": res["passed"], "utilisation": utils,
                             "max_utilisation": max(binding) if binding else None}
-        spec = third_octave_rms(a, fs, fmin=1.0, fmax=80.0, axis=0)
+        spec = third_octave_rms(a, fs, fmin=ASSESSMENT_BAND_HZ[0],
+                                fmax=ASSESSMENT_BAND_HZ[1], axis=0)
         ok = spec.n_bins > 0
         rms = spec.rms[ok]
         spectra[name] = {"bands_hz": spec.bands.nominal[ok].tolist(),
@@ -538,11 +543,6 @@ def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm: MPI.Comm, rep
     raise StudyError(f"the modes did not reach {band_hz:g} Hz after {attempts} solves")
 
 
-#: The assessment band [Hz]: the one-third-octave bands of the criteria (VC curves, the
-#: ISO 2631 / DIN 4150-2 weightings) and the spectra of the studies.
-ASSESSMENT_BAND_HZ = (1.0, 80.0)
-
-
 def band_resolved(nominal_hz: float, f_max_hz: float | None) -> bool:
     """Whether a one-third-octave band (nominal centre) lies in a solution's band
     ``f_max_hz`` -- the convention of :func:`~railvib_hpc.assess.weighting.
@@ -571,11 +571,12 @@ def resolved_spectra(result: dict) -> dict:
             spectra[probe] = spec
             continue
         keep = [i for i, f in enumerate(spec["bands_hz"]) if band_resolved(f, top)]
+        kept = set(keep)
         spectra[probe] = {**spec, "bands_hz": [spec["bands_hz"][i] for i in keep],
                           "acc_rms": {c: [vals[i] for i in keep]
                                       for c, vals in spec["acc_rms"].items()},
                           "resolved_up_to_hz": top}
-        gone = [f for i, f in enumerate(spec["bands_hz"]) if i not in set(keep)]
+        gone = [f for i, f in enumerate(spec["bands_hz"]) if i not in kept]
         if gone:
             dropped[probe] = gone
     return {**result, "spectra": spectra, "unresolved_bands_hz": dropped}

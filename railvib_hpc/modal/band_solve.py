@@ -282,11 +282,17 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
     """
     from mpi4py import MPI
 
-    from .block_lanczos import NotConverged, block_lanczos, default_max_basis, dense_gb
+    from .block_lanczos import (
+        NotConverged,
+        block_lanczos,
+        default_max_basis,
+        dense_gb,
+        effective_block,
+    )
 
     t0 = time.perf_counter()
     n_global = K.getSize()[0]
-    b = max(1, min(s.block_size, n_global // 4 if n_global >= 8 else 1))
+    b = effective_block(s.block_size, n_global)
     nev = min(estimate + 2 * EDGE_MARGIN, max(n_global - 3 * b, 1))
     for attempt in range(3):
         max_basis = min(max(BASIS_FACTOR * nev, default_max_basis(nev, b)) * (2**attempt),

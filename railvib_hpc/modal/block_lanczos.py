@@ -449,6 +449,18 @@ class BlockOperator:
             self._use_out_of_core(False)
 
 
+def effective_block(block: int, n_global: int) -> int:
+    """The block size :func:`block_lanczos` uses: ``block``, at most a quarter of the
+    ``n_global`` DOFs (1 below 8 DOFs).
+
+    Examples
+    --------
+    >>> effective_block(32, 100_000), effective_block(32, 40), effective_block(32, 5)
+    (32, 10, 1)
+    """
+    return max(1, min(block, n_global // 4 if n_global >= 8 else 1))
+
+
 def default_max_basis(nev: int, block: int) -> int:
     """Basis size at which block Lanczos restarts when the caller gives none."""
     return max(2 * nev, nev + 8 * block)
@@ -611,7 +623,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     """
     progress = progress or no_progress
     n = op.n_global
-    b = max(1, min(block, n // 4 if n >= 8 else 1))
+    b = effective_block(block, n)
     if max_basis <= 0:
         max_basis = default_max_basis(nev, b)
     max_basis = min(max_basis, n - b)

@@ -147,8 +147,9 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         raise EigenSolveError(f"modal.n_modes = {n_modes}: must be smaller than the number of "
                               f"free DOFs ({n_global})")
     if method == "block_lanczos" and f_max <= 0:
-        b = max(1, min(PETSc.Options(PREFIX).getInt("bl_block_size", block_size),
-                       n_global // 4 if n_global >= 8 else 1))
+        from .block_lanczos import effective_block
+
+        b = effective_block(PETSc.Options(PREFIX).getInt("bl_block_size", block_size), n_global)
         if n_modes + 3 * b > n_global:      # block Lanczos: nev + 2 b <= basis <= n - b
             raise EigenSolveError(
                 f"modal.n_modes = {n_modes}: block Lanczos with blocks of {b} finds at most "

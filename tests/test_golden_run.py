@@ -1,0 +1,55 @@
+"""The coarse ``run`` and ``transient`` give what they gave before the stage protocol (issue 27).
+
+``tests/data/golden_run.json`` was recorded with ``tools/golden_run.py`` on 1 and 2 ranks
+before the stages were restructured: the provenance of every product (format version,
+stage, inputs digest, upstream files), every probe's peak velocity and acceleration, and
+which files a rerun (and a rerun after ``output.dt`` changed) reuses or recomputes.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+import golden_run  # noqa: E402
+
+GOLDEN = ROOT / "tests" / "data" / "golden_run.json"
+comm = MPI.COMM_WORLD
+
+
+def _compare(folder: Path) -> None:
+    got = golden_run.record(folder)
+    if comm.rank == 0:
+        expected = json.loads(GOLDEN.read_text())[str(comm.size)]
+        assert golden_run.differences(expected, got) == []
+    comm.Barrier()
+
+
+def test_differences_are_found():
+    """The comparison itself notices a changed digest, peak and reuse verdict."""
+    doc = json.loads(GOLDEN.read_text())["1"]
+    assert golden_run.differences(doc, doc) == []
+    bent = json.loads(json.dumps(doc))
+    bent["run"]["provenance"]["modes.h5"]["inputs_sha256"] = "0" * 64
+    probe = sorted(bent["run"]["peaks"])[0]
+    bent["run"]["peaks"][probe][0] *= 1 + 10 * golden_run.PEAK_RTOL
+    bent["transient"]["rerun"] = bent["transient"]["rerun"][1:]
+    bad = golden_run.differences(doc, bent)
+    assert len(bad) == 3 and "modes.h5" in bad[0] and probe in bad[1] and "rerun" in bad[2]
+
+
+@pytest.mark.slow
+def test_coarse_run_unchanged_on_one_rank(shared_tmp):
+    _compare(shared_tmp)
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_coarse_run_unchanged_on_n_ranks(shared_tmp):
+    _compare(shared_tmp)

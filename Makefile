@@ -57,10 +57,14 @@ test-mpi: setup
 
 test-all: test test-slow
 
-# ruff, then the layer order and the ban on import cycles (.importlinter)
+# ruff, then the layer order and the ban on import cycles (.importlinter), then no function
+# over 150 lines unless listed with its reason (tools/code_rules.py), then no stage module
+# that calls the reuse, provenance or lock layer itself (tools/stage_rules.py)
 lint: setup
 	$(VENV)/bin/ruff check railvib_hpc tests bench examples tools
 	$(VENV)/bin/lint-imports --no-cache
+	$(PY) tools/code_rules.py
+	$(PY) tools/stage_rules.py
 
 docs: setup
 	$(PY) -m railvib_hpc.docs

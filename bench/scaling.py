@@ -155,9 +155,9 @@ from railvib_hpc.petsc_env import init_petsc
 init_petsc([])
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.stage import make_mesh
-from railvib_hpc.modal.block_lanczos import BlockOperator
 from railvib_hpc.modal.dofmap import build_dofmap
 from railvib_hpc.modal.eigen import PREFIX
+from railvib_hpc.modal.factor import ShiftInvertFactor
 from railvib_hpc.modal.petsc import assemble
 from railvib_hpc.parallel import on_root
 comm = MPI.COMM_WORLD
@@ -167,8 +167,8 @@ mesh = on_root(lambda: make_mesh(case)[0], comm)
 dm = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
                   case["modal.fix_rail_rotations_at_pads"])
 K, M, _ = assemble(mesh, case, dm, comm)
-op = BlockOperator.__new__(BlockOperator)      # analysis only: no factorization
-op.A, op.comm = K, comm
+op = ShiftInvertFactor.__new__(ShiftInvertFactor)      # analysis only: no factorization
+op.A, op.comm, op.inertia = K, comm, False
 gb = op._estimate_factor_memory(PREFIX)
 if comm.rank == 0:
     print(json.dumps({"refinement": float(sys.argv[2]), "n_dofs": int(dm.n_dofs),

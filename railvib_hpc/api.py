@@ -53,9 +53,10 @@ import numpy as np
 
 from .config import Case
 from .errors import CaseError, UserError
+from .io.stage_protocol import StageRun, StageRunner
 from .log import Reporter
 from .parallel import on_root, world
-from .pipeline import PIPELINE_ORDER, STAGES
+from .pipeline import PIPELINE_ORDER, run_stages, stage
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -83,13 +84,6 @@ def _reporter(comm, reporter: Reporter | None, quiet: bool) -> Reporter:
     if reporter is not None:
         return reporter
     return Reporter(comm.rank, _Silent() if quiet else None)
-
-
-def _frozen(values: Any) -> np.ndarray:
-    """A read-only float array (results are immutable)."""
-    arr = np.array(values, dtype=float)
-    arr.flags.writeable = False
-    return arr
 
 
 class FrozenDict(dict):
@@ -152,7 +146,7 @@ def _freeze(value: Any) -> Any:
         return frozenset(_freeze(v) for v in value)
     if isinstance(value, np.ndarray):
         if not value.flags.writeable and value.flags.owndata:
-            return value               # already frozen (:func:`_frozen`): no second copy
+            return value               # already frozen: no second copy
         arr = np.array(value, copy=True)
         arr.flags.writeable = False
         return arr
@@ -175,11 +169,6 @@ class _Frozen:
         import dataclasses
 
         return (type(self), tuple(getattr(self, f.name) for f in dataclasses.fields(self)))
-
-
-def _path(out_dir: Path, name: str) -> Path | None:
-    p = out_dir / name
-    return p if p.exists() else None
 
 
 def _as_case(case: Case | str | os.PathLike) -> Case:
@@ -212,7 +201,7 @@ class StageResult(_Frozen):
     timings
         The timed parts of the call, ``{name: seconds}`` (e.g. ``assembly``, ``eigensolve``).
     summary
-        The stage's full summary (the dict the stage returned).
+        The stage's full summary (that of the result object the stage returned).
     unused_petsc_options
         PETSc options of the pipeline that nothing used during the call (typos, or
         nothing was solved).
@@ -411,6 +400,13 @@ class AssessResult(StageResult):
         return tuple(k for k, v in self.verdict.items() if v is False)
 
 
+#: The typed result of each of the pipeline's stages (built from the stage's own result
+#: object, which has the same fields).
+_RESULTS: dict[str, type[StageResult]] = {"mesh": MeshResult, "modal": ModalResult,
+                                          "mbs": MBSResult, "reconstruct": ReconstructResult,
+                                          "assess": AssessResult}
+
+
 @dataclass(frozen=True)
 class RunResult(_Frozen):
     """:meth:`Pipeline.run`: every stage's result.
@@ -547,8 +543,9 @@ class Pipeline:
         self.reporter = _reporter(self.comm, reporter, quiet)
         self.wait = wait
         self.command = command
-        self._in_scope = False
         self._run_label: str | None = None
+        self._runner = StageRunner(self.out_dir, self.comm, self.reporter, self.petsc_options,
+                                   command=self._label("run"), wait=wait)
 
     def __repr__(self) -> str:
         return (f"Pipeline(case={self.case['case.name']!r}, out_dir={str(self.out_dir)!r}, "
@@ -564,175 +561,78 @@ class Pipeline:
         return (f"railvib_hpc.Pipeline({self.case['case.name']!r}, {str(self.out_dir)!r})"
                 f".{call}()")
 
-    def _options_scope(self):
-        """PETSc options in the database for the block (nested blocks share the outer one)."""
-        import contextlib
+    def session(self, command: str | None = None):
+        """Hold the output folder's lock and the PETSc options' scope for a block of calls
+        (a context manager; the calls inside share them, as :meth:`run_stages` does).
 
-        from .petsc_env import options_scope
+        ``command`` names the holder of the lock (default: this pipeline's ``command``).
+        The block gets the list that, after it, holds the PETSc options nothing used in it.
+        """
+        return self._runner.session(command or self._label("session"))
 
-        if self._in_scope:
-            return contextlib.nullcontext([])
-        return options_scope(self.petsc_options)
+    def _call(self, name: str) -> tuple[StageRun, tuple[str, ...]]:
+        """Run stage ``name`` in a session of its own (or the open one); the options of
+        that session nothing used."""
+        declared = stage(name)
+        label = self._label(name)
+        with self._runner.session(label) as unused:
+            run = self._runner.run(declared, self.case, command=label)
+        return run, tuple(unused)
 
-    def _call(self, name: str) -> tuple[dict, float, dict[str, float], tuple[str, ...]]:
-        from .pipeline import call_stage
+    def _result(self, run: StageRun, unused: tuple[str, ...]) -> StageResult:
+        """The typed result of a stage call (:data:`_RESULTS`; others: a :class:`StageResult`)
+        from the stage's own result object."""
+        import dataclasses
 
-        rep = self.reporter
-        n0 = len(rep.timings)
-        t0 = time.perf_counter()
-        outer = self._in_scope
-        with self._options_scope() as unused:
-            self._in_scope = True
-            try:
-                summary = call_stage(name, self.case, self.out_dir, self.comm, rep,
-                                     list(self.petsc_options), command=self._label(name),
-                                     wait=self.wait)
-            finally:
-                self._in_scope = outer
-        seconds = time.perf_counter() - t0
-        timings: dict[str, float] = {}
-        for n, t in rep.timings[n0:]:
-            timings[n] = timings.get(n, 0.0) + t
-        if self.comm.size > 1:          # rank 0's summary and clock: the same result everywhere
-            summary, seconds, timings = self.comm.bcast((summary, seconds, timings), root=0)
-        return summary, seconds, timings, tuple(unused)
-
-    def _common(self, name: str, summary: dict, seconds: float, timings: dict,
-                unused: tuple[str, ...]) -> dict[str, Any]:
-        return {"stage": name, "out_dir": self.out_dir, "reused": summary.get("reused"),
-                "seconds": seconds, "timings": timings, "summary": summary,
-                "unused_petsc_options": unused}
+        out = run.result
+        summary = out if isinstance(out, Mapping) else getattr(out, "summary", {})
+        common = {"stage": run.stage, "out_dir": self.out_dir,
+                  "reused": summary.get("reused") if isinstance(out, Mapping)
+                  else getattr(out, "reused", None), "seconds": run.seconds,
+                  "timings": run.timings, "summary": dict(summary),
+                  "unused_petsc_options": unused}
+        cls = _RESULTS.get(run.stage, StageResult)
+        fields = {f.name: getattr(out, f.name) for f in dataclasses.fields(cls)
+                  if f.name not in common}
+        if "probes" in fields:
+            fields["probes"] = {name: ProbePeak(
+                name=name, role=p["role"], coords=tuple(p["coords"]),
+                acc_vertical=p["acc_vertical"], acc_total=p["acc_total"],
+                t_acc_total=p["t_acc_total"], vel_total=p["vel_total"],
+                disp_total=p["disp_total"], t_onset=p["t_onset"])
+                for name, p in fields["probes"].items()}
+        return cls(**common, **fields)
 
     def stage(self, name: str) -> StageResult:
-        """Run any registered stage by name (:data:`railvib_hpc.pipeline.STAGES` and any
-        stage :func:`~railvib_hpc.pipeline.stage_runner` knows); the pipeline's own stages
-        return their typed results.
+        """Run any registered stage by name (:data:`railvib_hpc.pipeline.STAGES`); the
+        pipeline's own stages return their typed results.
 
         Raises
         ------
         ValueError
             For a name that is not a stage.
         """
-        from .pipeline import stage_runner
-
-        typed = {"mesh": self.mesh, "modal": self.modal, "mbs": self.mbs,
-                 "reconstruct": self.reconstruct, "assess": self.assess}
-        if name in typed:
-            return typed[name]()
-        try:
-            stage_runner(name)
-        except KeyError:
-            raise ValueError(f"unknown stage {name!r}; stages: {', '.join(STAGES)}") from None
-        summary, seconds, timings, unused = self._call(name)
-        return StageResult(**self._common(name, summary, seconds, timings, unused))
+        return self._result(*self._call(name))
 
     def mesh(self) -> MeshResult:
         """Build (or reuse) the mesh: ``mesh.h5``, ``mesh.xdmf``, ``mesh.msh``."""
-        summary, seconds, timings, unused = self._call("mesh")
-        out = self.out_dir
-
-        def extra() -> dict[str, Any]:
-            q = summary.get("quality", {})
-            return {"mesh_h5": out / "mesh.h5", "mesh_xdmf": out / "mesh.xdmf",
-                    "mesh_msh": _path(out, "mesh.msh") if not self.case["mesh.file"]
-                    else None, "report_json": out / "mesh_report.json",
-                    "n_nodes": int(q.get("n_nodes", 0)), "n_hexes": int(q.get("n_hexes", 0)),
-                    "min_scaled_jacobian": float(q.get("min_scaled_jacobian", float("nan"))),
-                    "max_aspect_ratio": float(q.get("max_aspect_ratio", float("nan"))),
-                    "warnings": tuple(summary.get("warnings", ()))}
-
-        return MeshResult(**self._common("mesh", summary, seconds, timings, unused),
-                          **on_root(extra, self.comm))
+        return self.stage("mesh")
 
     def modal(self) -> ModalResult:
         """Compute (or reuse) the modes: ``modes.h5`` (and ``static.h5``)."""
-        summary, seconds, timings, unused = self._call("modal")
-        out = self.out_dir
-
-        def extra() -> dict[str, Any]:
-            import h5py
-
-            modes = _path(out, "modes.h5") if not summary.get("band_only") else None
-            freqs: Any = []
-            if modes is not None:
-                with h5py.File(modes, "r") as f:
-                    freqs = f["modes/frequency_hz"][()]
-            return {"modes_h5": modes, "modes_xdmf": _path(out, "modes.xdmf") if modes
-                    else None,
-                    "static_h5": _path(out, "static.h5") if self.case["mbs.static_correction"]
-                    else None,
-                    "frequencies_hz": np.asarray(freqs, dtype=float),
-                    "n_dofs": summary.get("n_dofs"),
-                    "max_orthonormality_error": summary.get("max_orthonormality_error"),
-                    "max_relative_residual": summary.get("max_relative_residual"),
-                    "peak_rss_gb_total": None if summary.get("reused")
-                    else summary.get("peak_rss_gb_total")}
-
-        fields = on_root(extra, self.comm)
-        fields["frequencies_hz"] = _frozen(fields["frequencies_hz"])
-        return ModalResult(**self._common("modal", summary, seconds, timings, unused),
-                           **fields)
+        return self.stage("modal")
 
     def mbs(self) -> MBSResult:
         """Run (or reuse) the multibody simulation: ``mbs.h5`` and its plots."""
-        summary, seconds, timings, unused = self._call("mbs")
-        out = self.out_dir
-        plots = on_root(lambda: tuple(sorted(out.glob("mbs_*.png"))), self.comm)
-        s = summary
-        return MBSResult(
-            **self._common("mbs", summary, seconds, timings, unused),
-            mbs_h5=out / "mbs.h5", plots=plots, n_modes=int(s["n_modes"]), dt=float(s["dt"]),
-            n_steps=int(s["n_steps"]), t_end=float(s["t_end"]),
-            static_wheel_load=_frozen(s["static_wheel_load"]),
-            mean_contact_force=_frozen(s["mean_contact_force"]),
-            peak_contact_force=_frozen(s["peak_contact_force"]),
-            min_contact_force=_frozen(s["min_contact_force"]),
-            max_rail_deflection=float(s["max_rail_deflection"]),
-            loss_of_contact_steps=int(s["loss_of_contact_steps"]))
+        return self.stage("mbs")
 
     def reconstruct(self) -> ReconstructResult:
         """Reconstruct (or reuse) fields, stresses and probe histories."""
-        summary, seconds, timings, unused = self._call("reconstruct")
-        out = self.out_dir
-        threshold = self.case["assessment.wave_threshold"]
-
-        def extra() -> dict[str, Any]:
-            from .assess.stage import read_probes
-            from .reconstruct.probes import probe_peaks
-
-            peaks = {}
-            for name, h in read_probes(out / "probes.h5").items():
-                p = probe_peaks(h, threshold)
-                peaks[name] = ProbePeak(
-                    name=name, role=h["role"], coords=tuple(p["coords"]),
-                    acc_vertical=p["acc_vertical"], acc_total=p["acc_total"],
-                    t_acc_total=p["t_acc_total"], vel_total=p["vel_total"],
-                    disp_total=p["disp_total"], t_onset=p["t_onset"])
-            return {"fields_h5": out / "fields.h5", "fields_xdmf": _path(out, "fields.xdmf"),
-                    "stress_xdmf": _path(out, "stress.xdmf")
-                    if self.case["output.stress_times"] else None,
-                    "probes_h5": out / "probes.h5", "probes": peaks}
-
-        return ReconstructResult(**self._common("reconstruct", summary, seconds, timings,
-                                                unused), **on_root(extra, self.comm))
+        return self.stage("reconstruct")
 
     def assess(self) -> AssessResult:
         """Assess every probe against the standards of ``[assessment]``; write the report."""
-        summary, seconds, timings, unused = self._call("assess")
-        out = self.out_dir
-        report = {k: Path(v) for k, v in summary.get("report", {}).items()}
-        utilisation: dict[str, float | None] = {}
-        for name, res in summary.get("results", {}).items():
-            binding = [b.get("utilisation") for b in res.get("standards", {}).values()
-                       if not b.get("comparison_only") and b.get("utilisation") is not None]
-            utilisation[name] = float(max(binding)) if binding else None
-        common = self._common("assess", summary, seconds, timings, unused)
-        common["reused"] = False                  # the assessment is always recomputed
-        return AssessResult(**common, assessment_json=out / "assessment.json",
-                            report_html=report.get("html"),
-                            report_md=report.get("markdown"), report_json=report.get("json"),
-                            verdict=dict(summary.get("verdict", {})),
-                            max_utilisation=utilisation)
+        return self.stage("assess")
 
     def run(self) -> RunResult:
         """The whole pipeline (mesh, modal, mbs, reconstruct, assess) under one lock of the
@@ -752,25 +652,19 @@ class Pipeline:
             For a name that is not a stage (before anything runs).
         """
         from .io.run_record import RUN_FILE
-        from .io.stage_files import output_lock
-        from .pipeline import stage_runner
 
         names = tuple(names)
         for name in names:
-            try:
-                stage_runner(name)
-            except KeyError:
-                raise ValueError(f"unknown stage {name!r}; stages: "
-                                 f"{', '.join(STAGES)}") from None
+            stage(name)
         t0 = time.perf_counter()
-        outer, label = self._in_scope, self._label("run")
-        with self._options_scope() as unused, \
-                output_lock(self.out_dir, self.comm, label, wait=self.wait, rep=self.reporter):
-            self._in_scope, self._run_label = True, label
-            try:
-                results = {name: self.stage(name) for name in names}
-            finally:
-                self._in_scope, self._run_label = outer, None
+        label = self._label("run")
+        outer, self._run_label = self._run_label, label
+        try:
+            with self._runner.session(label) as unused:
+                runs = run_stages(self._runner, names, self.case, command=label)
+        finally:
+            self._run_label = outer
+        results = {name: self._result(run, ()) for name, run in runs.items()}
         seconds = time.perf_counter() - t0
         if self.comm.size > 1:
             seconds = self.comm.bcast(seconds, root=0)

@@ -33,10 +33,20 @@ from .config import Case, load_case, results_folder_name
 from .errors import UserError
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
+from .pipeline import PIPELINES, single_stage_commands
 
 #: Exit code when the output's reader goes away (a closed pipe): the shell's 128 + SIGPIPE.
 BROKEN_PIPE_EXIT = 141
 STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation")
+
+
+#: The help lines of the commands that run a pipeline of stages (:data:`PIPELINES`).
+PIPELINE_HELPS = {
+    "run": "the whole pipeline: " + ", ".join(PIPELINES["run"]),
+    "transient": "direct time integration of the full FE model (absorbing faces, causal "
+                 "waves), then assess; results in --out itself (default: "
+                 "results/<case.name>/transient)",
+}
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -50,19 +60,9 @@ def _parser() -> argparse.ArgumentParser:
                "error (one line), 1 internal error (please report; a log file is named).")
     p.add_argument("--version", action="version", version=f"railvib-hpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    helps = {
-        "check": "validate a case file (no computation)",
-        "mesh": "build the gmsh model, check its quality, write mesh.msh/.h5/.xdmf",
-        "modal": "assemble K, M and extract mass-normalised modes",
-        "mbs": "roll the vehicle over the flexible track in modal coordinates",
-        "reconstruct": "rebuild displacement/velocity/acceleration fields of every node",
-        "assess": "evaluate the building response against vibration standards",
-        "run": "the whole pipeline: mesh, modal, mbs, reconstruct, assess",
-        "transient": "direct time integration of the full FE model (absorbing faces, "
-                     "causal waves), then assess; results in --out itself (default: "
-                     "results/<case.name>/transient)",
-        "study": "convergence / modes / reflection / speed / thesis-comparison studies",
-    }
+    helps = {"check": "validate a case file (no computation)", **single_stage_commands(),
+             **PIPELINE_HELPS,
+             "study": "convergence / modes / reflection / speed / thesis-comparison studies"}
     for name, text in helps.items():
         sp = sub.add_parser(name, help=text, description=text)
         if name == "study":
@@ -120,16 +120,16 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
              f"file {case.path or '<defaults>'})")
     rep.info(f"  track: {len(lay.sleeper_x)} sleepers, flexible rail "
              f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
-    from .mbs.stage import tracks_line
+    from .mbs.case_vehicle import tracks_line
 
     tracks = tracks_line(case)
     if tracks:
         rep.info(f"  tracks: {tracks}")
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
-    from .config import soil_layers
     from .mesh.building import Building
     from .mesh.interfaces import site_line
+    from .site import soil_layers
 
     rep.info(f"  building: {Building.of_case(case).describe()}")
     from .mesh.turn import turn_line
@@ -152,9 +152,7 @@ def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Report
               petsc_options: list[str], command: str) -> tuple[int, list[str]]:
     """Run the command; returns the exit code and the PETSc options nothing used."""
     from .api import Pipeline, run_study
-    from .io.stage_files import output_lock
     from .petsc_env import unused_options
-    from .pipeline import TRANSIENT_PIPELINE
 
     if args.command == "check":
         return _cmd_check(case, rep), unused_options(petsc_options)
@@ -166,31 +164,21 @@ def _dispatch(args: argparse.Namespace, case: Case, out: Path, comm, rep: Report
         return (0 if study.ok else 2), list(study.unused_petsc_options)
     pipe = Pipeline(case, out, comm, petsc_options, reporter=rep, wait=args.wait,
                     command=command)
-    with output_lock(out, comm, " ".join(["railvib", args.command, str(args.case)]),
-                     wait=args.wait, rep=rep):
-        if args.command == "transient":
+    with pipe.session(" ".join(["railvib", args.command, str(args.case)])) as unused:
+        if args.command in PIPELINES:
             _cmd_check(case, rep)
-            res = pipe.run_stages(TRANSIENT_PIPELINE)
+            assess = pipe.run_stages(PIPELINES[args.command])["assess"]
             rep.info("\n" + rep.timing_table())
-            assess = res["assess"]
             failed = assess.exceeded
-            rep.info(f"transient complete: {len(assess.verdict)} probes assessed, "
+            what = "pipeline" if args.command == "run" else args.command
+            rep.info(f"{what} complete: {len(assess.verdict)} probes assessed, "
                      + (f"limits exceeded at {', '.join(failed)}" if failed
                         else "no limit exceeded"))
-            return 0, list(res.unused_petsc_options)
-        if args.command == "run":
-            _cmd_check(case, rep)
-            result = pipe.run()
-            rep.info("\n" + rep.timing_table())
-            failed = result.assess.exceeded
-            rep.info(f"pipeline complete: {len(result.verdict)} probes assessed, "
-                     + (f"limits exceeded at {', '.join(failed)}" if failed
-                        else "no limit exceeded"))
-            return 0, list(result.unused_petsc_options)
-        stage = pipe.stage(args.command)
-        if args.command != "mesh":
-            rep.info("\n" + rep.timing_table())
-        return 0, list(stage.unused_petsc_options)
+        else:
+            pipe.stage(args.command)
+            if args.command != "mesh":
+                rep.info("\n" + rep.timing_table())
+    return 0, list(unused)
 
 
 def run(argv: list[str] | None = None) -> int:

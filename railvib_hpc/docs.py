@@ -1,14 +1,18 @@
-"""Generate the case-file reference and the fully commented baseline case.
+"""Generate the case-file reference, the commented baseline case and the README's layout.
 
 ``python -m railvib_hpc.docs`` (``make docs``) rewrites the tables between the
 ``<!-- case-reference -->`` markers of ``docs/case_reference.md`` and
 ``jobs/thesis_baseline.toml``; ``tests/test_config.py`` fails when either is out of date
-with :mod:`railvib_hpc.schema`.
+with :mod:`railvib_hpc.schema`. It also rewrites the module table between the
+``<!-- layout -->`` markers of ``README.md`` from the modules' docstrings (the first
+paragraph of each); ``tests/test_code_rules.py`` fails when it is stale.
 """
 
 from __future__ import annotations
 
+import ast
 import json
+import re
 from pathlib import Path
 
 from .schema import PRESETS, SCHEMA, Param, iter_params, source
@@ -16,6 +20,11 @@ from .schema import PRESETS, SCHEMA, Param, iter_params, source
 BEGIN, END = "<!-- case-reference:begin -->", "<!-- case-reference:end -->"
 #: The generated case reference, relative to the repository root.
 CASE_REFERENCE = Path("docs") / "case_reference.md"
+LAYOUT_BEGIN, LAYOUT_END = "<!-- layout:begin -->", "<!-- layout:end -->"
+#: The README whose layout section is generated, relative to the repository root.
+README = Path("README.md")
+#: The package whose modules the layout lists.
+PACKAGE = Path(__file__).resolve().parent
 
 
 def _fmt(v: object) -> str:
@@ -87,6 +96,62 @@ def default_case_toml() -> str:
     return "\n".join(lines)
 
 
+def module_summary(path: Path) -> str:
+    """The first paragraph of the docstring of the module at ``path``, on one line.
+
+    Raises
+    ------
+    ValueError
+        The module has no docstring (every module says in one line what it does).
+    """
+    doc = ast.get_docstring(ast.parse(path.read_text(), str(path)))
+    if not doc:
+        raise ValueError(f"{path} has no module docstring: start it with one line saying "
+                         "what the module does")
+    return " ".join(doc.split("\n\n", 1)[0].split())
+
+
+def layout_markdown(package: Path = PACKAGE) -> str:
+    """The README's module table: every package and module of ``package``, with its summary.
+
+    A package's row (bold) carries its ``__init__.py`` docstring; its modules follow it,
+    in alphabetical order, the subpackages after the top-level modules.
+    """
+    rows = ["| module | what it does |", "|---|---|"]
+    packages = sorted((p.parent for p in package.rglob("__init__.py")),
+                      key=lambda p: p.relative_to(package).parts)
+    for pkg in packages:
+        rel = pkg.relative_to(package.parent).as_posix()
+        rows.append(f"| **`{rel}/`** | {_cell(module_summary(pkg / '__init__.py'))} |")
+        for module in sorted(pkg.glob("*.py")):
+            if module.name != "__init__.py":
+                name = module.relative_to(package).as_posix()
+                rows.append(f"| `{name}` | {_cell(module_summary(module))} |")
+    return "\n".join(rows) + "\n"
+
+
+def _cell(text: str) -> str:
+    """The reST ``text`` of a docstring as markdown inside a table cell.
+
+    Cross-reference roles (``:mod:`x```) become code, double backquotes single ones, and
+    a literal ``|`` is escaped.
+    """
+    text = re.sub(r":(?:mod|class|func|meth|attr|data|exc):`[~.]*([^`]+)`", r"`\1`", text)
+    return text.replace("``", "`").replace("|", "\\|")
+
+
+def _replace_between(path: Path, begin: str, end: str, body: str) -> bool:
+    """Put ``body`` between the markers ``begin`` and ``end`` of ``path``; True if it changed."""
+    content = path.read_text()
+    head, rest = content.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    new = f"{head}{begin}\n{body}{end}{tail}"
+    if new == content:
+        return False
+    path.write_text(new)
+    return True
+
+
 def update(root: Path) -> list[Path]:
     """Rewrite the generated files under the repository ``root``; return those changed."""
     changed = []
@@ -95,14 +160,11 @@ def update(root: Path) -> list[Path]:
     if not job.exists() or job.read_text() != text:
         job.write_text(text)
         changed.append(job)
-    reference = root / CASE_REFERENCE
-    content = reference.read_text()
-    head, rest = content.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    new = f"{head}{BEGIN}\n{case_reference_markdown()}{END}{tail}"
-    if new != content:
-        reference.write_text(new)
-        changed.append(reference)
+    for path, begin, end, body in (
+            (root / CASE_REFERENCE, BEGIN, END, case_reference_markdown()),
+            (root / README, LAYOUT_BEGIN, LAYOUT_END, layout_markdown(root / "railvib_hpc"))):
+        if _replace_between(path, begin, end, body):
+            changed.append(path)
     return changed
 
 

@@ -1,111 +1,101 @@
-"""The stages in pipeline order, each with the same entry point.
+"""The registry of the stages, the pipelines of stages, and the loop that runs them.
 
-Every stage is a function ``run_<stage>_stage(case, out_dir, comm, rep,
-petsc_options=None) -> dict``: collective over ``comm``, self-contained (it starts
-PETSc when it needs it, takes the lock of ``out_dir``, verifies its input files, reuses
-or recomputes its outputs through :mod:`railvib_hpc.io.stage_files`) and returns a
-summary dict on every rank. User and environment errors raise
-:class:`~railvib_hpc.errors.UserError` on every rank.
+:data:`STAGES` is the registry: every stage's name and the module that declares it (its
+``STAGE``, a :class:`~railvib_hpc.io.stage_protocol.Stage`), in pipeline order. Adding a
+stage is one module with its ``STAGE`` and one line here (or :func:`register`). The
+command line takes its stage commands and their help lines from it, the Python API
+(:class:`~railvib_hpc.api.Pipeline`) and the studies run every stage through it, and
+:data:`PIPELINES` names the commands that run several stages in order: ``railvib run``
+(the modal solution) and ``railvib transient`` (the full-order solution, then its
+assessment).
 
-:func:`call_stage` is how a stage is called from outside: it holds the output folder's
-lock and records the call (wall time, peak memory of every rank, versions, the command
-and the case digest) in ``<out>/run.json`` (:mod:`railvib_hpc.io.run_record`).
-The CLI and the Python API (:mod:`railvib_hpc.api`) call every stage through it.
-The full-order solution (``railvib transient``) is a stage with the same entry point
-that ``run`` does not include (:data:`OPTIONAL_STAGES`); the ``transient`` command runs
-:data:`TRANSIENT_PIPELINE`.
+Every call goes through one :class:`~railvib_hpc.io.stage_protocol.StageRunner`: the
+output folder's lock (once per command), the PETSc options' scope, ``run.json`` and the
+timings; :func:`run_stages` is the loop over a sequence.
 
 Example
 -------
->>> from railvib_hpc.pipeline import STAGES, TRANSIENT_PIPELINE
->>> list(STAGES)
-['mesh', 'modal', 'mbs', 'reconstruct', 'assess']
->>> TRANSIENT_PIPELINE
+>>> from railvib_hpc.pipeline import PIPELINES, stage
+>>> PIPELINES["run"]
+('mesh', 'modal', 'mbs', 'reconstruct', 'assess')
+>>> PIPELINES["transient"]
 ('transient', 'assess')
+>>> stage("modal").products
+('modes.h5', 'static.h5', 'modal_damping.h5')
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Sequence
 
-#: Stage name -> (module, entry point), in pipeline order.
-STAGES: dict[str, tuple[str, str]] = {
-    "mesh": ("railvib_hpc.mesh.stage", "run_mesh_stage"),
-    "modal": ("railvib_hpc.modal.stage", "run_modal_stage"),
-    "mbs": ("railvib_hpc.mbs.stage", "run_mbs_stage"),
-    "reconstruct": ("railvib_hpc.reconstruct.stage", "run_reconstruct_stage"),
-    "assess": ("railvib_hpc.assess.stage", "run_assess_stage"),
+from .io.stage_protocol import Stage, StageRun, StageRunner
+
+#: The registry: stage name -> the module declaring its ``STAGE``, in pipeline order.
+STAGES: dict[str, str] = {
+    "mesh": "railvib_hpc.mesh.stage",
+    "modal": "railvib_hpc.modal.stage",
+    "mbs": "railvib_hpc.mbs.stage",
+    "reconstruct": "railvib_hpc.reconstruct.stage",
+    "transient": "railvib_hpc.transient.stage",
+    "assess": "railvib_hpc.assess.stage",
 }
 
-#: The stages ``railvib run`` (and :func:`run_pipeline`) runs, in order.
-PIPELINE_ORDER: tuple[str, ...] = ("mesh", "modal", "mbs", "reconstruct", "assess")
-#: Stages with the same entry point that ``railvib run`` does not run.
-OPTIONAL_STAGES: dict[str, tuple[str, str]] = {
-    "transient": ("railvib_hpc.transient.stage", "run_transient_stage"),
+#: Commands that run a sequence of stages: name -> the stages, in order.
+PIPELINES: dict[str, tuple[str, ...]] = {
+    "run": ("mesh", "modal", "mbs", "reconstruct", "assess"),
+    "transient": ("transient", "assess"),
 }
+#: The stages ``railvib run`` runs, in order.
+PIPELINE_ORDER: tuple[str, ...] = PIPELINES["run"]
 #: ``railvib transient``: the full-order solution, then its assessment.
-TRANSIENT_PIPELINE = ("transient", "assess")
-
-StageRunner = Callable[..., dict]
+TRANSIENT_PIPELINE: tuple[str, ...] = PIPELINES["transient"]
 
 
-def stage_runner(name: str) -> StageRunner:
-    """The entry point of stage ``name`` (imported on first use)."""
-    module, func = STAGES[name] if name in STAGES else OPTIONAL_STAGES[name]
-    return getattr(importlib.import_module(module), func)
+def register(name: str, module: str) -> None:
+    """Add stage ``name``, declared by ``module`` (its ``STAGE``), to the registry."""
+    STAGES[name] = module
 
 
-def call_stage(name: str, case, out_dir: str | Path, comm, rep,
-               petsc_options: list[str] | None = None, *, command: str | None = None,
-               wait: bool = False) -> dict:
-    """Run stage ``name`` under the lock of ``out_dir`` and record it in ``run.json``.
+def stage(name: str) -> Stage:
+    """The declaration of stage ``name`` (its module imported on first use).
 
-    Parameters
-    ----------
-    name
-        A key of :data:`STAGES`.
-    case, out_dir, comm, rep, petsc_options
-        As for every stage entry point.
-    command
-        What ran it, for ``run.json`` (default ``railvib <name>``).
-    wait
-        Wait for another command holding the folder instead of refusing.
-
-    Returns
-    -------
-    dict
-        The stage's summary (every rank).
+    Raises
+    ------
+    ValueError
+        For a name that is not in the registry.
     """
-    from .io.run_record import record_stage
-    from .io.stage_files import output_lock
-
-    out_dir = Path(out_dir)
-    command = command or f"railvib {name}"
-    with output_lock(out_dir, comm, command, wait=wait, rep=rep), \
-            record_stage(out_dir, comm, name, case, rep, command) as call:
-        summary = stage_runner(name)(case, out_dir, comm, rep, petsc_options)
-        call.done(summary)
-    return summary
+    if name not in STAGES:
+        raise ValueError(f"unknown stage {name!r}; stages: {', '.join(STAGES)}")
+    declared = importlib.import_module(STAGES[name]).STAGE
+    if declared.name != name:
+        raise ValueError(f"{STAGES[name]} declares stage {declared.name!r}, not {name!r}")
+    return declared
 
 
-def run_pipeline(case, out_dir: str | Path, comm, rep, petsc_options: list[str] | None = None,
-                 stages: tuple[str, ...] | None = None, *, command: str | None = None,
-                 wait: bool = False) -> dict[str, dict]:
-    """Run the stages in order (all by default) under one lock of ``out_dir``.
+def single_stage_commands() -> dict[str, str]:
+    """The stages that are commands of their own (not a pipeline's name): name -> help."""
+    return {name: stage(name).help for name in STAGES if name not in PIPELINES}
 
-    Each stage reuses what is current and recomputes what is stale or corrupt, saying
-    why; each call is recorded in ``run.json`` (:func:`call_stage`). Returns
-    ``{stage: summary}``.
+
+def run_stage(runner: StageRunner, name: str, case, *, command: str | None = None,
+              **options) -> StageRun:
+    """Run the registered stage ``name`` through ``runner`` (see
+    :meth:`~railvib_hpc.io.stage_protocol.StageRunner.run`)."""
+    return runner.run(stage(name), case, command=command, **options)
+
+
+def run_stages(runner: StageRunner, names: Sequence[str], case, *,
+               command: str | None = None) -> dict[str, StageRun]:
+    """Run the registered stages ``names`` in order in one session of ``runner`` (one lock
+    of the folder, one scope of the PETSc options); each reuses what is current and is
+    recorded in ``run.json``.
+
+    Raises
+    ------
+    ValueError
+        For a name that is not a stage (before anything runs).
     """
-    from .io.stage_files import output_lock
-
-    out_dir = Path(out_dir)
-    command = command or "railvib run"
-    summaries = {}
-    with output_lock(out_dir, comm, command, wait=wait, rep=rep):
-        for name in stages or PIPELINE_ORDER:
-            summaries[name] = call_stage(name, case, out_dir, comm, rep, petsc_options,
-                                         command=command)
-    return summaries
+    stages = [stage(n) for n in names]
+    with runner.session(command):
+        return {s.name: runner.run(s, case, command=command) for s in stages}

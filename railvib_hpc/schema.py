@@ -20,10 +20,10 @@ Conventions
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
-from .sections import APDL_RAIL, APDL_SLEEPER
+from .sections import APDL_RAIL, APDL_SLEEPER, SectionProperties
 
 
 @dataclass(frozen=True)
@@ -54,6 +54,11 @@ class Param:
     maximum
         Largest allowed value (numbers; ``None``: no bound beyond ``check``); its reason
         belongs in ``doc``.
+    source
+        Where the default comes from (the thesis's APDL script, its tables, the literature),
+        shown in the case reference; ``""`` for the numerical settings of this program
+        (solver tolerances, output steps...). A preset's values carry their own
+        (:data:`PRESET_SOURCES`).
     """
 
     default: Any
@@ -64,6 +69,18 @@ class Param:
     choices: tuple[str, ...] = field(default_factory=tuple)
     unique: bool = False
     maximum: float | None = None
+    source: str = ""
+
+
+_APDL = "thesis App. A (APDL)"
+_T1 = "thesis Table I"
+_T2 = "thesis Table II"
+_RAIL_SEC = "App. A SECTYPE,1,BEAM,I / SECDATA,0.1524,0.07,0.19,0.0165,0.045,0.0175"
+_SLP_SEC = "App. A SECTYPE,2,BEAM,QUAD / SECDATA,-0.135,-0.11,.135,-.11,.090,.11,-.090,.11"
+_MANCHESTER = "Manchester Benchmark vehicle 1 (Iwnicki, Veh. Syst. Dyn. 30 (1998) 295-313)"
+#: The modal damping of the thesis, the source of every material's damping ratio.
+_THESIS_DAMPING = "thesis §2.1: 3 % modal damping"
+_OTHER_DAMPING = "not in the thesis: the 3 % of the other materials"
 
 
 #: Probes of the building whose responses the studies compare (names of the mesh probes).
@@ -84,15 +101,51 @@ def _study_solver(what: str) -> Param:
                  choices=("modal", "direct"))
 
 
-def _mat(e: float, nu: float, rho: float, what: str) -> dict[str, Param]:
+def _mat(e: float, nu: float, rho: float, what: str, source: str | tuple[str, str, str],
+         damping_source: str = _THESIS_DAMPING) -> dict[str, Param]:
+    """``materials.<name>``: ``source`` of E, nu and rho (one for all three, or each its own)."""
+    e_src, nu_src, rho_src = (source,) * 3 if isinstance(source, str) else source
     return {
-        "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos"),
-        "nu": Param(nu, "float", "-", f"Poisson's ratio of the {what}", "poisson"),
-        "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos"),
+        "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos", source=e_src),
+        "nu": Param(nu, "float", "-", f"Poisson's ratio of the {what}", "poisson",
+                    source=nu_src),
+        "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos", source=rho_src),
         "damping_ratio": Param(0.03, "float", "-",
                                f"damping ratio of the {what}, used when modal.damping = "
-                               "'strain_energy'", "fraction"),
+                               "'strain_energy'", "fraction", source=damping_source),
     }
+
+
+def _mp(number: int, ex: str, prxy: str, dens: str) -> tuple[str, str, str]:
+    """The sources of E, nu and rho of APDL material ``number``: its MP commands, as written."""
+    return (f"{_APDL}: MP,EX,{number},{ex}", f"{_APDL}: MP,PRXY,{number},{prxy}",
+            f"{_APDL}: MP,DENS,{number},{dens}")
+
+
+def _section(section: SectionProperties, what: str, horizontal: str,
+             secdata: str) -> dict[str, Param]:
+    """``sections.<name>``: the APDL section's properties, each citing its ``SECDATA``."""
+    src = f"{secdata} (railvib_hpc.sections)"
+    return {
+        "area": Param(section.area, "float", "m^2", f"{what} cross-section area", "pos",
+                      source=src),
+        "iyy": Param(section.iyy, "float", "m^4", f"{what} second moment, vertical bending",
+                     "pos", source=src),
+        "izz": Param(section.izz, "float", "m^4", f"{what} second moment, {horizontal} bending",
+                     "pos", source=src),
+        "j": Param(section.j, "float", "m^4", f"{what} torsion constant", "pos", source=src),
+        "shear_coefficient_y": Param(section.shear_coefficient_y, "float", "-",
+                                     "Timoshenko shear coefficient, vertical bending", "pos",
+                                     source=src),
+        "shear_coefficient_z": Param(section.shear_coefficient_z, "float", "-",
+                                     f"Timoshenko shear coefficient, {horizontal} bending",
+                                     "pos", source=src),
+    }
+
+
+def _apdl_coordinate(name: str, value: float, what: str) -> Param:
+    """``geometry.<name>``: the APDL script's coordinate ``name`` (cited with its value)."""
+    return Param(value, "float", "m", f"{name}: {what}", source=f"{_APDL}: {name}={value:g}")
 
 
 #: Most soil layers a case may give (``[[soil.layers]]``); each is a part of its own.
@@ -105,7 +158,7 @@ MAX_SOIL_LAYERS = 8
 MIN_SOIL_LAYER_THICKNESS = 0.1
 #: Largest ``|building.rotation|`` [deg]: one whole turn either way. Beyond it a float no
 #: longer holds the angle to a degree (at 1e17 deg the spacing of floats is 16 deg), so
-#: the whole quarter turns and the rest (:func:`railvib_hpc.config.quarter_turns`) would
+#: the whole quarter turns and the rest (:func:`railvib_hpc.site.quarter_turns`) would
 #: be wrong; within it they are exact.
 MAX_ROTATION_DEG = 360.0
 #: Most storeys of the building (``building.storeys``): a program limit. The layout's
@@ -135,7 +188,7 @@ SOLID_PARTS = ("ballast", "subballast", "subgrade", "footing", "column", "beam",
                *SOIL_LAYER_PARTS, *MEASURE_PARTS, "fill")
 BUILDING_PARTS = ("footing", "column", "beam", "slab", "wall")
 #: Material of each solid part: ``materials.<name>``, or the soil layer of the same name
-#: (:func:`railvib_hpc.config.solid_material`).
+#: (:func:`railvib_hpc.site.solid_material`).
 SOLID_MATERIAL = {"ballast": "ballast", "subballast": "subballast", "subgrade": "subgrade",
                   **{p: "concrete" for p in BUILDING_PARTS}, **{p: p for p in SOIL_LAYER_PARTS},
                   "trench_fill": "trench_fill", "wib": "wib", "fill": "fill"}
@@ -188,148 +241,163 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         choices=("apdl", "table1")),
     },
     "geometry": {
-        "x0": Param(0.0, "float", "m", "X0: start of the first rigid rail"),
-        "x1": Param(3.0, "float", "m", "X1: start of the flexible rail and of the soil"),
-        "x2": Param(12.6, "float", "m", "X2: building (and its excavation) starts"),
-        "x3": Param(19.8, "float", "m", "X3: building ends"),
-        "x4": Param(24.6, "float", "m", "X4: end of the flexible rail and of the soil"),
-        "ys0": Param(8.25, "float", "m", "YS0: soil edge on the side away from the building"),
-        "ys1": Param(-4.25, "float", "m",
-                     "YS1: toe of the embankment (subballast base half-width is |YS1|)"),
-        "ys2": Param(-9.9, "float", "m", "YS2: building face nearest the track"),
-        "ys3": Param(-17.1, "float", "m", "YS3: building face farthest from the track"),
-        "ys4": Param(-29.1, "float", "m", "YS4: soil edge beyond the building"),
-        "z0": Param(0.0, "float", "m", "Z0: bottom of the subgrade (fixed base)"),
-        "z1": Param(4.8, "float", "m", "Z1: top of the subgrade = ground level"),
-        "z2": Param(5.3, "float", "m", "Z2: top of the subballast"),
-        "z3": Param(5.8, "float", "m", "Z3: top of the ballast = sleeper axis"),
-        "z4": Param(6.00424, "float", "m", "Z4: rail axis height"),
-        "xbb": Param(16.2, "float", "m", "XBB: x of the building base point (centre of its plan)"),
-        "ybb": Param(-13.5, "float", "m", "YBB: y of the building base point (centre of its plan)"),
-        "zbb": Param(2.4, "float", "m", "ZBB: z of the building base (underside of footings)"),
+        "x0": _apdl_coordinate("X0", 0.0, "start of the first rigid rail"),
+        "x1": _apdl_coordinate("X1", 3.0, "start of the flexible rail and of the soil"),
+        "x2": _apdl_coordinate("X2", 12.6, "building (and its excavation) starts"),
+        "x3": _apdl_coordinate("X3", 19.8, "building ends"),
+        "x4": _apdl_coordinate("X4", 24.6, "end of the flexible rail and of the soil"),
+        "ys0": Param(8.25, "float", "m", "YS0: soil edge on the side away from the building",
+                     source=f"{_APDL}: YSO=8.25"),
+        "ys1": _apdl_coordinate("YS1", -4.25,
+                                "toe of the embankment (subballast base half-width is |YS1|)"),
+        "ys2": _apdl_coordinate("YS2", -9.9, "building face nearest the track"),
+        "ys3": _apdl_coordinate("YS3", -17.1, "building face farthest from the track"),
+        "ys4": _apdl_coordinate("YS4", -29.1, "soil edge beyond the building"),
+        "z0": _apdl_coordinate("Z0", 0.0, "bottom of the subgrade (fixed base)"),
+        "z1": _apdl_coordinate("Z1", 4.8, "top of the subgrade = ground level"),
+        "z2": _apdl_coordinate("Z2", 5.3, "top of the subballast"),
+        "z3": _apdl_coordinate("Z3", 5.8, "top of the ballast = sleeper axis"),
+        "z4": _apdl_coordinate("Z4", 6.00424, "rail axis height"),
+        "xbb": _apdl_coordinate("XBB", 16.2, "x of the building base point (centre of its plan)"),
+        "ybb": _apdl_coordinate("YBB", -13.5, "y of the building base point (centre of its plan)"),
+        "zbb": _apdl_coordinate("ZBB", 2.4, "z of the building base (underside of footings)"),
         "ballast_top_half_width": Param(3.25, "float", "m",
                                         "half-width of the ballast crest (top of the shoulder)",
-                                        "pos"),
+                                        "pos", source=f"{_APDL}: K,KP_SLP_END+9,X1,3.25,Z3"),
         "ballast_bottom_half_width": Param(3.75, "float", "m",
                                            "half-width of the ballast at the subballast top",
-                                           "pos"),
+                                           "pos", source=f"{_APDL}: K,KP_SLP_END+10,X1,3.75,Z2"),
     },
     "track": {
-        "rigid_length": Param(3.0, "float", "m", "length of each rigid rail section", "pos"),
-        "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos"),
-        "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos"),
-        "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos"),
-        "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos"),
-        "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos"),
+        "rigid_length": Param(3.0, "float", "m", "length of each rigid rail section", "pos",
+                              source=f"{_APDL}: Rigid=3; {_T1}"),
+        "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos",
+                             source=f"{_APDL}: Rail_length=21.6; {_T1}"),
+        "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos",
+                       source=f"{_APDL}: R_Gage=2*0.75565; {_T1}"),
+        "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos",
+                                 source=f"{_APDL}: Distance_betw_sleepers=0.6; {_T1}"),
+        "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos",
+                            source=f"{_APDL}: No_sleeper_div_total=36 (+1)"),
+        "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos",
+                                source=f"{_APDL}: K,...,Rigid,+-1.25,Z3; {_T1}"),
         "embankment_height": Param(0.0, "float", "m",
                                    "a fill embankment under the track bed: it lifts the "
                                    "subballast, ballast, sleepers and rails (geometry.z2, z3, "
                                    "z4) by this height (0: the thesis's track bed directly on "
-                                   "the ground, a track at grade)", "nonneg"),
+                                   "the ground, a track at grade)", "nonneg",
+                                   source=f"{_APDL}: the track bed on the ground (Z1 = top of the "
+                                          "subgrade), no fill"),
         "embankment_slope": Param(1.5, "float", "-",
                                   "horizontal run of the fill's side slopes per unit height "
                                   "(1.5: 1V:1.5H); the fill's top is the subballast's base "
-                                  "(half-width |YS1|)", "pos"),
+                                  "(half-width |YS1|)", "pos",
+                                  source="not in the thesis: 1V:1.5H, the usual fill slope"),
         "count": Param(1, "int", "-",
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
-                       "from the building, on the same embankment)", "pos"),
+                       "from the building, on the same embankment)", "pos",
+                       source=f"{_APDL}: one track"),
         "spacing": Param(4.0, "float", "m",
                          "distance between the two tracks' centre lines (track.count = 2)",
-                         "pos"),
+                         "pos",
+                         source="not in the thesis (one track): 4.0 m, the usual track centre "
+                                "distance of European main lines (DB Ril 800.0130: >= 4.0 m)"),
     },
     "building": {
-        "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos"),
-        "footing_height": Param(0.6, "float", "m", "HSF: footing height", "pos"),
-        "column_size": Param(0.6, "float", "m", "square column side", "pos"),
-        "beam_width": Param(0.6, "float", "m", "BEAM_WIDTH: width of beams and grade beams", "pos"),
-        "beam_depth": Param(0.6, "float", "m", "depth of beams and grade beams", "pos"),
-        "slab_thickness": Param(0.2, "float", "m", "thickness of both slabs", "pos"),
-        "wall_thickness": Param(0.3, "float", "m", "WALL_WIDTH: basement wall thickness", "pos"),
+        "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos",
+                              source=f"{_APDL}: FX1=2.4, FX4=3.6 (local system 11)"),
+        "footing_height": Param(0.6, "float", "m", "HSF: footing height", "pos",
+                                source=f"{_APDL}: HSF=0.6 (the text's 1.2 m is not used)"),
+        "column_size": Param(0.6, "float", "m", "square column side", "pos",
+                             source=f"{_APDL}: CX1=2.7, CX2=3.3"),
+        "beam_width": Param(0.6, "float", "m", "BEAM_WIDTH: width of beams and grade beams", "pos",
+                            source=f"{_APDL}: BEAM_WIDTH=0.6"),
+        "beam_depth": Param(0.6, "float", "m", "depth of beams and grade beams", "pos",
+                            source=f"{_APDL}: VEXT,A_BEAM1+1,...,0.6"),
+        "slab_thickness": Param(0.2, "float", "m", "thickness of both slabs", "pos",
+                                source=f"{_APDL}: VEXT,A_SLAB1+1,,0,,,0.2"),
+        "wall_thickness": Param(0.3, "float", "m", "WALL_WIDTH: basement wall thickness", "pos",
+                                source=f"{_APDL}: WALL_WIDTH=0.3"),
         "z_slab1_base": Param(4.2, "float", "m", "Z_SLAB1_BASE: underside of slab 1 above ZBB",
-                              "pos"),
+                              "pos", source=f"{_APDL}: Z_SLAB1_BASE=4.2"),
         "z_slab2_base": Param(8.0, "float", "m",
                               "Z_SLAB2_BASE: underside of slab 2 above ZBB (each storey above "
-                              "repeats storey 2's height)", "pos"),
+                              "repeats storey 2's height)", "pos",
+                              source=f"{_APDL}: Z_SLAB2_BASE=8"),
         "storeys": Param(2, "int", "-",
                          f"storeys above the basement, one slab on top of each; at most "
                          f"{MAX_STOREYS}, a program limit",
-                         "pos", maximum=MAX_STOREYS),
+                         "pos", maximum=MAX_STOREYS,
+                         source=f"{_APDL}: two slabs (A_SLAB1, A_SLAB2); thesis Fig. 13"),
         "slab_bases": Param([], "floats", "m",
                             "underside of every slab above ZBB, one per storey, bottom up, "
                             "for storeys of their own heights (empty: z_slab1_base, then each "
-                            "storey z_slab2_base - z_slab1_base higher)", "pos"),
+                            "storey z_slab2_base - z_slab1_base higher)", "pos",
+                            source=f"{_APDL}: Z_SLAB1_BASE=4.2, Z_SLAB2_BASE=8 (z_slab*_base)"),
         "bays_x": Param(1, "int", "-", "bays along the track (x); bays_x + 1 column lines",
-                        "pos"),
+                        "pos", source=f"{_APDL}: one bay, four columns (CX1..CX2 at the corners)"),
         "bays_y": Param(1, "int", "-", "bays across the track (y); bays_y + 1 column lines",
-                        "pos"),
+                        "pos", source=f"{_APDL}: one bay, four columns (CX1..CX2 at the corners)"),
         "spans_x": Param([], "floats", "m",
                          "column-centre spans along x, from X2 (empty: bays_x equal spans; they "
-                         "add up to X3 - X2 - footing_size)", "pos"),
+                         "add up to X3 - X2 - footing_size)", "pos",
+                         source=f"{_APDL}: one span, X3 - X2 - FX1 = 6 m"),
         "spans_y": Param([], "floats", "m",
                          "column-centre spans along y, from the face nearest the track YS2 "
                          "(empty: bays_y equal spans; they add up to YS2 - YS3 - footing_size)",
-                         "pos"),
+                         "pos", source=f"{_APDL}: one span, X3 - X2 - FX1 = 6 m"),
         "foundation": Param("pad", "str", "-",
                             "pad footings under the columns, strip footings along every column "
                             "line, or a raft under the whole plan (footing_height thick)",
-                            choices=FOUNDATION_TYPES),
+                            choices=FOUNDATION_TYPES,
+                            source=f"{_APDL}: four pad footings (FX1, FX4) with grade beams"),
         "rotation": Param(0.0, "float", "deg",
                           f"turn of the building about its plan centre (XBB, YBB), "
                           f"counter-clockwise seen from above, -{MAX_ROTATION_DEG:g} to "
                           f"{MAX_ROTATION_DEG:g}; the soil round it twists to meet the "
                           f"track-parallel mesh beyond whole quarter turns (docs/sites.md)",
-                          "angle"),
+                          "angle",
+                          source=f"{_APDL}: the walls are parallel to the track (no rotation)"),
     },
     "materials": {
-        "rail": _mat(210e9, 0.30, 7700.0, "flexible rail"),
-        "rigid_rail": _mat(210e10, 0.30, 7700.0, "rigid rail (its DOFs are fixed)"),
-        "sleeper": _mat(64e9, 0.25, 2570.0, "sleepers"),
-        "ballast": _mat(260e6, 0.25, 1800.0, "ballast"),
-        "subballast": _mat(200e6, 0.20, 1850.0, "subballast"),
-        "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade"),
-        "concrete": _mat(31e9, 0.25, 2500.0, "concrete building"),
-        # EPS geofoam, the usual soft trench fill (EPS 20: E ~ 5 MPa, rho ~ 20 kg/m^3; the
-        # EN 14933 range 3-8 MPa)
-        "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')"),
-        # jet-grouted or cement-stabilised soil block (E 0.5-5 GPa)
-        "wib": _mat(2e9, 0.25, 2100.0, "wave-impeding block ([wib])"),
-        # compacted granular embankment fill (E 50-200 MPa)
-        "fill": _mat(1.5e8, 0.30, 1900.0, "embankment fill (track.embankment_height)"),
+        "rail": _mat(210e9, 0.30, 7700.0, "flexible rail", _mp(1, "210e9", "0.30", "7700")),
+        "rigid_rail": _mat(210e10, 0.30, 7700.0, "rigid rail (its DOFs are fixed)",
+                           _mp(2, "210e10", "0.30", "7700")),
+        "sleeper": _mat(64e9, 0.25, 2570.0, "sleepers", _mp(3, "64e9", "0.25", "2570")),
+        "ballast": _mat(260e6, 0.25, 1800.0, "ballast", _mp(4, "260e6", "0.25", "1800")),
+        "subballast": _mat(200e6, 0.20, 1850.0, "subballast",
+                           _mp(5, "200e06", "0.2", "1850")),
+        "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade", _mp(6, "200e6", "0.2", "1850")),
+        "concrete": _mat(31e9, 0.25, 2500.0, "concrete building",
+                         _mp(10, "31e9", "0.25", "2500")),
+        # mitigation materials: not in the thesis (its future work); typical values
+        "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')",
+                            "not in the thesis: EPS geofoam EPS 20 (EN 14933, E 3-8 MPa, "
+                            "rho ~20 kg/m^3), the usual soft trench fill", _OTHER_DAMPING),
+        "wib": _mat(2e9, 0.25, 2100.0, "wave-impeding block ([wib])",
+                    "not in the thesis: jet-grouted / cement-stabilised soil (E 0.5-5 GPa, "
+                    "rho 2000-2200 kg/m^3)", _OTHER_DAMPING),
+        "fill": _mat(1.5e8, 0.30, 1900.0, "embankment fill (track.embankment_height)",
+                     "not in the thesis: compacted granular embankment fill (E 50-200 MPa, "
+                     "rho 1800-2000 kg/m^3)", _OTHER_DAMPING),
     },
     "sections": {
-        "rail": {
-            "area": Param(APDL_RAIL.area, "float", "m^2", "rail cross-section area", "pos"),
-            "iyy": Param(APDL_RAIL.iyy, "float", "m^4", "rail second moment, vertical bending",
-                         "pos"),
-            "izz": Param(APDL_RAIL.izz, "float", "m^4", "rail second moment, lateral bending",
-                         "pos"),
-            "j": Param(APDL_RAIL.j, "float", "m^4", "rail torsion constant", "pos"),
-            "shear_coefficient_y": Param(APDL_RAIL.shear_coefficient_y, "float", "-",
-                                         "Timoshenko shear coefficient, vertical bending", "pos"),
-            "shear_coefficient_z": Param(APDL_RAIL.shear_coefficient_z, "float", "-",
-                                         "Timoshenko shear coefficient, lateral bending", "pos"),
-        },
-        "sleeper": {
-            "area": Param(APDL_SLEEPER.area, "float", "m^2", "sleeper cross-section area", "pos"),
-            "iyy": Param(APDL_SLEEPER.iyy, "float", "m^4",
-                         "sleeper second moment, vertical bending", "pos"),
-            "izz": Param(APDL_SLEEPER.izz, "float", "m^4",
-                         "sleeper second moment, horizontal bending", "pos"),
-            "j": Param(APDL_SLEEPER.j, "float", "m^4", "sleeper torsion constant", "pos"),
-            "shear_coefficient_y": Param(APDL_SLEEPER.shear_coefficient_y, "float", "-",
-                                         "Timoshenko shear coefficient, vertical bending", "pos"),
-            "shear_coefficient_z": Param(APDL_SLEEPER.shear_coefficient_z, "float", "-",
-                                         "Timoshenko shear coefficient, horizontal bending",
-                                         "pos"),
-        },
+        "rail": _section(APDL_RAIL, "rail", "lateral", _RAIL_SEC),
+        "sleeper": _section(APDL_SLEEPER, "sleeper", "horizontal", _SLP_SEC),
     },
     "pads": {
-        "kx": Param(70e8, "float", "N/m", "rail pad stiffness along the track", "pos"),
-        "ky": Param(70e8, "float", "N/m", "rail pad stiffness across the track", "pos"),
-        "kz": Param(70e8, "float", "N/m", "rail pad stiffness, vertical", "pos"),
-        "cx": Param(5e5, "float", "N s/m", "rail pad damping along the track", "nonneg"),
-        "cy": Param(5e5, "float", "N s/m", "rail pad damping across the track", "nonneg"),
-        "cz": Param(5e5, "float", "N s/m", "rail pad damping, vertical", "nonneg"),
+        "kx": Param(70e8, "float", "N/m", "rail pad stiffness along the track", "pos",
+                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)"),
+        "ky": Param(70e8, "float", "N/m", "rail pad stiffness across the track", "pos",
+                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)"),
+        "kz": Param(70e8, "float", "N/m", "rail pad stiffness, vertical", "pos",
+                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)"),
+        "cx": Param(5e5, "float", "N s/m", "rail pad damping along the track", "nonneg",
+                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)"),
+        "cy": Param(5e5, "float", "N s/m", "rail pad damping across the track", "nonneg",
+                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)"),
+        "cz": Param(5e5, "float", "N s/m", "rail pad damping, vertical", "nonneg",
+                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)"),
     },
     "mesh": {
         "layout": Param("thesis", "str", "-",
@@ -337,7 +405,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "(Appendix A/B: 41,880 hexahedra, coarse soil across the track; the "
                         "size_far, size_deep and layer_elements keys do not apply), 'refined' "
                         "uses the mesh.size_* keys (finer far field, for engineering runs)",
-                        choices=("thesis", "refined")),
+                        choices=("thesis", "refined"),
+                        source="thesis App. A/B: divisions of the APDL script, 41,880 hexahedra "
+                               "(App. B element ranges)"),
         "refinement": Param(1.0, "float", "-",
                             "multiplies every element count (1: the layout's own size; "
                             "2: ~8x the elements)", "pos"),
@@ -345,18 +415,21 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "use this gmsh .msh (same physical-group names) instead of generating; "
                       "relative to the case file"),
         "rail_elements_per_bay": Param(5, "int", "-", "rail beam elements between sleepers",
-                                       "pos"),
+                                       "pos", source=f"{_APDL}: No_rail_ele_betwn_sleeper=5"),
         "soil_elements_per_bay": Param(2, "int", "-",
                                        "soil elements along x per sleeper bay, away from building",
-                                       "pos"),
+                                       "pos", source=f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2"),
         "soil_elements_per_bay_building": Param(4, "int", "-",
                                                 "soil elements along x per bay in line with the "
-                                                "building", "pos"),
+                                                "building", "pos",
+                                                source=f"{_APDL}: No_soil_ele_betwn_sleeper_B=4"),
         "sleeper_outer_elements": Param(2, "int", "-",
-                                        "sleeper elements between its end and the rail", "pos"),
+                                        "sleeper elements between its end and the rail", "pos",
+                                        source=f"{_APDL}: SLP_OUT_ELE=2"),
         "sleeper_middle_elements": Param(4, "int", "-", "sleeper elements between the rails",
-                                         "pos"),
-        "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos"),
+                                         "pos", source=f"{_APDL}: SLP_MID_ELE=4"),
+        "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos",
+                                   source=f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)"),
         "size_far": Param(0.6, "float", "m",
                           "layout 'refined': element size across the track in the far field",
                           "pos"),
@@ -365,8 +438,11 @@ SCHEMA: dict[str, dict[str, Any]] = {
                            "pos"),
         "size_building_y": Param(0.3, "float", "m",
                                  "building and soil element size across the track in line with "
-                                 "the building", "pos"),
-        "size_building_z": Param(0.6, "float", "m", "building element size vertically", "pos"),
+                                 "the building", "pos",
+                                 source=f"{_APDL}: LESIZE,ALL,0.3 (building and soil across)"),
+        "size_building_z": Param(0.6, "float", "m", "building element size vertically", "pos",
+                                 source=f"{_APDL}: EXTOPT,ESIZE,6 over 3.6 m (columns), "
+                                        "walls 0.6 m"),
         "layer_elements": Param(1, "int", "-",
                                 "layout 'refined': elements through each of the ballast and "
                                 "subballast layers", "pos"),
@@ -442,7 +518,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "elastomers", "fraction"),
         "width": Param(0.27, "float", "m",
                        "bearing width of the sleeper on the pads (its underside; less than "
-                       "track.sleeper_spacing)", "pos"),
+                       "track.sleeper_spacing)", "pos",
+                       source=f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m"),
     },
     "ballast_mat": {
         "modulus": Param(0.0, "float", "N/m^3",
@@ -528,7 +605,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "modal damping does not use them)"),
     },
     "modal": {
-        "n_modes": Param(300, "int", "-", "number of modes to extract", "pos"),
+        "n_modes": Param(300, "int", "-", "number of modes to extract", "pos",
+                         source=f"{_APDL}: MODOPT,LANB,300; thesis §3"),
         "f_max": Param(0.0, "float", "Hz",
                        "if > 0: extract all modes below this frequency instead of n_modes "
                        "(block Lanczos: band-sliced, Sylvester inertia counts prove none is "
@@ -548,7 +626,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                            "missing ones)", "nonneg"),
         "damping_ratio": Param(0.03, "float", "-",
                                "modal damping ratio for all modes (modal.damping = 'uniform'; "
-                               "with 'strain_energy': the rail pads' share)", "fraction"),
+                               "with 'strain_energy': the rail pads' share)", "fraction",
+                               source=_THESIS_DAMPING),
         "damping": Param("uniform", "str", "-",
                          "modal damping: the same ratio for every mode (the thesis), or per "
                          "material from each mode's strain-energy shares, zeta_i = sum_g "
@@ -566,11 +645,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                  "default, the thesis; too soft in bending when a slab or wall "
                                  "is one element thick), incompatible modes (SOLID185 "
                                  "KEYOPT(2)=3; bends correctly one element thick) or plain full "
-                                 "integration", choices=("bbar", "incompatible", "full")),
+                                 "integration", choices=("bbar", "incompatible", "full"),
+                                 source=f"{_APDL}: ET,2,SOLID185 (default KEYOPT(2)=0: B-bar)"),
         "method": Param("block_lanczos", "str", "-",
                         "eigensolver: block shift-invert Lanczos (fast, many right-hand sides "
                         "per MUMPS solve) or SLEPc Krylov-Schur (with f_max: SLEPc spectrum "
-                        "slicing)", choices=("block_lanczos", "krylovschur")),
+                        "slicing)", choices=("block_lanczos", "krylovschur"),
+                        source=f"{_APDL}: MODOPT,LANB (block Lanczos)"),
         "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos"),
         "out_of_core": Param("auto", "str", "-",
                              "MUMPS factor on disk (ICNTL(22)): auto = only when the in-core "
@@ -586,20 +667,25 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "tol": Param(1e-8, "float", "-", "relative residual tolerance of the eigenpairs", "pos"),
         "max_restarts": Param(100, "int", "-", "maximum restarts of the eigensolver", "pos"),
         "fix_sleeper_rotations": Param(True, "bool", "-",
-                                       "fix all rotations of sleeper nodes (thesis, App. A)"),
+                                       "fix all rotations of sleeper nodes (thesis, App. A)",
+                                       source=f"{_APDL}: ESEL,S,MAT,,3 / D,ALL,ROTX..ROTZ,0"),
         "fix_rail_rotations_at_pads": Param(True, "bool", "-",
                                             "fix all rotations of rail nodes above the pads "
-                                            "(thesis, App. A)"),
+                                            "(thesis, App. A)",
+                                            source=f"{_APDL}: NSEL,S,NODE,,7,177,5 / D,ALL,ROT*,0"),
     },
     "vehicle": {
         "type": Param("wheelset", "str", "-",
                       "load model: constant moving forces, the thesis's suspended wheelset "
                       "(Table II), or cars with 2 bogies and 4 wheelsets each",
-                      choices=("moving_force", "wheelset", "vehicle")),
-        "speed": Param(30.0, "float", "m/s", "running speed", "pos"),
+                      choices=("moving_force", "wheelset", "vehicle"),
+                      source="thesis §4.4: suspended wheelset (SAMS)"),
+        "speed": Param(30.0, "float", "m/s", "running speed", "pos",
+                       source="thesis §4.4: 30 m/s (67 mph)"),
         "x_start": Param(0.0, "float", "m",
                          "position of the leading wheel at t = 0 (on the rigid entry rail; 0: "
-                         "its start, the thesis's time origin)"),
+                         "its start, the thesis's time origin)",
+                         source="thesis §2.2 and §6.6: wheel starts at x = 0 on the rigid rail"),
         "x_end": Param(0.0, "float", "m",
                        "the run ends when the last wheel reaches this position (0: the end of "
                        "the rigid exit rail)", "nonneg"),
@@ -611,10 +697,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "axle_offsets": Param([0.0], "floats", "m",
                               "moving_force: axle positions relative to the leading axle "
                               "(<= 0, one force per rail and axle)"),
-        "wheelset_mass": Param(1568.0, "float", "kg", "wheelset mass (thesis Table II)", "pos"),
+        "wheelset_mass": Param(1568.0, "float", "kg", "wheelset mass (thesis Table II)", "pos",
+                               source=f"{_T2}: mass 1568 kg"),
         "wheelset_roll_inertia": Param(656.0, "float", "kg m^2",
-                                       "wheelset roll inertia Ixx (thesis Table II)", "pos"),
-        "wheel_radius": Param(0.46, "float", "m", "wheel rolling radius (Hertz constant)", "pos"),
+                                       "wheelset roll inertia Ixx (thesis Table II)", "pos",
+                                       source=f"{_T2}: Ixx 656 kg m^2"),
+        "wheel_radius": Param(0.46, "float", "m", "wheel rolling radius (Hertz constant)", "pos",
+                              source="Jenkins et al. (1974) / benchmarks.md: R = 0.46 m"),
         "contact_span": Param(1.5, "float", "m",
                               "lateral distance of the two wheel-rail contact points", "pos"),
         "suspension_span": Param(2.0, "float", "m",
@@ -622,10 +711,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                  "pos"),
         "k_suspension": Param(25_000.0, "float", "N/m",
                               "wheelset: suspension stiffness per side (thesis Table II)",
-                              "nonneg"),
+                              "nonneg",
+                              source=f"{_T2}: K_l1 = k_l2 = 25000 (read as vertical, per side)"),
         "c_suspension": Param(1_000.0, "float", "N s/m",
                               "wheelset: suspension damping per side (thesis Table II)",
-                              "nonneg"),
+                              "nonneg",
+                              source=f"{_T2}: K_t1 = k_t2 = 1000 N.s/m (read as damping, per side; "
+                                     "see docs/thesis.md for the other reading)"),
         "preload": Param(0.0, "float", "N",
                          "wheelset: static downward force of the frame per side (share of a "
                          "car body; 0 in the thesis)", "nonneg"),
@@ -637,54 +729,71 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "conicity": Param(0.025, "float", "-",
                           "wheelset: equivalent tread conicity (UIC 1:40); the contact normals "
                           "lean inwards and couple lateral motion and the rails' lateral modes",
-                          "nonneg"),
+                          "nonneg", source="UIC 1:40 tread inclination"),
         "k_hertz": Param(0.0, "float", "N/m^1.5",
                          "Hertz constant K_H (0: Jenkins' formula from wheel_radius)", "nonneg"),
         "contact_damping": Param(0.0, "float", "N s/m^2",
                                  "Hertz contact damping C in F = K_H d^1.5 - C d' |d| (the "
-                                 "thesis's formula; it gives no value)", "nonneg"),
+                                 "thesis's formula; it gives no value)", "nonneg",
+                                 source="thesis §4.2 formula F = K_H d^1.5 + C d' |d|; C not "
+                                        "given"),
         "drop_height": Param(0.0, "float", "m",
                              "initial condition: 0 starts the vehicle at rest in static "
                              "equilibrium; > 0 drops it: at t = 0 the track is at rest and "
                              "every body hangs rigidly lifted from its static equilibrium so "
                              "that the wheels are this far above the rail (the thesis's "
                              "wheelset is 'dropped from a small distance', unspecified)",
-                             "nonneg"),
+                             "nonneg",
+                             source="thesis §2.2: 'dropped from a small distance'; not given"),
         "n_cars": Param(1, "int", "-", "vehicle: number of coupled cars in the train", "pos"),
         "car_mass": Param(32_000.0, "float", "kg", "vehicle: car body mass (defaults: Manchester "
-                          "Benchmark passenger coach, Iwnicki 1998)", "pos"),
+                          "Benchmark passenger coach, Iwnicki 1998)", "pos", source=_MANCHESTER),
         "car_pitch_inertia": Param(1.97e6, "float", "kg m^2", "vehicle: car body pitch inertia",
-                                   "pos"),
+                                   "pos", source=_MANCHESTER),
         "car_roll_inertia": Param(5.68e4, "float", "kg m^2", "vehicle: car body roll inertia",
-                                  "pos"),
-        "bogie_mass": Param(2_615.0, "float", "kg", "vehicle: bogie frame mass", "pos"),
+                                  "pos", source=_MANCHESTER),
+        "bogie_mass": Param(2_615.0, "float", "kg", "vehicle: bogie frame mass", "pos",
+                            source=_MANCHESTER),
         "bogie_pitch_inertia": Param(1_476.0, "float", "kg m^2", "vehicle: bogie pitch inertia",
-                                     "pos"),
+                                     "pos", source=_MANCHESTER),
         "bogie_roll_inertia": Param(1_722.0, "float", "kg m^2", "vehicle: bogie roll inertia",
-                                    "pos"),
-        "car_wheelset_mass": Param(1_813.0, "float", "kg", "vehicle: wheelset mass", "pos"),
+                                    "pos", source=_MANCHESTER),
+        "car_wheelset_mass": Param(1_813.0, "float", "kg", "vehicle: wheelset mass", "pos",
+                                   source=_MANCHESTER),
         "car_wheelset_roll_inertia": Param(1_120.0, "float", "kg m^2",
-                                           "vehicle: wheelset roll inertia", "pos"),
+                                           "vehicle: wheelset roll inertia", "pos",
+                                           source=_MANCHESTER),
         "k_primary": Param(1.22e6, "float", "N/m",
-                           "vehicle: primary suspension stiffness per axle box", "nonneg"),
+                           "vehicle: primary suspension stiffness per axle box", "nonneg",
+                           source=f"{_MANCHESTER}: 1.22 MN/m per axle box (TTB-2D, "
+                                  "github.com/DanielCanteroNTNU/TTB-2D "
+                                  "TrainProp_Manchester_BenchMark.m, uses 1.20 MN/m)"),
         "c_primary": Param(4.0e3, "float", "N s/m",
-                           "vehicle: primary suspension damping per axle box", "nonneg"),
+                           "vehicle: primary suspension damping per axle box", "nonneg",
+                           source=_MANCHESTER),
         "k_secondary": Param(4.3e5, "float", "N/m",
-                             "vehicle: secondary suspension stiffness per side", "nonneg"),
+                             "vehicle: secondary suspension stiffness per side", "nonneg",
+                             source=_MANCHESTER),
         "c_secondary": Param(2.0e4, "float", "N s/m",
-                             "vehicle: secondary suspension damping per side", "nonneg"),
+                             "vehicle: secondary suspension damping per side", "nonneg",
+                             source=_MANCHESTER),
         "k_antiroll": Param(940e3, "float", "N m/rad",
                             "vehicle: anti-roll bar stiffness per bogie (roll moment between "
-                            "car body and bogie frame per radian of relative roll)", "nonneg"),
+                            "car body and bogie frame per radian of relative roll)", "nonneg",
+                            source=f"{_MANCHESTER}: anti-roll bar 940 kN m/rad per bogie"),
         "primary_span": Param(2.0, "float", "m",
-                              "vehicle: lateral distance of the primary springs", "pos"),
+                              "vehicle: lateral distance of the primary springs", "pos",
+                              source=_MANCHESTER),
         "secondary_span": Param(2.0, "float", "m",
-                                "vehicle: lateral distance of the secondary springs", "pos"),
+                                "vehicle: lateral distance of the secondary springs", "pos",
+                                source=_MANCHESTER),
         "bogie_spacing": Param(19.0, "float", "m", "vehicle: distance between the bogie centres",
-                               "pos"),
-        "wheelbase": Param(2.56, "float", "m", "vehicle: axle distance within a bogie", "pos"),
+                               "pos", source=_MANCHESTER),
+        "wheelbase": Param(2.56, "float", "m", "vehicle: axle distance within a bogie", "pos",
+                           source=_MANCHESTER),
         "car_length": Param(26.4, "float", "m",
-                            "vehicle: length over couplers (distance of successive cars)", "pos"),
+                            "vehicle: length over couplers (distance of successive cars)", "pos",
+                            source="UIC-Z coach length over couplers (not in the benchmark)"),
         "coupler_stiffness": Param(0.0, "float", "N/m",
                                    "vehicle: vertical stiffness coupling successive car ends",
                                    "nonneg"),
@@ -721,7 +830,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "seed": Param(1, "int", "-", "random seed of the profile", "nonneg"),
         "wavelength_min": Param(1.524, "float", "m",
                                 "shortest wavelength of the random profile (the FRA spectra are "
-                                "fitted to 1.524-304.8 m, i.e. 5-1000 ft)", "pos"),
+                                "fitted to 1.524-304.8 m, i.e. 5-1000 ft)", "pos",
+                                source="FRA spectra fitted to 5-1000 ft (Hamid et al., "
+                                       "FRA/ORD-80/28, 1980; 1.524 m = 5 ft)"),
         "wavelength_max": Param(30.0, "float", "m", "longest wavelength of the random profile",
                                 "pos"),
         "flat_depth": Param(0.0, "float", "m", "wheel flat depth (0: no flat)", "nonneg"),
@@ -783,7 +894,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "time window [t0, t1] of the reconstructed fields (empty: all)"),
         "float32": Param(False, "bool", "-", "store reconstructed fields in single precision"),
         "stress_times": Param([0.54, 0.61], "floats", "s",
-                              "times of the element stress/strain fields (thesis: 0.54, 0.61 s)"),
+                              "times of the element stress/strain fields (thesis: 0.54, 0.61 s)",
+                              source="thesis Figs. 21-26: t = 0.54 s and 0.61 s"),
         "probes": Param([], "floats", "m",
                         "extra probe points as a flat list x1, y1, z1, x2, y2, z2, ..."),
         "probe_roles": Param([], "strs", "-",
@@ -942,198 +1054,78 @@ SCHEMA["train2"]["vehicle"] = Param(
     "force); {} = [vehicle]'s vehicle",
     choices=tuple(k for k in SCHEMA["vehicle"] if k not in TRAIN2_SHARED_VEHICLE_KEYS))
 
+
+class PresetValue(NamedTuple):
+    """A preset's value of one key and where it comes from."""
+
+    value: Any
+    source: str
+
+
 #: Values of the thesis's Table I where it differs from the APDL script
-#: (../shared/reference/benchmarks.md section 3). Layer depths are the same in
-#: both presets: Table I's "ballast 4.8 m" contradicts the APDL z-levels and
+#: (../shared/reference/benchmarks.md section 3), each with its source. Layer depths are the
+#: same in both presets: Table I's "ballast 4.8 m" contradicts the APDL z-levels and
 #: the thesis's own wave speeds. Table I gives neither torsion constants nor the
 #: sleeper's lateral second moment: those keep the APDL section's values.
-PRESETS: dict[str, dict[str, Any]] = {
+_PRESET_VALUES: dict[str, dict[str, PresetValue]] = {
     "apdl": {},
     "table1": {
-        "materials.ballast.nu": 0.3,
-        "materials.ballast.rho": 1300.0,
-        "materials.subballast.nu": 0.35,
-        "materials.subgrade.nu": 0.35,
-        "materials.sleeper.rho": 2750.0,
-        "pads.kx": 26.5e7, "pads.ky": 26.5e7, "pads.kz": 26.5e7,
-        "pads.cx": 4.6e4, "pads.cy": 4.6e4, "pads.cz": 4.6e4,
-        "sections.rail.area": 64.5e-4,
-        "sections.rail.iyy": 2010e-8,
-        "sections.rail.izz": 326e-8,
-        "sections.rail.shear_coefficient_y": 0.34,
-        "sections.rail.shear_coefficient_z": 0.34,
-        "sections.sleeper.area": 513.8e-4,
-        "sections.sleeper.iyy": 18907e-8,
-        "sections.sleeper.shear_coefficient_y": 0.83,
-        "sections.sleeper.shear_coefficient_z": 0.83,
+        "materials.ballast.nu": PresetValue(0.3, f"{_T1}: Poisson's ratio of the ballast 0.3"),
+        "materials.ballast.rho": PresetValue(1300.0, f"{_T1}: density of the ballast 1300"),
+        "materials.subballast.nu": PresetValue(
+            0.35, f"{_T1}: Poisson's ratio of the subballast 0.35"),
+        "materials.subgrade.nu": PresetValue(0.35, f"{_T1}: Poisson's ratio of the subgrade 0.35"),
+        "materials.sleeper.rho": PresetValue(2750.0, f"{_T1}: density of a sleeper 2750"),
+        **{f"pads.k{d}": PresetValue(26.5e7, f"{_T1}: stiffness coefficient of a pad 26.5e7")
+           for d in "xyz"},
+        **{f"pads.c{d}": PresetValue(4.6e4, f"{_T1}: damping coefficient of a pad 4.6e4")
+           for d in "xyz"},
+        "sections.rail.area": PresetValue(
+            64.5e-4, f"{_T1}: cross-sectional area of the rail 64.5e-4"),
+        "sections.rail.iyy": PresetValue(2010e-8, f"{_T1}: second moment of the rail Iyy 2010e-8"),
+        "sections.rail.izz": PresetValue(326e-8, f"{_T1}: second moment of the rail Izz 326e-8"),
+        "sections.rail.shear_coefficient_y": PresetValue(
+            0.34, f"{_T1}: Timoshenko shear coefficient 0.34"),
+        "sections.rail.shear_coefficient_z": PresetValue(
+            0.34, f"{_T1}: Timoshenko shear coefficient 0.34 (one value given, used for both "
+            "planes)"),
+        "sections.sleeper.area": PresetValue(
+            513.8e-4, f"{_T1}: cross-sectional area of a sleeper 513.8e-4"),
+        "sections.sleeper.iyy": PresetValue(
+            18907e-8, f"{_T1}: second moment of a sleeper 18907e-8"),
+        "sections.sleeper.shear_coefficient_y": PresetValue(
+            0.83, f"{_T1}: Timoshenko shear coefficient 0.83"),
+        "sections.sleeper.shear_coefficient_z": PresetValue(
+            0.83, f"{_T1}: Timoshenko shear coefficient 0.83 (one value given, used for both "
+            "planes)"),
     },
 }
-
-_APDL = "thesis App. A (APDL)"
-_T1 = "thesis Table I"
-_T2 = "thesis Table II"
-_RAIL_SEC = "App. A SECTYPE,1,BEAM,I / SECDATA,0.1524,0.07,0.19,0.0165,0.045,0.0175"
-_SLP_SEC = "App. A SECTYPE,2,BEAM,QUAD / SECDATA,-0.135,-0.11,.135,-.11,.090,.11,-.090,.11"
-_MANCHESTER = "Manchester Benchmark vehicle 1 (Iwnicki, Veh. Syst. Dyn. 30 (1998) 295-313)"
-
-#: Where the value of every thesis- or literature-derived key comes from, per preset:
-#: ``SOURCES[preset][key]`` (the ``apdl`` entries are the schema defaults). Keys that are
-#: numerical settings of this program (solver tolerances, output steps...) have none.
-SOURCES: dict[str, dict[str, str]] = {
-    "apdl": {
-        **{f"geometry.{k}": f"{_APDL}: {k.upper()}=" for k in (
-            "x0", "x1", "x2", "x3", "x4", "ys1", "ys2", "ys3", "ys4", "z0", "z1", "z2", "z3",
-            "z4", "xbb", "ybb", "zbb")},
-        "geometry.ys0": f"{_APDL}: YSO=8.25",
-        "geometry.ballast_top_half_width": f"{_APDL}: K,KP_SLP_END+9,X1,3.25,Z3",
-        "geometry.ballast_bottom_half_width": f"{_APDL}: K,KP_SLP_END+10,X1,3.75,Z2",
-        "track.rigid_length": f"{_APDL}: Rigid=3; {_T1}",
-        "track.rail_length": f"{_APDL}: Rail_length=21.6; {_T1}",
-        "track.gauge": f"{_APDL}: R_Gage=2*0.75565; {_T1}",
-        "track.sleeper_spacing": f"{_APDL}: Distance_betw_sleepers=0.6; {_T1}",
-        "track.n_sleepers": f"{_APDL}: No_sleeper_div_total=36 (+1)",
-        "track.sleeper_length": f"{_APDL}: K,...,Rigid,+-1.25,Z3; {_T1}",
-        "track.count": f"{_APDL}: one track",
-        "track.spacing": "not in the thesis (one track): 4.0 m, the usual track centre "
-                         "distance of European main lines (DB Ril 800.0130: >= 4.0 m)",
-        "building.footing_size": f"{_APDL}: FX1=2.4, FX4=3.6 (local system 11)",
-        "building.footing_height": f"{_APDL}: HSF=0.6 (the text's 1.2 m is not used)",
-        "building.column_size": f"{_APDL}: CX1=2.7, CX2=3.3",
-        "building.beam_width": f"{_APDL}: BEAM_WIDTH=0.6",
-        "building.beam_depth": f"{_APDL}: VEXT,A_BEAM1+1,...,0.6",
-        "building.slab_thickness": f"{_APDL}: VEXT,A_SLAB1+1,,0,,,0.2",
-        "building.wall_thickness": f"{_APDL}: WALL_WIDTH=0.3",
-        "building.z_slab1_base": f"{_APDL}: Z_SLAB1_BASE=4.2",
-        "building.z_slab2_base": f"{_APDL}: Z_SLAB2_BASE=8",
-        "building.storeys": f"{_APDL}: two slabs (A_SLAB1, A_SLAB2); thesis Fig. 13",
-        "building.slab_bases": f"{_APDL}: Z_SLAB1_BASE=4.2, Z_SLAB2_BASE=8 (z_slab*_base)",
-        **{f"building.bays_{d}": f"{_APDL}: one bay, four columns (CX1..CX2 at the corners)"
-           for d in "xy"},
-        **{f"building.spans_{d}": f"{_APDL}: one span, X3 - X2 - FX1 = 6 m" for d in "xy"},
-        "building.foundation": f"{_APDL}: four pad footings (FX1, FX4) with grade beams",
-        "building.rotation": f"{_APDL}: the walls are parallel to the track (no rotation)",
-        "usp.width": f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m",
-        **{f"materials.{m}.{k}": f"{_APDL}: MP,{cmd},{n},{v}"
-           for m, n, vals in (("rail", 1, ("210e9", "0.30", "7700")),
-                              ("rigid_rail", 2, ("210e10", "0.30", "7700")),
-                              ("sleeper", 3, ("64e9", "0.25", "2570")),
-                              ("ballast", 4, ("260e6", "0.25", "1800")),
-                              ("subballast", 5, ("200e06", "0.2", "1850")),
-                              ("subgrade", 6, ("200e6", "0.2", "1850")),
-                              ("concrete", 10, ("31e9", "0.25", "2500")))
-           for k, cmd, v in zip(("E", "nu", "rho"), ("EX", "PRXY", "DENS"), vals)},
-        **{f"materials.{m}.damping_ratio": "thesis §2.1: 3 % modal damping"
-           for m in ("rail", "rigid_rail", "sleeper", "ballast", "subballast", "subgrade",
-                     "concrete")},
-        # mitigation materials: not in the thesis (its future work); typical values
-        **{f"materials.trench_fill.{k}": "not in the thesis: EPS geofoam EPS 20 (EN 14933, "
-           "E 3-8 MPa, rho ~20 kg/m^3), the usual soft trench fill" for k in ("E", "nu", "rho")},
-        "materials.trench_fill.damping_ratio": "not in the thesis: the 3 % of the other "
-                                               "materials",
-        **{f"materials.wib.{k}": "not in the thesis: jet-grouted / cement-stabilised soil "
-           "(E 0.5-5 GPa, rho 2000-2200 kg/m^3)" for k in ("E", "nu", "rho")},
-        "materials.wib.damping_ratio": "not in the thesis: the 3 % of the other materials",
-        **{f"materials.fill.{k}": "not in the thesis: compacted granular embankment fill "
-           "(E 50-200 MPa, rho 1800-2000 kg/m^3)" for k in ("E", "nu", "rho")},
-        "materials.fill.damping_ratio": "not in the thesis: the 3 % of the other materials",
-        "track.embankment_height": f"{_APDL}: the track bed on the ground (Z1 = top of the "
-                                   "subgrade), no fill",
-        "track.embankment_slope": "not in the thesis: 1V:1.5H, the usual fill slope",
-        **{f"sections.rail.{k}": f"{_RAIL_SEC} (railvib_hpc.sections)" for k in (
-            "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
-        **{f"sections.sleeper.{k}": f"{_SLP_SEC} (railvib_hpc.sections)" for k in (
-            "area", "iyy", "izz", "j", "shear_coefficient_y", "shear_coefficient_z")},
-        **{f"pads.k{d}": f"{_APDL}: R,{r},70e8,5e5 (COMBIN14 KEYOPT(2)={o})"
-           for d, r, o in (("x", 7, 1), ("y", 8, 2), ("z", 9, 3))},
-        **{f"pads.c{d}": f"{_APDL}: R,{r},70e8,5e5 (COMBIN14 KEYOPT(2)={o})"
-           for d, r, o in (("x", 7, 1), ("y", 8, 2), ("z", 9, 3))},
-        "mesh.layout": "thesis App. A/B: divisions of the APDL script, 41,880 hexahedra "
-                       "(App. B element ranges)",
-        "mesh.rail_elements_per_bay": f"{_APDL}: No_rail_ele_betwn_sleeper=5",
-        "mesh.soil_elements_per_bay": f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2",
-        "mesh.soil_elements_per_bay_building": f"{_APDL}: No_soil_ele_betwn_sleeper_B=4",
-        "mesh.sleeper_outer_elements": f"{_APDL}: SLP_OUT_ELE=2",
-        "mesh.sleeper_middle_elements": f"{_APDL}: SLP_MID_ELE=4",
-        "mesh.shoulder_elements": f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)",
-        "mesh.size_building_y": f"{_APDL}: LESIZE,ALL,0.3 (building and soil across)",
-        "mesh.size_building_z": f"{_APDL}: EXTOPT,ESIZE,6 over 3.6 m (columns), walls 0.6 m",
-        "modal.n_modes": f"{_APDL}: MODOPT,LANB,300; thesis §3",
-        "modal.damping_ratio": "thesis §2.1: 3 % modal damping",
-        "modal.hex_formulation": f"{_APDL}: ET,2,SOLID185 (default KEYOPT(2)=0: B-bar)",
-        "modal.method": f"{_APDL}: MODOPT,LANB (block Lanczos)",
-        "modal.fix_sleeper_rotations": f"{_APDL}: ESEL,S,MAT,,3 / D,ALL,ROTX..ROTZ,0",
-        "modal.fix_rail_rotations_at_pads": f"{_APDL}: NSEL,S,NODE,,7,177,5 / D,ALL,ROT*,0",
-        "vehicle.type": "thesis §4.4: suspended wheelset (SAMS)",
-        "vehicle.speed": "thesis §4.4: 30 m/s (67 mph)",
-        "vehicle.x_start": "thesis §2.2 and §6.6: wheel starts at x = 0 on the rigid rail",
-        "vehicle.wheelset_mass": f"{_T2}: mass 1568 kg",
-        "vehicle.wheelset_roll_inertia": f"{_T2}: Ixx 656 kg m^2",
-        "vehicle.k_suspension": f"{_T2}: K_l1 = k_l2 = 25000 (read as vertical, per side)",
-        "vehicle.c_suspension": f"{_T2}: K_t1 = k_t2 = 1000 N.s/m (read as damping, per "
-                                "side; see docs/thesis.md for the other reading)",
-        "vehicle.wheel_radius": "Jenkins et al. (1974) / benchmarks.md: R = 0.46 m",
-        "vehicle.contact_damping": "thesis §4.2 formula F = K_H d^1.5 + C d' |d|; C not given",
-        "vehicle.drop_height": "thesis §2.2: 'dropped from a small distance'; not given",
-        "vehicle.conicity": "UIC 1:40 tread inclination",
-        "vehicle.car_mass": _MANCHESTER,
-        "vehicle.car_pitch_inertia": _MANCHESTER,
-        "vehicle.car_roll_inertia": _MANCHESTER,
-        "vehicle.bogie_mass": _MANCHESTER,
-        "vehicle.bogie_pitch_inertia": _MANCHESTER,
-        "vehicle.bogie_roll_inertia": _MANCHESTER,
-        "vehicle.car_wheelset_mass": _MANCHESTER,
-        "vehicle.car_wheelset_roll_inertia": _MANCHESTER,
-        "vehicle.k_primary": f"{_MANCHESTER}: 1.22 MN/m per axle box (TTB-2D, "
-                             "github.com/DanielCanteroNTNU/TTB-2D "
-                             "TrainProp_Manchester_BenchMark.m, uses 1.20 MN/m)",
-        "vehicle.c_primary": _MANCHESTER,
-        "vehicle.k_secondary": _MANCHESTER,
-        "vehicle.c_secondary": _MANCHESTER,
-        "vehicle.k_antiroll": f"{_MANCHESTER}: anti-roll bar 940 kN m/rad per bogie",
-        "vehicle.bogie_spacing": _MANCHESTER,
-        "vehicle.wheelbase": _MANCHESTER,
-        "vehicle.primary_span": _MANCHESTER,
-        "vehicle.secondary_span": _MANCHESTER,
-        "vehicle.car_length": "UIC-Z coach length over couplers (not in the benchmark)",
-        "irregularity.wavelength_min": "FRA spectra fitted to 5-1000 ft (Hamid et al., "
-                                       "FRA/ORD-80/28, 1980; 1.524 m = 5 ft)",
-        "output.stress_times": "thesis Figs. 21-26: t = 0.54 s and 0.61 s",
-    },
-    "table1": {
-        "materials.ballast.nu": f"{_T1}: Poisson's ratio of the ballast 0.3",
-        "materials.ballast.rho": f"{_T1}: density of the ballast 1300",
-        "materials.subballast.nu": f"{_T1}: Poisson's ratio of the subballast 0.35",
-        "materials.subgrade.nu": f"{_T1}: Poisson's ratio of the subgrade 0.35",
-        "materials.sleeper.rho": f"{_T1}: density of a sleeper 2750",
-        **{f"pads.k{d}": f"{_T1}: stiffness coefficient of a pad 26.5e7" for d in "xyz"},
-        **{f"pads.c{d}": f"{_T1}: damping coefficient of a pad 4.6e4" for d in "xyz"},
-        "sections.rail.area": f"{_T1}: cross-sectional area of the rail 64.5e-4",
-        "sections.rail.iyy": f"{_T1}: second moment of the rail Iyy 2010e-8",
-        "sections.rail.izz": f"{_T1}: second moment of the rail Izz 326e-8",
-        "sections.rail.shear_coefficient_y": f"{_T1}: Timoshenko shear coefficient 0.34",
-        "sections.rail.shear_coefficient_z": f"{_T1}: Timoshenko shear coefficient 0.34 "
-                                             "(one value given, used for both planes)",
-        "sections.sleeper.area": f"{_T1}: cross-sectional area of a sleeper 513.8e-4",
-        "sections.sleeper.iyy": f"{_T1}: second moment of a sleeper 18907e-8",
-        "sections.sleeper.shear_coefficient_y": f"{_T1}: Timoshenko shear coefficient 0.83",
-        "sections.sleeper.shear_coefficient_z": f"{_T1}: Timoshenko shear coefficient 0.83 "
-                                                "(one value given, used for both planes)",
-    },
-}
-# the geometry entries name the APDL variable; add its value
-for _key, _text in list(SOURCES["apdl"].items()):
-    if _key.startswith("geometry.") and _text.endswith("="):
-        _leaf = _key.split(".")[1]
-        _node = SCHEMA["geometry"][_leaf]
-        SOURCES["apdl"][_key] = f"{_text}{_node.default:g}"
+#: The keys each preset sets and their values: ``PRESETS[preset][key]`` (``apdl``: none, the
+#: schema defaults).
+PRESETS: dict[str, dict[str, Any]] = {
+    name: {key: entry.value for key, entry in values.items()}
+    for name, values in _PRESET_VALUES.items()}
+#: Where each preset value comes from: ``PRESET_SOURCES[preset][key]``; the defaults' own
+#: sources are :attr:`Param.source`.
+PRESET_SOURCES: dict[str, dict[str, str]] = {
+    name: {key: entry.source for key, entry in values.items()}
+    for name, values in _PRESET_VALUES.items()}
 
 
 def source(key: str, preset: str = "apdl") -> str:
     """Where the value of ``key`` comes from in ``preset`` ('' for program settings).
 
-    A key the preset does not set takes the ``apdl`` (default) source.
+    A key the preset does not set takes the source of its default (:attr:`Param.source`).
     """
-    return SOURCES.get(preset, {}).get(key) or SOURCES["apdl"].get(key, "")
+    own = PRESET_SOURCES.get(preset, {}).get(key)
+    if own:
+        return own
+    node: Any = SCHEMA
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return ""
+        node = node[part]
+    return node.source if isinstance(node, Param) else ""
 
 
 def iter_params(tree: dict[str, Any] | None = None, prefix: str = ""):

@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 
 from railvib_hpc.cli import run
-from railvib_hpc.config import ALL_KEYS, load_case, parse_override
+from railvib_hpc.config import load_case, parse_override
 from railvib_hpc.docs import case_reference_markdown, default_case_toml
 from railvib_hpc.errors import CaseError
+from railvib_hpc.validation import ALL_KEYS
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -65,12 +66,12 @@ def test_defaults_equal_thesis_apdl():
 
 
 def test_every_preset_value_cites_its_source():
-    from railvib_hpc.schema import PRESETS, SOURCES, source
+    from railvib_hpc.schema import PRESET_SOURCES, PRESETS, source
 
     for preset, values in PRESETS.items():
         for key in values:
-            assert SOURCES[preset].get(key), (preset, key)
-    for preset, sources in SOURCES.items():
+            assert PRESET_SOURCES[preset].get(key), (preset, key)
+    for preset, sources in PRESET_SOURCES.items():
         unknown = [k for k in sources if k not in ALL_KEYS]
         assert not unknown, (preset, unknown)
     # every default that comes from the thesis's model or data names where it comes from

@@ -31,17 +31,20 @@ how well the modes represent wave propagation.
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case, track_lift
-from ..errors import UserError
+from ..config import Case
 from ..io.stage_checks import CHECKS
-from ..io.stage_files import forget, output_lock, provenance, require_inputs, write_json
+from ..io.stage_files import require_inputs, write_json
+from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
+from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
+from ..site import track_lift
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
 from .waves import wave_arrival, wave_speeds  # re-exported
 
@@ -49,34 +52,8 @@ if TYPE_CHECKING:
     from mpi4py import MPI
 
 
-class AssessStageError(UserError):
-    """Missing or inconsistent inputs of the assessment."""
-
-
-def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
-    """Probe histories from ``probes.h5`` (layout of :mod:`railvib_hpc.reconstruct.probes`)."""
-    import h5py
-
-    if not path.exists():
-        raise AssessStageError(f"{path} not found: run 'railvib reconstruct' first")
-    out = {}
-    with h5py.File(path, "r") as f:
-        if int(f.attrs.get("complete", 1)) != 1:
-            raise AssessStageError(f"{path} is incomplete: rerun 'railvib reconstruct'")
-        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["names"][()]]
-        coords = f["coords"][()]
-        for name, xyz in zip(names, coords):
-            g = f[f"probes/{name}"]
-            role = g.attrs.get("role")
-            if role is None:
-                raise AssessStageError(f"{path}: probe '{name}' has no role (file written by "
-                                       "an older version): rerun 'railvib run' (modal and "
-                                       "reconstruct recompute their files)")
-            out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
-                         "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
-                         "coords": np.asarray(xyz, dtype=float),
-                         "role": role.decode() if isinstance(role, bytes) else str(role)}
-    return out
+#: The assessment's input errors: those of ``probes.h5`` (re-exported name).
+AssessStageError = ProbesFileError
 
 
 def _contact(out_dir: Path, solver: str):
@@ -254,10 +231,11 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
 
-    rep = rep or Reporter(0)
+    ctx = StageContext(case, out_dir, rep=rep)
+    rep = ctx.rep
     solver = solver_of(out_dir)
     upstream = verify_chain(case, out_dir, solver)
-    forget(out_dir / "assessment.json")
+    ctx.discard(out_dir / "assessment.json")
     hist = read_probes(out_dir / "probes.h5")
     a = case["assessment"]
     results = {}
@@ -315,7 +293,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                "floors": floors,
                "report": {k: str(p) for k, p in files.items()}}
     write_json(out_dir / "assessment.json", json.loads(json.dumps(summary, default=float)),
-               provenance("assessment.json", case, upstream))
+               ctx.provenance("assessment.json", upstream))
     rep.info(format_table(results))
     rep.info(format_floor_table(floors))
     rep.info(format_thesis_table(rows))
@@ -405,7 +383,7 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
 
 def _site_summary(case: Case) -> list[str]:
     """The building and the tracks in one line each."""
-    from ..mbs.stage import tracks_line
+    from ..mbs.case_vehicle import tracks_line
     from ..mesh.building import Building
     from ..mesh.interfaces import site_line
 
@@ -445,10 +423,62 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
             f"transient.h5 inputs  sha256 {key}"]
 
 
+@dataclass(frozen=True)
+class AssessmentOutput(StageOutput):
+    """What the ``assess`` stage returns (the API's ``AssessResult`` has these fields).
+
+    Attributes
+    ----------
+    assessment_json
+        Everything assessed (``results``, wave arrivals, thesis comparison).
+    report_html, report_md, report_json
+        The report.
+    verdict
+        ``{probe: passed}`` (True, False, or None when undetermined).
+    max_utilisation
+        ``{probe: largest value / limit over the binding standards}``.
+    """
+
+    assessment_json: Path
+    report_html: Path | None
+    report_md: Path | None
+    report_json: Path | None
+    verdict: dict[str, bool | None]
+    max_utilisation: dict[str, float | None]
+
+    @classmethod
+    def of_summary(cls, summary: dict, out_dir: Path) -> AssessmentOutput:
+        """The output of an assessment's summary (:func:`assess_case`) in ``out_dir``; it is
+        always computed anew (``reused`` False)."""
+        report = {k: Path(v) for k, v in summary.get("report", {}).items()}
+        utilisation: dict[str, float | None] = {}
+        for name, res in summary.get("results", {}).items():
+            binding = [b.get("utilisation") for b in res.get("standards", {}).values()
+                       if not b.get("comparison_only") and b.get("utilisation") is not None]
+            utilisation[name] = float(max(binding)) if binding else None
+        return cls(reused=False, summary=summary, assessment_json=out_dir / "assessment.json",
+                   report_html=report.get("html"), report_md=report.get("markdown"),
+                   report_json=report.get("json"), verdict=dict(summary.get("verdict", {})),
+                   max_utilisation=utilisation)
+
+
+def compute(ctx: StageContext) -> AssessmentOutput:
+    """``railvib assess`` (collective): rank 0 verifies the inputs and assesses
+    (:func:`assess_case`), every rank gets the output."""
+    with ctx.rep.stage("assess"):
+        return on_root(lambda: AssessmentOutput.of_summary(
+            assess_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
+
+
+STAGE = Stage(name="assess", help="evaluate the building response against vibration "
+              "standards", products=("assessment.json",),
+              reads=("modes.h5", "static.h5", "mbs.h5", "fields.h5", "probes.h5",
+                     *TRANSIENT_INPUTS), compute=compute)
+
+
 def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
                      petsc_options: list[str] | None = None) -> dict:
-    """``railvib assess`` (collective): rank 0 verifies the inputs and assesses
-    (:func:`assess_case`), every rank gets the summary; holds the output folder's lock."""
-    out_dir = Path(out_dir)
-    with output_lock(out_dir, comm, "assess", rep=rep), rep.stage("assess"):
-        return on_root(lambda: assess_case(case, out_dir, rep), comm)
+    """The ``assess`` stage from a script: :data:`STAGE` through the runner (the folder's
+    lock; no ``run.json`` entry). Returns its summary (every rank)."""
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="assess")
+    return dict(runner.run(STAGE, case, record=False).result.summary)

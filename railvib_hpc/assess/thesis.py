@@ -31,7 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Case, track_lift
+from ..config import Case
+from ..site import track_lift
 
 #: What the thesis reports, with where (thesis.md / benchmarks.md section 2).
 THESIS = {
@@ -177,91 +178,111 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
     list of dict
         ``quantity``, ``thesis``, ``railvib``, ``explanation`` (strings).
     """
-    import h5py
-
-    from .waves import wave_speeds
-
-    rows = []
     modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
     have_modes = modal and modes_path.exists()
-    freq = np.zeros(0)
-    counts: dict[str, int] = {}
-    n_nodes = 0
-    if have_modes:
-        from ..schema import PART_ID
+    freq, counts, n_nodes = _read_modes(modes_path) if have_modes else (np.zeros(0), {}, 0)
+    rows = _model_rows(case, counts, n_nodes) if counts else []
+    rows.append(_section_row(case))
+    if freq.size:
+        rows += _mode_rows(case, freq, modes_path)
+    c_peaks = {}
+    if have_modes and mbs_path.exists():
+        probes = {k: hist[k]["coords"] for k in ("slab1", "slab2") if k in hist}
+        if probes:
+            c_peaks = appendix_c_peaks(modes_path, mbs_path, probes)
+    rows += _response_rows(case, ours, c_peaks)
+    rows += _wave_rows(case, arrival)
+    rows += _study_rows(case)
+    return rows
 
-        with h5py.File(modes_path, "r") as f:
-            freq = f["modes/frequency_hz"][()]
-            n_nodes = int(f["mesh/points"].shape[0])
-            part = f["mesh/hex_part"][()]
-        counts = {p: int(np.sum(part == PART_ID[p])) for p in ("ballast", "subballast",
-                                                               "subgrade")}
-        counts["concrete"] = int(np.sum(np.isin(part, [PART_ID[p] for p in _CONCRETE])))
+
+def _read_modes(modes_path: Path) -> tuple[np.ndarray, dict[str, int], int]:
+    """The frequencies, the hexahedra per part group of :data:`THESIS_HEXES` and the node
+    count of ``modes.h5``."""
+    import h5py
+
+    from ..schema import PART_ID
+
+    with h5py.File(modes_path, "r") as f:
+        freq = f["modes/frequency_hz"][()]
+        n_nodes = int(f["mesh/points"].shape[0])
+        part = f["mesh/hex_part"][()]
+    counts = {p: int(np.sum(part == PART_ID[p])) for p in ("ballast", "subballast",
+                                                           "subgrade")}
+    counts["concrete"] = int(np.sum(np.isin(part, [PART_ID[p] for p in _CONCRETE])))
+    return freq, counts, n_nodes
+
+
+def _model_rows(case: Case, counts: dict[str, int], n_nodes: int) -> list[dict]:
+    """The model size: hexahedra per part group and nodes."""
     layout = case["mesh.layout"] if not case["mesh.file"] else f"file {case['mesh.file']}"
-    # ---- model size
-    if counts:
-        same = all(counts[k] == v for k, v in THESIS_HEXES.items())
-        ours_txt = ", ".join(f"{k} {counts[k]:,}" for k in THESIS_HEXES)
-        rows.append(_row(
-            "hexahedra (App. B element ranges)",
-            ", ".join(f"{k} {v:,}" for k, v in THESIS_HEXES.items()),
-            ours_txt + f" = {sum(counts.values()):,} (layout {layout}, refinement "
-            f"{case['mesh.refinement']:g})",
-            "identical: the thesis layout reproduces the APDL divisions" if same else
-            f"mesh.layout = '{layout}' / refinement {case['mesh.refinement']:g}: "
-            "mesh.layout = 'thesis' at refinement 1 gives the thesis's counts"))
-        rows.append(_row(
-            "nodes", f"{THESIS_NODES:,} (App. C: NN)", f"{n_nodes:,}",
-            f"a conforming mesh with Appendix B's 41,880 hexahedra has "
-            f"{THESIS_LAYOUT_NODES:,} nodes (this project, thesis layout); the printed count "
-            f"is {THESIS_NODES - THESIS_LAYOUT_NODES:,} "
-            "higher and follows from no documented mesh: compare element counts, not "
-            "node counts"))
-    # ---- sections
+    same = all(counts[k] == v for k, v in THESIS_HEXES.items())
+    ours_txt = ", ".join(f"{k} {counts[k]:,}" for k in THESIS_HEXES)
+    return [
+        _row("hexahedra (App. B element ranges)",
+             ", ".join(f"{k} {v:,}" for k, v in THESIS_HEXES.items()),
+             ours_txt + f" = {sum(counts.values()):,} (layout {layout}, refinement "
+             f"{case['mesh.refinement']:g})",
+             "identical: the thesis layout reproduces the APDL divisions" if same else
+             f"mesh.layout = '{layout}' / refinement {case['mesh.refinement']:g}: "
+             "mesh.layout = 'thesis' at refinement 1 gives the thesis's counts"),
+        _row("nodes", f"{THESIS_NODES:,} (App. C: NN)", f"{n_nodes:,}",
+             f"a conforming mesh with Appendix B's 41,880 hexahedra has "
+             f"{THESIS_LAYOUT_NODES:,} nodes (this project, thesis layout); the printed count "
+             f"is {THESIS_NODES - THESIS_LAYOUT_NODES:,} "
+             "higher and follows from no documented mesh: compare element counts, not "
+             "node counts"),
+    ]
+
+
+def _section_row(case: Case) -> dict:
+    """The rail section: APDL ``SECDATA`` against Table I."""
     sec = case["sections.rail"]
-    rows.append(_row(
+    return _row(
         "rail section A / I_vert",
         "Table I: 64.5 cm² / 2010 cm⁴; APDL SECDATA: 79.1 cm² / 3956 cm⁴",
         f"{sec['area'] * 1e4:.1f} cm² / {sec['iyy'] * 1e8:.0f} cm⁴ (preset "
         f"{case['case.preset']})",
         "BEAM188 takes its section from SECTYPE/SECDATA, so the solved rail had "
         f"{79.13 / 64.5:.2f}x Table I's area and {3956 / 2010:.2f}x its bending stiffness "
-        "(railvib_hpc.sections); case.preset = 'table1' uses Table I"))
-    # ---- modes and band
-    if freq.size:
-        n, f_top = freq.size, float(freq[-1])
-        w_top = weyl_count(case, f_top)
-        w_band = weyl_count(case, THESIS_BAND_HZ)
-        scaled = n * (THESIS_BAND_HZ / f_top) ** 3
-        band_n = int(np.sum(freq <= THESIS_BAND_HZ))
-        covered = f_top >= THESIS_BAND_HZ
-        rows.append(_row(
-            "modes: count and band",
-            f"{THESIS_N_MODES} modes, {THESIS_F1_HZ}-{THESIS_BAND_HZ} Hz",
-            f"{n} modes, {freq[0]:.2f}-{f_top:.2f} Hz"
-            + (f"; {band_n} modes below {THESIS_BAND_HZ} Hz" if covered else ""),
-            f"Weyl's law for this soil box gives {w_top:.0f} modes below {f_top:.1f} Hz "
-            f"(computed: {n}) and {w_band:.0f} below {THESIS_BAND_HZ} Hz; scaling this "
-            f"spectrum (N ~ f^3) gives {scaled:.0f}. 300 modes reach {THESIS_BAND_HZ} Hz "
-            f"only with {w_band / THESIS_N_MODES:.1f}x fewer modes per band than the "
-            "domain has: no documented variant does. The thesis's band: modal.f_max = "
-            f"{THESIS_BAND_HZ} (railvib study thesis compares both)"))
-        shares = concrete_energy_shares(modes_path, min(2, n))
-        rows.append(_row(
-            "first natural frequency", f"{THESIS_F1_HZ} Hz", f"{freq[0]:.3f} Hz"
-            + (f" (mode 2: {freq[1]:.3f} Hz)" if n > 1 else ""),
-            ("modes 1-2 are the building's sway: "
-             + " and ".join(f"{100 * s:.0f} %" for s in shares)
-             + " of their kinetic energy is in the concrete; the thesis's lowest mode is "
-             f"very likely the same pair ({100 * (freq[0] / THESIS_F1_HZ - 1):+.1f} %)")
-            if shares else "this model has no building, the thesis's lowest mode is the "
-            "building's sway: not comparable"))
-    # ---- accelerations
-    c_peaks = {}
-    if have_modes and mbs_path.exists():
-        probes = {k: hist[k]["coords"] for k in ("slab1", "slab2") if k in hist}
-        if probes:
-            c_peaks = appendix_c_peaks(modes_path, mbs_path, probes)
+        "(railvib_hpc.sections); case.preset = 'table1' uses Table I")
+
+
+def _mode_rows(case: Case, freq: np.ndarray, modes_path: Path) -> list[dict]:
+    """The mode count and band, and the first natural frequency."""
+    n, f_top = freq.size, float(freq[-1])
+    w_top = weyl_count(case, f_top)
+    w_band = weyl_count(case, THESIS_BAND_HZ)
+    scaled = n * (THESIS_BAND_HZ / f_top) ** 3
+    band_n = int(np.sum(freq <= THESIS_BAND_HZ))
+    covered = f_top >= THESIS_BAND_HZ
+    rows = [_row(
+        "modes: count and band",
+        f"{THESIS_N_MODES} modes, {THESIS_F1_HZ}-{THESIS_BAND_HZ} Hz",
+        f"{n} modes, {freq[0]:.2f}-{f_top:.2f} Hz"
+        + (f"; {band_n} modes below {THESIS_BAND_HZ} Hz" if covered else ""),
+        f"Weyl's law for this soil box gives {w_top:.0f} modes below {f_top:.1f} Hz "
+        f"(computed: {n}) and {w_band:.0f} below {THESIS_BAND_HZ} Hz; scaling this "
+        f"spectrum (N ~ f^3) gives {scaled:.0f}. 300 modes reach {THESIS_BAND_HZ} Hz "
+        f"only with {w_band / THESIS_N_MODES:.1f}x fewer modes per band than the "
+        "domain has: no documented variant does. The thesis's band: modal.f_max = "
+        f"{THESIS_BAND_HZ} (railvib study thesis compares both)")]
+    shares = concrete_energy_shares(modes_path, min(2, n))
+    rows.append(_row(
+        "first natural frequency", f"{THESIS_F1_HZ} Hz", f"{freq[0]:.3f} Hz"
+        + (f" (mode 2: {freq[1]:.3f} Hz)" if n > 1 else ""),
+        ("modes 1-2 are the building's sway: "
+         + " and ".join(f"{100 * s:.0f} %" for s in shares)
+         + " of their kinetic energy is in the concrete; the thesis's lowest mode is "
+         f"very likely the same pair ({100 * (freq[0] / THESIS_F1_HZ - 1):+.1f} %)")
+        if shares else "this model has no building, the thesis's lowest mode is the "
+        "building's sway: not comparable"))
+    return rows
+
+
+def _response_rows(case: Case, ours: dict, c_peaks: dict[str, float]) -> list[dict]:
+    """The peak accelerations of the slabs and floors and the building's displacements."""
+    rows = []
     drop = case["vehicle.drop_height"]
     start = (f"a {drop * 1e3:g} mm drop" if drop > 0 else
              "a start at rest in static equilibrium")
@@ -295,48 +316,59 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
                          f"thesis / railvib = {THESIS[key] / val:.1f}; quasi-static response "
                          "to the wheel load, driven by the same start" if val else
                          "needs fields.h5 (railvib reconstruct)"))
-    # ---- wave arrivals on the thesis's clock
-    c_p, c_s = wave_speeds(case)
-    if arrival is not None:
-        for key, wave, c in (("p_wave_arrival_basement_wall", "P", c_p),
-                             ("s_wave_arrival_basement_wall", "S", c_s)):
-            t_an = arrival["t_entry"] + arrival["distance"] / c
-            rows.append(_row(
-                f"{wave}-wave arrival, far end of the basement wall",
-                f"{THESIS[key]:g} s (20.2 m / {THESIS[key] - 0.1:.2f} s = "
-                f"{THESIS_WAVE_DISTANCE / (THESIS[key] - 0.1):.0f} m/s)",
-                f"analytic {t_an:.3f} s; detected onset {arrival['detected']:.3f} s",
-                f"thesis clock: t = 0 with the wheel at x = 0, flexible rail entered at "
-                f"{arrival['t_entry']:.3f} s; probe basement_wall_far (far end of the "
-                f"track-side wall, mid-height) at r = {arrival['distance']:.2f} m from the "
-                f"nearer rail at the entry (the thesis's 20.2 m: "
-                f"{arrival['distance_far_rail']:.2f} m from the far rail to the base of that "
-                f"wall end), c_{wave} = {c:.1f} m/s. A truncated modal "
-                "basis is not causal (every mode responds at once): the detected onset is "
-                "where the response first reaches "
-                f"{100 * case['assessment.wave_threshold']:g} % of its peak"))
-    # ---- reflection study and Table II
-    rows.append(_row(
-        "reflection study (§6.7)",
-        "Model 1: 3 m deep subgrade; Model 2: 5 m; Model 3: Model 2 + 2 m length, + 6 m "
-        "width beyond the building; 'unchanged'",
-        "railvib study reflection: model1 = 3 m (z0 raised 1.8 m), model2 = the APDL domain "
-        "(4.8 m), model3 = model2 + 2 m each end + 6 m width, larger = reference",
-        "labels follow the thesis's text; the APDL listing's 4.8 m subgrade is the "
-        "thesis's '5 m' Model 2 (0.6 m and 2.4 m below the 2.4 m-deep building base)"))
-    v = case["vehicle"]
-    rows.append(_row(
-        "Table II (wheelset)",
-        "mass 1568 kg, Ixx 656, Iyy 168, Izz 13500 kg m²; K_l 25000, K_t 1000 'N.s/m', "
-        "c_l 0, c_t blank",
-        f"{v['wheelset_mass']:g} kg, Ixx {v['wheelset_roll_inertia']:g} kg m², "
-        f"k {v['k_suspension']:g} N/m, c {v['c_suspension']:g} N s/m per side; static "
-        f"wheel load {0.5 * v['wheelset_mass'] * 9.81 / 1e3:.2f} kN",
-        "garbled table: read as vertical stiffness 25 kN/m with 1 kN s/m damping per side. "
-        "Other reading (units shifted one row): k_l 25 kN/m, k_t 1 kN/m lateral, no "
-        "damping (c_l = 0): --set vehicle.c_suspension=0 --set vehicle.k_lateral=1000. "
-        "The static wheel load (7.69 kN) is the same in both"))
     return rows
+
+
+def _wave_rows(case: Case, arrival: dict | None) -> list[dict]:
+    """The P- and S-wave arrivals at the far end of the basement wall, on the thesis's clock."""
+    from .waves import wave_speeds
+
+    c_p, c_s = wave_speeds(case)
+    if arrival is None:
+        return []
+    rows = []
+    for key, wave, c in (("p_wave_arrival_basement_wall", "P", c_p),
+                         ("s_wave_arrival_basement_wall", "S", c_s)):
+        t_an = arrival["t_entry"] + arrival["distance"] / c
+        rows.append(_row(
+            f"{wave}-wave arrival, far end of the basement wall",
+            f"{THESIS[key]:g} s (20.2 m / {THESIS[key] - 0.1:.2f} s = "
+            f"{THESIS_WAVE_DISTANCE / (THESIS[key] - 0.1):.0f} m/s)",
+            f"analytic {t_an:.3f} s; detected onset {arrival['detected']:.3f} s",
+            f"thesis clock: t = 0 with the wheel at x = 0, flexible rail entered at "
+            f"{arrival['t_entry']:.3f} s; probe basement_wall_far (far end of the "
+            f"track-side wall, mid-height) at r = {arrival['distance']:.2f} m from the "
+            f"nearer rail at the entry (the thesis's 20.2 m: "
+            f"{arrival['distance_far_rail']:.2f} m from the far rail to the base of that "
+            f"wall end), c_{wave} = {c:.1f} m/s. A truncated modal "
+            "basis is not causal (every mode responds at once): the detected onset is "
+            "where the response first reaches "
+            f"{100 * case['assessment.wave_threshold']:g} % of its peak"))
+    return rows
+
+
+def _study_rows(case: Case) -> list[dict]:
+    """Which settings correspond to the thesis's reflection models and its Table II."""
+    v = case["vehicle"]
+    return [
+        _row("reflection study (§6.7)",
+             "Model 1: 3 m deep subgrade; Model 2: 5 m; Model 3: Model 2 + 2 m length, + 6 m "
+             "width beyond the building; 'unchanged'",
+             "railvib study reflection: model1 = 3 m (z0 raised 1.8 m), model2 = the APDL "
+             "domain (4.8 m), model3 = model2 + 2 m each end + 6 m width, larger = reference",
+             "labels follow the thesis's text; the APDL listing's 4.8 m subgrade is the "
+             "thesis's '5 m' Model 2 (0.6 m and 2.4 m below the 2.4 m-deep building base)"),
+        _row("Table II (wheelset)",
+             "mass 1568 kg, Ixx 656, Iyy 168, Izz 13500 kg m²; K_l 25000, K_t 1000 'N.s/m', "
+             "c_l 0, c_t blank",
+             f"{v['wheelset_mass']:g} kg, Ixx {v['wheelset_roll_inertia']:g} kg m², "
+             f"k {v['k_suspension']:g} N/m, c {v['c_suspension']:g} N s/m per side; static "
+             f"wheel load {0.5 * v['wheelset_mass'] * 9.81 / 1e3:.2f} kN",
+             "garbled table: read as vertical stiffness 25 kN/m with 1 kN s/m damping per "
+             "side. Other reading (units shifted one row): k_l 25 kN/m, k_t 1 kN/m lateral, "
+             "no damping (c_l = 0): --set vehicle.c_suspension=0 --set "
+             "vehicle.k_lateral=1000. The static wheel load (7.69 kN) is the same in both"),
+    ]
 
 
 def _fmt(v: float | None, unit: str) -> str:

@@ -16,8 +16,8 @@ def wave_speeds(case: Case) -> tuple[float, float]:
     """P- and S-wave speeds of the subgrade [m/s]; of the top soil layer when the soil is
     layered (``soil.layers``: the path along the surface; a head wave through a stiffer
     layer below can arrive earlier at a distance)."""
-    from ..config import soil_layers, solid_material
     from ..fem.boundary import wave_speeds as material_wave_speeds
+    from ..site import soil_layers, solid_material
 
     layers = soil_layers(case)
     mat = solid_material(case, layers[0]["part"] if layers else "subgrade")

@@ -1,9 +1,10 @@
 """``run.json``: what each stage call in an output folder cost, and with which software.
 
-Every stage call made through :func:`railvib_hpc.pipeline.call_stage` (every ``railvib``
-stage command, ``railvib run``, and the Python API's :class:`~railvib_hpc.api.Pipeline`)
-appends one entry to ``<out>/run.json`` and replaces the stage's entry in its ``stages``
-table. The file is rewritten atomically through the stage-file layer
+Every stage call made through the runner (:class:`~railvib_hpc.io.stage_protocol.StageRunner`:
+every ``railvib`` stage command, ``railvib run``, the Python API's
+:class:`~railvib_hpc.api.Pipeline` and the studies' variants) appends one entry to
+``<out>/run.json`` and replaces the stage's entry in its ``stages`` table. The file is
+rewritten atomically through the stage-file layer
 (:func:`~railvib_hpc.io.stage_files.atomic_file`: temporary name, fsync, rename) by rank 0
 while the output folder's lock is held, so concurrent commands cannot interleave.
 
@@ -240,14 +241,17 @@ def _plain(x: Any) -> Any:
 
 # ----------------------------------------------------------------------------- recording
 class StageCall:
-    """What :func:`record_stage` yields: give it the stage's summary with :meth:`done`."""
+    """What :func:`record_stage` yields: give it the stage's result with :meth:`done`."""
 
     def __init__(self) -> None:
-        self.summary: dict | None = None
+        self.reused: Any = None
 
-    def done(self, summary: dict | None) -> None:
-        """The stage returned ``summary`` (its ``reused`` goes into the entry)."""
-        self.summary = summary
+    def done(self, result: Any) -> None:
+        """The stage returned ``result``: its summary dict, or a result object with one
+        (:class:`~railvib_hpc.io.stage_protocol.StageOutput`); the summary's ``reused``
+        goes into the entry."""
+        summary = result if isinstance(result, dict) else getattr(result, "summary", None)
+        self.reused = summary.get("reused") if summary is not None else None
 
 
 @contextlib.contextmanager
@@ -270,11 +274,10 @@ def record_stage(out_dir: str | os.PathLike, comm: MPI.Comm | None, stage: str, 
     identity = _case_identity(case)
 
     def entry(status: str, peaks: list[float], measure: str, hosts: list[str]) -> dict:
-        reused = (call.summary or {}).get("reused") if call.summary is not None else None
         return {"stage": stage, "status": status, "started": started, "finished": _now(),
                 "wall_s": time.perf_counter() - t0,
                 "substages": [[n, t] for n, t in (rep.timings[n_timed:] if rep else [])],
-                "reused": reused, "ranks": size, "hosts": sorted(set(hosts)),
+                "reused": call.reused, "ranks": size, "hosts": sorted(set(hosts)),
                 "peak_rss_gb_per_rank": peaks, "peak_rss_gb_total": float(sum(peaks)),
                 "peak_rss_gb_max": float(max(peaks)) if peaks else None,
                 "memory_measure": measure, "command": command, **identity,

@@ -350,8 +350,14 @@ _MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("doma
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).
 MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")
+#: The damping settings of [modal] and [pads] (and the materials' ratios): not the modes.
+MODAL_DAMPING_KEYS = ("damping_ratio", "damping")
 #: Damping settings and the solver layout do not change the modes.
-MODAL_ONLY_EXCLUDED = ("damping_ratio", "damping", *MODAL_SOLVER_LAYOUT)
+MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
+#: A band of the band-sliced solve (its cache in ``<out>/bands``) depends on [modal] as the
+#: modes do, except on how many modes up to which frequency are wanted and on the basis
+#: and shift of an unsliced solve (:func:`railvib_hpc.modal.band_solve.cache_key`).
+BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
                   ("boundary", ()))
@@ -459,6 +465,18 @@ def spec(name: str) -> StageFile:
     except KeyError:
         raise KeyError(f"{name} is not a stage file; known: {', '.join(STAGE_FILES)}") \
             from None
+
+
+def whole_sections(name: str) -> tuple[str, ...]:
+    """The case sections stage file ``name`` depends on whole (no key left out below them),
+    in table order.
+
+    Examples
+    --------
+    >>> whole_sections("mesh.h5")[:4]
+    ('geometry', 'track', 'building', 'mesh')
+    """
+    return tuple(k for k, left_out in spec(name).inputs if k and "." not in k and not left_out)
 
 
 def flat_case(data: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

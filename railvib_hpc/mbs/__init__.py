@@ -12,6 +12,8 @@ Pure numpy, meant to run on rank 0. Modules:
 * :mod:`.static_correction` -- residual flexibility of the truncated modes at the wheels;
 * :mod:`.irregularity` -- rail profiles (file, FRA/ISO 8608 spectra) and wheel flats;
 * :mod:`.train` -- cars with two bogies and four wheelsets, trains;
+* :mod:`.case_vehicle` -- the case's vehicle, second train, irregularity and passage;
+* :mod:`.damping_model` -- the modal damping of the kept and residual modes;
 * :mod:`.stage` -- the ``railvib mbs`` stage (modes.h5 -> mbs.h5 + plots).
 """
 

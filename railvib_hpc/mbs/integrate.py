@@ -48,7 +48,7 @@ import numpy as np
 
 from .contact import hertz_energy, hertz_linear_stiffness
 from .coupling import RailCoupling
-from .propagator import make_propagator
+from .propagator import CoupledPropagator, ModalPropagator, make_propagator
 from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
 from .static_correction import ContactResidual
 from .vehicles import Vehicle, missing_members, static_equilibrium
@@ -178,7 +178,8 @@ def simulate_moving_force(
     return out.result(t, x, (), dt, nt, np.zeros(p.size + 1, int))
 
 
-def _hertz_scalar(d: float, d_old: float, kh: float, c: float, dt: float) -> tuple[float, float]:
+def hertz_force_and_slope(d: float, d_old: float, kh: float, c: float, dt: float
+                          ) -> tuple[float, float]:
     """Hertz force and its derivative w.r.t. the penetration (contact damping included)."""
     if d <= 0.0:
         return 0.0, 0.0
@@ -212,7 +213,7 @@ def solve_contact(
     dold = delta_old.tolist()
     d = list(dhat)
     for _ in range(max_iter):
-        fd = [_hertz_scalar(d[i], dold[i], kh, c, dt) for i in range(nw)]
+        fd = [hertz_force_and_slope(d[i], dold[i], kh, c, dt) for i in range(nw)]
         g = [d[i] + sum(am[i][k] * fd[k][0] for k in range(nw)) - dhat[i] for i in range(nw)]
         jac = [[(i == k) + am[i][k] * fd[k][1] for k in range(nw)] for i in range(nw)]
         if nw == 1:
@@ -223,14 +224,14 @@ def solve_contact(
                     (jac[0][0] * g[1] - jac[1][0] * g[0]) / det]
         d = [d[i] - step[i] for i in range(nw)]
         if max(abs(x) for x in step) <= tol:
-            f = [_hertz_scalar(d[i], dold[i], kh, c, dt)[0] for i in range(nw)]
+            f = [hertz_force_and_slope(d[i], dold[i], kh, c, dt)[0] for i in range(nw)]
             return np.array(d), np.array(f)
     raise RuntimeError("contact Newton iteration did not converge; reduce dt")
 
 
 def _hertz_vector(d: np.ndarray, d_old: np.ndarray, kh: float, c: float, dt: float
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Vectorised :func:`_hertz_scalar`."""
+    """Vectorised :func:`hertz_force_and_slope`."""
     dp = np.maximum(d, 0.0)
     s = np.sqrt(dp)
     f = kh * dp * s + c * dp * (d - d_old) / dt
@@ -407,6 +408,50 @@ def simulate_vehicle(
     if not isinstance(vehicle, Vehicle):
         raise TypeError(f"{type(vehicle).__name__} is not a railvib_hpc.mbs.Vehicle: it lacks "
                         + ", ".join(missing_members(vehicle)))
+    run = _prepare_run(omega, zeta, rails, vehicle, x0, speed, t_end, dt, irregularity,
+                       points_per_period, newton_tol, residual)
+    start = _initial_state(run, vehicle, initial_state, drop_height)
+    out = Storage(kept_steps(run.nt, store_every), run.omega.size, vehicle.n_wheels,
+                  vehicle.n_dof, run.res.n_dofs if run.res is not None else 0)
+    lost = _march(run, vehicle, start, out, max_iter, progress)
+    return out.result(run.t, run.x, vehicle.dof_names, run.dt, run.nt, lost)
+
+
+class _VehicleRun(NamedTuple):
+    """The fixed data of one :func:`simulate_vehicle` run."""
+
+    omega: np.ndarray                 # (m,) circular frequencies [rad/s]
+    dt: float                         # time step [s]
+    nt: int                           # number of steps
+    t: np.ndarray                     # (nt + 1,) times [s]
+    x: np.ndarray                     # (nt + 1, n_wheels) wheel positions [m]
+    prop: ModalPropagator | CoupledPropagator
+    rows: RowEvaluator                # the wheels' modal rows at every step
+    res: ContactResidual | None       # the static correction (None: pure modal rail)
+    irr: Irregularity                 # rail-top heights under the wheels
+    veh: VehicleNewmark               # the vehicle's Newmark step
+    tol: float                        # absolute contact Newton tolerance [m]
+
+
+class _VehicleState(NamedTuple):
+    """Track, vehicle and contact state at one step (and the rows it was computed with)."""
+
+    q: np.ndarray                     # (m,) modal coordinates
+    v: np.ndarray                     # (m,) their velocities
+    y: np.ndarray                     # (n_dof,) vehicle displacements
+    yd: np.ndarray                    # (n_dof,) and velocities
+    ydd: np.ndarray                   # (n_dof,) and accelerations
+    f: np.ndarray                     # (n_wheels,) contact forces [N]
+    delta: np.ndarray                 # (n_wheels,) penetrations [m]
+    Q: np.ndarray                     # (m,) modal loads
+    psi: np.ndarray                   # (m, n_wheels) modal rows under the wheels
+    c_res: np.ndarray | float         # residual flexibility at the wheels (0.0 without)
+
+
+def _prepare_run(omega, zeta, rails, vehicle, x0, speed, t_end, dt, irregularity,
+                 points_per_period, newton_tol, residual) -> _VehicleRun:
+    """Rails per wheel, time step and grid, wheel positions, modal propagator, static
+    correction and Newmark step of a :func:`simulate_vehicle` run (same arguments)."""
     rl = wheel_rails(rails, vehicle)
     om = np.asarray(omega, dtype=float)
     wheel_speed = np.broadcast_to(np.asarray(speed, dtype=float), (vehicle.n_wheels,))
@@ -426,14 +471,22 @@ def simulate_vehicle(
         uniq = tuple(rails) if not isinstance(rails, RailCoupling) else (rails,)
         res = ContactResidual(residual, uniq if len(uniq) > 1 else rl, wr, x)
     irr = (lambda xs: np.zeros(nw)) if irregularity is None else irregularity
-    kh, cc = vehicle.hertz_constant, vehicle.contact_damping
     veh = VehicleNewmark(vehicle, dt)
-    mv, cv, kv, b, f0 = veh.mv, veh.cv, veh.kv, veh.b, veh.f0
-    tol = contact_tolerance(vehicle, newton_tol)
+    return _VehicleRun(om, dt, nt, t, x, prop, rows, res, irr, veh,
+                       contact_tolerance(vehicle, newton_tol))
 
-    psi = rows.rows(0)
+
+def _initial_state(run: _VehicleRun, vehicle: Vehicle,
+                   initial_state: tuple[np.ndarray, ...] | None,
+                   drop_height: float) -> _VehicleState:
+    """The state at t = 0: ``initial_state``, the drop of ``drop_height``
+    (:func:`drop_state`) or the static equilibrium on the modal rail, with the contact
+    forces, penetrations and modal loads that go with it."""
+    om, res, veh = run.omega, run.res, run.veh
+    kh = vehicle.hertz_constant
+    psi = run.rows.rows(0)
     c_res = res.matrix(0) if res is not None else 0.0
-    r = np.asarray(irr(x[0]), dtype=float)
+    r = np.asarray(run.irr(run.x[0]), dtype=float)
     if initial_state is None and drop_height > 0.0:
         initial_state = (np.zeros(om.size), np.zeros(om.size),
                          drop_state(vehicle, drop_height, r), np.zeros(vehicle.n_dof))
@@ -447,27 +500,41 @@ def simulate_vehicle(
     else:
         q, v, y, yd = (np.array(s, dtype=float) for s in initial_state)
         f = None
-    delta = psi.T @ q + r - b.T @ y
+    delta = psi.T @ q + r - veh.b.T @ y
     if f is None:
         f = np.maximum(kh * np.maximum(delta, 0.0) ** 1.5, 0.0)
     if res is not None:
         delta = delta - c_res @ f
-    ydd = np.linalg.solve(mv, f0 + b @ f - cv @ yd - kv @ y)
-    Q = -psi @ f
-    m = om.size
-    out = Storage(kept_steps(nt, store_every), m, nw, vehicle.n_dof,
-                  res.n_dofs if res is not None else 0)
+    ydd = veh.acceleration(y, yd, f)
+    return _VehicleState(q, v, y, yd, ydd, f, delta, -psi @ f, psi, c_res)
 
-    def put(n):
-        w = psi.T @ q
-        if res is not None:
-            w = w - c_res @ f
-        out.put(n, q, v, prop.acceleration(q, v, Q), f, delta, w, y, yd, ydd)
-        if res is not None:
-            out.put_loads(n, res.loads(n, f))
 
-    put(0)
-    lost = np.zeros(nw + 1, int)
+def _store(out: Storage, run: _VehicleRun, n: int, s: _VehicleState) -> None:
+    """Step ``n``'s state into ``out`` (the rail under the wheels, the rail-DOF loads)."""
+    w = s.psi.T @ s.q
+    if run.res is not None:
+        w = w - s.c_res @ s.f
+    out.put(n, s.q, s.v, run.prop.acceleration(s.q, s.v, s.Q), s.f, s.delta, w, s.y, s.yd,
+            s.ydd)
+    if run.res is not None:
+        out.put_loads(n, run.res.loads(n, s.f))
+
+
+def _march(run: _VehicleRun, vehicle: Vehicle, start: _VehicleState, out: Storage,
+           max_iter: int, progress: Callable[[int, int], None] | None) -> np.ndarray:
+    """Steps 1 .. nt from ``start``, the kept ones stored in ``out`` (with step 0).
+
+    Returns
+    -------
+    numpy.ndarray
+        (n_wheels + 1,) steps without contact: at any wheel, then per wheel.
+    """
+    prop, rows, res, irr, veh = run.prop, run.rows, run.res, run.irr, run.veh
+    dt, nt, x, tol = run.dt, run.nt, run.x, run.tol
+    kh, cc = vehicle.hertz_constant, vehicle.contact_damping
+    q, v, y, yd, ydd, f, delta, Q, psi, c_res = start
+    _store(out, run, 0, start)
+    lost = np.zeros(vehicle.n_wheels + 1, int)
     every = max(nt // 50, 1)
     for n in range(1, nt + 1):
         qf, vf = prop.free(q, v, Q)
@@ -489,10 +556,10 @@ def simulate_vehicle(
         lost[0] += bool(no_contact.any())
         lost[1:] += no_contact
         if out.wants(n):
-            put(n)
+            _store(out, run, n, _VehicleState(q, v, y, yd, ydd, f, delta, Q, psi, c_res))
         if progress is not None and (n % every == 0 or n == nt):
             progress(n, nt)
-    return out.result(t, x, vehicle.dof_names, dt, nt, lost)
+    return lost
 
 
 def rigid_lift(vehicle) -> np.ndarray:

@@ -42,14 +42,14 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case, train2_vehicle
-from ..constants import STANDARD_GRAVITY
-from ..errors import DataError, ResourceError, UserError
+from ..config import Case
+from ..errors import DataError, ResourceError
 from ..io.stage_checks import (
     check_mbs,
     check_mbs_arrays,
@@ -61,17 +61,22 @@ from ..io.stage_checks import (
 from ..io.stage_files import (
     atomic_file,
     ensure_space,
-    examine,
-    forget,
-    output_lock,
-    provenance,
     require_inputs,
     write_h5,
 )
+from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory
-from .vehicles import Vehicle
+from .case_vehicle import (
+    MBSInputError,
+    build_vehicle,
+    passage,
+    passage_irregularity,
+    static_wheel_load,
+    two_trains,
+)
+from .damping_model import modal_damping, residual_damping
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -79,326 +84,6 @@ if TYPE_CHECKING:
 #: Largest number of time steps of one passage: about 2 h at the 14,000 steps/s measured
 #: for the thesis wheelset (bench/mbs_thesis_bench.py), 9 h for a 4-car train.
 MAX_MBS_STEPS = 100_000_000
-
-
-class MBSInputError(UserError):
-    """The modal input of the multibody simulation is missing or inconsistent."""
-
-
-def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
-    """(m,) damping ratios, or the (m, m) modal damping matrix, with the ``mbs.damping_*``
-    overrides applied.
-
-    ``modal.damping = 'uniform'``: ``modal.damping_ratio`` for every mode;
-    ``'strain_energy'``: per material from the strain energies stored in ``modes_path``
-    (:func:`railvib_hpc.modal.energy.damping_from_energies`); ``'rayleigh'``:
-    ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.modal.damping`); ``'full'``:
-    the matrix ``D = Phi^T C Phi`` from ``modal_damping.h5`` next to ``modes_path``
-    (:func:`railvib_hpc.modal.projection.compose_damping`), whose diagonal the overrides set
-    to ``2 zeta omega``.
-
-    Raises
-    ------
-    MBSInputError
-        ``strain_energy`` damping with a ``modes.h5`` that has no strain energies, ``full``
-        damping without a matching ``modal_damping.h5``.
-    """
-    kind = case["modal.damping"]
-    omega = None
-    if kind in ("rayleigh", "full"):
-        import h5py
-
-        with h5py.File(modes_path, "r") as f:
-            omega = np.sqrt(np.maximum(f["modes/eigenvalue"][:m], 0.0))
-    if kind == "strain_energy":
-        from ..io.modes_io import read_strain_energies
-        from ..modal.energy import damping_from_energies
-
-        energies = read_strain_energies(modes_path) if modes_path is not None else None
-        if energies is None:
-            raise MBSInputError(f"modal.damping = 'strain_energy': {modes_path} holds no "
-                                "per-material strain energies (written by an older version); "
-                                "rerun 'railvib modal' to recompute it")
-        zeta = damping_from_energies(energies, case)[:m].copy()
-    elif kind == "rayleigh":
-        from ..modal.damping import case_rayleigh, rayleigh_ratio
-
-        zeta = rayleigh_ratio(*case_rayleigh(case), omega)
-    elif kind == "full":
-        from ..modal.projection import compose_damping
-
-        return _override_diagonal(case, compose_damping(case, damping_parts(case, modes_path),
-                                                        omega), omega, m)
-    else:
-        zeta = np.full(m, case["modal.damping_ratio"])
-    for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
-        if int(k) <= m:
-            zeta[int(k) - 1] = r
-    return zeta
-
-
-def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
-    """The projected damping parts of ``modal_damping.h5`` next to ``modes_path`` (rank 0).
-
-    Raises
-    ------
-    MBSInputError
-        Without a ``modal_damping.h5`` of these modes and settings.
-    """
-    from ..modal.projection import read_damping_parts
-
-    out_dir = Path(modes_path).parent
-    if not (out_dir / "modal_damping.h5").exists():
-        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / 'modal_damping.h5'}: "
-                            "run 'railvib modal' with modal.damping = 'full' first")
-    require_inputs(out_dir, ("modes.h5", "modal_damping.h5"), case,
-                   {"modes.h5": check_modes, "modal_damping.h5": check_modal_damping})
-    return read_damping_parts(out_dir / "modal_damping.h5")
-
-
-def _override_diagonal(case: Case, d: np.ndarray, omega: np.ndarray, m: int) -> np.ndarray:
-    """``mbs.damping_modes`` / ``damping_ratios`` on the diagonal of a damping matrix."""
-    for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
-        if int(k) <= m:
-            d[int(k) - 1, int(k) - 1] = 2.0 * r * omega[int(k) - 1]
-    return d
-
-
-def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
-                     omega: np.ndarray, omega_rest: np.ndarray, modes_path: Path
-                     ) -> np.ndarray:
-    """Damping of the kept modes followed by the residual modes of the static correction.
-
-    ``modal.damping = 'uniform'`` (and ``'strain_energy'``, whose per-material shares the
-    residual modes do not have): ``modal.damping_ratio`` for them; ``'rayleigh'``: the
-    Rayleigh ratio at their frequencies (exact: ``[Phi, X' V]`` diagonalises K and M);
-    ``'full'``: the projected parts of ``[Phi, X']`` in ``modal_damping.h5`` turned onto the
-    new basis (:func:`.static_correction.residual_damping_parts`) and composed like the
-    modes' (dashpots, pads and materials couple modes and residual modes).
-    """
-    kind = case["modal.damping"]
-    m = omega.size
-    if kind == "full":
-        from ..modal.projection import compose_damping
-        from .static_correction import residual_damping_parts
-
-        try:
-            parts = residual_damping_parts(damping_parts(case, modes_path), res, rest_rows,
-                                           omega_rest, m)
-        except ValueError as exc:
-            raise MBSInputError(f"{Path(modes_path).with_name('modal_damping.h5')}: {exc}; "
-                                "rerun 'railvib modal' with mbs.static_correction = true") \
-                from exc
-        om = np.concatenate([omega, res.omega])
-        return _override_diagonal(case, compose_damping(case, parts, om), om, m)
-    if kind == "rayleigh":
-        from ..modal.damping import case_rayleigh, rayleigh_ratio
-
-        extra = rayleigh_ratio(*case_rayleigh(case), res.omega)
-    else:
-        extra = np.full(res.omega.size, case["modal.damping_ratio"])
-    return np.concatenate([zeta, extra])
-
-
-def two_trains(case: Case) -> bool:
-    """Whether a second train runs on track 2 (``track.count = 2``, ``train2.enabled``)."""
-    return case["track.count"] == 2 and bool(case["train2.enabled"])
-
-
-def tracks_line(case: Case) -> str | None:
-    """One line on the second track and its train (None with one track)."""
-    if case["track.count"] != 2:
-        return None
-    t2 = case["train2"]
-    own = t2["vehicle"]
-    vehicle = (f", its own {case['vehicle.type']} ("
-               + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
-                           for k, v in own.items()) + ")") if own else ""
-    second = ("track 2 unloaded" if not t2["enabled"] else
-              f"train 2 runs the {t2['direction']} direction, {t2['t_start']:g} s later, at "
-              f"{t2['speed'] or case['vehicle.speed']:g} m/s{vehicle}")
-    return (f"2, {case['track.spacing']:g} m apart (track 2 further from the building); "
-            f"{second}")
-
-
-def mirror_x(case: Case, x: np.ndarray | float) -> np.ndarray | float:
-    """``x`` mirrored about the middle of the rails (rigid entry rail start ``X0`` to rigid
-    exit rail end ``X4 + rigid_length``): where an 'opposite' train is when [vehicle]'s
-    would be at ``x``."""
-    lo = case["geometry.x0"]
-    hi = case["geometry.x4"] + case["track.rigid_length"]
-    return lo + hi - x
-
-
-def second_train_layout(case: Case, offsets: np.ndarray) -> tuple[np.ndarray, float]:
-    """Wheel positions at t = 0 relative to ``vehicle.x_start`` and the velocity of the
-    second train, whose own wheel offsets are ``offsets`` (<= 0, leading wheel first)."""
-    x0, t0 = case["vehicle.x_start"], case["train2.t_start"]
-    v2 = case["train2.speed"] or case["vehicle.speed"]
-    offsets = np.asarray(offsets, dtype=float)
-    if case["train2.direction"] == "same":
-        return offsets - v2 * t0, v2
-    return mirror_x(case, x0) - x0 - offsets + v2 * t0, -v2
-
-
-def build_vehicle(case: Case) -> Vehicle | None:
-    """The vehicle of ``[vehicle]`` (None for ``moving_force``); with a second train on
-    track 2 (:func:`two_trains`) both as one :class:`~.train.Traffic`."""
-    first = _build_train(case["vehicle"], case["vehicle.n_cars"])
-    if first is None or not two_trains(case):
-        return first
-    from .train import Traffic
-
-    second = _build_train(train2_vehicle(case), case["train2.n_cars"] or case["vehicle.n_cars"])
-    pos2, v2 = second_train_layout(case, second.wheel_offsets)
-    return Traffic([first, second], positions=[first.wheel_offsets, pos2],
-                   speeds=[case["vehicle.speed"], v2], rail_shift=[0, 2])
-
-
-def _build_train(v: dict, n_cars: int) -> Vehicle | None:
-    """One train of the vehicle keys ``v`` (``[vehicle]``'s, or the second train's) with
-    ``n_cars`` cars (None for ``moving_force``)."""
-    from .vehicles import SuspendedWheelset
-
-    kh = v["k_hertz"] if v["k_hertz"] > 0 else None
-    if v["type"] == "moving_force":
-        return None
-    if v["type"] == "wheelset":
-        return SuspendedWheelset(
-            mass=v["wheelset_mass"], roll_inertia=v["wheelset_roll_inertia"],
-            wheel_radius=v["wheel_radius"], contact_span=v["contact_span"],
-            suspension_span=v["suspension_span"], k_suspension=v["k_suspension"],
-            c_suspension=v["c_suspension"], preload=v["preload"],
-            contact_damping=v["contact_damping"], k_hertz=kh, k_lateral=v["k_lateral"],
-            c_lateral=v["c_lateral"], conicity=v["conicity"])
-    from .train import RailVehicle, Train
-
-    car = RailVehicle(
-        car_mass=v["car_mass"], car_pitch_inertia=v["car_pitch_inertia"],
-        car_roll_inertia=v["car_roll_inertia"], bogie_mass=v["bogie_mass"],
-        bogie_pitch_inertia=v["bogie_pitch_inertia"], bogie_roll_inertia=v["bogie_roll_inertia"],
-        wheelset_mass=v["car_wheelset_mass"],
-        wheelset_roll_inertia=v["car_wheelset_roll_inertia"],
-        bogie_semi_spacing=0.5 * v["bogie_spacing"], semi_wheelbase=0.5 * v["wheelbase"],
-        car_length=v["car_length"], wheel_radius=v["wheel_radius"],
-        contact_span=v["contact_span"], primary_span=v["primary_span"],
-        secondary_span=v["secondary_span"], k_primary=v["k_primary"], c_primary=v["c_primary"],
-        k_secondary=v["k_secondary"], c_secondary=v["c_secondary"],
-        k_antiroll=v["k_antiroll"], contact_damping=v["contact_damping"], k_hertz=kh)
-    if n_cars == 1:
-        return car
-    return Train([car] * n_cars, k_coupler=v["coupler_stiffness"])
-
-
-def build_irregularity(case: Case, wheel_rail: np.ndarray, x_range: tuple[float, float],
-                       seed_shift: int = 0, flats: bool = True):
-    """The rail irregularity and wheel flats of ``[irregularity]`` (None when smooth);
-    a random profile draws with ``irregularity.seed + seed_shift``; ``flats = False``
-    leaves the wheel flats out."""
-    from .irregularity import Irregularity, RailProfile, WheelFlat
-
-    irr = case["irregularity"]
-    profile = None
-    if irr["type"] == "file":
-        profile = RailProfile.from_file(case.resolve(irr["file"]))
-    elif irr["type"] in ("fra", "iso8608"):
-        profile = RailProfile.from_psd(
-            irr["type"], irr["track_class"], x_range, seed=irr["seed"] + seed_shift,
-            wavelength_range=(irr["wavelength_min"], irr["wavelength_max"]))
-    with_flats, flats = flats, ()
-    if with_flats and irr["flat_depth"] > 0:
-        wheels = [int(w) for w in irr["flat_wheels"]]
-        bad = [w for w in wheels if w >= len(wheel_rail)]
-        if bad:
-            raise MBSInputError(f"irregularity.flat_wheels = {irr['flat_wheels']}: the vehicle "
-                                f"has wheels 0..{len(wheel_rail) - 1}")
-        flats = (WheelFlat(depth=irr["flat_depth"], length=irr["flat_length"], wheels=wheels,
-                           wheel_radius=case["vehicle.wheel_radius"]),)
-    if profile is None and not flats:
-        return None
-    return Irregularity(profile=profile, flats=flats, wheel_rail=wheel_rail)
-
-
-def passage_irregularity(case: Case, vehicle, run: dict):
-    """The irregularity the wheels of a run see (None when smooth): :func:`build_irregularity`
-    over the x range the wheels cover; with two trains each train sees its own (a random
-    profile of track 2 draws with ``irregularity.seed + 1``; wheel flats are on train 1)."""
-    x0 = run["x_start"] + run["offsets"]
-    x1 = x0 + run["speeds"] * run["t_end"]
-    x_range = (float(min(x0.min(), x1.min())) - 1.0, float(max(x0.max(), x1.max())) + 1.0)
-    from .train import Traffic
-
-    if not isinstance(vehicle, Traffic):
-        return build_irregularity(case, run["wheel_rail"], x_range)
-    parts = [build_irregularity(case, np.asarray(t.wheel_rail), x_range, seed_shift=k,
-                                flats=k == 0)
-             for k, t in enumerate(vehicle.trains)]
-    if all(p is None for p in parts):
-        return None
-    start = vehicle.wheel_start
-
-    def heights(x_wheels: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.zeros(b - a) if p is None else p(x_wheels[a:b])
-                               for p, a, b in zip(parts, start[:-1], start[1:])])
-
-    return heights
-
-
-def moving_loads(case: Case) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Forces, offsets (relative to ``vehicle.x_start``), rails and velocities of the
-    ``moving_force`` loads (one per rail and axle; with two trains, the second's on rails
-    2 and 3)."""
-    def axles(v: dict) -> tuple[float, np.ndarray, np.ndarray]:
-        force = v["force"] if v["force"] > 0 else 0.5 * v["wheelset_mass"] * STANDARD_GRAVITY
-        offs = np.repeat(np.asarray(v["axle_offsets"], dtype=float), 2)
-        return force, offs, np.tile([0, 1], len(v["axle_offsets"]))
-
-    force, offs, rails = axles(case["vehicle"])
-    forces, speeds = np.full(offs.size, force), np.full(offs.size, case["vehicle.speed"])
-    if two_trains(case):
-        force2, offs2, rails2 = axles(train2_vehicle(case))
-        pos2, v2 = second_train_layout(case, offs2)
-        offs, rails = np.concatenate([offs, pos2]), np.concatenate([rails, rails2 + 2])
-        forces = np.concatenate([forces, np.full(pos2.size, force2)])
-        speeds = np.concatenate([speeds, np.full(pos2.size, v2)])
-    return forces, offs, rails, speeds
-
-
-def passage(case: Case, vehicle, flexible_end: float) -> dict:
-    """The run of ``[vehicle]``: loads or wheel layout, start and end, simulated time.
-
-    Parameters
-    ----------
-    case
-        The case.
-    vehicle
-        :func:`build_vehicle`'s vehicle (None: moving forces).
-    flexible_end
-        x of the end of the flexible rail [m] (the rigid exit rail follows).
-
-    Returns
-    -------
-    dict
-        ``forces`` (moving forces, else None), ``offsets``, ``wheel_rail``, ``speeds``
-        (velocity along x, n_wheels each), ``x_start``, ``x_end``, ``t_end`` [s].
-    """
-    x_end = case["vehicle.x_end"] or flexible_end + case["track.rigid_length"]
-    x_start, speed = case["vehicle.x_start"], case["vehicle.speed"]
-    forces = None
-    if vehicle is None:
-        forces, offsets, wheel_rail, speeds = moving_loads(case)
-    else:
-        offsets = np.asarray(vehicle.wheel_offsets, dtype=float)
-        wheel_rail = np.asarray(vehicle.wheel_rail)
-        speeds = np.asarray(getattr(vehicle, "wheel_speeds", np.full(offsets.size, speed)),
-                            dtype=float)
-    # every wheel runs to x_end (a train in the opposite direction: to its mirror image)
-    x0 = x_start + offsets
-    goal = np.where(speeds > 0, x_end, mirror_x(case, x_end))
-    t_end = float(np.max((goal - x0) / speeds)) + case["vehicle.t_after"]
-    return {"forces": forces, "offsets": np.asarray(offsets, dtype=float),
-            "wheel_rail": np.asarray(wheel_rail, dtype=np.int64), "x_start": x_start,
-            "x_end": x_end, "t_end": t_end, "speeds": speeds}
 
 
 def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
@@ -413,14 +98,6 @@ def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
         raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
                             f"({n_r}, {n_r})")
     return x_rr, x_mass
-
-
-def static_wheel_load(case: Case) -> float:
-    """The largest static wheel (or moving) load of the case's vehicle [N]."""
-    vehicle = build_vehicle(case)
-    if vehicle is None:
-        return float(np.max(moving_loads(case)[0]))
-    return float(np.max(vehicle.static_wheel_loads()))
 
 
 def check_context(case: Case, out_dir: Path) -> dict:
@@ -528,13 +205,10 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
         raise MBSInputError(f"mbs.n_modes = {m}: {modes_path} has only {m_file} modes")
     path = out_dir / "mbs.h5"
     context = check_context(case, out_dir)
-    verdict = examine(path, "mbs.h5", case, data_check=check_mbs, context=context)
-    if verdict.ok:
-        rep.info(f"reusing {path} (same modes, vehicle and settings)")
-        return {**json.loads(verdict.attrs.get("stats", "{}")), "reused": True}
-    if verdict.kind != "missing":
-        rep.info(f"recomputing {path}: {verdict.reason}")
-    forget(path)
+    ctx = StageContext(case, out_dir, rep=rep)
+    old = ctx.reuse("mbs.h5", path=path, why="same modes, vehicle and settings", context=context)
+    if old.ok:
+        return {**json.loads(old.verdict.attrs.get("stats", "{}")), "reused": True}
 
     t0 = time.perf_counter()
     rm = read_rail_modes(modes_path, m)
@@ -597,7 +271,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
         raise DataError(f"the multibody results fail their data checks ({problems[0]}); "
                         f"{path} was not written. Check the vehicle, irregularity and mbs "
                         "settings")
-    attrs = provenance("mbs.h5", case, upstream)
+    attrs = ctx.provenance("mbs.h5", upstream)
     attrs["stats"] = json.dumps(stats)
 
     def fill(f, parallel: bool) -> None:
@@ -809,10 +483,70 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
     return paths
 
 
+@dataclass(frozen=True)
+class PassageOutput(StageOutput):
+    """What the ``mbs`` stage returns (the API's ``MBSResult`` has these fields).
+
+    Attributes
+    ----------
+    mbs_h5
+        The histories (contact forces, vehicle, modal coordinates).
+    plots
+        The PNG plots written with it.
+    n_modes, dt, n_steps, t_end
+        Modes used, time step [s], steps, end time [s].
+    static_wheel_load, mean_contact_force, peak_contact_force, min_contact_force
+        Per wheel [N] (the mean on the flexible rail).
+    max_rail_deflection
+        Largest rail deflection under a wheel [m].
+    loss_of_contact_steps
+        Steps in which a wheel lost contact.
+    """
+
+    mbs_h5: Path
+    plots: tuple[Path, ...]
+    n_modes: int
+    dt: float
+    n_steps: int
+    t_end: float
+    static_wheel_load: np.ndarray
+    mean_contact_force: np.ndarray
+    peak_contact_force: np.ndarray
+    min_contact_force: np.ndarray
+    max_rail_deflection: float
+    loss_of_contact_steps: int
+
+    @classmethod
+    def of_stats(cls, stats: dict, out_dir: Path) -> PassageOutput:
+        """The output of a passage's statistics (``stats`` of ``mbs.h5``) in ``out_dir``."""
+        return cls(reused=stats.get("reused"), summary=stats, mbs_h5=out_dir / "mbs.h5",
+                   plots=tuple(sorted(out_dir.glob("mbs_*.png"))),
+                   n_modes=int(stats["n_modes"]), dt=float(stats["dt"]),
+                   n_steps=int(stats["n_steps"]), t_end=float(stats["t_end"]),
+                   static_wheel_load=np.array(stats["static_wheel_load"], dtype=float),
+                   mean_contact_force=np.array(stats["mean_contact_force"], dtype=float),
+                   peak_contact_force=np.array(stats["peak_contact_force"], dtype=float),
+                   min_contact_force=np.array(stats["min_contact_force"], dtype=float),
+                   max_rail_deflection=float(stats["max_rail_deflection"]),
+                   loss_of_contact_steps=int(stats["loss_of_contact_steps"]))
+
+
+def compute(ctx: StageContext) -> PassageOutput:
+    """``railvib mbs``: rank 0 simulates (see :func:`simulate_case`), every rank gets the
+    output."""
+    with ctx.rep.stage("mbs"):
+        return on_root(lambda: PassageOutput.of_stats(
+            simulate_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
+
+
+STAGE = Stage(name="mbs", help="roll the vehicle over the flexible track in modal coordinates",
+              products=("mbs.h5",), reads=("modes.h5", "static.h5", "modal_damping.h5"),
+              compute=compute)
+
+
 def run_mbs_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
                   petsc_options: list[str] | None = None) -> dict:
-    """``railvib mbs``: rank 0 simulates (see :func:`simulate_case`), every rank gets the
-    summary; holds the output folder's lock."""
-    out_dir = Path(out_dir)
-    with output_lock(out_dir, comm, "mbs", rep=rep), rep.stage("mbs"):
-        return on_root(lambda: simulate_case(case, out_dir, rep), comm)
+    """The ``mbs`` stage from a script: :data:`STAGE` through the runner (the folder's
+    lock; no ``run.json`` entry). Returns its summary (every rank)."""
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="mbs")
+    return dict(runner.run(STAGE, case, record=False).result.summary)

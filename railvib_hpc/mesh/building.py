@@ -30,9 +30,9 @@ the column faces, on the side of the first column line and of the track). Bays c
 from X2 (``i``) and from the face nearest the track (``j``).
 
 A building turned by whole quarter turns (``building.rotation``,
-:func:`railvib_hpc.config.quarter_turns`) is laid out turned: the fields stay in its own
+:func:`railvib_hpc.site.quarter_turns`) is laid out turned: the fields stay in its own
 frame, its lines, parts and probes come turned about the plan centre (the plan's length and
-width exchanged for an odd number, :func:`railvib_hpc.config.placed_plan`). The rest of the
+width exchanged for an odd number, :func:`railvib_hpc.site.placed_plan`). The rest of the
 turn twists the mesh afterwards (:mod:`railvib_hpc.mesh.turn`).
 """
 
@@ -42,7 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case, quarter_turns, slab_bases, turn_quarters
+from ..config import Case
+from ..site import quarter_turns, slab_bases, turn_quarters
 
 #: Role of the building's named probes (:data:`railvib_hpc.schema.PROBE_ROLES`).
 ROLE_FLOOR, ROLE_WALL, ROLE_FOUNDATION = "floor", "wall", "foundation"
@@ -75,7 +76,7 @@ class Building:
         Underside of every slab above ZBB, bottom up.
     quarters
         Whole quarter turns of the building about ``centre``, counter-clockwise
-        (:func:`railvib_hpc.config.quarter_turns` of ``building.rotation``). The fields above
+        (:func:`railvib_hpc.site.quarter_turns` of ``building.rotation``). The fields above
         are in the building's own frame; its lines, parts and probes are given turned.
     centre
         The plan centre ``(XBB, YBB)``.

@@ -31,8 +31,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..config import Case, track_lift
+from ..config import Case
 from ..schema import BUILDING_PARTS, INTERFACE_PARTS, PART_ID
+from ..site import track_lift
 from .model import Mesh, renumbered
 from .search import HEX_FACES
 

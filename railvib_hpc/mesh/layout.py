@@ -36,8 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..config import (
-    Case,
+from ..config import Case
+from ..fem.boundary import wave_speeds
+from ..site import (
     building_turn,
     embankment_toe,
     placed_plan,
@@ -45,7 +46,6 @@ from ..config import (
     solid_material,
     track_lift,
 )
-from ..fem.boundary import wave_speeds
 from .building import Building
 
 _TOL = 1e-9
@@ -184,81 +184,149 @@ THESIS_DIVISIONS: dict[str, float] = {
 }
 
 
+@dataclass(frozen=True)
+class _CrossSection:
+    """The track across y: the track centre lines (track 1 at y = 0, track 2 track.spacing
+    further from the building), half the sleeper length and the gauge, the embankment's toes
+    on the ground (near side ``-toe``, far side ``toe_far``) and the fill's lift."""
+
+    centres: tuple[float, ...]
+    half_sleeper: float
+    half_gauge: float
+    toe: float
+    toe_far: float
+    lift: float
+
+    @classmethod
+    def of_case(cls, case: Case) -> _CrossSection:
+        t = case["track"]
+        # one embankment carries both tracks; a fill (track.embankment_height) lifts the
+        # track bed by lift, its sides sloping in to the subballast's base half-width |YS1|
+        centres = (0.0,) + ((t["spacing"],) if t["count"] == 2 else ())
+        lift = track_lift(case)
+        toe = embankment_toe(case)
+        return cls(centres, t["sleeper_length"] / 2, t["gauge"] / 2, toe, centres[-1] + toe,
+                   lift)
+
+
+@dataclass(frozen=True)
+class _Levels:
+    """The z levels of the layout: below the ground (soil and basement), the embankment's
+    layers above it (with their parts) and the building above the ground."""
+
+    below: np.ndarray
+    embank: list[float]
+    embank_parts: tuple[str, ...]
+    above: np.ndarray
+
+
 def build_layout(case: Case) -> Layout:
     """Compute the block decomposition for a validated case."""
     g, t, m, d = (case[s] for s in ("geometry", "track", "mesh", "domain"))
     r = m["refinement"]
-    sp = t["sleeper_spacing"]
-    nbays = int(round(t["rail_length"] / sp))
-    sleeper_x = g["x1"] + sp * np.arange(nbays + 1)
-
-    # --- building lines: footing, column and wall faces (mesh.building), and its plan,
+    # the building's lines: footing, column and wall faces (mesh.building), and its plan,
     # both turned by building.rotation's whole quarter turns
     bldg = Building.of_case(case)
-    plan_x2, plan_x3, plan_ys3, plan_ys2 = placed_plan(case)
+    plan = placed_plan(case)
+    cross = _CrossSection.of_case(case)
+    bounds = (g["x1"] - d["extra_length"], g["x4"] + d["extra_length"],
+              g["ys4"] - d["extra_width"], g["ys0"], g["z0"] - d["extra_depth"], g["z1"])
+    sp = t["sleeper_spacing"]
+    sleeper_x = g["x1"] + sp * np.arange(int(round(t["rail_length"] / sp)) + 1)
+    xb, yb = _lines(case, bldg, cross, sleeper_x, bounds)
+    layers = soil_layers(case)
+    nx, ny = _horizontal_divisions(case, xb, yb, plan, cross, layers)
+    levels = _levels(case, bldg, layers, cross.lift, bounds[4])
+    zdiv = _vertical_divisions(case, levels, layers)
+    blocks = _blocks(case, bldg, plan, xb, yb, levels, cross, layers)
+    probes, probe_roles = _named_probes(case, bldg, plan, cross, bounds[2])
+    centres, hs, hg, lift = cross.centres, cross.half_sleeper, cross.half_gauge, cross.lift
+    return Layout(
+        xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
+        rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
+        rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
+        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
+        sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
+        sleeper_z=g["z3"] + lift, deform=_shoulder_slopes(g, yb, cross),
+        bounds=bounds, probes=probes, probe_roles=probe_roles)
 
-    xmin = g["x1"] - d["extra_length"]
-    xmax = g["x4"] + d["extra_length"]
+
+def _lines(case: Case, bldg: Building, cross: _CrossSection, sleeper_x: np.ndarray,
+           bounds: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The breakpoints along x (domain ends, sleepers, building) and y (domain edges,
+    embankment toes, sleeper ends and rails of every track, building, the measures' faces)."""
+    g = case["geometry"]
+    xmin, xmax, ymin = bounds[:3]
     xb = _merge([xmin, xmax, *sleeper_x, *bldg.x_lines()])
-    ymin = g["ys4"] - d["extra_width"]
-    hs, hg = t["sleeper_length"] / 2, t["gauge"] / 2
-    # track centre lines: track 1 at y = 0, track 2 track.spacing further from the building;
-    # one embankment carries both. Its base on the ground reaches toe (near side) and
-    # toe_far; a fill (track.embankment_height) lifts the track bed by lift, its sides
-    # sloping in to the subballast's base half-width |YS1|.
-    centres = [0.0] + ([t["spacing"]] if t["count"] == 2 else [])
-    lift = track_lift(case)
-    toe = embankment_toe(case)
-    toe_far = centres[-1] + toe
     tr, wib = case["trench"], case["wib"]
     measure_y = []
     if tr["width"] > 0:            # the trench's faces (also with type 'none': same mesh)
         measure_y += [-tr["distance"], -tr["distance"] - tr["width"]]
     if wib["width"] > 0:
         measure_y += [-wib["width"] / 2, wib["width"] / 2]
-    track_y = [c + s * w for c in centres for w in (hs, hg) for s in (-1, 1)]
-    yb = _merge([ymin, g["ys0"], -toe, toe_far, *track_y, *bldg.y_lines(), *measure_y])
+    track_y = [c + s * w for c in cross.centres for w in (cross.half_sleeper, cross.half_gauge)
+               for s in (-1, 1)]
+    yb = _merge([ymin, g["ys0"], -cross.toe, cross.toe_far, *track_y, *bldg.y_lines(),
+                 *measure_y])
+    return xb, yb
 
-    # --- divisions per interval
+
+def _y_divisions(m: dict, y0: float, y1: float, plan: tuple[float, float, float, float],
+                 cross: _CrossSection) -> int:
+    """Divisions of the y interval ``[y0, y1]`` with the ``mesh`` keys' sizes."""
+    r = m["refinement"]
+    _, _, plan_ys3, plan_ys2 = plan
+    hs, hg = cross.half_sleeper, cross.half_gauge
+    c = min(cross.centres, key=lambda v: abs(0.5 * (y0 + y1) - v))    # the nearest track
+    if y0 - c >= -hg - _TOL and y1 - c <= hg + _TOL:
+        return max(1, round(m["sleeper_middle_elements"] * r))
+    if y0 - c >= -hs - _TOL and y1 - c <= hs + _TOL:
+        return max(1, round(m["sleeper_outer_elements"] * r))
+    if y0 >= -cross.toe - _TOL and y1 <= cross.toe_far + _TOL:
+        return max(1, round(m["shoulder_elements"] * r))
+    if y0 >= plan_ys3 - _TOL and y1 <= plan_ys2 + _TOL:
+        return _ndiv(y1 - y0, m["size_building_y"], r)
+    return _ndiv(y1 - y0, m["size_far"], r)
+
+
+def _y_divisions_thesis(m: dict, y0: float, y1: float, plan: tuple[float, float, float, float],
+                        cross: _CrossSection) -> int:
+    """Divisions of the y interval ``[y0, y1]`` of the APDL script (:data:`THESIS_DIVISIONS`)."""
+    r = m["refinement"]
+    _, _, plan_ys3, plan_ys2 = plan
+    if y0 >= -cross.toe - _TOL:
+        if y1 <= cross.toe_far + _TOL:
+            return _y_divisions(m, y0, y1, plan, cross)
+        return _ndiv(y1 - y0, THESIS_DIVISIONS["far_track_side"], r)
+    if y0 >= plan_ys2 - _TOL:
+        return _ndiv(y1 - y0, THESIS_DIVISIONS["toe_to_building"], r)
+    if y0 >= plan_ys3 - _TOL:
+        return _y_divisions(m, y0, y1, plan, cross)
+    return _ndiv(y1 - y0, THESIS_DIVISIONS["beyond_building"], r)
+
+
+def _horizontal_divisions(case: Case, xb: np.ndarray, yb: np.ndarray,
+                          plan: tuple[float, float, float, float], cross: _CrossSection,
+                          layers: list[dict]) -> tuple[np.ndarray, np.ndarray]:
+    """The element divisions of every x and y interval: the layout's sizes, refined for the
+    softest soil's wavelength and across the soil twisted round a turned building."""
+    m = case["mesh"]
+    r = m["refinement"]
+    sp = case["track.sleeper_spacing"]
+    plan_x2, plan_x3 = plan[:2]
     h_track = sp / m["soil_elements_per_bay"]
     h_bldg = sp / m["soil_elements_per_bay_building"]
     nx = np.array([
         _ndiv(x1 - x0, h_bldg if (x0 >= plan_x2 - _TOL and x1 <= plan_x3 + _TOL) else h_track, r)
         for x0, x1 in zip(xb[:-1], xb[1:])])
+    ydiv = _y_divisions_thesis if m["layout"] == "thesis" else _y_divisions
+    ny = np.array([ydiv(m, y0, y1, plan, cross) for y0, y1 in zip(yb[:-1], yb[1:])])
 
-    def ydiv(y0: float, y1: float) -> int:
-        c = min(centres, key=lambda v: abs(0.5 * (y0 + y1) - v))    # the nearest track
-        if y0 - c >= -hg - _TOL and y1 - c <= hg + _TOL:
-            return max(1, round(m["sleeper_middle_elements"] * r))
-        if y0 - c >= -hs - _TOL and y1 - c <= hs + _TOL:
-            return max(1, round(m["sleeper_outer_elements"] * r))
-        if y0 >= -toe - _TOL and y1 <= toe_far + _TOL:
-            return max(1, round(m["shoulder_elements"] * r))
-        if y0 >= plan_ys3 - _TOL and y1 <= plan_ys2 + _TOL:
-            return _ndiv(y1 - y0, m["size_building_y"], r)
-        return _ndiv(y1 - y0, m["size_far"], r)
-
-    def ydiv_thesis(y0: float, y1: float) -> int:
-        if y0 >= -toe - _TOL:
-            if y1 <= toe_far + _TOL:
-                return ydiv(y0, y1)
-            return _ndiv(y1 - y0, THESIS_DIVISIONS["far_track_side"], r)
-        if y0 >= plan_ys2 - _TOL:
-            return _ndiv(y1 - y0, THESIS_DIVISIONS["toe_to_building"], r)
-        if y0 >= plan_ys3 - _TOL:
-            return ydiv(y0, y1)
-        return _ndiv(y1 - y0, THESIS_DIVISIONS["beyond_building"], r)
-
-    thesis = m["layout"] == "thesis"
-    ny = np.array([(ydiv_thesis if thesis else ydiv)(y0, y1)
-                   for y0, y1 in zip(yb[:-1], yb[1:])])
-
-    # --- soil layers (top down) and wavelength sizing (mesh.elements_per_wavelength)
-    layers = soil_layers(case)
+    # wavelength sizing (mesh.elements_per_wavelength), horizontally: the softest soil (one
+    # grid for all layers)
     soils = [x["part"] for x in layers] or ["subgrade"]
     h_soft = min(wavelength_size(case, name) for name in
-                 (*soils, "ballast", "subballast", *(("fill",) if lift > 0 else ())))
-    # horizontally: the softest soil (one grid for all layers)
+                 (*soils, "ballast", "subballast", *(("fill",) if cross.lift > 0 else ())))
     nx = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(nx, np.diff(xb))])
     ny = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(ny, np.diff(yb))])
     # a twisted building (building.rotation beyond whole quarter turns): the soil across
@@ -272,28 +340,37 @@ def build_layout(case: Case) -> Layout:
         h_ring = (turn.r_out - turn.r_in) / n_ring
         nx = _ring_divisions(nx, xb, turn.centre[0], turn.r_out, h_ring)
         ny = _ring_divisions(ny, yb, turn.centre[1], turn.r_out, h_ring)
+    return nx, ny
 
-    def soil_part(z: float) -> str:
-        """The soil part at level ``z`` below the ground."""
-        for x in layers:
-            if z > x["z_bottom"]:
-                return x["part"]
-        return layers[-1]["part"] if layers else "subgrade"
 
-    def ground_part(y: float, z: float) -> str | None:
-        """The part of a block centred at ``(y, z)`` below the ground outside the building:
-        the trench (None when open), the wave-impeding block, or the soil."""
-        if tr["type"] != "none" and -tr["distance"] - tr["width"] < y < -tr["distance"] \
-                and z > g["z1"] - tr["depth"]:
-            return None if tr["type"] == "open" else "trench_fill"
-        if wib["type"] != "none" and abs(y) < wib["width"] / 2 and \
-                g["z1"] - wib["depth"] - wib["thickness"] < z < g["z1"] - wib["depth"]:
-            return "wib"
-        return soil_part(z)
+def _soil_part(layers: list[dict], z: float) -> str:
+    """The soil part at level ``z`` below the ground."""
+    for x in layers:
+        if z > x["z_bottom"]:
+            return x["part"]
+    return layers[-1]["part"] if layers else "subgrade"
 
-    # --- z levels
-    zbot = g["z0"] - d["extra_depth"]
-    zbb = g["zbb"]
+
+def _ground_part(case: Case, layers: list[dict], y: float, z: float) -> str | None:
+    """The part of a block centred at ``(y, z)`` below the ground outside the building:
+    the trench (None when open), the wave-impeding block, or the soil."""
+    z1 = case["geometry.z1"]
+    tr, wib = case["trench"], case["wib"]
+    if tr["type"] != "none" and -tr["distance"] - tr["width"] < y < -tr["distance"] \
+            and z > z1 - tr["depth"]:
+        return None if tr["type"] == "open" else "trench_fill"
+    if wib["type"] != "none" and abs(y) < wib["width"] / 2 and \
+            z1 - wib["depth"] - wib["thickness"] < z < z1 - wib["depth"]:
+        return "wib"
+    return _soil_part(layers, z)
+
+
+def _levels(case: Case, bldg: Building, layers: list[dict], lift: float,
+            zbot: float) -> _Levels:
+    """The z levels: soil layers, measures and basement below the ground, the embankment's
+    layers and the building's storeys above it."""
+    g = case["geometry"]
+    tr, wib = case["trench"], case["wib"]
     interfaces = [x["z_bottom"] for x in layers[:-1]]
     if tr["width"] > 0:
         interfaces.append(g["z1"] - tr["depth"])
@@ -305,30 +382,49 @@ def build_layout(case: Case) -> Layout:
     embank_parts = (*(("fill",) if lift > 0 else ()), "subballast", "ballast")
     above = _merge([g["z1"], *bldg.levels_above()])
     above = above[above >= g["z1"] - _TOL]
+    return _Levels(below, embank, embank_parts, above)
 
+
+def _zkey(z0: float, z1: float) -> tuple[float, float]:
+    """The key of the z interval ``[z0, z1]`` in :attr:`Layout.zdiv`."""
+    return round(z0, 9), round(z1, 9)
+
+
+def _vertical_divisions(case: Case, levels: _Levels,
+                        layers: list[dict]) -> dict[tuple[float, float], int]:
+    """The element divisions of every z interval, each refined for its layer's wavelength."""
+    m = case["mesh"]
+    r = m["refinement"]
+    thesis = m["layout"] == "thesis"
+    zbb = case["geometry.zbb"]
+    below, embank, above = levels.below, levels.embank, levels.above
     zdiv: dict[tuple[float, float], int] = {}
-
-    def zkey(z0: float, z1: float) -> tuple[float, float]:
-        return round(z0, 9), round(z1, 9)
-
     for z0, z1 in zip(below[:-1], below[1:]):
         if thesis:
             size = THESIS_DIVISIONS["vertical_soil"]
         else:
             size = m["size_deep"] if z1 <= zbb + _TOL else m["size_building_z"]
         # vertically: the layer's own wavelength
-        zdiv[zkey(z0, z1)] = _resolving_divisions(
+        zdiv[_zkey(z0, z1)] = _resolving_divisions(
             _ndiv(z1 - z0, size, r), z1 - z0,
-            wavelength_size(case, soil_part(0.5 * (z0 + z1))), r)
+            wavelength_size(case, _soil_part(layers, 0.5 * (z0 + z1))), r)
     n_layer = THESIS_DIVISIONS["layer_elements"] if thesis else m["layer_elements"]
-    for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), embank_parts):
+    for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), levels.embank_parts):
         n = (_ndiv(z1 - z0, THESIS_DIVISIONS["vertical_soil"] if thesis else m["size_deep"], r)
              if part == "fill" else max(1, round(n_layer * r)))
-        zdiv[zkey(z0, z1)] = _resolving_divisions(n, z1 - z0, wavelength_size(case, part), r)
+        zdiv[_zkey(z0, z1)] = _resolving_divisions(n, z1 - z0, wavelength_size(case, part), r)
     for z0, z1 in zip(above[:-1], above[1:]):
-        zdiv[zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
+        zdiv[_zkey(z0, z1)] = _ndiv(z1 - z0, m["size_building_z"], r)
+    return zdiv
 
-    # --- classification of blocks by their centre
+
+def _blocks(case: Case, bldg: Building, plan: tuple[float, float, float, float],
+            xb: np.ndarray, yb: np.ndarray, levels: _Levels, cross: _CrossSection,
+            layers: list[dict]) -> list[Block]:
+    """Every non-empty block, its part given by its centre."""
+    plan_x2, plan_x3, plan_ys3, plan_ys2 = plan
+    zbb = case["geometry.zbb"]
+    below, embank, above = levels.below, levels.embank, levels.above
     blocks: list[Block] = []
     for i in range(len(xb) - 1):
         xc = 0.5 * (xb[i] + xb[i + 1])
@@ -338,36 +434,52 @@ def build_layout(case: Case) -> Layout:
             in_plan = in_x and plan_ys3 < yc < plan_ys2
             for z0, z1 in zip(below[:-1], below[1:]):
                 zc = 0.5 * (z0 + z1)
-                part = bldg.part(xc, yc, zc) if in_plan and zc > zbb else ground_part(yc, zc)
+                part = (bldg.part(xc, yc, zc) if in_plan and zc > zbb
+                        else _ground_part(case, layers, yc, zc))
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
-            if -toe < yc < toe_far:
-                for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), embank_parts):
+            if -cross.toe < yc < cross.toe_far:
+                for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), levels.embank_parts):
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if in_plan:
                 for z0, z1 in zip(above[:-1], above[1:]):
                     part = bldg.part(xc, yc, 0.5 * (z0 + z1))
                     if part:
                         blocks.append(Block(i, j, float(z0), float(z1), part))
+    return blocks
 
-    # --- shoulder slopes: move the outer embankment vertices above Z1
-    jlo = int(np.argmin(abs(yb + toe)))
-    jhi = int(np.argmin(abs(yb - toe_far)))
+
+def _shoulder_slopes(g: dict, yb: np.ndarray,
+                     cross: _CrossSection) -> dict[tuple[int, float], float]:
+    """The shoulder slopes: the outer embankment vertices above Z1, moved to their slopes
+    (:attr:`Layout.deform`)."""
+    lift = cross.lift
+    jlo = int(np.argmin(abs(yb + cross.toe)))
+    jhi = int(np.argmin(abs(yb - cross.toe_far)))
     deform = {}
     slopes = (*(((g["z1"] + lift, -g["ys1"]),) if lift > 0 else ()),
               (g["z2"] + lift, g["ballast_bottom_half_width"]),
               (g["z3"] + lift, g["ballast_top_half_width"]))
     for z, hw in slopes:
         deform[(jlo, round(z, 9))] = -hw
-        deform[(jhi, round(z, 9))] = centres[-1] + hw
+        deform[(jhi, round(z, 9))] = cross.centres[-1] + hw
+    return deform
 
+
+def _named_probes(case: Case, bldg: Building, plan: tuple[float, float, float, float],
+                  cross: _CrossSection, ymin: float
+                  ) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
+    """The named probes: the building's and the ground's, each point with its role
+    (:data:`railvib_hpc.schema.PROBE_ROLES`)."""
+    g, tr = case["geometry"], case["trench"]
+    _, _, plan_ys3, plan_ys2 = plan
+    toe, toe_far = cross.toe, cross.toe_far
     # the ground between the embankment and the building; with a trench's lines (any type,
     # so that a measure and its same-mesh reference share the point) in front of the
     # trench when the middle would fall into it
     y_mid = 0.5 * (-toe + plan_ys2)
     if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
         y_mid = -0.5 * (toe + tr["distance"])
-    # the named probes: point and role (railvib_hpc.schema.PROBE_ROLES)
     located = {
         **bldg.probes(),
         "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
@@ -378,13 +490,4 @@ def build_layout(case: Case) -> Layout:
     }
     probes = {name: point for name, (point, _) in located.items()}
     probe_roles = {name: role for name, (_, role) in located.items()}
-
-    return Layout(
-        xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
-        rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
-        rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
-        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
-        sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
-        sleeper_z=g["z3"] + lift, deform=deform,
-        bounds=(xmin, xmax, ymin, g["ys0"], zbot, g["z1"]), probes=probes,
-        probe_roles=probe_roles)
+    return probes, probe_roles

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -11,8 +12,8 @@ import numpy as np
 
 from ..config import Case
 from ..errors import MeshError
-from ..io.stage_checks import check_mesh
-from ..io.stage_files import examine, forget, output_lock, provenance, write_text
+from ..io.stage_files import write_text
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory
@@ -28,10 +29,6 @@ from .turn import turn_building, turn_line, turn_map
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: Case sections that determine the mesh (see ``mesh.h5`` in
-#: :data:`railvib_hpc.io.stage_files.STAGE_FILES`).
-MESH_INPUTS = ("geometry", "track", "building", "mesh", "domain", "soil", "trench", "wib",
-               "usp", "ballast_mat", "isolation")
 #: Memory per hexahedron while gmsh meshes and the mesh is extracted: 0.7 kB measured on the
 #: thesis model (52,056 hexahedra: +29 MB over 8,556), times 3 for the quality checks.
 MESH_BYTES_PER_HEX = 2.0e3
@@ -87,7 +84,7 @@ def wavelength_warnings(quality: dict, case: Case) -> list[str]:
     """One warning per soil part whose longest element edge resolves the shear wavelength at
     :func:`~railvib_hpc.mesh.layout.resolved_frequency` with fewer than
     ``mesh.min_elements_per_wavelength`` elements (none when no frequency is set)."""
-    from ..config import solid_material
+    from ..site import solid_material
     from .layout import resolved_frequency, shear_wave_speed
 
     f = resolved_frequency(case)
@@ -277,10 +274,9 @@ def user_mesh_notes(report: dict) -> list[str]:
     return out
 
 
-def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
-                        ) -> tuple[Mesh, dict, str]:
-    """Reuse ``mesh.h5`` of ``out_dir`` when it is current and sound, else build and write
-    it (rank 0 only).
+def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
+    """Reuse ``mesh.h5`` of the context's folder when it is current and sound, else build
+    and write it (rank 0 only).
 
     Returns
     -------
@@ -288,30 +284,31 @@ def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
         The mesh, its quality report (``reused`` set) and the content digest of
         ``mesh.h5``.
     """
+    case, out_dir, reporter = ctx.case, ctx.out_dir, ctx.rep
     out_dir.mkdir(parents=True, exist_ok=True)
     h5 = out_dir / "mesh.h5"
     report_path = out_dir / "mesh_report.json"
     msh = None if case["mesh.file"] else out_dir / "mesh.msh"
-    verdict = examine(h5, "mesh.h5", case, data_check=check_mesh)
-    if verdict.ok and msh is not None and not msh.exists():
-        verdict.ok, verdict.reason = False, "it lacks mesh.msh, written with it"
-    if verdict.ok:
+
+    def read(verdict) -> tuple[Mesh, dict]:
+        if msh is not None and not msh.exists():
+            raise NotReusable("it lacks mesh.msh, written with it")
         try:
             mesh, _ = read_mesh_h5(h5)
             if not mesh.probe_roles:      # mesh.h5 written before probes had roles
                 mesh.probe_roles = dict(build_layout(case).probe_roles)
-            report = json.loads(report_path.read_text())
-            reporter.info(f"reusing {h5} (same mesh inputs)")
-            report["reused"] = True
-            report["warnings"] = (quality_warnings(report["quality"], case["modal.tol"])
-                                  + wavelength_warnings(report["quality"], case))
-            _print_warnings(report, reporter)
-            return mesh, report, verdict.sha256
+            return mesh, json.loads(report_path.read_text())
         except (OSError, KeyError, ValueError) as exc:
-            verdict.reason = f"it cannot be read ({exc})"
-    if verdict.kind != "missing":
-        reporter.info(f"recomputing {h5}: {verdict.reason}")
-    forget(h5)
+            raise NotReusable(f"it cannot be read ({exc})") from None
+
+    old = ctx.reuse("mesh.h5", path=h5, why="same mesh inputs", accept=read)
+    if old.ok:
+        mesh, report = old.value
+        report["reused"] = True
+        report["warnings"] = (quality_warnings(report["quality"], case["modal.tol"])
+                              + wavelength_warnings(report["quality"], case))
+        _print_warnings(report, reporter)
+        return mesh, report, old.sha256
     try:
         mesh, report = make_mesh(case, msh)
     except MeshError:
@@ -319,7 +316,7 @@ def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
             msh.unlink(missing_ok=True)
         raise
     t0 = time.perf_counter()
-    sha = write_mesh_files(out_dir, mesh, provenance("mesh.h5", case, {}))
+    sha = write_mesh_files(out_dir, mesh, ctx.provenance("mesh.h5", {}))
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0
     report["reused"] = False
     write_text(report_path, json.dumps(report, indent=2))
@@ -327,24 +324,77 @@ def build_or_reuse_mesh(case: Case, out_dir: Path, reporter: Reporter
     return mesh, report, sha
 
 
-def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
-                   petsc_options: list[str] | None = None) -> dict:
-    """``railvib mesh``: build or reuse ``mesh.h5`` and print the quality report (collective;
-    gmsh runs on rank 0). Returns the report (every rank)."""
-    out_dir = Path(out_dir)
+@dataclass(frozen=True)
+class MeshOutput(StageOutput):
+    """What the ``mesh`` stage returns (the API's ``MeshResult`` has these fields).
 
-    def work() -> dict:
+    Attributes
+    ----------
+    mesh_h5, mesh_xdmf, report_json
+        The mesh in HDF5, its XDMF view (ParaView), the quality report.
+    mesh_msh
+        gmsh's mesh (None when ``mesh.file`` gave one).
+    n_nodes, n_hexes
+        Size of the mesh.
+    min_scaled_jacobian, max_aspect_ratio
+        Worst element quality.
+    warnings
+        The mesh check's warnings.
+    """
+
+    mesh_h5: Path
+    mesh_xdmf: Path
+    mesh_msh: Path | None
+    report_json: Path
+    n_nodes: int
+    n_hexes: int
+    min_scaled_jacobian: float
+    max_aspect_ratio: float
+    warnings: tuple[str, ...]
+
+    @classmethod
+    def of_report(cls, report: dict, out_dir: Path, user_mesh: bool) -> MeshOutput:
+        """The output of a quality report (:func:`build_or_reuse_mesh`) in ``out_dir``."""
+        q = report.get("quality", {})
+        msh = out_dir / "mesh.msh"
+        return cls(reused=report.get("reused"), summary=report, mesh_h5=out_dir / "mesh.h5",
+                   mesh_xdmf=out_dir / "mesh.xdmf",
+                   mesh_msh=msh if not user_mesh and msh.exists() else None,
+                   report_json=out_dir / "mesh_report.json",
+                   n_nodes=int(q.get("n_nodes", 0)), n_hexes=int(q.get("n_hexes", 0)),
+                   min_scaled_jacobian=float(q.get("min_scaled_jacobian", float("nan"))),
+                   max_aspect_ratio=float(q.get("max_aspect_ratio", float("nan"))),
+                   warnings=tuple(report.get("warnings", ())))
+
+
+def compute(ctx: StageContext) -> MeshOutput:
+    """``railvib mesh``: build or reuse ``mesh.h5`` and print the quality report (collective;
+    gmsh runs on rank 0)."""
+    case, out_dir, rep = ctx.case, ctx.out_dir, ctx.rep
+
+    def work() -> MeshOutput:
         with rep.stage("mesh"):
-            _, report, _ = build_or_reuse_mesh(case, out_dir, rep)
+            _, report, _ = build_or_reuse_mesh(ctx)
         rep.info(format_report(report))
         rep.info("mesh timings: " + ", ".join(f"{k} {v:.2f} s"
                                                 for k, v in report["timings"].items()))
         rep.info(f"wrote {out_dir / 'mesh.xdmf'} (open in ParaView), {out_dir / 'mesh.h5'}"
                  + ("" if case["mesh.file"] else f", {out_dir / 'mesh.msh'}"))
-        return report
+        return MeshOutput.of_report(report, out_dir, bool(case["mesh.file"]))
 
-    with output_lock(out_dir, comm, "mesh", rep=rep):
-        return on_root(work, comm)
+    return on_root(work, ctx.comm)
+
+
+STAGE = Stage(name="mesh", help="build the gmsh model, check its quality, write "
+              "mesh.msh/.h5/.xdmf", products=("mesh.h5",), compute=compute)
+
+
+def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
+                   petsc_options: list[str] | None = None) -> dict:
+    """The ``mesh`` stage from a script: :data:`STAGE` through the runner (the folder's
+    lock; no ``run.json`` entry). Returns the quality report (every rank)."""
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="mesh")
+    return dict(runner.run(STAGE, case, record=False).result.summary)
 
 
 def _print_warnings(report: dict, reporter: Reporter) -> None:

@@ -1,14 +1,14 @@
 """A building turned against the track (``building.rotation``): the twist of the mesh.
 
 The structured layout is parallel to the track. A turn is split into whole quarter turns
-and a rest within +-45 deg (:func:`railvib_hpc.config.quarter_turns`). The quarters are
+and a rest within +-45 deg (:func:`railvib_hpc.site.quarter_turns`). The quarters are
 exact: the layout is symmetric under them, so the building is generated already turned
 by them (:class:`railvib_hpc.mesh.building.Building`). The rest twists the mesh about the
 plan centre: a point at distance ``r`` turns by ``angle * w(r)`` (:func:`twist_weight`),
 so the building and the soil within ``r_in`` turn rigidly, the track, the embankment, a
 trench and the domain's faces (beyond ``r_out``) stay where they are, and the ring between
 is sheared, never folded: the map keeps every circle round the centre and every area (see
-:class:`railvib_hpc.config.BuildingTurn`). Where that leaves soil cells with corner angles
+:class:`railvib_hpc.site.BuildingTurn`). Where that leaves soil cells with corner angles
 beyond 25-155 deg, the ring's nodes are relaxed (:func:`relax`, :class:`TwistMap`). The
 mesh stays conformal, its parts and node sets keep their elements and nodes, and the
 probes move with the points they mark.
@@ -22,22 +22,22 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..config import (
+from ..config import Case
+from ..errors import CaseError, MeshError
+from ..site import (
     MAX_TWIST_SHEAR,
     TWIST_RESOLUTION_DEG,
     BuildingTurn,
-    Case,
     building_turn,
     placed_plan,
     quarter_turns,
 )
-from ..errors import CaseError, MeshError
 from .layout import Layout, build_layout
 from .model import Mesh, renumbered
 
 #: Least scaled Jacobian a hexahedron may fall to by the twist (one that had less before
 #: may not lose more): corner angles kept within 25-155 deg. A cube sheared by
-#: cot(25 deg) = 2.14 reaches it (:data:`railvib_hpc.config.MAX_TWIST_SHEAR`); an element
+#: cot(25 deg) = 2.14 reaches it (:data:`railvib_hpc.site.MAX_TWIST_SHEAR`); an element
 #: long in the radial direction reaches it at a smaller shear, which this catches.
 MIN_TWISTED_JACOBIAN = math.sin(math.radians(25.0))
 

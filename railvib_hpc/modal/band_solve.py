@@ -181,14 +181,15 @@ class BandSettings:
 
 
 def _factor(K, M, comm, sigma: float, extra_gb: float, out_of_core: str, inertia: bool):
-    """BlockOperator at ``sigma`` (nudged when it hits an eigenvalue)."""
-    from .block_lanczos import BlockOperator, FactorizationError, InsufficientMemory
+    """The :class:`~.factor.ShiftInvertFactor` at ``sigma`` (nudged when it hits an
+    eigenvalue)."""
+    from .factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
 
     for attempt in range(3):
         s = sigma * (1.0 + SHIFT_NUDGE * attempt) if sigma else 0.0
         try:
-            return BlockOperator(K, M, s, comm, PREFIX, extra_gb=extra_gb,
-                                 out_of_core=out_of_core, inertia=inertia)
+            return ShiftInvertFactor(K, M, s, comm, PREFIX, extra_gb=extra_gb,
+                                     out_of_core=out_of_core, inertia=inertia)
         except InsufficientMemory as exc:
             raise EigenSolveError(str(exc)) from None
         except FactorizationError as exc:
@@ -251,7 +252,7 @@ def check_mode_count(key: str, f_hz: float, n_below: int, n_dofs: int, comm) -> 
     """Refuse (:class:`EigenSolveError`, one line) a band plan up to ``f_hz`` (the value of
     the case key ``key``) whose inertia count ``n_below`` exceeds :func:`mode_count_limit`;
     called before any band is solved (collective)."""
-    from .block_lanczos import available_memory_gb
+    from .factor import available_memory_gb
 
     limit, why = mode_count_limit(n_dofs, available_memory_gb(comm))
     if n_below <= limit:
@@ -401,6 +402,8 @@ def _trim(result: ModalResult, band: Band) -> ModalResult:
     out.residual_floors = result.residual_floors[keep]
     if result.roundoff_floors is not None:
         out.roundoff_floors = result.roundoff_floors[keep]
+    if result.gram is not None:
+        out.gram, out.stiff = result.gram[np.ix_(keep, keep)], result.stiff[np.ix_(keep, keep)]
     return out
 
 
@@ -502,9 +505,41 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
     -------
     ModalResult, or None with ``band_only`` (the band is cached, nothing merged).
     """
-    from mpi4py import MPI
-
     t_start = time.perf_counter()
+    plan = _plan_solve(K, M, comm, s, log)
+    records, proven, static = _solve_planned(K, M, comm, s, plan, assemble, monitor,
+                                             static_rhs, log, progress)
+    cache, n_bands = plan.cache, len(plan.bands)
+    for rec in (r for part in comm.allgather(records) for r in part):
+        r = BandRecord.from_json(rec)
+        if log is not None and plan.groups > 1:
+            log(band_line(r, n_bands))
+        _record(cache, r)
+    cache.save()
+    if s.band_only:
+        return None
+    return _merge_planned(K, M, comm, s, plan, static, proven, log, progress, t_start)
+
+
+@dataclass
+class _SolvePlan:
+    """What :func:`solve_bands` plans before it solves a band: the band cache, ``N(f_max)``
+    (None: an array task with given edges, which counts its own band instead) and the
+    seconds its count took, the bands of the plan, those to solve here, the band groups,
+    and the exact mode counts of the bands to solve (by index, when ``n_total`` is None)."""
+
+    cache: BandCache
+    n_total: int | None
+    t_count: float
+    bands: list[Band]
+    todo: list[Band]
+    groups: int
+    exact: dict[int, int]
+
+
+def _plan_solve(K, M, comm, s: BandSettings, log=None) -> _SolvePlan:
+    """The cache, the count at ``f_max``, the plan and the bands to solve; the refusals
+    before any band is solved (collective)."""
     s.cache_dir.mkdir(parents=True, exist_ok=True) if comm.rank == 0 else None
     comm.Barrier()
     cache = BandCache(s.cache_dir, s.key, comm)
@@ -542,6 +577,23 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         for band in todo:
             exact[band.index] = count_band(K, M, comm, band, cache, s.out_of_core, log,
                                            s.f_max)
+    return _SolvePlan(cache, n_total, t_count, bands, todo, groups, exact)
+
+
+def _solve_planned(K, M, comm, s: BandSettings, plan: _SolvePlan, assemble=None,
+                   monitor=None, static_rhs: np.ndarray | None = None, log=None,
+                   progress=None
+                   ) -> tuple[list[dict], dict[int, BandChecks], np.ndarray | None]:
+    """Solve and write the bands ``plan.todo`` (on ``plan.groups`` sub-communicators), each
+    recorded in the cache at once with one group. Returns rank 0's records of each group's
+    bands, the checks of the bands solved here (:class:`BandChecks`, by index) and the static
+    solutions (lowest band, one group). An error on any rank is raised on all (collective).
+    """
+    from mpi4py import MPI
+
+    cache, n_total, groups, bands, todo = plan.cache, plan.n_total, plan.groups, plan.bands, \
+        plan.todo
+    n_bands = len(bands)
     done_modes = {"n": sum(min(r.n_modes, _band_estimate(r.band, s.f_max, n_total))
                            for b in bands if (r := cache.find(b)) is not None)}
     color = comm.rank * groups // comm.size
@@ -555,7 +607,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         for i, band in enumerate(todo):
             if i % groups != color:
                 continue
-            est = exact.get(band.index) or _band_estimate(band, s.f_max, n_total)
+            est = plan.exact.get(band.index) or _band_estimate(band, s.f_max, n_total)
 
             def band_monitor(nconv, nev, basis, band=band, est=est):
                 total = n_total or est
@@ -617,30 +669,33 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         if error is not None and not isinstance(error, EigenSolveError):
             raise error
         raise EigenSolveError(failed[0][1]) if failed[0][0] else RuntimeError(failed[0][1])
-    for rec in (r for part in comm.allgather(records) for r in part):
-        r = BandRecord.from_json(rec)
-        if log is not None and groups > 1:
-            log(band_line(r, n_bands))
-        _record(cache, r)
-    cache.save()
-    if s.band_only:
-        return None
+    return records, proven, static
+
+
+def _merge_planned(K, M, comm, s: BandSettings, plan: _SolvePlan, static: np.ndarray | None,
+                   proven: dict[int, BandChecks], log=None, progress=None,
+                   t_start: float = 0.0) -> ModalResult:
+    """Merge the bands of the plan (:func:`_merge`), with the static solutions, the bands'
+    reuse flags and timings, and record the merged chain in the cache (collective)."""
+    cache, bands = plan.cache, plan.bands
+    n_bands = len(bands)
     if log is not None:
         log(f"merging {n_bands} band(s): {sum(cache.find(b).n_modes for b in bands)} band modes, "
             f"{K.getSize()[0]:,} DOFs (Rayleigh-Ritz with K and M, duplicates, inertia "
             "check) ...")
     t_m = time.perf_counter()
-    result = _merge(K, M, comm, bands, cache, s, n_total, progress, proven)
+    result = _merge(K, M, comm, bands, cache, s, plan.n_total, progress, proven)
     if log is not None:
         st = result.stats
         log(f"  {len(result.eigenvalues)} modes, {st['n_duplicates']} duplicate(s) dropped, "
             f"max |Phi^T M Phi - I| = {st['max_orthonormality_error']:.1e} (merged in "
             f"{time.perf_counter() - t_m:.1f} s)")
     result.static = static
-    computed = {b.index for b in todo}
+    computed = {b.index for b in plan.todo}
     for d in result.stats["bands"]:
         d["reused"] = d["index"] not in computed
-    result.stats.update(time_count_fmax=t_count, time_bands_total=time.perf_counter() - t_start)
+    result.stats.update(time_count_fmax=plan.t_count,
+                        time_bands_total=time.perf_counter() - t_start)
     chain = {"f_hz": float(s.f_max), "bands": [
         {"index": b.index, "lo_hz": b.lo_hz, "hi_hz": b.hi_hz, "shift_hz": b.shift_hz}
         for b in bands]}
@@ -670,7 +725,8 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     products), with ``progress``."""
     from mpi4py import MPI
 
-    from .block_lanczos import no_progress, sparse_times_block, symmetric_from_upper
+    from .block_lanczos import no_progress, symmetric_from_upper
+    from .factor import sparse_times_block
     from .ritz import NORMALISE_CHUNK
 
     chunk = chunk or NORMALISE_CHUNK
@@ -685,6 +741,36 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     return symmetric_from_upper(G)
 
 
+def _band_gram(A, Phi: np.ndarray, comm, diagonal: list[np.ndarray], progress=None,
+               phase: str = "merge: Gram products") -> np.ndarray:
+    """``Phi^T A Phi`` (all ranks) for ``Phi`` = the bands' modes side by side, whose
+    diagonal blocks (each band's ``Phi_b^T A Phi_b``) the bands' own checks measured of
+    these very vectors (``diagonal``): only the blocks between bands are formed, band
+    ``j``'s products against the bands before it, :data:`~railvib_hpc.modal.ritz.
+    NORMALISE_CHUNK` columns at a time (the sparse products of every band but the first,
+    and the dense products between bands only: measured at the issue-26 case, 2 bands of
+    161 and 135 modes, half of :func:`_gram`'s work)."""
+    from mpi4py import MPI
+
+    from .block_lanczos import no_progress, symmetric_from_upper
+    from .factor import sparse_times_block
+    from .ritz import NORMALISE_CHUNK
+
+    progress = progress or no_progress
+    m = Phi.shape[1]
+    G = np.zeros((m, m))
+    edges = np.concatenate([[0], np.cumsum([len(d) for d in diagonal])])
+    for b0, b1 in zip(edges[1:-1], edges[2:]):
+        for j in range(b0, b1, NORMALISE_CHUNK):
+            c = slice(j, min(j + NORMALISE_CHUNK, b1))
+            G[:b0, c] = Phi[:, :b0].T @ sparse_times_block(A, Phi[:, c], comm)
+            progress(phase, c.stop - edges[1], m - edges[1])
+    comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
+    for d, b0, b1 in zip(diagonal, edges[:-1], edges[1:]):
+        G[b0:b1, b0:b1] = np.triu(d)
+    return symmetric_from_upper(G)
+
+
 def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
            n_total: int, progress=None, proven: dict | None = None) -> ModalResult:
     """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
@@ -693,7 +779,8 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     bands solved in this run)."""
     from scipy.linalg import eigh
 
-    from .block_lanczos import available_memory_gb, narrow_columns, rotate_narrowing
+    from .block_lanczos import narrow_columns, rotate_narrowing
+    from .factor import available_memory_gb
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()
@@ -751,8 +838,18 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
             if result is not None:
                 return result
     t1 = time.perf_counter()
-    GM = _gram(M, Phi, comm, progress=progress, phase="merge: M-Gram products")
-    GK = _gram(K, Phi, comm, progress=progress, phase="merge: K-Gram products")
+    known = [(proven or {}).get(b.index) for b in bands]
+    if all(c is not None and c.gram is not None for c in known):
+        blocks = [c.subset(k) for c, k in zip(known, keeps)]
+        GM = _band_gram(M, Phi, comm, [c.gram for c in blocks], progress,
+                        "merge: M-Gram products")
+        GK = _band_gram(K, Phi, comm, [c.stiff for c in blocks], progress,
+                        "merge: K-Gram products")
+        stats["merge_gram"] = "cross-band blocks (the bands' own blocks from their checks)"
+    else:
+        GM = _gram(M, Phi, comm, progress=progress, phase="merge: M-Gram products")
+        GK = _gram(K, Phi, comm, progress=progress, phase="merge: K-Gram products")
+        stats["merge_gram"] = "full"
     w, U = eigh(GM)
     good = w > DUPLICATE_GRAM * w.max()
     W = U[:, good] / np.sqrt(w[good])
@@ -804,18 +901,25 @@ class BandChecks:
     floors: np.ndarray
     max_orthonormality_error: float
     max_stiffness_diag_error: float
+    #: Phi^T M Phi and Phi^T K Phi of the band's modes (the multi-band merge's diagonal
+    #: blocks, :func:`_band_gram`)
+    gram: np.ndarray | None = None
+    stiff: np.ndarray | None = None
 
     @classmethod
     def of(cls, result: ModalResult) -> BandChecks:
         st = result.stats
         return cls(result.residuals.copy(), result.roundoff_floors.copy(),
                    float(st["max_orthonormality_error"]),
-                   float(st["max_stiffness_diag_error"]))
+                   float(st["max_stiffness_diag_error"]), result.gram, result.stiff)
 
     def subset(self, cols: np.ndarray) -> BandChecks:
         """The checks of the columns ``cols`` (the set's maxima bound the subset's)."""
+        ix = np.ix_(cols, cols)
         return BandChecks(self.residuals[cols], self.floors[cols],
-                          self.max_orthonormality_error, self.max_stiffness_diag_error)
+                          self.max_orthonormality_error, self.max_stiffness_diag_error,
+                          None if self.gram is None else self.gram[ix],
+                          None if self.stiff is None else self.stiff[ix])
 
 
 def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[float],
@@ -862,22 +966,28 @@ def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[f
     return result
 
 
-def band_digest_exclude() -> tuple[str, ...]:
-    """[modal] keys that do not change the band files (the cache key leaves them out)."""
-    return ("f_max", "bands", "band_modes", "band_groups", "band_only", "n_modes",
-            "damping_ratio", "damping", "out_of_core", "max_basis", "shift_hz")
-
-
 def cache_key(case) -> str:
-    """Key of the band cache: the model and the solver settings that change the modes."""
+    """Key of the band cache: the model and the solver settings that change the modes.
+
+    Its keys come from the table of stage files: the sections of ``mesh.h5``
+    (:func:`~railvib_hpc.io.stage_files.whole_sections`), the materials, sections and pads
+    without their damping settings, ``[modal]`` without the keys that do not change the modes
+    (:data:`~railvib_hpc.io.stage_files.MODAL_ONLY_EXCLUDED`) or a band
+    (:data:`~railvib_hpc.io.stage_files.BAND_EXTENT`), and ``[boundary]``.
+    """
     import hashlib
 
-    from ..mesh.stage import MESH_INPUTS
+    from ..io.stage_files import (
+        BAND_EXTENT,
+        MODAL_DAMPING_KEYS,
+        MODAL_ONLY_EXCLUDED,
+        whole_sections,
+    )
 
-    skip = band_digest_exclude()
+    skip = (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)
     modal = {k: v for k, v in case["modal"].items() if k not in skip}
-    text = json.dumps({"mesh": case.digest(*MESH_INPUTS),
+    text = json.dumps({"mesh": case.digest(*whole_sections("mesh.h5")),
                        "physics": case.digest("materials", "sections", "pads",
-                                              exclude=("damping_ratio", "damping")),
+                                              exclude=MODAL_DAMPING_KEYS),
                        "modal": modal, "boundary": case.digest("boundary")}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()

@@ -1,4 +1,4 @@
-"""Block shift-invert Lanczos with thick restart (PETSc for the operator, numpy for the rest).
+"""Block shift-invert Lanczos with thick restart (numpy; the operator is a MUMPS factor).
 
 Why: a single-vector Krylov method reads the whole sparse factor once per
 triangular solve; MUMPS solving a block of right-hand sides reads it once per
@@ -6,7 +6,8 @@ block (measured here: 96 ms for one right-hand side, 17 ms per right-hand side
 in a block of 32, 168k DOFs on 2 ranks). This is what ANSYS's Block Lanczos
 exploits.
 
-Method: the operator ``A = (K - sigma M)^-1 M`` is self-adjoint in the M inner
+Method: the operator ``A = (K - sigma M)^-1 M``
+(:meth:`~railvib_hpc.modal.factor.ShiftInvertFactor.apply`) is self-adjoint in the M inner
 product. The basis ``V`` is M-orthonormal (block classical Gram-Schmidt applied
 twice, then SVQB normalisation); ``T = V^T M A V`` is accumulated from the
 Gram-Schmidt coefficients. Ritz pairs ``(theta, y)`` of ``T`` give eigenvalues
@@ -24,7 +25,6 @@ depend on the number of ranks (beyond round-off).
 
 from __future__ import annotations
 
-import contextlib
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
@@ -35,7 +35,7 @@ from scipy.linalg import eigh
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 
 if TYPE_CHECKING:
-    from mpi4py import MPI
+    from .factor import ShiftInvertFactor
 
 
 #: Progress callback of the long phases: ``progress(phase, done, total)`` (units of work
@@ -46,61 +46,6 @@ Progress = Callable[[str, int, int], None]
 def no_progress(phase: str, done: int, total: int) -> None:
     """The default :data:`Progress`: nothing."""
 
-
-def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
-    """A PETSc dense matrix holding this rank's rows ``arr`` (n_local, b) of a block."""
-    from petsc4py import PETSc
-
-    D = PETSc.Mat().createDense(size=((arr.shape[0], n_global), (None, arr.shape[1])),
-                                comm=comm)
-    D.setUp()
-    D.getDenseArray()[:] = arr
-    D.assemble()
-    return D
-
-
-def sparse_times_block(A, X: np.ndarray, comm: MPI.Comm) -> np.ndarray:
-    """This rank's rows of ``A X`` for a distributed block X (n_local, b)."""
-    D = dense_block(X, A.getSize()[0], comm)
-    R = A.matMult(D)
-    out = R.getDenseArray().copy()
-    D.destroy()
-    R.destroy()
-    return out
-
-
-def abs_matrix(A, comm):
-    """``|A|`` (entrywise absolute values) with A's parallel layout and pattern."""
-    from petsc4py import PETSc
-
-    ip, ix, v = A.getValuesCSR()
-    B = PETSc.Mat().createAIJ(size=A.getSizes(), csr=(ip, ix, np.abs(v)), comm=comm)
-    B.assemble()
-    return B
-
-
-def longest_row(A, comm) -> int:
-    """Largest number of stored entries in a row of A (all ranks)."""
-    from mpi4py import MPI
-
-    ip = A.getValuesCSR()[0]
-    return comm.allreduce(int(np.diff(ip).max(initial=0)), op=MPI.MAX)
-
-
-#: Resident memory of one rank before the factorisation where ``/proc`` cannot tell it
-#: (the predictor otherwise measures it, :meth:`BlockOperator.memory_parts`): Python,
-#: numpy/scipy, PETSc/SLEPc/MUMPS, MPI, h5py, gmsh (0.12 GB after the imports), the mesh and
-#: the DOF map; 0.17 GB measured (VmRSS) per rank of the coarse thesis model (25k DOFs,
-#: 2 ranks) with K and M, whose own share is 0.013 GB; more as a safety margin.
-BASE_GB_PER_RANK = 0.3
-
-#: Bytes per stored matrix entry (double value + 32-bit column index).
-BYTES_PER_ENTRY = 12
-
-#: Bytes per entry of the copy of ``K - sigma M`` that PETSc hands to MUMPS for a Cholesky
-#: factorization: its upper triangle as coordinate triples (two 32-bit MUMPS indices + the
-#: double value; PETSc's ``MatConvertToTriples_mpiaij_mpisbaij``).
-MUMPS_TRIPLE_BYTES = 16
 
 #: Work blocks (n x ``block`` doubles each) of the Lanczos phase besides the basis, measured
 #: (VmHWM) on the coarse thesis model: one expansion holds the M product, PETSc's dense
@@ -113,11 +58,6 @@ LANCZOS_WORK_BLOCKS = 12
 #: Work blocks of the purification phase besides its n x ``wanted`` arrays (the solves of
 #: one block and their K and M products; the checks' chunks of K Phi and M Phi).
 PURIFY_WORK_BLOCKS = 12
-
-
-#: Share of the available memory (``MemAvailable``) a modal solve may plan to use at its peak:
-#: the rest absorbs the spread of the predictor and what other processes allocate meanwhile.
-MEMORY_HEADROOM = 0.9
 
 
 def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: int = 0
@@ -142,311 +82,8 @@ def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: in
     return BYTES_PER_DOUBLE * n_global * max(lanczos, purify, static) / BYTES_PER_GB
 
 
-class InsufficientMemory(RuntimeError):
-    """The factorization (plus the Lanczos basis) would not fit in the available memory."""
-
-
-class FactorizationError(RuntimeError):
-    """MUMPS could not factor the shifted stiffness matrix."""
-
-
 class NotConverged(RuntimeError):
     """Fewer than the wanted eigenpairs converged within the allowed restarts."""
-
-
-def available_memory_gb(comm: MPI.Comm) -> float:
-    """MemAvailable summed over the distinct nodes of ``comm`` (Linux), in GB."""
-    from mpi4py import MPI
-
-    node = comm.Split_type(MPI.COMM_TYPE_SHARED)
-    mine = 0.0
-    if node.rank == 0:
-        try:
-            with open("/proc/meminfo") as f:
-                for line in f:
-                    if line.startswith("MemAvailable:"):
-                        mine = float(line.split()[1]) / 1e6
-        except OSError:
-            mine = float("inf")
-    node.Free()
-    return comm.allreduce(mine, op=MPI.SUM)
-
-
-def destroy_all(*objects) -> None:
-    """``destroy()`` every PETSc object given (None skipped), in the order given.
-
-    Explicitly, not by dropping the Python reference: petsc4py 3.18 only stashes a parallel
-    object whose last reference is dropped, until a collective ``PETSc.garbage_cleanup``.
-    """
-    for obj in objects:
-        if obj is not None:
-            obj.destroy()
-
-
-class BlockOperator:
-    """Dense-block products with M, K and the shift-invert operator (MUMPS Cholesky)."""
-
-    def __init__(self, K, M, sigma: float, comm: MPI.Comm, prefix: str, extra_gb: float = 0.0,
-                 out_of_core: str = "auto", inertia: bool = False):
-        """Factor ``K - sigma M`` with MUMPS after checking that it fits in memory.
-
-        The memory predictor (:attr:`predicted_peak_gb`: the peak resident memory of the
-        ranks together while this operator lives, comparable with their ``VmHWM``) is the
-        sum of :attr:`memory_parts` [GB]:
-
-        * ``resident``: what the processes hold when the operator is created (``VmRSS``
-          summed over the ranks: Python and the libraries, the mesh, the DOF map, K and M,
-          whatever the caller keeps), measured, not modelled; where ``/proc`` is missing,
-          :data:`BASE_GB_PER_RANK` per rank plus K and M;
-        * ``shifted_matrix``: ``K - sigma M`` (sigma != 0; nonzeros x
-          :data:`BYTES_PER_ENTRY` and the row pointers);
-        * ``mumps_input``: PETSc's copy of its upper triangle handed to MUMPS
-          (:data:`MUMPS_TRIPLE_BYTES` per entry);
-        * ``factor``: MUMPS's own estimate of everything it allocates for the factorization,
-          from the analysis (INFOG(17) in core, INFOG(27) out of core);
-        * ``dense``: the caller's dense arrays ``extra_gb`` (:func:`dense_gb`: the Lanczos
-          basis, work blocks, Ritz vectors and the purification's arrays).
-
-        Measured on the coarse thesis model (25k DOFs, 2 ranks; block 8, 16 and 32; bands of
-        8-76 modes) the prediction was within 4 % of every band's own peak. The memory check:
-        what the operator adds (all parts but ``resident``, which the processes already
-        hold and ``MemAvailable`` does not count) must stay below
-        :data:`MEMORY_HEADROOM` of the available memory.
-
-        ``out_of_core``: ``"auto"`` switches MUMPS to out-of-core (factor on disk,
-        ICNTL(22) = 1) when the in-core estimate does not fit but the out-of-core one does;
-        ``"always"`` / ``"never"`` force it on / off. An explicit PETSc option
-        ``-<prefix>st_mat_mumps_icntl_22`` always wins. The option is removed again by
-        :meth:`destroy` when this operator set it.
-
-        ``inertia``: also count the eigenvalues below ``sigma`` (Sylvester: the negative
-        pivots of the LDL^T factor, MUMPS INFOG(12), exact with ICNTL(13) = 1 so that the
-        root front is not factored by ScaLAPACK) into :attr:`n_below`.
-
-        Call :meth:`destroy` when done: it frees the factor at once (collective).
-        """
-        self.K, self.M, self.comm, self.sigma = K, M, comm, sigma
-        self.ksp = self.factor = None
-        self._set_ooc = False
-        self._inertia = inertia
-        self.n_below: int | None = None
-        self.n_global = K.getSize()[0]
-        self.n_local = K.getLocalSize()[0]
-        self.A = K
-        try:
-            self._setup(prefix, extra_gb, out_of_core)
-        except BaseException:
-            self.destroy()          # nothing of a failed operator outlives it
-            raise
-
-    def _setup(self, prefix: str, extra_gb: float, out_of_core: str) -> None:
-        """Memory check and factorization (see :meth:`__init__`)."""
-        from petsc4py import PETSc
-
-        from ..resources import current_memory_gb
-
-        K, M, comm, sigma = self.K, self.M, self.comm, self.sigma
-        resident = comm.allreduce(current_memory_gb())       # before K - sigma M is formed
-        if sigma != 0.0:
-            self.A = K.duplicate(copy=True)
-            self.A.axpy(-sigma, M, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
-        t0 = time.perf_counter()
-        self._ooc_option = f"{prefix}st_mat_mumps_icntl_22"
-        opts = PETSc.Options()
-        user_set = opts.hasName(self._ooc_option)
-        if out_of_core == "always" and not user_set:
-            self._use_out_of_core(True)
-        avail_gb = available_memory_gb(comm)
-        self.factor_memory_gb = self._estimate_factor_memory(prefix)
-        self.in_core_memory_gb = self.factor_memory_gb
-
-        fixed = self._fixed_memory_gb(resident)
-
-        def peak(factor_gb: float) -> float:
-            return sum(fixed.values()) + factor_gb + extra_gb
-
-        def fit(factor_gb: float) -> bool:     # what the processes hold is not available
-            return peak(factor_gb) - fixed["resident"] <= MEMORY_HEADROOM * avail_gb
-
-        fits = fit(self.factor_memory_gb)
-        self.available_gb = avail_gb
-        ooc_note = ""
-        if not fits and out_of_core == "auto" and not user_set:
-            self._use_out_of_core(True)
-            ooc_gb = self._estimate_factor_memory(prefix)
-            if fit(ooc_gb):
-                self.factor_memory_gb, fits = ooc_gb, True
-            else:
-                self._use_out_of_core(False)
-                ooc_note = (f"; out of core: ~{ooc_gb:.1f} GB factor, "
-                            f"~{peak(ooc_gb) - fixed['resident']:.1f} GB more, does not fit "
-                            "either")
-        if not fits:                       # (the option set here goes with destroy)
-            advice = ("a coarser mesh (mesh.refinement), more nodes or a smaller "
-                      "modal.max_basis / modal.n_modes")
-            if out_of_core == "never":
-                advice += ", or MUMPS out of core (modal.out_of_core = 'auto' or 'always')"
-            more = peak(self.factor_memory_gb) - fixed["resident"]
-            raise InsufficientMemory(
-                f"the model has {self.n_global:,} DOFs: MUMPS estimates "
-                f"~{self.factor_memory_gb:.1f} GB for the Cholesky factor "
-                f"{'out of core' if out_of_core == 'always' else 'in core'}; with the copies "
-                f"of K - sigma M (~{fixed['shifted_matrix'] + fixed['mumps_input']:.1f} GB) "
-                f"and the Lanczos basis and blocks (~{extra_gb:.1f} GB) the solve needs "
-                f"~{more:.1f} GB more than the ~{fixed['resident']:.1f} GB its processes hold "
-                f"now{ooc_note}, but {avail_gb:.1f} GB are available on {comm.size} rank(s) "
-                f"(modal.out_of_core = '{out_of_core}'); use {advice}")
-        self.out_of_core = opts.getInt(self._ooc_option, 0) == 1
-        #: the memory predictor's parts (see :meth:`__init__`), all ranks [GB]
-        self.memory_parts = dict(fixed, factor=self.factor_memory_gb, dense=extra_gb)
-        #: the memory predictor: the peak resident memory of the ranks [GB]
-        self.predicted_peak_gb = peak(self.factor_memory_gb)
-        self.ksp, self.factor = ksp, F = self._factor_solver(prefix)
-        try:
-            ksp.setUp()
-            failed = F.getMumpsInfog(1) < 0    # PETSc flags a failed factorization silently
-        except PETSc.Error:
-            failed = True
-        if failed:                         # (destroyed by __init__)
-            raise FactorizationError(f"MUMPS Cholesky factorization of K - sigma M failed "
-                                     f"(INFOG(1) = {F.getMumpsInfog(1)}, INFOG(2) = "
-                                     f"{F.getMumpsInfog(2)}); is the model free to move "
-                                     "(missing supports)? A small positive modal.shift_hz "
-                                     "helps then")
-        self.time_factorization = time.perf_counter() - t0
-        if self._inertia:
-            self.n_below = int(F.getMumpsInfog(12))
-        self.n_solves = 0
-        self.time_solves = 0.0
-
-    def _fixed_memory_gb(self, resident: float) -> dict[str, float]:
-        """The predictor's parts besides the factor and the dense arrays [GB, all ranks]:
-        ``resident`` (what the processes held before this operator: ``VmRSS`` summed over
-        the ranks; where it is NaN, :data:`BASE_GB_PER_RANK` per rank and K and M),
-        ``shifted_matrix`` (``K - sigma M``, when sigma != 0) and ``mumps_input`` (PETSc's
-        triples of its upper triangle for MUMPS)."""
-        import math
-
-        from petsc4py import PETSc
-
-        def nnz(A) -> int:
-            return int(A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"])
-
-        if math.isnan(resident):
-            resident = BASE_GB_PER_RANK * self.comm.size + \
-                BYTES_PER_ENTRY * (nnz(self.K) + nnz(self.M)) / BYTES_PER_GB
-        n_a = nnz(self.A)
-        shifted = 0.0 if self.A is self.K else \
-            (BYTES_PER_ENTRY * n_a + 8 * (self.n_global + self.comm.size)) / BYTES_PER_GB
-        return {"resident": resident, "shifted_matrix": shifted,
-                "mumps_input": MUMPS_TRIPLE_BYTES * (n_a + self.n_global) / 2 / BYTES_PER_GB}
-
-    def _use_out_of_core(self, on: bool) -> None:
-        """Set (or remove again) the MUMPS out-of-core option of this operator's factor."""
-        from petsc4py import PETSc
-
-        if on:
-            PETSc.Options().setValue(self._ooc_option, 1)
-        else:
-            PETSc.Options().delValue(self._ooc_option)
-        self._set_ooc = on
-
-    def _factor_solver(self, prefix: str):
-        from petsc4py import PETSc
-
-        ksp = PETSc.KSP().create(self.comm)
-        ksp.setOperators(self.A)
-        ksp.setType(PETSc.KSP.Type.PREONLY)
-        pc = ksp.getPC()
-        pc.setType(PETSc.PC.Type.CHOLESKY)
-        pc.setFactorSolverType("mumps")
-        ksp.setOptionsPrefix(prefix + "st_")
-        ksp.setFromOptions()
-        pc.setFactorSetUpSolverType()
-        F = pc.getFactorMatrix()
-        if self._inertia and F.getType() == "mumps":
-            F.setMumpsIcntl(13, 1)          # exact inertia: no ScaLAPACK root
-        return ksp, F
-
-    def _estimate_factor_memory(self, prefix: str) -> float:
-        """MUMPS's own estimate (GB, all ranks) of the in-core factorization, after analysis only.
-
-        The analysis runs with a 1 MB working-memory cap (ICNTL(23)), so MUMPS stops with
-        INFOG(1) = -19 before allocating anything and reports INFOG(17).
-        """
-        from petsc4py import PETSc
-
-        ksp, F = self._factor_solver(prefix)
-        try:
-            if F.getType() != "mumps":
-                return 0.0
-            F.setMumpsIcntl(23, 1)
-            with contextlib.suppress(PETSc.Error):
-                ksp.setUp()
-            out_of_core = PETSc.Options().getInt(f"{prefix}st_mat_mumps_icntl_22", 0) == 1
-            return F.getMumpsInfog(27 if out_of_core else 17) / 1e3
-        finally:
-            destroy_all(F, ksp)         # the analysis's symbolic data (~10 % of the factor)
-
-    def _dense(self, arr: np.ndarray):
-        return dense_block(arr, self.n_global, self.comm)
-
-    def _product(self, A, X: np.ndarray) -> np.ndarray:
-        return sparse_times_block(A, X, self.comm)
-
-    def mass(self, X: np.ndarray) -> np.ndarray:
-        """``M X`` for a block X (n_local, b)."""
-        return self._product(self.M, X)
-
-    def stiffness(self, X: np.ndarray) -> np.ndarray:
-        """``K X`` for a block X (n_local, b)."""
-        return self._product(self.K, X)
-
-    def apply(self, X: np.ndarray) -> np.ndarray:
-        """``(K - sigma M)^-1 M X`` for a block X (n_local, b)."""
-        return self.solve(self.mass(X), chunk=max(X.shape[1], 1))
-
-    def solve(self, B: np.ndarray, chunk: int = 64, progress: Progress | None = None,
-              phase: str = "solves") -> np.ndarray:
-        """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time
-        (``progress``: :data:`Progress` after each chunk)."""
-        from petsc4py import PETSc
-
-        out = np.empty(B.shape)
-        for c0 in range(0, B.shape[1], chunk):
-            Bc = np.ascontiguousarray(B[:, c0:c0 + chunk])
-            Bd = self._dense(Bc)
-            Y = PETSc.Mat().createDense(size=((self.n_local, self.n_global),
-                                              (None, Bc.shape[1])), comm=self.comm)
-            Y.setUp()
-            Y.assemble()
-            t0 = time.perf_counter()
-            self.factor.matSolve(Bd, Y)
-            self.time_solves += time.perf_counter() - t0
-            self.n_solves += Bc.shape[1]
-            out[:, c0:c0 + chunk] = Y.getDenseArray()
-            Bd.destroy()
-            Y.destroy()
-            if progress is not None:
-                progress(phase, min(c0 + chunk, B.shape[1]), B.shape[1])
-        return out
-
-    def destroy(self) -> None:
-        """Free the factor, its solver and ``K - sigma M`` now (collective; idempotent).
-
-        The factor must be destroyed explicitly: petsc4py 3.18 does not destroy a parallel
-        PETSc object whose last Python reference goes away but stashes it for
-        ``PETSc.garbage_cleanup`` (``PetscObjectDelayedDestroy``), and the Python handle of
-        ``pc.getFactorMatrix()`` is the last reference once the KSP is destroyed: measured,
-        every band kept its whole MUMPS factor resident (+1.1 GB per band at thesis size).
-        """
-        destroy_all(self.factor, self.ksp)
-        self.factor = self.ksp = None
-        if self.A is not None and self.A is not self.K:
-            self.A.destroy()
-        self.A = None
-        if self._set_ooc:
-            self._use_out_of_core(False)
 
 
 def effective_block(block: int, n_global: int) -> int:
@@ -539,7 +176,7 @@ def _allsum(comm, a: np.ndarray) -> np.ndarray:
     return a
 
 
-def m_orthonormalize_block(op: BlockOperator, V: np.ndarray, W: np.ndarray, m: int, r0: int,
+def m_orthonormalize_block(op: ShiftInvertFactor, V: np.ndarray, W: np.ndarray, m: int, r0: int,
                            local_from: int | None = None
                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Gram-Schmidt against V[:, :m], then SVQB; returns Q, coefficients C (m, b), R (b, b).
@@ -574,7 +211,148 @@ def m_orthonormalize_block(op: BlockOperator, V: np.ndarray, W: np.ndarray, m: i
     return Q, C, R
 
 
-def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: float = 1e-8,
+class _LanczosRun:
+    """One :func:`block_lanczos` solve between its phases: the M-orthonormal basis ``V``
+    (its first ``m`` vectors have their images in ``T``), the projected matrix ``T``, the
+    wanted count ``nev`` and the ``keep`` Ritz vectors of a thick restart (both grow with a
+    band, ``theta_cut``), the last Ritz pairs ``theta, Y, res``, the counters and the
+    timings."""
+
+    def __init__(self, op: ShiftInvertFactor, nev: int, r0: int, b: int, keep: int,
+                 max_basis: int, tol: float, theta_cut: float | None, margin: int):
+        self.op, self.r0, self.b, self.tol = op, r0, b, tol
+        self.nev, self.keep, self.max_basis = nev, keep, max_basis
+        self.theta_cut, self.margin = theta_cut, margin
+        self.two_sided = op.sigma != 0.0          # theta of both signs: order by modulus
+        self.V = np.zeros((op.n_local, max_basis + b), order="F")  # column slices contiguous
+        self.T = np.zeros((max_basis + b, max_basis + b))
+        self.t_orth = self.t_ritz = 0.0
+        self.m = 0                                # vectors whose A-image is in T
+        self.restarts = self.expansions = self.tests = 0
+        self.theta = self.Y = self.res = None
+        self.fresh = -1                           # the basis size of the last Ritz step
+        self.nconv, self.next_test, self.history = 0, 0, []
+        self.just_restarted = False
+
+    def _orthonormalize(self, W: np.ndarray, m: int, local_from: int | None = None):
+        return m_orthonormalize_block(self.op, self.V, W, m, self.r0, local_from)
+
+    def start(self) -> None:
+        """The first block of the basis: the reproducible random :func:`start_block`."""
+        t0 = time.perf_counter()
+        Q, _, _ = self._orthonormalize(start_block(self.op.n_global, self.r0,
+                                                   self.r0 + self.op.n_local, self.b), 0)
+        self.t_orth += time.perf_counter() - t0
+        self.V[:, :self.b] = Q
+
+    def expand(self) -> bool:
+        """Expand the block ``V[:, m:m+b]``: its image, orthonormalized, becomes the next
+        block and its coefficients a block column of ``T``. Returns whether the basis is
+        full (a thick restart is due)."""
+        V, T, b, m = self.V, self.T, self.b, self.m
+        W = self.op.apply(V[:, m:m + b])
+        t0 = time.perf_counter()
+        Q, C, R = self._orthonormalize(W, m + b, None if self.just_restarted else max(0, m - b))
+        self.just_restarted = False
+        self.t_orth += time.perf_counter() - t0
+        T[: m + b, m:m + b] += C
+        T[m + b:m + 2 * b, m:m + b] = R
+        V[:, m + b:m + 2 * b] = Q
+        self.m = m + b
+        self.expansions += 1
+        return self.m + 2 * b > self.max_basis
+
+    def test_due(self, restart_due: bool) -> bool:
+        """Whether a convergence test comes now: enough vectors, and its forecast
+        (:func:`rr_gap`) says it may pass or a restart is due."""
+        return self.m >= self.nev + self.b and (self.expansions >= self.next_test
+                                                or restart_due)
+
+    def convergence_test(self, monitor: Callable[[int, int, int], None] | None) -> bool:
+        """Rayleigh-Ritz on the ``m`` vectors whose images are known (:func:`ritz_step`);
+        with ``theta_cut`` the wanted count grows to the band. Returns whether the wanted
+        pairs have converged."""
+        m = self.m
+        t0 = time.perf_counter()
+        self.theta, self.Y, self.res = ritz_step(self.T, m, self.keep, self.b, self.two_sided)
+        theta, res = self.theta, self.res
+        self.fresh, self.tests = m, self.tests + 1
+        ok = res <= self.tol * np.abs(theta)
+        self.nconv = int(np.argmin(ok)) if not ok.all() else len(ok)
+        if self.theta_cut is not None:
+            self._grow_to_band(theta)
+        nev = self.nev
+        if nev <= len(theta):
+            self.history.append((self.expansions, float(np.max(
+                res[:nev] / (self.tol * np.abs(theta[:nev]))))))
+        self.next_test = self.expansions + rr_gap(self.history)
+        self.t_ritz += time.perf_counter() - t0
+        if monitor:
+            monitor(min(self.nconv, nev), nev, m)
+        return self.nconv >= nev
+
+    def _grow_to_band(self, theta: np.ndarray) -> None:
+        """The band: every Ritz value above the cut, then ``margin`` converged below it."""
+        inside = int(np.sum(np.abs(theta) >= self.theta_cut))
+        want = max(self.nev, inside + self.margin)
+        if want + 2 * self.b > self.max_basis:
+            raise NotConverged(f"block Lanczos: the band holds at least {inside} "
+                               f"modes, more than a basis of {self.max_basis} can take")
+        if want > self.nev:
+            self.nev = want
+            self.keep = min(self.nev + self.b, self.max_basis - 2 * self.b)
+
+    def thick_restart(self, max_restarts: int, progress: Progress) -> None:
+        """Keep the best ``keep`` Ritz vectors (an arrow matrix ``T``), then the next block;
+        :class:`NotConverged` after ``max_restarts``."""
+        V, T, b, m = self.V, self.T, self.b, self.m
+        if self.restarts >= max_restarts:
+            raise NotConverged(f"block Lanczos: {self.nconv} of {self.nev} modes converged "
+                               f"after {self.restarts} restarts")
+        if self.fresh != m or len(self.theta) < min(self.keep, m):
+            # the band grew at the last test (more vectors to keep than it computed)
+            t0 = time.perf_counter()
+            self.theta, self.Y, self.res = ritz_step(T, m, self.keep, b, self.two_sided)
+            self.fresh = m
+            self.t_ritz += time.perf_counter() - t0
+        p = min(self.keep, len(self.theta))
+        t0 = time.perf_counter()
+        coupling = T[m:m + b, :m] @ self.Y[:, :p]
+        nxt = V[:, m:m + b].copy()
+        rows_product(V[:, :m], self.Y[:, :p], V[:, :p], progress, "thick restart")
+        V[:, p:p + b] = nxt
+        T[:] = 0.0
+        T[np.arange(p), np.arange(p)] = self.theta[:p]
+        T[p:p + b, :p] = coupling       # its transpose comes from the next expansion
+        self.t_orth += time.perf_counter() - t0
+        self.m = p
+        self.restarts += 1
+        self.just_restarted = True
+
+    def ritz_vectors(self, guard: int, progress: Progress
+                     ) -> tuple[np.ndarray, np.ndarray, dict]:
+        """The converged pairs (with ``theta_cut``: every converged one), ``guard`` more
+        Ritz vectors at most, and the statistics."""
+        if self.theta_cut is not None:          # return every converged pair (band + margin)
+            self.nev = self.nconv
+        nev, op = self.nev, self.op
+        n_guard = max(0, min(guard, self.Y.shape[1] - nev))
+        t0 = time.perf_counter()
+        X = np.empty((op.n_local, nev + n_guard))
+        rows_product(self.V[:, :self.m], self.Y[:, :nev + n_guard], X, progress, "Ritz vectors")
+        self.t_orth += time.perf_counter() - t0
+        stats = {"block_size": self.b, "max_basis": self.max_basis, "restarts": self.restarts,
+                 "expansions": self.expansions, "basis_size": self.m,
+                 "linear_solves": op.n_solves, "time_block_solves": op.time_solves,
+                 "time_orthogonalization": self.t_orth, "time_lanczos_ritz": self.t_ritz,
+                 "lanczos_ritz_steps": self.tests,
+                 "max_residual_estimate": float((self.res[:nev]
+                                                 / np.abs(self.theta[:nev])).max()),
+                 "n_wanted": int(nev), "n_guard": int(n_guard)}
+        return self.theta[:nev], X, stats
+
+
+def block_lanczos(op: ShiftInvertFactor, nev: int, r0: int, block: int = 32, tol: float = 1e-8,
                   max_basis: int = 0, max_restarts: int = 50,
                   monitor: Callable[[int, int, int], None] | None = None,
                   theta_cut: float | None = None, margin: int = 1, guard: int = 0,
@@ -596,7 +374,7 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     Parameters
     ----------
     op
-        The operator (shift-invert of K, M).
+        The shift-invert factor of K - sigma M (its ``apply``, ``mass`` and statistics).
     nev
         Number of wanted eigenpairs.
     r0
@@ -630,103 +408,18 @@ def block_lanczos(op: BlockOperator, nev: int, r0: int, block: int = 32, tol: fl
     if nev + 2 * b > max_basis:
         raise ValueError(f"too many modes ({nev}) for {n} DOFs with block size {b}")
     keep = min(nev + b, max_basis - 2 * b)
-    two_sided = op.sigma != 0.0          # theta of both signs: order by modulus
-    V = np.zeros((op.n_local, max_basis + b), order="F")   # column slices stay contiguous
-    T = np.zeros((max_basis + b, max_basis + b))
-    t_orth = t_ritz = 0.0
-
-    def m_orthonormalize(W: np.ndarray, m: int, local_from: int | None = None):
-        return m_orthonormalize_block(op, V, W, m, r0, local_from)
-
-    t0 = time.perf_counter()
-    Q, _, _ = m_orthonormalize(start_block(n, r0, r0 + op.n_local, b), 0)
-    t_orth += time.perf_counter() - t0
-    V[:, :b] = Q
-    m = 0                                   # vectors whose A-image is in T
-    restarts, expansions, tests = 0, 0, 0
-    theta = Y = res = None
-    fresh = -1                              # the basis size of the last Ritz step
-    nconv, next_test, history = 0, 0, []
-    just_restarted = False
+    run = _LanczosRun(op, nev, r0, b, keep, max_basis, tol, theta_cut, margin)
+    run.start()
     while True:
-        # expand the block V[:, m:m+b]
-        W = op.apply(V[:, m:m + b])
-        t0 = time.perf_counter()
-        Q, C, R = m_orthonormalize(W, m + b, None if just_restarted else max(0, m - b))
-        just_restarted = False
-        t_orth += time.perf_counter() - t0
-        T[: m + b, m:m + b] += C
-        T[m + b:m + 2 * b, m:m + b] = R
-        V[:, m + b:m + 2 * b] = Q
-        m += b
-        expansions += 1
-        restart_due = m + 2 * b > max_basis
-        # Rayleigh-Ritz on the m vectors whose images are known: the convergence test
-        if m >= nev + b and (expansions >= next_test or restart_due):
-            t0 = time.perf_counter()
-            theta, Y, res = ritz_step(T, m, keep, b, two_sided)
-            fresh, tests = m, tests + 1
-            ok = res <= tol * np.abs(theta)
-            nconv = int(np.argmin(ok)) if not ok.all() else len(ok)
-            if theta_cut is not None:
-                # the band: every Ritz value above the cut, then `margin` converged below it
-                inside = int(np.sum(np.abs(theta) >= theta_cut))
-                want = max(nev, inside + margin)
-                if want + 2 * b > max_basis:
-                    raise NotConverged(f"block Lanczos: the band holds at least {inside} "
-                                       f"modes, more than a basis of {max_basis} can take")
-                if want > nev:
-                    nev = want
-                    keep = min(nev + b, max_basis - 2 * b)
-            if nev <= len(theta):
-                history.append((expansions, float(np.max(
-                    res[:nev] / (tol * np.abs(theta[:nev]))))))
-            next_test = expansions + rr_gap(history)
-            t_ritz += time.perf_counter() - t0
-            if monitor:
-                monitor(min(nconv, nev), nev, m)
-            if nconv >= nev:
+        restart_due = run.expand()
+        if run.test_due(restart_due):
+            if run.convergence_test(monitor):
                 break
         elif monitor:
-            monitor(min(nconv, nev), nev, m)
+            monitor(min(run.nconv, run.nev), run.nev, run.m)
         if restart_due:
-            if restarts >= max_restarts:
-                raise NotConverged(f"block Lanczos: {nconv} of {nev} modes converged after "
-                                   f"{restarts} restarts")
-            if fresh != m or len(theta) < min(keep, m):
-                # the band grew at the last test (more vectors to keep than it computed)
-                t0 = time.perf_counter()
-                theta, Y, res = ritz_step(T, m, keep, b, two_sided)
-                fresh = m
-                t_ritz += time.perf_counter() - t0
-            # thick restart: keep the best `keep` Ritz vectors, then the next block
-            p = min(keep, len(theta))
-            t0 = time.perf_counter()
-            coupling = T[m:m + b, :m] @ Y[:, :p]
-            nxt = V[:, m:m + b].copy()
-            rows_product(V[:, :m], Y[:, :p], V[:, :p], progress, "thick restart")
-            V[:, p:p + b] = nxt
-            T[:] = 0.0
-            T[np.arange(p), np.arange(p)] = theta[:p]
-            T[p:p + b, :p] = coupling       # its transpose comes from the next expansion
-            t_orth += time.perf_counter() - t0
-            m = p
-            restarts += 1
-            just_restarted = True
-    if theta_cut is not None:          # return every converged pair (band + margin)
-        nev = nconv
-    n_guard = max(0, min(guard, Y.shape[1] - nev))
-    t0 = time.perf_counter()
-    X = np.empty((op.n_local, nev + n_guard))
-    rows_product(V[:, :m], Y[:, :nev + n_guard], X, progress, "Ritz vectors")
-    t_orth += time.perf_counter() - t0
-    stats = {"block_size": b, "max_basis": max_basis, "restarts": restarts,
-             "expansions": expansions, "basis_size": m, "linear_solves": op.n_solves,
-             "time_block_solves": op.time_solves, "time_orthogonalization": t_orth,
-             "time_lanczos_ritz": t_ritz, "lanczos_ritz_steps": tests,
-             "max_residual_estimate": float((res[:nev] / np.abs(theta[:nev])).max()),
-             "n_wanted": int(nev), "n_guard": int(n_guard)}
-    return theta[:nev], X, stats
+            run.thick_restart(max_restarts, progress)
+    return run.ritz_vectors(guard, progress)
 
 
 #: Rows per slice when a block of vectors is rotated in place (:func:`rotate_in_place`):
@@ -799,10 +492,9 @@ def permute_columns(A: np.ndarray, order: np.ndarray) -> None:
         A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS][:, order]
 
 
-def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: bool = False,
+def purify_and_project(op: ShiftInvertFactor, X: np.ndarray, block: int, refine: bool = False,
                        select: Callable[[np.ndarray], np.ndarray] | None = None,
                        progress: Progress | None = None, timings: dict | None = None,
-                       fixed: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                        kx: np.ndarray | None = None
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One more operator application (purification), then Rayleigh-Ritz with K and M.
@@ -816,10 +508,8 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     (``X_p += (K - sigma M)^-1 s``), which brings an inaccurate factor's solves to working
     accuracy.
 
-    ``fixed = (KC, MC, bounds)``: the first ``c = len(bounds)`` columns of X are modes kept
-    as they are (converged ones of an earlier pass, with their projections ``KC = X_c^T K
-    X_c``, ``MC = X_c^T M X_c`` and solve-residual bounds): only the others are purified,
-    and the Rayleigh-Ritz step works in the span of both.
+    An extra pass with converged modes locked is :func:`~railvib_hpc.modal.ritz.
+    purify_locked`.
 
     The projected matrices ``X_p^T K X_p`` and ``X_p^T M X_p`` are accumulated block by
     block while the K and M products of the block are at hand, their upper triangles only
@@ -835,7 +525,7 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     added under ``"solves"``, ``"products"`` (the K and M products and solve residuals) and
     ``"rayleigh_ritz"`` (projection, dense eigenproblem, rotation).
 
-    ``kx`` (C-contiguous, X's shape; not with ``fixed``): filled with ``K Phi``, the K
+    ``kx`` (C-contiguous, X's shape): filled with ``K Phi``, the K
     products of the purified vectors rotated by the same Rayleigh-Ritz rotation as the
     vectors themselves (exact in exact arithmetic; the rounding of the rotation, ~1e-16
     ``||K Phi||``, is far below any residual tolerance), for the checks to reuse
@@ -843,8 +533,8 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     """
     from mpi4py import MPI
 
-    if kx is not None and (fixed is not None or kx.shape != X.shape):
-        raise ValueError("purify_and_project: kx needs X's shape and no fixed columns")
+    if kx is not None and kx.shape != X.shape:
+        raise ValueError("purify_and_project: kx needs X's shape")
     progress = progress or no_progress
     timings = {} if timings is None else timings
     clock = dict.fromkeys(("solves", "products", "rayleigh_ritz"), 0.0)
@@ -852,8 +542,7 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
     kp = np.zeros((k, k))
     mp = np.zeros((k, k))
     sres = np.zeros(k)
-    n_fixed = 0 if fixed is None else len(fixed[2])
-    for j in range(n_fixed, k, block):
+    for j in range(0, k, block):
         c = slice(j, min(j + block, k))
         t0, s0 = time.perf_counter(), op.time_solves
         B = op.mass(X[:, c])
@@ -873,13 +562,10 @@ def purify_and_project(op: BlockOperator, X: np.ndarray, block: int, refine: boo
         kp[:c.stop, c] = X[:, :c.stop].T @ KY
         mp[:c.stop, c] = X[:, :c.stop].T @ MY
         clock["rayleigh_ritz"] += time.perf_counter() - t1
-        progress("purification", c.stop - n_fixed, k - n_fixed)
+        progress("purification", c.stop, k)
     t0 = time.perf_counter()
     for a in (sres, kp, mp):
         op.comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-    if n_fixed:
-        kp[:n_fixed, :n_fixed], mp[:n_fixed, :n_fixed] = fixed[0], fixed[1]
-        sres[:n_fixed] = fixed[2] ** 2
     lam, Z = eigh(symmetric_from_upper(kp), symmetric_from_upper(mp))
     if select is not None:
         perm = np.asarray(select(lam))

@@ -34,13 +34,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case, solid_material
+from ..config import Case
 from ..errors import UserError
 from ..fem.boundary import face_impedance, wave_speeds
 from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
 from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_LAYER_PARTS, SOIL_PARTS
+from ..site import solid_material
 from .dofmap import COMPONENTS
 from .elements import SOLID_MATERIAL
 

@@ -267,15 +267,8 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
     from mpi4py import MPI
     from petsc4py import PETSc
 
-    from .block_lanczos import (
-        BlockOperator,
-        FactorizationError,
-        InsufficientMemory,
-        NotConverged,
-        block_lanczos,
-        default_max_basis,
-        dense_gb,
-    )
+    from .block_lanczos import NotConverged, block_lanczos, default_max_basis, dense_gb
+    from .factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
 
     opts = PETSc.Options(PREFIX)
     block_size = opts.getInt("bl_block_size", block_size)
@@ -289,8 +282,8 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
                         0 if static_rhs is None else comm.allreduce(
                             static_rhs.shape[1], op=MPI.MAX))
     try:
-        op = BlockOperator(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
-                           out_of_core=out_of_core)
+        op = ShiftInvertFactor(K, M, sigma, comm, PREFIX, extra_gb=extra_gb,
+                               out_of_core=out_of_core)
     except (InsufficientMemory, FactorizationError) as exc:
         raise EigenSolveError(str(exc)) from None
     r0 = K.getOwnershipRange()[0]

@@ -12,13 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case, solid_material
+from ..config import Case
 from ..fem.beam import beam_mass, beam_stiffness, shear_deformation_factors, shear_modulus
 from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
 from ..fem.spring import spring_matrices
 from ..mesh.interfaces import tributary_areas
 from ..mesh.model import Mesh
 from ..schema import INTERFACE_PARTS, PART_ID, SOLID_MATERIAL
+from ..site import solid_material
 
 BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
 PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}

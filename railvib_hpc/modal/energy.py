@@ -54,7 +54,7 @@ def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm
         Group name -> (m,) strain energies (the same on every rank); their sum over the
         groups is ``omega^2``.
     """
-    from .block_lanczos import sparse_times_block
+    from .factor import sparse_times_block
 
     m = phi.shape[1]
     energies = {}

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -13,14 +14,9 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
-from ..io.stage_checks import (
-    check_eigenvalues,
-    check_modal_damping,
-    check_mode_shapes,
-    check_modes,
-    check_static,
-)
-from ..io.stage_files import ensure_space, examine, forget, output_lock, provenance
+from ..io.stage_checks import check_eigenvalues, check_mode_shapes
+from ..io.stage_files import ensure_space
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
@@ -99,84 +95,139 @@ class EigenProgress:
             self.current = None
 
 
+@dataclass(frozen=True)
+class ModesOutput(StageOutput):
+    """What the ``modal`` stage returns (the API's ``ModalResult`` has these fields).
+
+    Attributes
+    ----------
+    modes_h5, modes_xdmf
+        The modes and their ParaView view (None with ``modal.band_only``: one band only).
+    static_h5
+        The static solutions of the static correction (None when it is off).
+    frequencies_hz
+        The natural frequencies [Hz].
+    n_dofs
+        Free degrees of freedom of the model.
+    max_orthonormality_error, max_relative_residual
+        The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
+    peak_rss_gb_total
+        Peak memory over all ranks of the eigensolve [GB] (None when reused).
+    """
+
+    modes_h5: Path | None
+    modes_xdmf: Path | None
+    static_h5: Path | None
+    frequencies_hz: np.ndarray
+    n_dofs: int | None
+    max_orthonormality_error: float | None
+    max_relative_residual: float | None
+    peak_rss_gb_total: float | None
+
+    @classmethod
+    def of_summary(cls, summary: dict, frequencies, out_dir: Path,
+                   static_correction: bool) -> ModesOutput:
+        """The output of a summary and the frequencies of its modes, in ``out_dir``."""
+        def present(name: str) -> Path | None:
+            return out_dir / name if (out_dir / name).exists() else None
+
+        modes = present("modes.h5") if not summary.get("band_only") else None
+        return cls(reused=summary.get("reused"), summary=summary, modes_h5=modes,
+                   modes_xdmf=present("modes.xdmf") if modes else None,
+                   static_h5=present("static.h5") if static_correction else None,
+                   frequencies_hz=np.asarray(frequencies if modes else [], dtype=float),
+                   n_dofs=summary.get("n_dofs"),
+                   max_orthonormality_error=summary.get("max_orthonormality_error"),
+                   max_relative_residual=summary.get("max_relative_residual"),
+                   peak_rss_gb_total=None if summary.get("reused")
+                   else summary.get("peak_rss_gb_total"))
+
+
+def compute(ctx: StageContext) -> ModesOutput:
+    """``railvib modal``: compute (or reuse) ``modes.h5`` (and ``static.h5``,
+    ``modal_damping.h5``) in the output folder (collective; the runner has started PETSc).
+
+    Builds or reuses ``mesh.h5`` when the modes are recomputed. The summary holds
+    ``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics.
+    """
+    old = _reused_modes(ctx)
+    if old is not None:
+        return old
+    summary, freqs = _modal(ctx)
+    return ModesOutput.of_summary(summary, freqs, ctx.out_dir,
+                                  bool(ctx.case["mbs.static_correction"]))
+
+
+STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
+              products=("modes.h5", "static.h5", "modal_damping.h5"), reads=("mesh.h5",),
+              compute=compute, petsc=True)
+
+
 def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
                     petsc_options: list[str] | None = None) -> dict:
-    """``railvib modal``: compute (or reuse) ``modes.h5`` (and ``static.h5``) in ``out_dir``.
-
-    Collective. Initialises PETSc with ``petsc_options`` (once per process), builds or
-    reuses ``mesh.h5`` when the modes are recomputed, and holds the output folder's lock.
-    Returns a summary dict (``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver
-    statistics).
-    """
-    from ..petsc_env import init_petsc
-
-    out_dir = Path(out_dir)
-    with output_lock(out_dir, comm, "modal", rep=rep):
-        init_petsc(petsc_options)
-        return _modal(case, out_dir, comm, rep)
+    """The ``modal`` stage from a script: :data:`STAGE` through the runner (the folder's
+    lock, PETSc started with ``petsc_options``; no ``run.json`` entry). Returns its summary
+    (``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics)."""
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="modal")
+    return dict(runner.run(STAGE, case, record=False).result.summary)
 
 
-def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
+def _reused_modes(ctx: StageContext) -> ModesOutput | None:
+    """Current modes (and their static fields and projected damping, recomputed when only
+    those are stale), or None when the modes are to be recomputed (collective)."""
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    path = out_dir / "modes.h5"
+    want_static = bool(case["mbs.static_correction"])
+
+    def read(verdict):
+        if case["modal.damping"] == "strain_energy" and read_strain_energies(path) is None:
+            raise NotReusable("it has no per-material strain energies (modal.damping = "
+                              "'strain_energy' needs them)")
+        if not has_probe_roles(path):
+            raise NotReusable("it has no probe roles (written by an older version)")
+        with h5py_file(path) as f:
+            return f["modes/frequency_hz"][()], str(f.attrs.get("stats", "{}"))
+
+    def previous():
+        old = ctx.reuse("modes.h5", path=path, why="same model and modal settings",
+                        detail=lambda v: f"{len(v[0])} modes, {v[0][0]:.3f} - "
+                                         f"{v[0][-1]:.3f} Hz", accept=read)
+        return (*old.value, old.sha256) if old.ok else None
+
+    old = on_root(previous, comm)
+    if old is None:
+        return None
+    f, stats, modes_sha = old
+    xdmf = path.with_suffix(".xdmf")
+    if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
+        rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
+    if want_static and not on_root(lambda: ctx.reuse("static.h5", discard=False).ok, comm):
+        _static_only(ctx, modes_sha)
+    if case["modal.damping"] == "full":
+        def projected(verdict) -> None:
+            if want_static and damping_size(ctx.path("modal_damping.h5")) <= len(f):
+                raise NotReusable("it holds the modes only (mbs.static_correction = true "
+                                  "needs the static fields projected too)")
+
+        if not on_root(lambda: ctx.reuse("modal_damping.h5", accept=projected,
+                                         discard=False).ok, comm):
+            _damping_only(ctx, modes_sha, len(f))
+    summary = {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
+               **json.loads(stats)}
+    return ModesOutput.of_summary(summary, f, out_dir, want_static)
+
+
+def _modal(ctx: StageContext) -> tuple[dict, np.ndarray]:
+    """Mesh, DOFs, K and M, the eigensolve and the files written from it (collective);
+    returns the summary and the frequencies."""
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     path = out_dir / "modes.h5"
     static_path = out_dir / "static.h5"
     want_static = bool(case["mbs.static_correction"])
-
-    def previous():
-        verdict = examine(path, "modes.h5", case, data_check=check_modes)
-        if verdict.ok and case["modal.damping"] == "strain_energy" \
-                and read_strain_energies(path) is None:
-            verdict.ok = False
-            verdict.reason = ("it has no per-material strain energies (modal.damping = "
-                              "'strain_energy' needs them)")
-        if verdict.ok and not has_probe_roles(path):
-            verdict.ok = False
-            verdict.reason = "it has no probe roles (written by an older version)"
-        if verdict.ok:
-            with h5py_file(path) as f:
-                return (f["modes/frequency_hz"][()], str(f.attrs.get("stats", "{}")),
-                        verdict.sha256)
-        if verdict.kind != "missing":
-            rep.info(f"recomputing {path}: {verdict.reason}")
-        forget(path)
-        return None
-
-    old = on_root(previous, comm)
     want_damping = case["modal.damping"] == "full"
     damping_path = out_dir / "modal_damping.h5"
-    if old is not None:
-        f, stats, modes_sha = old
-        rep.info(f"reusing {path} (same model and modal settings): {len(f)} modes, "
-                 f"{f[0]:.3f} - {f[-1]:.3f} Hz")
-        xdmf = path.with_suffix(".xdmf")
-        if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
-            rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
-        if want_static:
-            def static_ok() -> bool:
-                v = examine(static_path, "static.h5", case, data_check=check_static)
-                if not v.ok and v.kind != "missing":
-                    rep.info(f"recomputing {static_path}: {v.reason}")
-                return v.ok
-
-            if not on_root(static_ok, comm):
-                _static_only(case, out_dir, comm, rep, modes_sha)
-        if want_damping:
-            def damping_ok() -> bool:
-                v = examine(damping_path, "modal_damping.h5", case,
-                            data_check=check_modal_damping)
-                if v.ok and want_static and damping_size(damping_path) <= len(f):
-                    v.ok, v.reason = False, ("it holds the modes only (mbs.static_correction "
-                                             "= true needs the static fields projected too)")
-                if not v.ok and v.kind != "missing":
-                    rep.info(f"recomputing {damping_path}: {v.reason}")
-                return v.ok
-
-            if not on_root(damping_ok, comm):
-                _damping_only(case, out_dir, comm, rep, modes_sha, len(f))
-        return {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
-                **json.loads(stats)}
-
     with rep.stage("mesh (load/build + broadcast)"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):
         dofmap = case_dofmap(mesh, case, comm.size)
@@ -206,7 +257,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         M.destroy()
         rep.info(f"band {case['modal.band_only']} written to {out_dir / 'bands'}; run with "
                  "modal.band_only = 0 to merge the bands into modes.h5")
-        return {"reused": False, "band_only": case["modal.band_only"], "n_modes": 0}
+        return {"reused": False, "band_only": case["modal.band_only"], "n_modes": 0}, []
     for warning in result.warnings:
         rep.info(f"WARNING: {warning}")
     if result.stats.get("out_of_core"):
@@ -251,7 +302,7 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
         stats["ranks"] = comm.size
         # rank 0's (timings differ per rank): parallel HDF5 needs identical attributes
         stats = comm.bcast(stats, root=0)
-        attrs = on_root(lambda: provenance("modes.h5", case, {"mesh.h5": mesh_sha}), comm)
+        attrs = on_root(lambda: ctx.provenance("modes.h5", {"mesh.h5": mesh_sha}), comm)
         attrs.update({"petsc_version": _versions()[0], "slepc_version": _versions()[1],
                       "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs})
         modes_sha = write_modes(path, comm, mesh, nodes, result.eigenvalues, translation,
@@ -266,19 +317,19 @@ def _modal(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter) -> dict:
              f"solved; peak memory {stats['peak_rss_gb_total']:.2f} GB (all ranks)")
     rep.info(f"wrote {path} and {path.with_suffix('.xdmf')}")
     if parts is not None:
-        _write_damping(case, damping_path, comm, parts, mesh_sha, modes_sha)
+        _write_damping(ctx, parts, mesh_sha, modes_sha)
         rep.info(f"wrote {damping_path}: Phi^T C Phi of the dashpots, pads and materials "
                  "(modal.damping = 'full')")
     if want_static:
         with rep.stage("write static.h5"):
-            sattrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
-                                                                   "modes.h5": modes_sha}), comm)
-            on_root(lambda: forget(static_path), comm)
+            sattrs = on_root(lambda: ctx.provenance("static.h5", {"mesh.h5": mesh_sha,
+                                                                  "modes.h5": modes_sha}), comm)
+            on_root(lambda: ctx.discard(static_path), comm)
             write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table,
                          sattrs, x_mass)
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
-    return summary
+    return summary, f
 
 
 def band_settings(case: Case, out_dir: Path):
@@ -330,10 +381,11 @@ def _check_modes_before_writing(comm: MPI.Comm, eigenvalues, translation, masses
                         f"{path} was not written. Check the material values and supports")
 
 
-def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes_sha: str) -> None:
+def _static_only(ctx: StageContext, modes_sha: str) -> None:
     """static.h5 for reused modes: assemble K again and factor it once."""
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     with rep.stage("static correction: mesh + assembly"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
         dofmap = case_dofmap(mesh, case, comm.size)
         K, M, _ = assemble(mesh, case, dofmap, comm)
     load_dofs, table = rail_load_dofs(mesh, dofmap)
@@ -349,9 +401,9 @@ def _static_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes
             M.destroy()
     static_path = out_dir / "static.h5"
     with rep.stage("write static.h5"):
-        attrs = on_root(lambda: provenance("static.h5", case, {"mesh.h5": mesh_sha,
-                                                              "modes.h5": modes_sha}), comm)
-        on_root(lambda: forget(static_path), comm)
+        attrs = on_root(lambda: ctx.provenance("static.h5", {"mesh.h5": mesh_sha,
+                                                             "modes.h5": modes_sha}), comm)
+        on_root(lambda: ctx.discard(static_path), comm)
         write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs,
                      x_mass)
     rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
@@ -364,23 +416,24 @@ def damping_size(path: Path) -> int:
         return int(f["dashpots"].shape[0])
 
 
-def _write_damping(case: Case, path: Path, comm: MPI.Comm, parts: dict, mesh_sha: str,
-                   modes_sha: str) -> None:
+def _write_damping(ctx: StageContext, parts: dict, mesh_sha: str, modes_sha: str) -> None:
     """Write ``modal_damping.h5`` on rank 0 (a stage file: provenance, checked, atomic)."""
+    path = ctx.path("modal_damping.h5")
+
     def write() -> None:
-        forget(path)
-        write_damping_parts(path, parts, provenance("modal_damping.h5", case,
-                                                    {"mesh.h5": mesh_sha,
-                                                     "modes.h5": modes_sha}))
+        ctx.discard(path)
+        write_damping_parts(path, parts, ctx.provenance("modal_damping.h5",
+                                                        {"mesh.h5": mesh_sha,
+                                                         "modes.h5": modes_sha}))
 
-    on_root(write, comm)
+    on_root(write, ctx.comm)
 
 
-def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, modes_sha: str,
-                  m: int) -> None:
+def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
     """modal_damping.h5 for reused modes: assemble again, read the modes' rows, project."""
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     with rep.stage("projected damping (reused modes)"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
         dofmap = case_dofmap(mesh, case, comm.size)
         want_static = bool(case["mbs.static_correction"])
         K, M, _ = assemble(mesh, case, dofmap, comm, mass=want_static)
@@ -394,7 +447,7 @@ def _damping_only(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter, mode
             M.destroy()
         parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
         K.destroy()
-    _write_damping(case, out_dir / "modal_damping.h5", comm, parts, mesh_sha, modes_sha)
+    _write_damping(ctx, parts, mesh_sha, modes_sha)
     rep.info(f"wrote {out_dir / 'modal_damping.h5'} (modal.damping = 'full')")
 
 

@@ -105,7 +105,7 @@ def deflate(M, phi: np.ndarray, cols: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     (mass-normalised) modes taken out, M-orthogonal to them (collective)."""
     from mpi4py import MPI
 
-    from .block_lanczos import sparse_times_block
+    from .factor import sparse_times_block
 
     coef = phi.T @ sparse_times_block(M, cols, comm)
     comm.Allreduce(MPI.IN_PLACE, coef, op=MPI.SUM)
@@ -161,12 +161,12 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
 
 def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:
     """``K^-1 rhs`` with its own MUMPS Cholesky factorization (options prefix railvib_eig_)."""
-    from .block_lanczos import BlockOperator
     from .eigen import PREFIX
+    from .factor import ShiftInvertFactor
 
     # dense blocks held besides the factor: the right-hand sides and the solutions (all ranks)
     extra_gb = 2 * BYTES_PER_DOUBLE * comm.allreduce(rhs.size) / BYTES_PER_GB
-    op = BlockOperator(K, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
+    op = ShiftInvertFactor(K, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
     try:
         return op.solve(rhs)
     finally:

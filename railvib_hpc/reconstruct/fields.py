@@ -58,7 +58,7 @@ import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
@@ -215,8 +215,77 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     modes_path, out_path = Path(modes_path), Path(out_path)
     extra = list(extra or [])
     t = np.asarray(t, dtype=float)
+    steps, hist, m = _coefficient_histories(len(t), q, q_dot, q_ddot, steps, extra)
+    ns = len(steps)
+    parallel = h5py_parallel_ok(comm)
+
+    # ---- read this rank's slice of the mode shapes (and the extra bases)
+    t0 = time.perf_counter()
+    basis = _read_mode_shapes(comm, parallel, modes_path, m, extra)
+    n, nodes, phi2, n_basis = basis.n, basis.nodes, basis.phi2, basis.phi2.shape[0]
+    nl = nodes.stop - nodes.start
+    t_read = time.perf_counter() - t0
+
+    # ---- blocks of steps
+    nb = int(block_steps) if block_steps else block_steps_for_budget(3 * nl, float32)
+    nb = comm.allreduce(nb, op=_mpi_min()) if comm.size > 1 else nb
+    nb = max(1, min(nb, ns))
+    dtype = np.float32 if float32 else np.float64
+    buf = np.empty((nb, 3 * nl))
+    buf32 = np.empty((nb, 3 * nl), dtype=np.float32) if float32 else None
+    gather = comm.size > 1 and not parallel
+
+    stats = {"t_gemm": 0.0, "t_write": 0.0}
+
+    def fill(f, par: bool) -> None:
+        error = None
+        dsets: dict = {}
+        try:
+            if f is not None:
+                dsets = _create(f, ns, n, basis.hexes_shape, basis.hexes_dtype,
+                                basis.part_dtype, dtype)
+                _set_attrs(f, m, n_basis - m, float32, nb, modes_path)
+            if comm.rank == 0:
+                _copy_mesh(modes_path, dsets, t[steps],
+                           steps if step_numbers is None else np.asarray(step_numbers))
+        except Exception as exc:   # re-raised on every rank
+            error = exc
+        check_collective(comm, error, f"writing {out_path}")
+        _stream(comm, dsets, hist, phi2, buf, buf32, nb, ns, nodes, parallel, gather,
+                stats, rep, out_path)
+
+    nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
+    mesh_bytes = 8 * (3 * n + basis.hexes_shape[0] * 9) + 16 * ns
+    write_h5(out_path, comm, fill, size_hint=nbytes + mesh_bytes + int(extra_bytes), attrs=attrs,
+             parallel=parallel, before_complete=before_complete, fill_everywhere=True,
+             check=lambda tmp: check_fields(tmp, False), record=record)
+
+    def xdmf():
+        write_fields_xdmf(out_path)
+
+    on_root(xdmf, comm)
+    t_gemm = _max_over_ranks(comm, stats["t_gemm"])
+    t_write = _max_over_ranks(comm, stats["t_write"])
+    t_read = _max_over_ranks(comm, t_read)
+    t_total = _max_over_ranks(comm, time.perf_counter() - t_start)
+    flops = 2.0 * sum(h.shape[1] for h in hist) * 3 * n * ns
+    return {"n_nodes": n, "n_steps": ns, "n_basis": n_basis, "n_modes": m,
+            "n_extra": n_basis - m, "block_steps": nb, "bytes_written": nbytes,
+            "seconds_read": t_read, "seconds_gemm": t_gemm, "seconds_write": t_write,
+            "seconds_total": t_total,
+            "gemm_gflops": flops / t_gemm / 1e9 if t_gemm > 0 else float("nan"),
+            "write_gb_per_s": nbytes / t_write / 1e9 if t_write > 0 else float("nan"),
+            "ranks": comm.size, "parallel_io": parallel, "float32": bool(float32)}
+
+
+def _coefficient_histories(nt: int, q: np.ndarray, q_dot: np.ndarray, q_ddot: np.ndarray,
+                           steps: Sequence[int] | np.ndarray | None,
+                           extra: list[ExtraBasis]
+                           ) -> tuple[np.ndarray, list[np.ndarray], int]:
+    """Check the histories; return the stored steps, the coefficient histories of all bases
+    at them (displacement, velocity, acceleration: each (ns, M), C-contiguous, trailing
+    all-zero columns dropped) and the number of modes ``m``."""
     q, q_dot, q_ddot = (np.asarray(a, dtype=float) for a in (q, q_dot, q_ddot))
-    nt = len(t)
     if q.ndim != 2 or q.shape[0] != nt or q_dot.shape != q.shape or q_ddot.shape != q.shape:
         raise ValueError(f"modal histories must be (nt, m) = ({nt}, m), got q {q.shape}, "
                          f"q_dot {q_dot.shape}, q_ddot {q_ddot.shape}")
@@ -228,7 +297,6 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     steps = np.arange(nt) if steps is None else np.asarray(steps, dtype=np.int64)
     if steps.ndim != 1 or len(steps) == 0 or steps.min() < 0 or steps.max() >= nt:
         raise ValueError(f"steps must be a non-empty list of indices in [0, {nt})")
-    m, ns = q.shape[1], len(steps)
     # coefficient histories of all bases, restricted to the stored steps (small: ns x M)
     hist = [np.ascontiguousarray(np.hstack([a[steps]] + [np.asarray(e[2 + i], float)[steps]
                                                          for e in extra]))
@@ -236,10 +304,37 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     # a field whose trailing coefficients are all zero (e.g. a static correction applied to
     # the displacements only) multiplies only its leading basis rows
     hist = [np.ascontiguousarray(h[:, :_leading_columns(h)]) for h in hist]
-    parallel = h5py_parallel_ok(comm)
+    return steps, hist, q.shape[1]
 
-    # ---- read this rank's slice of the mode shapes (and the extra bases)
-    t0 = time.perf_counter()
+
+class _RankBasis(NamedTuple):
+    """This rank's share of the bases, and the mesh of ``modes.h5`` the fields file copies.
+
+    Attributes
+    ----------
+    n
+        Nodes of the mesh.
+    nodes
+        The nodes this rank owns (:func:`node_range`).
+    phi2
+        Their rows of all bases, C-contiguous (m + sum k, 3 n_local).
+    hexes_shape, hexes_dtype, part_dtype
+        Shape and dtype of ``mesh/hexes``, dtype of ``mesh/hex_part``.
+    """
+
+    n: int
+    nodes: slice
+    phi2: np.ndarray
+    hexes_shape: tuple[int, ...]
+    hexes_dtype: str
+    part_dtype: str
+
+
+def _read_mode_shapes(comm: MPI.Comm, parallel: bool, modes_path: Path, m: int,
+                      extra: list[ExtraBasis]) -> _RankBasis:
+    """Check ``modes.h5`` (complete, at least ``m`` modes) and read this rank's rows of its
+    first ``m`` mode shapes and of the extra bases (collective; an error on any rank is
+    raised on every rank)."""
 
     def shapes():
         import h5py
@@ -265,61 +360,12 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
     except Exception as exc:       # re-raised on every rank below
         error = exc
     check_collective(comm, error, f"reading the mode shapes of {modes_path}")
-    phi2 = phi.reshape(phi.shape[0], 3 * nl)
-    n_basis = phi.shape[0]
-    t_read = time.perf_counter() - t0
+    return _RankBasis(n, nodes, phi.reshape(phi.shape[0], 3 * nl), hshape, hdtype, pdtype)
 
-    # ---- blocks of steps
-    nb = int(block_steps) if block_steps else block_steps_for_budget(3 * nl, float32)
-    nb = comm.allreduce(nb, op=_mpi_min()) if comm.size > 1 else nb
-    nb = max(1, min(nb, ns))
-    dtype = np.float32 if float32 else np.float64
-    buf = np.empty((nb, 3 * nl))
-    buf32 = np.empty((nb, 3 * nl), dtype=np.float32) if float32 else None
-    gather = comm.size > 1 and not parallel
 
-    stats = {"t_gemm": 0.0, "t_write": 0.0}
-
-    def fill(f, par: bool) -> None:
-        error = None
-        dsets: dict = {}
-        try:
-            if f is not None:
-                dsets = _create(f, ns, n, hshape, hdtype, pdtype, dtype)
-                _set_attrs(f, m, n_basis - m, float32, nb, modes_path)
-            if comm.rank == 0:
-                _copy_mesh(modes_path, dsets, t[steps],
-                           steps if step_numbers is None else np.asarray(step_numbers))
-        except Exception as exc:   # re-raised on every rank
-            error = exc
-        check_collective(comm, error, f"writing {out_path}")
-        _stream(comm, dsets, hist, phi2, buf, buf32, nb, ns, nodes, parallel, gather,
-                stats, rep, out_path)
-
-    nbytes = 3 * ns * n * 3 * np.dtype(dtype).itemsize
-    mesh_bytes = 8 * (3 * n + hshape[0] * 9) + 16 * ns
-    write_h5(out_path, comm, fill, size_hint=nbytes + mesh_bytes + int(extra_bytes), attrs=attrs,
-             parallel=parallel, before_complete=before_complete, fill_everywhere=True,
-             check=lambda tmp: check_fields(tmp, False), record=record)
-
-    def xdmf():
-        write_fields_xdmf(out_path)
-
-    on_root(xdmf, comm)
-    t_gemm = comm.allreduce(stats["t_gemm"], op=_mpi_max()) if comm.size > 1 else stats["t_gemm"]
-    t_write = comm.allreduce(stats["t_write"], op=_mpi_max()) if comm.size > 1 \
-        else stats["t_write"]
-    t_read = comm.allreduce(t_read, op=_mpi_max()) if comm.size > 1 else t_read
-    t_total = time.perf_counter() - t_start
-    t_total = comm.allreduce(t_total, op=_mpi_max()) if comm.size > 1 else t_total
-    flops = 2.0 * sum(h.shape[1] for h in hist) * 3 * n * ns
-    return {"n_nodes": n, "n_steps": ns, "n_basis": n_basis, "n_modes": m,
-            "n_extra": n_basis - m, "block_steps": nb, "bytes_written": nbytes,
-            "seconds_read": t_read, "seconds_gemm": t_gemm, "seconds_write": t_write,
-            "seconds_total": t_total,
-            "gemm_gflops": flops / t_gemm / 1e9 if t_gemm > 0 else float("nan"),
-            "write_gb_per_s": nbytes / t_write / 1e9 if t_write > 0 else float("nan"),
-            "ranks": comm.size, "parallel_io": parallel, "float32": bool(float32)}
+def _max_over_ranks(comm: MPI.Comm, value: float) -> float:
+    """The largest ``value`` of all ranks (collective)."""
+    return comm.allreduce(value, op=_mpi_max()) if comm.size > 1 else value
 
 
 def _mpi_min():

@@ -376,6 +376,36 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
     return write_h5(path, None, fill, size_hint=int(size), attrs=attrs, check=check_probes)
 
 
+class ProbesFileError(UserError):
+    """A ``probes.h5`` that is missing, incomplete or written by an older version."""
+
+
+def read_probes(path: Path) -> dict[str, dict[str, np.ndarray]]:
+    """Probe histories from ``probes.h5`` (layout of :mod:`railvib_hpc.reconstruct.probes`)."""
+    import h5py
+
+    if not path.exists():
+        raise ProbesFileError(f"{path} not found: run 'railvib reconstruct' first")
+    out = {}
+    with h5py.File(path, "r") as f:
+        if int(f.attrs.get("complete", 1)) != 1:
+            raise ProbesFileError(f"{path} is incomplete: rerun 'railvib reconstruct'")
+        names = [n.decode() if isinstance(n, bytes) else str(n) for n in f["names"][()]]
+        coords = f["coords"][()]
+        for name, xyz in zip(names, coords):
+            g = f[f"probes/{name}"]
+            role = g.attrs.get("role")
+            if role is None:
+                raise ProbesFileError(f"{path}: probe '{name}' has no role (file written by "
+                                       "an older version): rerun 'railvib run' (modal and "
+                                       "reconstruct recompute their files)")
+            out[name] = {"t": g["time"][()], "displacement": g["displacement"][()],
+                         "velocity": g["velocity"][()], "acceleration": g["acceleration"][()],
+                         "coords": np.asarray(xyz, dtype=float),
+                         "role": role.decode() if isinstance(role, bytes) else str(role)}
+    return out
+
+
 def probe_peaks(history: Mapping[str, np.ndarray], wave_threshold: float) -> dict[str, Any]:
     """Peak response of one probe history (``t``, ``displacement``, ``velocity``,
     ``acceleration``, ``coords``), as the studies and the Python API report it.

@@ -57,24 +57,16 @@ import json
 import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import UserError
-from ..io.stage_checks import check_fields, check_mbs, check_modes, check_probes, check_static
-from ..io.stage_files import (
-    digest,
-    ensure_space,
-    examine,
-    file_digest,
-    forget,
-    output_lock,
-    provenance,
-    record_file,
-    require_inputs,
-)
+from ..io.stage_checks import check_mbs, check_modes, check_static
+from ..io.stage_files import digest, ensure_space, file_digest, record_file, require_inputs
+from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
@@ -306,37 +298,25 @@ def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
         rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
 
 
-def _reusable(out_dir: Path, case, keys: dict, upstream: dict, want_stress: bool,
-              rep: Reporter) -> dict:
-    """Which outputs in ``out_dir`` are current and sound (rank 0); says why not."""
+def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) -> dict:
+    """Which outputs in the context's folder are current and sound (rank 0); says why not."""
     import h5py
 
+    out_dir = ctx.out_dir
     ok = {"fields": False, "stress": False, "probes": False}
     fields = out_dir / "fields.h5"
-    v = examine(fields, "fields.h5", case, inputs_sha256=keys["fields"], upstream=upstream,
-                data_check=check_fields)
-    if v.ok:
-        ok["fields"] = True
-        if want_stress:
-            try:
-                with h5py.File(fields, "r") as f:
-                    ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
-                                    and _attr(f["stress"], "inputs_sha256") == keys["stress"]
-                                    and (out_dir / "stress.xdmf").is_file())
-            except (OSError, KeyError):
-                ok["stress"] = False
-    else:
-        if v.kind != "missing":
-            rep.info(f"recomputing {fields}: {v.reason}")
-        forget(fields)
-    probes = out_dir / "probes.h5"
-    v = examine(probes, "probes.h5", case, inputs_sha256=keys["probes"], upstream=upstream,
-                data_check=check_probes)
-    ok["probes"] = v.ok
-    if not v.ok:
-        if v.kind != "missing":
-            rep.info(f"recomputing {probes}: {v.reason}")
-        forget(probes)
+    ok["fields"] = ctx.reuse("fields.h5", path=fields, inputs_sha256=keys["fields"],
+                             upstream=upstream).ok
+    if ok["fields"] and want_stress:
+        try:
+            with h5py.File(fields, "r") as f:
+                ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
+                                and _attr(f["stress"], "inputs_sha256") == keys["stress"]
+                                and (out_dir / "stress.xdmf").is_file())
+        except (OSError, KeyError):
+            ok["stress"] = False
+    ok["probes"] = ctx.reuse("probes.h5", path=out_dir / "probes.h5",
+                             inputs_sha256=keys["probes"], upstream=upstream).ok
     return ok
 
 
@@ -377,18 +357,41 @@ def input_files(out_dir: Path) -> tuple[str, ...]:
     return tuple(names)
 
 
-def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,
-                          petsc_options: list[str] | None = None) -> dict:
+@dataclass(frozen=True)
+class FieldsOutput(StageOutput):
+    """What the ``reconstruct`` stage returns (the API's ``ReconstructResult`` has these
+    fields).
+
+    Attributes
+    ----------
+    fields_h5, fields_xdmf
+        Displacement, velocity and acceleration of every node and their ParaView view.
+    stress_xdmf
+        Element stresses at ``output.stress_times`` (None when there are none).
+    probes_h5
+        Probe histories (and ``probes/<name>.csv``).
+    probes
+        ``{probe: its role and peaks}`` (:func:`~.probes.probe_peaks` with ``role``).
+    """
+
+    fields_h5: Path
+    fields_xdmf: Path | None
+    stress_xdmf: Path | None
+    probes_h5: Path
+    probes: dict[str, dict]
+
+
+def compute(ctx: StageContext) -> FieldsOutput:
     """``railvib reconstruct``: fields, stresses and probes of the case (collective).
 
-    Verifies that ``modes.h5``, ``mbs.h5`` (and ``static.h5``) in ``out_dir`` are current
+    Verifies that ``modes.h5``, ``mbs.h5`` (and ``static.h5``) in the folder are current
     for the case and sound (else :class:`~railvib_hpc.errors.StaleInputError` naming the
     file, what differs and the command to run), takes the options from ``[output]`` and
-    runs :func:`reconstruct_outputs`. Holds the output folder's lock.
+    reconstructs (as :func:`reconstruct_outputs`).
     """
     from ..mbs.stage import check_context
 
-    out_dir = Path(out_dir)
+    case, out_dir = ctx.case, ctx.out_dir
 
     def prepare() -> dict:
         names = input_files(out_dir)
@@ -397,10 +400,38 @@ def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep:
                        context=check_context(case, out_dir))
         return reconstruct_options(case, out_dir)
 
-    with output_lock(out_dir, comm, "reconstruct", rep=rep):
-        opts = on_root(prepare, comm)
-        return reconstruct_outputs(out_dir / "modes.h5", out_dir / "mbs.h5", out_dir, comm, rep,
-                                   case=case, **opts)
+    opts = on_root(prepare, ctx.comm)
+    summary = _outputs(ctx, out_dir / "modes.h5", out_dir / "mbs.h5", **opts)
+
+    def output() -> FieldsOutput:
+        from .probes import probe_peaks, read_probes
+
+        def present(name: str) -> Path | None:
+            return out_dir / name if (out_dir / name).exists() else None
+
+        threshold = case["assessment.wave_threshold"]
+        peaks = {name: {"role": h["role"], **probe_peaks(h, threshold)}
+                 for name, h in read_probes(out_dir / "probes.h5").items()}
+        return FieldsOutput(reused=summary.get("reused"), summary=summary,
+                            fields_h5=out_dir / "fields.h5", fields_xdmf=present("fields.xdmf"),
+                            stress_xdmf=present("stress.xdmf")
+                            if case["output.stress_times"] else None,
+                            probes_h5=out_dir / "probes.h5", probes=peaks)
+
+    return on_root(output, ctx.comm)
+
+
+STAGE = Stage(name="reconstruct", help="rebuild displacement/velocity/acceleration fields of "
+              "every node", products=("fields.h5", "probes.h5"),
+              reads=("modes.h5", "static.h5", "mbs.h5"), compute=compute)
+
+
+def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,
+                          petsc_options: list[str] | None = None) -> dict:
+    """The ``reconstruct`` stage from a script: :data:`STAGE` through the runner (the
+    folder's lock; no ``run.json`` entry). Returns its summary (every rank)."""
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="reconstruct")
+    return dict(runner.run(STAGE, case, record=False).result.summary)
 
 
 def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLike,
@@ -455,8 +486,23 @@ def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLi
     ReconstructInputError
         Invalid inputs (on every rank).
     """
+    out_dir = Path(out_dir)
+    with StageRunner(out_dir, comm, rep, command="reconstruct").session():
+        return _outputs(StageContext(case, out_dir, comm, rep), modes_path, mbs_path,
+                        stride=stride, window=window, float32=float32,
+                        stress_times=stress_times, user_probes=user_probes,
+                        user_probe_roles=user_probe_roles, correction_rates=correction_rates)
+
+
+def _outputs(ctx: StageContext, modes_path: str | os.PathLike, mbs_path: str | os.PathLike, *,
+             stride: int = 1, window: tuple[float, float] | None = None, float32: bool = False,
+             stress_times: Sequence[float] = (), user_probes: UserProbes = (),
+             user_probe_roles: Mapping[str, str] | None = None,
+             correction_rates: bool = False) -> dict:
+    """:func:`reconstruct_outputs` into the context's folder (the runner holds its lock)."""
     t_start = time.perf_counter()
-    modes_path, mbs_path, out_dir = Path(modes_path), Path(mbs_path), Path(out_dir)
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    modes_path, mbs_path = Path(modes_path), Path(mbs_path)
     stress_times = [float(v) for v in np.atleast_1d(np.asarray(stress_times, dtype=float))]
     full: dict = {}
 
@@ -471,9 +517,9 @@ def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLi
         keys = _expected(case, options)
         upstream = _upstream(info)
         out_dir.mkdir(parents=True, exist_ok=True)
-        reuse = _reusable(out_dir, case, keys, upstream, bool(stress_times), rep)
-        attrs = {n: provenance(f"{n}.h5", case, upstream, options[n],
-                               inputs_sha256=keys[n] if case is None else None)
+        reuse = _reusable(ctx, keys, upstream, bool(stress_times))
+        attrs = {n: ctx.provenance(f"{n}.h5", upstream, options[n],
+                                   inputs_sha256=keys[n] if case is None else None)
                  for n in ("fields", "probes")}
         if stress_times:
             t_sel = info["t"][info["steps"]]
@@ -492,10 +538,8 @@ def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLi
                                     for e in info["extra"]]})
         return small, keys, reuse, attrs
 
-    with output_lock(out_dir, comm, "reconstruct", rep=rep):
-        return _reconstruct(load, modes_path, mbs_path, out_dir, comm, rep, stress_times,
-                            user_probes, user_probe_roles, float32, stride, window, full,
-                            t_start)
+    return _reconstruct(load, modes_path, mbs_path, out_dir, comm, rep, stress_times,
+                        user_probes, user_probe_roles, float32, stride, window, full, t_start)
 
 
 def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MPI.Comm,

@@ -85,8 +85,8 @@ def hex_materials(case: Case) -> dict[int, tuple[float, float]]:
     dict
         Keys are :data:`railvib_hpc.schema.PART_ID` values of the solid parts.
     """
-    from ..config import solid_material
     from ..modal.elements import SOLID_MATERIAL
+    from ..site import solid_material
 
     out = {}
     for part, mat in SOLID_MATERIAL.items():

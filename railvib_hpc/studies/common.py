@@ -61,19 +61,19 @@ import numpy as np
 from .. import __version__
 from ..config import Case, build_case
 from ..errors import UserError
-from ..io.run_record import record_stage
 from ..io.stage_files import (
     copy_file,
     digest,
     examine,
     file_digest,
-    output_lock,
     provenance,
     write_json,
     write_text,
 )
+from ..io.stage_protocol import StageRunner
 from ..log import Reporter
 from ..parallel import on_root
+from ..pipeline import run_stage
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -245,20 +245,22 @@ def model_info(modes_path: Path, modes_used: int | None, n_frequencies: int = 10
     return info
 
 
-def mbs_metrics(summary: dict) -> dict:
-    """Contact-force and rail metrics of an MBS summary (``stats`` of ``mbs.h5``)."""
-    peak = np.asarray(summary["peak_contact_force"], dtype=float)
-    static = np.asarray(summary["static_wheel_load"], dtype=float)
+def mbs_metrics(passage) -> dict:
+    """Contact-force and rail metrics of a passage: the result of the ``mbs`` stage
+    (:class:`~railvib_hpc.mbs.stage.PassageOutput`) or of the ``transient`` stage
+    (:class:`~railvib_hpc.transient.stage.TransientOutput`)."""
+    peak = np.asarray(passage.peak_contact_force, dtype=float)
+    static = np.asarray(passage.static_wheel_load, dtype=float)
     ok = static > 0
     return {
         "peak_contact_force": float(peak.max()),
         "static_wheel_load": float(static.max()),
         "dynamic_increment": float((peak - static).max()),
         "dynamic_factor": float((peak[ok] / static[ok]).max()) if ok.any() else None,
-        "min_contact_force": float(np.min(summary["min_contact_force"])),
-        "max_rail_deflection": float(summary["max_rail_deflection"]),
-        "dt": float(summary["dt"]), "n_steps": int(summary["n_steps"]),
-        "loss_of_contact_steps": int(summary.get("loss_of_contact_steps", 0)),
+        "min_contact_force": float(np.min(passage.min_contact_force)),
+        "max_rail_deflection": float(passage.max_rail_deflection),
+        "dt": float(passage.dt), "n_steps": int(passage.n_steps),
+        "loss_of_contact_steps": int(passage.loss_of_contact_steps),
         "peak_per_wheel": peak.tolist(),
     }
 
@@ -345,21 +347,16 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
             "n_steps": int(t.size), "duration": float(t[-1] - t[0]) if t.size else 0.0}
 
 
-def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep: Reporter) -> dict:
-    """Compute (or reuse) the shared model of a study in ``<root>/model`` (collective)."""
-    from ..modal.stage import run_modal_stage
-
+def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep: Reporter):
+    """Compute (or reuse) the shared model of a study in ``<root>/model`` (collective);
+    returns the ``modal`` stage's result (None when the study has no shared model)."""
     if plan.shared_overrides is None:
-        return {}
+        return None
     mcase = on_root(lambda: variant_case(case, plan.shared_overrides), comm)
-    folder = root / SHARED_DIR
     command = f"railvib study {plan.kind}: shared model"
-    with output_lock(folder, comm, command, wait=True, rep=rep), \
-            rep.stage(f"{plan.kind}: shared model"), \
-            record_stage(folder, comm, "modal", mcase, rep, command) as call:
-        summary = run_modal_stage(mcase, folder, comm, rep)
-        call.done(summary)
-        return summary
+    runner = StageRunner(root / SHARED_DIR, comm, rep, command=command, wait=True)
+    with runner.session(), rep.stage(f"{plan.kind}: shared model"):
+        return run_stage(runner, "modal", mcase).result
 
 
 def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
@@ -373,15 +370,15 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
         ``{"failed": message}`` when a stage raised a user error (written to
         ``failed.json``; the study goes on with the other variants).
     """
-    vdir = root / v.name
-    with output_lock(vdir, comm, f"study {plan.kind} --variant {v.name}", wait=wait, rep=rep):
-        return _run_variant(plan, v, case, root, vdir, comm, rep, settings)
+    runner = StageRunner(root / v.name, comm, rep, wait=wait,
+                         command=f"railvib study {plan.kind} --variant {v.name}")
+    with runner.session(f"study {plan.kind} --variant {v.name}"):
+        return _run_variant(plan, v, case, root, runner, settings)
 
 
-def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path, comm,
-                 rep: Reporter, settings: dict[str, Any]) -> dict:
-    from ..mbs.stage import run_mbs_stage
-    from ..modal.stage import run_modal_stage
+def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, runner: StageRunner,
+                 settings: dict[str, Any]) -> dict:
+    vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
 
     def setup():
         vcase = variant_case(case, v.overrides)
@@ -394,31 +391,27 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
         return {**done, "reused_result": True}
     rep.info(f"[{plan.kind}/{v.name}] running: " + (", ".join(v.overrides) or "the case"))
     if settings.get("solver") == "direct":
-        return _run_direct_variant(plan, v, vcase, digest, vdir, comm, rep, settings)
+        return _run_direct_variant(plan, v, vcase, digest, runner, settings)
     t_start = time.perf_counter()
     timings: dict[str, float] = {}
-    command = f"railvib study {plan.kind} --variant {v.name}"
     try:
         t0 = time.perf_counter()
         if v.shared:
             prepare_shared(plan, case, root, comm, rep)       # reused when current
             on_root(lambda: link_shared(root / SHARED_DIR, vdir), comm)
-            modal = {"reused": True}
+            modes_reused = True
         else:
             if comm.rank == 0:
                 vdir.mkdir(parents=True, exist_ok=True)
             if v.band_hz > 0:
-                modal, vcase = _modes_for_band(vcase, vdir, v.band_hz, comm, rep)
+                modal, vcase = _modes_for_band(vcase, runner, v.band_hz)
             else:
-                with record_stage(vdir, comm, "modal", vcase, rep, command) as call:
-                    modal = run_modal_stage(vcase, vdir, comm, rep)
-                    call.done(modal)
+                modal = run_stage(runner, "modal", vcase).result
+            modes_reused = bool(modal.reused)
         timings["modal"] = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        with record_stage(vdir, comm, "mbs", vcase, rep, command) as call:
-            mbs = run_mbs_stage(vcase, vdir, comm, rep)
-            call.done(mbs)
-        timings["mbs"] = time.perf_counter() - t0
+        passage = run_stage(runner, "mbs", vcase)
+        mbs = passage.result
+        timings["mbs"] = passage.seconds
 
         def finish() -> dict:
             t1 = time.perf_counter()
@@ -432,7 +425,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, vdir: Path
                 "ranks": comm.size,
                 "model": model_info(vdir / "modes.h5", vcase["mbs.n_modes"] or None),
                 "mbs": mbs_metrics(mbs), **resp, "timings": timings,
-                "reused": {"modes": bool(modal.get("reused")), "mbs": bool(mbs.get("reused"))},
+                "reused": {"modes": modes_reused, "mbs": bool(mbs.reused)},
                 "complete": True,
             }
             write_result(vdir, result, vcase)
@@ -462,35 +455,36 @@ def _record_failure(plan: StudyPlan, v: Variant, digest: str, vdir: Path, comm, 
     return {"failed": msg, "variant": v.name}
 
 
-def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str, vdir: Path,
-                        comm, rep: Reporter, settings: dict[str, Any]) -> dict:
-    """A variant solved by the full-order time integration (``railvib transient``'s entry
-    point: reused when current, resumed from a current checkpoint)."""
-    from ..assess.stage import read_probes
-    from ..transient.stage import run_transient_stage
+def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
+                        runner: StageRunner, settings: dict[str, Any]) -> dict:
+    """A variant solved by the full-order time integration (the ``transient`` stage:
+    reused when current, resumed from a current checkpoint)."""
+    from ..reconstruct.probes import read_probes
 
+    vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
     t_start = time.perf_counter()
     try:
-        stats = run_transient_stage(vcase, vdir, comm, rep)
-        timings = {"transient": time.perf_counter() - t_start}
+        solved = run_stage(runner, "transient", vcase)
+        stats = solved.result
+        timings = {"transient": solved.seconds}
 
         def finish() -> dict:
             t1 = time.perf_counter()
             resp = response_metrics(read_probes(vdir / "probes.h5"), vcase, settings["probes"])
             timings["response"] = time.perf_counter() - t1
             timings["total"] = time.perf_counter() - t_start
-            model = {"n_nodes": stats["n_nodes"], "n_dofs": stats["n_dofs"],
+            model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,
                      "n_hexes": None, "modes_in_file": None, "modes_used": None,
                      "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
-                     "solver": "direct", "dt": stats["dt"], "n_steps": stats["n_steps"],
-                     "time_integration": stats["time_integration"],
-                     "peak_rss_gb_total": stats["peak_rss_gb_total"]}
+                     "solver": "direct", "dt": stats.dt, "n_steps": stats.n_steps,
+                     "time_integration": stats.time_integration,
+                     "peak_rss_gb_total": stats.peak_rss_gb_total}
             result = {
                 "schema": RESULT_FORMAT, "study": plan.kind, "variant": v.name,
                 "parameter": v.parameter, "overrides": list(v.overrides),
                 "inputs_sha256": digest, "railvib_version": __version__, "ranks": comm.size,
                 "model": model, "mbs": mbs_metrics(stats), **resp, "timings": timings,
-                "reused": {"transient": bool(stats.get("reused"))}, "complete": True}
+                "reused": {"transient": bool(stats.reused)}, "complete": True}
             write_result(vdir, result, vcase)
             return result
 
@@ -501,29 +495,20 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str, v
     return {**result, "reused_result": False}
 
 
-def _modes_for_band(vcase: Case, vdir: Path, band_hz: float, comm: MPI.Comm, rep: Reporter,
-                    attempts: int = 4) -> tuple[dict, Case]:
+def _modes_for_band(vcase: Case, runner: StageRunner, band_hz: float, attempts: int = 4):
     """Modal solve(s) until the modes reach ``band_hz``; the MBS case uses those below it.
 
     Returns
     -------
     tuple
-        The modal summary and the case with ``mbs.n_modes`` = the number of modes below
-        the band (and the final ``modal.n_modes``).
+        The ``modal`` stage's result and the case with ``mbs.n_modes`` = the number of
+        modes below the band (and the final ``modal.n_modes``).
     """
-    import h5py
-
-    from ..modal.stage import run_modal_stage
-
+    comm, rep = runner.comm, runner.rep
     case = vcase
     for _ in range(attempts):
-        modal = run_modal_stage(case, vdir, comm, rep)
-
-        def top(path: Path = vdir / "modes.h5") -> list[float]:
-            with h5py.File(path, "r") as f:
-                return f["modes/frequency_hz"][()].tolist()
-
-        freq = on_root(top, comm)
+        modal = run_stage(runner, "modal", case).result
+        freq = modal.frequencies_hz.tolist()
         if case["modal.f_max"] >= band_hz:           # band-sliced: every mode below f_max
             rep.info(f"  {len(freq)} modes below the band limit {band_hz:g} Hz (inertia-"
                      "checked band solve)")

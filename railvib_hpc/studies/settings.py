@@ -2,7 +2,7 @@
 
 The settings of each study are ordinary case keys, ``study.<kind>.<key>``, declared in
 :mod:`railvib_hpc.schema` and checked by the one validation engine of
-:mod:`railvib_hpc.config` (same types, ranges and error format: key, value, allowed). A
+:mod:`railvib_hpc.validation` (same types, ranges and error format: key, value, allowed). A
 case file may hold them as tables (``[study.convergence]``, ...); ``--study-set KEY=VALUE``
 (repeatable, the value in TOML syntax, bare words allowed, e.g. ``--study-set
 levels=[0.5,0.75,1]`` or ``--study-set probes=[slab1,slab2]``) overrides the study's
@@ -17,9 +17,10 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..config import ALL_KEYS, Case, check_studies, check_value, toml_value
+from ..config import Case, toml_value
 from ..errors import CaseError
 from ..schema import BUILDING_PROBES, SCHEMA, Param
+from ..validation import ALL_KEYS, check_studies, check_value
 
 __all__ = ["BUILDING_PROBES", "SETTINGS", "StudySettingsError", "describe",
            "parse_study_set", "study_settings"]

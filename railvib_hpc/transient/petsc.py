@@ -3,8 +3,8 @@
 :class:`TransientSystem` holds the distributed K, M, C of the model, builds the effective
 matrix ``K_eff = c_m M + c_c C + c_k K`` of :class:`~.scheme.GeneralizedAlpha` (the same
 sparsity pattern as K), factors it once with MUMPS Cholesky (through
-:class:`~railvib_hpc.modal.block_lanczos.BlockOperator`: memory check, automatic out of
-core, options prefix ``railvib_tr_st_``) and reuses the factor at every step. The history
+:class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0: memory check, automatic
+out of core, options prefix ``railvib_tr_st_``) and reuses the factor at every step. The history
 part of the right-hand side is precombined into at most three matrices
 ``H_u = m_u M + c_u C - alpha_f K``, ``H_v = m_v M + c_v C``, ``H_a = m_a M + c_a C``
 (``H_a`` vanishes for the trapezoidal rule), so a step costs one solve and two or three
@@ -46,7 +46,7 @@ class TransientSystem:
     def __init__(self, K, M, C, scheme: GeneralizedAlpha, comm, extra_gb: float = 0.0):
         from petsc4py import PETSc
 
-        from ..modal.block_lanczos import BlockOperator
+        from ..modal.factor import ShiftInvertFactor
 
         self.K, self.M, self.C, self.scheme, self.comm = K, M, C, scheme, comm
         self.n_global = K.getSize()[0]
@@ -64,7 +64,7 @@ class TransientSystem:
         self.k_eff = k_eff
         self.history_matrices = self._history(PETSc)
         self.time_setup = time.perf_counter() - t0
-        self.op = BlockOperator(k_eff, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
+        self.op = ShiftInvertFactor(k_eff, M, 0.0, comm, PREFIX, extra_gb=extra_gb)
         self.time_factorization = self.op.time_factorization
         self.factor_memory_gb = self.op.factor_memory_gb
         self.out_of_core = self.op.out_of_core
@@ -121,7 +121,7 @@ class TransientSystem:
     def solve(self, rhs, out) -> None:
         """``out = K_eff^-1 rhs`` with the stored factor."""
         t0 = time.perf_counter()
-        self.op.ksp.solve(rhs, out)
+        self.op.solve_vector(rhs, out)
         self.time_solves += time.perf_counter() - t0
         self.n_solves += 1
 
@@ -150,10 +150,10 @@ class TransientSystem:
     def solve_matrix(self, A, B: np.ndarray) -> np.ndarray:
         """``A^-1 B`` for a block B with a separate MUMPS Cholesky factor of A (e.g. K for a
         static start, M for a consistent initial acceleration); the factor is freed."""
-        from ..modal.block_lanczos import BlockOperator
+        from ..modal.factor import ShiftInvertFactor
 
-        op = BlockOperator(A, self.M, 0.0, self.comm, PREFIX + "aux_",
-                           extra_gb=16.0 * B.size / 1e9)
+        op = ShiftInvertFactor(A, self.M, 0.0, self.comm, PREFIX + "aux_",
+                               extra_gb=16.0 * B.size / 1e9)
         try:
             return op.solve(np.ascontiguousarray(B, dtype=float))
         finally:

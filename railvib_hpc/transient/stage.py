@@ -57,26 +57,16 @@ import json
 import math
 import time
 import uuid
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..config import Case
 from ..errors import ResourceError, UserError
-from ..io.stage_checks import CHECKS, check_checkpoint, check_transient
-from ..io.stage_files import (
-    digest,
-    ensure_space,
-    examine,
-    forget,
-    inputs_hash,
-    output_lock,
-    provenance,
-    record_file,
-    resume_path,
-    spec,
-    write_h5,
-)
+from ..io.stage_checks import check_transient
+from ..io.stage_files import digest, ensure_space, inputs_hash, record_file, resume_path, write_h5
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
@@ -122,40 +112,25 @@ class Interrupted(RuntimeError):
 
 # --------------------------------------------------------------------------- reuse
 def _checks_context(case: Case) -> dict:
-    from ..mbs.stage import static_wheel_load
+    from ..mbs.case_vehicle import static_wheel_load
 
     return {"static_wheel_load": static_wheel_load(case)}
 
 
-def _why(path: Path, reason: str) -> str:
-    return f"{path.name} {reason[3:]}" if reason.startswith("it ") else f"{path.name}: {reason}"
-
-
-def previous_results(case: Case, out_dir: Path, rep: Reporter) -> dict | None:
-    """The run statistics of current, sound transient results in ``out_dir`` (rank 0).
+def previous_results(ctx: StageContext) -> dict | None:
+    """The run statistics of current, sound transient results in the folder (rank 0).
 
     ``fields.h5``, ``probes.h5`` and ``transient.h5`` must all pass
     :func:`~railvib_hpc.io.stage_files.examine` for the case (with their data checks and
     companions). Otherwise the reason is printed in one line (unless there is nothing
-    at all), the three are deleted, and None is returned.
+    at all), the three are deleted, and None is returned
+    (:meth:`~railvib_hpc.io.stage_protocol.StageContext.reuse_together`).
     """
-    context = _checks_context(case)
-    reason, present, stats = None, False, None
-    for name in PRODUCTS:
-        path = out_dir / spec(name).filename
-        v = examine(path, name, case, data_check=CHECKS[name], context=context)
-        present = present or v.kind != "missing"
-        if not v.ok and reason is None:
-            reason = _why(path, v.reason)
-        if v.ok and name == HISTORIES:
-            stats = json.loads(str(v.attrs.get("stats", "{}")))
-    if reason is None:
-        return stats
-    if present:
-        rep.info(f"recomputing the transient results in {out_dir}: {reason}")
-    for name in PRODUCTS:
-        forget(out_dir / spec(name).filename)
-    return None
+    verdicts = ctx.reuse_together(PRODUCTS, "transient results",
+                                  context=_checks_context(ctx.case))
+    if verdicts is None:
+        return None
+    return json.loads(str(verdicts[HISTORIES].attrs.get("stats", "{}")))
 
 
 def stress_key(case: Case) -> str:
@@ -216,8 +191,7 @@ def _stress_bytes(case: Case, n_hexes: int) -> int:
     return 16 * n * int(n_hexes) + 16 * n
 
 
-def _resumable(case: Case, out_dir: Path, mesh_sha: str, n_fields: tuple, nt: int,
-               rep: Reporter) -> str | None:
+def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> str | None:
     """The run id of a checkpoint this run may resume, or None (rank 0).
 
     The checkpoint must be current for the case and computed from this ``mesh.h5``,
@@ -227,31 +201,34 @@ def _resumable(case: Case, out_dir: Path, mesh_sha: str, n_fields: tuple, nt: in
     """
     import h5py
 
-    ckpt = out_dir / CHECKPOINT
-    partial = resume_path(out_dir / "fields.h5")
-    v = examine(ckpt, CHECKPOINT, case, data_check=check_checkpoint,
-                upstream={"mesh.h5": mesh_sha})
-    why = None if v.ok else (v.reason if v.kind != "missing" else "")
-    run_id = str(v.attrs.get("run_id", "")) if v.ok else ""
-    if v.ok:
+    partial = resume_path(ctx.out_dir / "fields.h5")
+
+    def matching(v) -> str:
+        run_id = str(v.attrs.get("run_id", ""))
         step, written = int(v.attrs.get("step", -1)), int(v.attrs.get("fields_written", -1))
         try:
             with h5py.File(partial, "r") as f:
                 a = f.attrs
                 if (a.get("railvib_file") != FIELDS or a.get("inputs_sha256")
-                        != inputs_hash(case, FIELDS) or a.get("run_id") != run_id):
-                    why = f"the partial fields file {partial.name} belongs to another run"
-                elif f["fields/displacement"].shape != n_fields:
-                    why = f"the partial fields file {partial.name} has another shape"
+                        != inputs_hash(ctx.case, FIELDS) or a.get("run_id") != run_id):
+                    raise NotReusable(f"the partial fields file {partial.name} belongs to "
+                                      "another run")
+                if f["fields/displacement"].shape != n_fields:
+                    raise NotReusable(f"the partial fields file {partial.name} has another "
+                                      "shape")
         except (OSError, KeyError):
-            why = f"its partial fields file {partial.name} is missing or unreadable"
-        if why is None and not (0 <= step < nt and 0 <= written <= n_fields[0]):
-            why = f"it is at step {step} of {nt} with {written} output steps written"
-    if why is None:
+            raise NotReusable(f"its partial fields file {partial.name} is missing or "
+                              "unreadable") from None
+        if not (0 <= step < nt and 0 <= written <= n_fields[0]):
+            raise NotReusable(f"it is at step {step} of {nt} with {written} output steps "
+                              "written")
         return run_id
-    if why:
-        rep.info(f"not resuming from {ckpt}: {why}; starting at t = 0")
-    forget(ckpt)
+
+    old = ctx.reuse(CHECKPOINT, accept=matching, upstream={"mesh.h5": mesh_sha},
+                    stale=lambda ckpt, why: f"not resuming from {ckpt}: {why}; starting at "
+                                            "t = 0")
+    if old.ok:
+        return old.value
     partial.unlink(missing_ok=True)
     return None
 
@@ -292,7 +269,7 @@ def check_run_size(case: Case, run: dict, dt: float, how: str, n_wheels: int, n_
     case
         The case.
     run
-        :func:`~railvib_hpc.mbs.stage.passage` of the case.
+        :func:`~railvib_hpc.mbs.case_vehicle.passage` of the case.
     dt
         The time step (or an upper bound of it: the count is then a lower bound).
     how
@@ -336,7 +313,7 @@ def precheck_size(case: Case) -> None:
     can only shorten it), so the count is a lower bound of the run's: a refusal here is
     one the exact check after the mesh would give too.
     """
-    from ..mbs.stage import build_vehicle, passage
+    from ..mbs.case_vehicle import build_vehicle, passage
     from ..mesh.layout import build_layout
 
     lay = build_layout(case)
@@ -420,58 +397,113 @@ class Recorder:
 
 
 # --------------------------------------------------------------------------- the stage
+@dataclass(frozen=True)
+class TransientOutput(StageOutput):
+    """What the ``transient`` stage returns: its run statistics and the numbers the studies
+    take from them (the contact forces as the ``mbs`` stage's, per wheel [N]).
+
+    Attributes
+    ----------
+    n_nodes, n_dofs
+        Size of the model.
+    dt, n_steps, time_integration
+        Time step [s], steps and the time integration's wall time [s].
+    peak_rss_gb_total
+        Peak memory over all ranks [GB].
+    static_wheel_load, peak_contact_force, min_contact_force
+        Per wheel [N].
+    max_rail_deflection
+        Largest rail deflection under a wheel [m].
+    loss_of_contact_steps
+        Steps in which a wheel lost contact.
+    """
+
+    n_nodes: int
+    n_dofs: int
+    dt: float
+    n_steps: int
+    time_integration: float
+    peak_rss_gb_total: float
+    static_wheel_load: np.ndarray
+    peak_contact_force: np.ndarray
+    min_contact_force: np.ndarray
+    max_rail_deflection: float | None
+    loss_of_contact_steps: int
+
+    @classmethod
+    def of_stats(cls, stats: dict) -> TransientOutput:
+        """The output of the run statistics (``stats`` of ``transient.h5``)."""
+        def per_wheel(key: str) -> np.ndarray:
+            return np.array(stats.get(key, []), dtype=float)
+
+        deflection = stats.get("max_rail_deflection")
+        return cls(reused=stats.get("reused"), summary=stats, n_nodes=stats["n_nodes"],
+                   n_dofs=stats["n_dofs"], dt=stats["dt"], n_steps=stats["n_steps"],
+                   time_integration=stats["time_integration"],
+                   peak_rss_gb_total=stats["peak_rss_gb_total"],
+                   static_wheel_load=per_wheel("static_wheel_load"),
+                   peak_contact_force=per_wheel("peak_contact_force"),
+                   min_contact_force=per_wheel("min_contact_force"),
+                   max_rail_deflection=None if deflection is None else float(deflection),
+                   loss_of_contact_steps=int(stats.get("loss_of_contact_steps", 0)))
+
+
+def compute(ctx: StageContext) -> TransientOutput:
+    """``railvib transient``: direct time integration of the full model (collective).
+
+    Reuses current results or recomputes them (resuming a current checkpoint); see the
+    module notes. ``ctx.options``: ``checkpoint_steps`` (also checkpoint every this many
+    steps; tests, the case's interval still applies) and ``stop_after`` (test hook: raise
+    :class:`Interrupted` after the first checkpoint at or after this step, as if the run
+    had been killed).
+    """
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    old = on_root(lambda: previous_results(ctx), comm)
+    if old is not None:
+        rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
+                 "settings)")
+        _refresh_stress(case, out_dir, comm, rep)
+        return TransientOutput.of_stats({**old, "reused": True})
+    return TransientOutput.of_stats(_transient(case, out_dir, comm, rep,
+                                               ctx.options.get("checkpoint_steps"),
+                                               ctx.options.get("stop_after")))
+
+
+STAGE = Stage(name="transient", help="direct time integration of the full FE model "
+              "(absorbing faces, causal waves)", products=PRODUCTS + (CHECKPOINT,),
+              reads=("mesh.h5",), compute=compute, petsc=True)
+
+
 def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
                         petsc_options: list[str] | None = None, *,
                         checkpoint_steps: int | None = None, stop_after: int | None = None
                         ) -> dict:
-    """``railvib transient``: direct time integration of the full model (collective).
-
-    Self-contained like every stage: initialises PETSc with ``petsc_options`` (once per
-    process), holds the output folder's lock, reuses current results or recomputes them
-    (resuming a current checkpoint); see the module notes.
+    """The ``transient`` stage from a script: :data:`STAGE` through the runner (the folder's
+    lock, PETSc started with ``petsc_options``; no ``run.json`` entry).
 
     Parameters
     ----------
-    case
-        The validated case.
-    out_dir
-        Output folder.
-    comm
-        MPI communicator.
-    rep
-        Reporter (progress, timings).
-    petsc_options
-        Options for PETSc (``railvib ... -- OPTIONS``).
-    checkpoint_steps
-        Also checkpoint every this many steps (tests; the case's interval still applies).
-    stop_after
-        Test hook: raise :class:`Interrupted` after the first checkpoint at or after this
-        step, as if the run had been killed.
+    case, out_dir, comm, rep, petsc_options
+        As for every stage.
+    checkpoint_steps, stop_after
+        The test hooks of :func:`compute`.
 
     Returns
     -------
     dict
         Summary (time step, steps, timings, contact forces, peak memory, ...), ``reused``.
     """
-    from ..petsc_env import init_petsc
-
-    out_dir = Path(out_dir)
-    with output_lock(out_dir, comm, "transient", rep=rep):
-        init_petsc(petsc_options)
-        old = on_root(lambda: previous_results(case, out_dir, rep), comm)
-        if old is not None:
-            rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
-                     "settings)")
-            _refresh_stress(case, out_dir, comm, rep)
-            return {**old, "reused": True}
-        return _transient(case, out_dir, comm, rep, checkpoint_steps, stop_after)
+    runner = StageRunner(out_dir, comm, rep, petsc_options or (), command="transient")
+    return dict(runner.run(STAGE, case, record=False, checkpoint_steps=checkpoint_steps,
+                           stop_after=stop_after).result.summary)
 
 
 def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps: int | None,
                stop_after: int | None) -> dict:
     t_wall = time.perf_counter()
+    ctx = StageContext(case, out_dir, comm, rep)
     on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
-    init = _setup(case, out_dir, comm, rep)
+    init = _setup(ctx)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
     upstream = {"mesh.h5": init["mesh_sha"]}
@@ -482,8 +514,8 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     ckpt_path = out_dir / CHECKPOINT
 
     # ---- initial state or resume
-    run_id = on_root(lambda: _resumable(case, out_dir, init["mesh_sha"],
-                                        (steps_out.size, mesh.n_nodes, 3), nt, rep), comm)
+    run_id = on_root(lambda: _resumable(ctx, init["mesh_sha"],
+                                        (steps_out.size, mesh.n_nodes, 3), nt), comm)
     resume_ok = run_id is not None
     if resume_ok:
         ck = read_checkpoint(ckpt_path, dofmap, comm.rank)
@@ -502,7 +534,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         fields_written = 0
 
     def fields_attrs() -> dict:
-        return {**provenance(FIELDS, case, upstream), "run_id": run_id,
+        return {**ctx.provenance(FIELDS, upstream), "run_id": run_id,
                 "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1 else 1,
                 "window": json.dumps(case["output.window"] or None)}
 
@@ -538,7 +570,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
             writer.put(int(k), state.u, state.v, state.a)
 
     def checkpoint_attrs() -> dict:
-        return {**provenance(CHECKPOINT, case, upstream), "run_id": run_id}
+        return {**ctx.provenance(CHECKPOINT, upstream), "run_id": run_id}
 
     fields_written_box = [fields_written]
     if not resume_ok:
@@ -588,10 +620,10 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                    recorder, nt - first_step, comm)
     with rep.stage("transient: probes, histories"):
         def write_rank0() -> None:
-            _write_probes(out_dir, init, recorder, case, provenance(PROBES, case, upstream))
+            _write_probes(out_dir, init, recorder, case, ctx.provenance(PROBES, upstream))
             _write_histories(out_dir / "transient.h5", case, init, recorder, stats,
-                             provenance(HISTORIES, case, upstream))
-            forget(ckpt_path)
+                             ctx.provenance(HISTORIES, upstream))
+            ctx.discard(ckpt_path)
 
         on_root(write_rank0, comm)
     solver.destroy()
@@ -605,16 +637,17 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     return {**stats, "reused": False}
 
 
-def _setup(case: Case, out_dir: Path, comm, rep: Reporter) -> dict:
+def _setup(ctx: StageContext) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
-    from ..mbs.stage import build_vehicle, passage, passage_irregularity
+    from ..mbs.case_vehicle import build_vehicle, passage, passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, case_dofmap, layer_line, support_warning
     from ..modal.petsc import assemble, assemble_damping
     from .petsc import TransientSystem
 
+    case, comm, rep = ctx.case, ctx.comm, ctx.rep
     with rep.stage("transient: mesh"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(case, out_dir, rep)[::2], comm)
+        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
     with rep.stage("transient: dofs"):
         dofmap = case_dofmap(mesh, case, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "

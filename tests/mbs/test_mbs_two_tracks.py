@@ -19,8 +19,8 @@ from mbs_beams import ss_beam
 from railvib_hpc.config import Case
 from railvib_hpc.errors import CaseError
 from railvib_hpc.mbs import RailCoupling, SuspendedWheelset, simulate_vehicle
+from railvib_hpc.mbs.case_vehicle import build_vehicle, mirror_x, passage, second_train_layout
 from railvib_hpc.mbs.integrate import contact_tolerance
-from railvib_hpc.mbs.stage import build_vehicle, mirror_x, passage, second_train_layout
 from railvib_hpc.mbs.train import RailVehicle, Traffic
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -104,7 +104,7 @@ def test_own_vehicles_swap_under_the_mirror(vehicle):
     forces: what the heavy train feels on track 2 it feels on track 1, under the same
     light train on the other track. Both runs go through the two-track code path with two
     different vehicles."""
-    from railvib_hpc.config import ALL_KEYS
+    from railvib_hpc.validation import ALL_KEYS
 
     heavy = HEAVY[vehicle]
     light = {k: ALL_KEYS[f"vehicle.{k}"].default for k in heavy}
@@ -136,7 +136,7 @@ def test_own_vehicle_static_loads_and_moving_forces_are_its_own():
     """Static wheel loads against hand counts: a wheelset carries m g / 2 + preload per
     wheel (the preload is per side); a car (body + 2 bogies + 4 wheelsets) / 8 of its
     weight; a moving force train its own force and axles."""
-    from railvib_hpc.mbs.stage import moving_loads, static_wheel_load
+    from railvib_hpc.mbs.case_vehicle import moving_loads, static_wheel_load
 
     g = 9.80665
     case = thesis_case(**{"train2.vehicle.wheelset_mass": 2400.0,

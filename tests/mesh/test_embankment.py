@@ -66,7 +66,7 @@ def test_bad_embankments_get_one_clear_line(changes, key, words):
 
 
 def test_wave_arrivals_measure_from_the_lifted_rail():
-    from railvib_hpc.config import track_lift
+    from railvib_hpc.site import track_lift
 
     case = thesis_case(**{"track.embankment_height": 1.0})
     assert track_lift(case) == 1.0

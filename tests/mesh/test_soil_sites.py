@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from fem_tools import box_mesh
 from scipy.optimize import brentq
 
-from railvib_hpc.config import Case, soil_layers
+from railvib_hpc.config import Case
 from railvib_hpc.errors import CaseError
 from railvib_hpc.fem import lowest_modes
 from railvib_hpc.fem.assemble_serial import assemble_matrix
@@ -33,6 +33,7 @@ from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.stage import predicted_hexes, wavelength_warnings
 from railvib_hpc.modal.elements import element_batches
 from railvib_hpc.schema import PART_ID
+from railvib_hpc.site import soil_layers
 
 H1, C1, RHO1, NU1 = 2.0, 120.0, 1750.0, 0.30     # soft top layer
 H2, C2, RHO2, NU2 = 4.0, 300.0, 2000.0, 0.25     # stiffer layer down to the base

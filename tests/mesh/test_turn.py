@@ -19,14 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from railvib_hpc.config import (
-    MAX_TWIST_SHEAR,
-    BuildingTurn,
-    Case,
-    building_turn,
-    placed_plan,
-    turn_quarters,
-)
+from railvib_hpc.config import Case
 from railvib_hpc.errors import CaseError, MeshError
 from railvib_hpc.fem import assemble_matrix, element_dofs, hex8_stiffness
 from railvib_hpc.mesh.building import Building
@@ -42,6 +35,13 @@ from railvib_hpc.mesh.turn import (
     twist_weight,
 )
 from railvib_hpc.schema import BUILDING_PARTS, PART_ID
+from railvib_hpc.site import (
+    MAX_TWIST_SHEAR,
+    BuildingTurn,
+    building_turn,
+    placed_plan,
+    turn_quarters,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 EPS = np.finfo(float).eps

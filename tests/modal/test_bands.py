@@ -166,10 +166,10 @@ LEFT_BEHIND = 0.5
 @pytest.mark.skipif(not LINUX_PROC, reason="resident memory is read from /proc (Linux)")
 def test_block_operator_destroy_frees_the_factor():
     """petsc4py 3.18 does not destroy a parallel factor Mat whose last Python reference
-    goes (it waits for PETSc.garbage_cleanup): BlockOperator.destroy must free it itself.
+    goes (it waits for PETSc.garbage_cleanup): ShiftInvertFactor.destroy must free it itself.
     Three operators one after the other leave less than half a factor behind."""
-    from railvib_hpc.modal.block_lanczos import BlockOperator
     from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.factor import ShiftInvertFactor
     from railvib_hpc.modal.petsc import assemble
     from railvib_hpc.modal.ritz import PREFIX
     from railvib_hpc.petsc_env import init_petsc
@@ -186,11 +186,11 @@ def test_block_operator_destroy_frees_the_factor():
         return comm.allreduce(current_memory_gb())
 
     # a first operator: PETSc's and MUMPS's one-time allocations are made
-    BlockOperator(K, M, 1e4, comm, PREFIX, inertia=True).destroy()
+    ShiftInvertFactor(K, M, 1e4, comm, PREFIX, inertia=True).destroy()
     before = resident()
     factors = []
     for k in range(3):
-        op = BlockOperator(K, M, 2e4 * (k + 1), comm, PREFIX, inertia=True)
+        op = ShiftInvertFactor(K, M, 2e4 * (k + 1), comm, PREFIX, inertia=True)
         factors.append(op.factor_memory_gb)
         grown = comm.allreduce(current_memory_gb()) - before
         op.destroy()
@@ -482,6 +482,31 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
         # the same verdicts (the residuals at the round-off floor differ by rounding)
         assert [w.split(":")[0] for w in runs[name].warnings] == \
             [w.split(":")[0] for w in runs["solved"].warnings]
+
+
+def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
+    """Issue 26: a merge of bands solved in this run takes each band's own Gram blocks from
+    its checks (the same vectors, bit for bit) and forms only the blocks between bands; a
+    merge of the same bands from the cache forms the full Gram matrices. Same modes, same
+    verdicts."""
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    runs = {}
+    for name in ("solved", "cached"):
+        res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=12)
+        _same_modes(res, ref, K, M, n, 12)
+        assert res.stats["n_bands"] >= 2
+        assert np.all(res.residuals <= np.maximum(1e-10, res.residual_floors))
+        runs[name] = res
+    assert runs["solved"].stats["merge_gram"].startswith("cross-band blocks")
+    assert runs["cached"].stats["merge_gram"] == "full"
+    lam = runs["solved"].eigenvalues
+    rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
+    assert np.all(np.abs(runs["cached"].eigenvalues / lam - 1) <= rtol)
+    assert runs["solved"].stats["max_orthonormality_error"] <= 1e-12
+    assert [w.split(":")[0] for w in runs["cached"].warnings] == \
+        [w.split(":")[0] for w in runs["solved"].warnings]
 
 
 def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():

@@ -144,8 +144,8 @@ def _assert_equal_serial(case, mesh):
     dofmap = build_dofmap(mesh, comm.size)
     KN, MN, _ = assemble(mesh, case, dofmap, comm)
     assert KN.getSize() == K1.getSize()
-    from railvib_hpc.config import solid_material
     from railvib_hpc.schema import PART_ID, SOLID_MATERIAL, SOLID_PARTS
+    from railvib_hpc.site import solid_material
 
     present = set(np.unique(mesh.hex_part).tolist())
     nu_max = max(solid_material(case, SOLID_MATERIAL[p])["nu"] for p in SOLID_PARTS
@@ -242,7 +242,7 @@ def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
     from petsc4py import PETSc
 
     from railvib_hpc.config import load_case
-    from railvib_hpc.modal import block_lanczos
+    from railvib_hpc.modal import factor
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
     from railvib_hpc.modal.petsc import assemble
@@ -263,8 +263,8 @@ def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
         ooc = PETSc.Options().getInt("railvib_eig_st_mat_mumps_icntl_22", 0) == 1
         return 0.001 if ooc else 100.0
 
-    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda c: 1.0)
-    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory", estimate)
+    monkeypatch.setattr(factor, "available_memory_gb", lambda c: 1.0)
+    monkeypatch.setattr(factor.ShiftInvertFactor, "_estimate_factor_memory", estimate)
     parallel = solve_modes(KN, MN, comm, n_modes=10, tol=1e-10, out_of_core="auto")
     assert parallel.stats["out_of_core"] is True
     rtol = eigen_rtol(K1, M1, serial.eigenvalues, phi=serial.phi)

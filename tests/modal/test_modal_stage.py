@@ -157,7 +157,8 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     from modal_cases import energy_sum_allowance, modes_from_file
 
     from railvib_hpc.io.modes_io import read_strain_energies
-    from railvib_hpc.mbs.stage import MBSInputError, modal_damping
+    from railvib_hpc.mbs.case_vehicle import MBSInputError
+    from railvib_hpc.mbs.damping_model import modal_damping
     from railvib_hpc.mesh.mesh_io import read_mesh_h5
     from railvib_hpc.modal.dofmap import build_dofmap
 

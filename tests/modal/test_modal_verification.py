@@ -189,7 +189,7 @@ def test_out_of_core_factorization(monkeypatch, setting):
     The memory situation is simulated: 1 GB available, 100 GB in core, 0.001 GB out of core."""
     from petsc4py import PETSc
 
-    from railvib_hpc.modal import block_lanczos
+    from railvib_hpc.modal import factor
 
     name = "railvib_eig_st_mat_mumps_icntl_22"
     reference, K, M, _ = solve(column_mesh(32), soil_case(), {"bottom": ("ux", "uy", "uz"),
@@ -201,8 +201,8 @@ def test_out_of_core_factorization(monkeypatch, setting):
         seen.append(ooc)
         return 0.001 if ooc else 100.0
 
-    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda comm: 1.0)
-    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory", estimate)
+    monkeypatch.setattr(factor, "available_memory_gb", lambda comm: 1.0)
+    monkeypatch.setattr(factor.ShiftInvertFactor, "_estimate_factor_memory", estimate)
     case = soil_case(**{"modal.out_of_core": setting})
     rules = {"bottom": ("ux", "uy", "uz"), "all": ("uy", "uz")}
     if setting == "never":
@@ -222,10 +222,10 @@ def test_out_of_core_factorization(monkeypatch, setting):
 def test_out_of_core_that_does_not_fit_either_is_a_clear_error(monkeypatch):
     from petsc4py import PETSc
 
-    from railvib_hpc.modal import block_lanczos
+    from railvib_hpc.modal import factor
 
-    monkeypatch.setattr(block_lanczos, "available_memory_gb", lambda comm: 1.0)
-    monkeypatch.setattr(block_lanczos.BlockOperator, "_estimate_factor_memory",
+    monkeypatch.setattr(factor, "available_memory_gb", lambda comm: 1.0)
+    monkeypatch.setattr(factor.ShiftInvertFactor, "_estimate_factor_memory",
                         lambda self, prefix: 100.0)
     with pytest.raises(EigenSolveError, match=r"out of core: ~100\.0 GB factor, .* does not "
                                               r"fit either, but 1\.0 GB are available"):

@@ -407,7 +407,7 @@ def test_studies_accept_solver_direct(tmp_path, monkeypatch, tally):
 
     import railvib_hpc.transient.stage as ts
 
-    monkeypatch.setattr(ts, "run_transient_stage", fake_transient)
+    monkeypatch.setattr(ts, "_transient", fake_transient)
     res = rv.run_study("mitigation", case, tmp_path, quiet=True, variants=["baseline"],
                        settings={"measures": ["soft: pads.kz=1.2e8"], "solver": "direct"})
     ok = called == ["baseline"] and res.failed == ("baseline",)

@@ -14,9 +14,10 @@ import pytest
 from faults import BASELINE
 
 from railvib_hpc.cli import run
-from railvib_hpc.config import Case, CaseKeyError, building_turn, quarter_turns
+from railvib_hpc.config import Case, CaseKeyError
 from railvib_hpc.errors import CaseError, MeshError
 from railvib_hpc.mesh.layout import build_layout
+from railvib_hpc.site import building_turn, quarter_turns
 
 B = str(BASELINE)
 #: Two layers; the second's thickness is the test's (the base is 4.8 m below the ground).

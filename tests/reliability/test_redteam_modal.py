@@ -83,8 +83,8 @@ def _column_operator(sigma_between: tuple[int, int] | None):
     from mpi4py import MPI
     from scipy.linalg import eigh
 
-    from railvib_hpc.modal.block_lanczos import BlockOperator
     from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.factor import ShiftInvertFactor
     from railvib_hpc.modal.petsc import assemble
     from railvib_hpc.petsc_env import init_petsc
 
@@ -94,9 +94,9 @@ def _column_operator(sigma_between: tuple[int, int] | None):
     K, M, _ = assemble(mesh, soil_case(), build_dofmap(mesh, 1, rules=RULES), comm)
     lam = eigh(to_scipy(K).toarray(), to_scipy(M).toarray(), eigvals_only=True)
     if sigma_between is None:
-        return BlockOperator(K, M, 0.0, comm, "railvib_eig_"), K, M, lam, None
+        return ShiftInvertFactor(K, M, 0.0, comm, "railvib_eig_"), K, M, lam, None
     lo, hi = sigma_between
-    op = BlockOperator(K, M, 0.5 * (lam[lo] + lam[hi]), comm, "railvib_eig_")
+    op = ShiftInvertFactor(K, M, 0.5 * (lam[lo] + lam[hi]), comm, "railvib_eig_")
     return op, K, M, lam, 1.0 / (0.5 * (lam[hi] - lam[lo]))
 
 

@@ -68,13 +68,13 @@ def _stage(capsys, out: Path, *extra: str) -> tuple[int, str, str]:
     from railvib_hpc.config import load_case
     from railvib_hpc.errors import UserError
     from railvib_hpc.log import Reporter
-    from railvib_hpc.pipeline import stage_runner
+    from railvib_hpc.transient.stage import run_transient_stage
 
     sets = [e for e in extra if e != "--set"]
     code = 0
     try:
-        stage_runner("transient")(load_case(BASELINE, [*TINY, *sets]), out, MPI.COMM_WORLD,
-                                  Reporter(MPI.COMM_WORLD.rank))
+        run_transient_stage(load_case(BASELINE, [*TINY, *sets]), out, MPI.COMM_WORLD,
+                            Reporter(MPI.COMM_WORLD.rank))
     except UserError as exc:
         print(f"railvib transient: error: {exc}", file=sys.stderr)
         code = 2

@@ -45,7 +45,7 @@ def test_speed_study_as_array_jobs_then_merge(shared_tmp, capsys, monkeypatch):
     def broken(*args, **kwargs):
         raise UserError("simulated failure")
 
-    monkeypatch.setattr("railvib_hpc.mbs.stage.run_mbs_stage", broken)
+    monkeypatch.setattr("railvib_hpc.mbs.stage.simulate_case", broken)
     more = [*base[:-1], "speeds=[20, 40, 60]"]
     assert run(more) == 2
     out = capsys.readouterr().out

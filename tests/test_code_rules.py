@@ -1,0 +1,54 @@
+"""Rules of the code base that ``make lint`` and ``make docs`` keep: function length, the
+README's module table."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from railvib_hpc.docs import LAYOUT_BEGIN, LAYOUT_END, README, layout_markdown, module_summary
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tools"))
+import code_rules  # noqa: E402
+
+
+def test_no_function_over_the_limit_unless_allowed():
+    assert code_rules.violations() == []
+
+
+def test_the_rule_counts_from_def_to_the_end(tmp_path):
+    pkg = tmp_path / "railvib_hpc"
+    pkg.mkdir()
+    lines = [f"x{i} = {i}" for i in range(code_rules.MAX_FUNCTION_LINES - 2)]
+    method, function = ("\n".join(indent + s for s in lines) for indent in (" " * 8, " " * 4))
+    (pkg / "m.py").write_text(
+        f'class A:\n    @staticmethod\n    def short():\n        """Doc."""\n{method}\n'
+        f'\n\ndef long():\n    """Doc."""\n{function}\n    return 1\n')
+    lengths = dict(code_rules.function_lengths(tmp_path))
+    assert lengths == {"railvib_hpc/m.py::A.short": code_rules.MAX_FUNCTION_LINES,
+                       "railvib_hpc/m.py::long": code_rules.MAX_FUNCTION_LINES + 1}
+    assert [v.split(": ")[0] for v in code_rules.violations(tmp_path)] == [
+        "railvib_hpc/m.py::long"]
+
+
+def test_every_module_says_what_it_does():
+    for path in sorted((ROOT / "railvib_hpc").rglob("*.py")):
+        assert module_summary(path), path
+
+
+def test_readme_layout_lists_every_module_and_is_up_to_date():
+    text = (ROOT / README).read_text()
+    current = text.split(LAYOUT_BEGIN, 1)[1].split(LAYOUT_END, 1)[0]
+    assert current == "\n" + layout_markdown(ROOT / "railvib_hpc"), "run `make docs`"
+    modules = [p for p in (ROOT / "railvib_hpc").rglob("*.py") if p.name != "__init__.py"]
+    for path in modules:
+        assert f"| `{path.relative_to(ROOT / 'railvib_hpc').as_posix()}` |" in current, path
+
+
+def test_a_module_without_docstring_is_refused(tmp_path):
+    (tmp_path / "m.py").write_text("x = 1\n")
+    with pytest.raises(ValueError, match="no module docstring"):
+        module_summary(tmp_path / "m.py")

@@ -1,0 +1,72 @@
+"""The stage rule of ``make lint``: no stage module calls the reuse, provenance or lock layer.
+
+A stage module (``railvib_hpc/<package>/stage.py``) declares its ``STAGE``
+(:class:`~railvib_hpc.io.stage_protocol.Stage`) and works through the context its
+``compute`` gets: the reuse verdict and its message, provenance, the lock and ``run.json``
+belong to :mod:`railvib_hpc.io.stage_protocol` and its runner. This rule fails when a stage
+module imports one of :data:`FORBIDDEN` itself, or the modules that hold them as a whole.
+
+Usage::
+
+    python tools/stage_rules.py      # lists the offenders and exits with 1, if any
+
+``tests/test_stage_protocol.py`` checks the same in the quick tier.
+"""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+#: The names of the reuse, provenance, lock and run-record layer a stage may not import.
+FORBIDDEN = frozenset({"examine", "forget", "provenance", "output_lock", "acquire_lock",
+                       "release_lock", "record_stage", "append_entry"})
+#: The modules that hold them (importing one whole would reach them too).
+LAYER_MODULES = frozenset({"stage_files", "run_record"})
+
+
+def stage_modules(root: Path = ROOT) -> list[Path]:
+    """Every stage module of the package: ``railvib_hpc/<package>/stage.py``."""
+    return sorted((root / "railvib_hpc").glob("*/stage.py"))
+
+
+def _offences(tree: ast.AST) -> list[str]:
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            module = (node.module or "").rsplit(".", 1)[-1]
+            for alias in node.names:
+                if module in LAYER_MODULES and alias.name in FORBIDDEN:
+                    out.append(f"line {node.lineno}: imports {alias.name} from {node.module}")
+                elif alias.name in LAYER_MODULES:
+                    out.append(f"line {node.lineno}: imports the module {alias.name}")
+        elif isinstance(node, ast.Import):
+            out += [f"line {node.lineno}: imports the module {alias.name}"
+                    for alias in node.names if alias.name.rsplit(".", 1)[-1] in LAYER_MODULES]
+    return out
+
+
+def violations(root: Path = ROOT) -> list[str]:
+    """Every breach of the rule, one line each (empty: the rule holds)."""
+    out = []
+    for path in stage_modules(root):
+        name = path.relative_to(root).as_posix()
+        for offence in _offences(ast.parse(path.read_text(), str(path))):
+            out.append(f"{name}: {offence} (a stage uses its context: ctx.reuse, "
+                       "ctx.provenance, ctx.discard; the runner holds the lock and writes "
+                       "run.json)")
+    return out
+
+
+def main() -> int:
+    """Print the breaches of the rule; 1 if there are any."""
+    found = violations()
+    for line in found:
+        print(line, file=sys.stderr)
+    return 1 if found else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

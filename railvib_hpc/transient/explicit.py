@@ -1,0 +1,365 @@
+"""Explicit central-difference time integration with a lumped mass: O(N) memory and work per step.
+
+The engine of ``transient.engine = "explicit"`` (issue 28). With the diagonal (lumped) mass
+``m`` of the model, every step ``t_n -> t_{n+1}`` is::
+
+    u_{n+1}   = u_n + dt v_n + dt^2 / 2 a_n
+    v_{n+1/2} = v_n + dt / 2 a_n
+    a_{n+1}   = m^-1 (f_{n+1} - K u_{n+1} - C v_{n+1/2})
+    v_{n+1}   = v_{n+1/2} + dt / 2 a_{n+1}
+
+(Newmark beta = 0, gamma = 1/2: the central-difference method; the damping force takes the
+half-step velocity, so no matrix is ever factored). A step costs two sparse products (K,
+C) and a few vector operations, and the memory is the matrices and a few vectors: both
+grow linearly with the DOFs, where the direct path's factor grows as n^(4/3) (issue 28).
+The scheme is second order, conserves the discrete energy of an undamped system and is
+stable up to the step of :func:`critical_step` (``2 / omega_max`` undamped, less with
+damping), with ``omega_max`` the largest natural frequency of ``K, m``
+(:func:`stability_limit`).
+
+A vehicle is coupled explicitly too: its linear equations (mass, damping, stiffness
+matrices of :class:`~railvib_hpc.mbs.integrate.VehicleNewmark`) take the same
+central-difference step, and the Hertz contact force at ``t_{n+1}`` follows from the
+penetration of the predicted rail and wheel positions (no Newton iteration: nothing at
+``t_{n+1}`` depends on the force). The contact spring is part of the stability limit: its
+frequency ``sqrt(k_H / m_rail)`` (linearised Hertz stiffness on the rail's nodal mass) is
+checked with the model's.
+
+Kernels work on this rank's rows as numpy arrays; PETSc does the sparse products
+(:mod:`.petsc` style: the matrices are distributed AIJ).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .integrate import SparseLoad, State, StepInfo, VehicleDriver, add_sparse, gather_values
+
+#: Options prefix of the largest-frequency eigensolve (``-railvib_cd_eps_...``).
+PREFIX = "railvib_cd_"
+#: Fraction of the critical step the automatic step uses, and the largest a given
+#: ``transient.dt`` may reach: the largest frequency is computed to ``OMEGA_TOL`` and the
+#: contact spring's is linearised, so a margin of 10 % (the usual safety factor of explicit
+#: codes, e.g. LS-DYNA's TSSFAC = 0.9) covers both.
+STEP_SAFETY = 0.9
+#: Relative tolerance of the largest eigenvalue of ``m^-1/2 K m^-1/2`` (Krylov-Schur).
+OMEGA_TOL = 1e-6
+#: Relative size of an off-diagonal mass entry that makes a mass matrix "not lumped".
+LUMPED_TOL = 1e-12
+
+
+class ExplicitEngineError(ValueError):
+    """The model cannot be integrated explicitly as given (a mass that is not lumped)."""
+
+
+def critical_step(omega: float, xi: float = 0.0) -> float:
+    """Largest stable step of the scheme for a mode of frequency ``omega`` [rad/s] and
+    damping ratio ``xi`` (the damping force at the half-step velocity).
+
+    Bisection on the spectral radius of the one-step map of ``u'' + 2 xi omega u' + omega^2
+    u = 0`` (``2 / omega`` for ``xi = 0``; damping lowers it).
+
+    >>> round(critical_step(1000.0) * 1000.0, 6)
+    2.0
+    >>> critical_step(1000.0, 0.1) < critical_step(1000.0)
+    True
+    """
+    if omega <= 0.0:
+        return float("inf")
+
+    def stable(h: float) -> bool:
+        return spectral_radius(omega, xi, h) <= 1.0 + 1e-12
+
+    lo, hi = 0.0, 2.0 / omega
+    if stable(hi):
+        return hi
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo
+
+
+def spectral_radius(omega: float, xi: float, h: float) -> float:
+    """Spectral radius of the scheme's one-step map ``(u, v, a)_n -> (u, v, a)_{n+1}`` for
+    one mode (see :func:`critical_step`)."""
+    w2, c = omega * omega, 2.0 * xi * omega
+    # u1 = u + h v + h^2/2 a; vh = v + h/2 a; a1 = -w2 u1 - c vh; v1 = vh + h/2 a1
+    u1 = np.array([1.0, h, 0.5 * h * h])
+    vh = np.array([0.0, 1.0, 0.5 * h])
+    a1 = -w2 * u1 - c * vh
+    v1 = vh + 0.5 * h * a1
+    return float(np.abs(np.linalg.eigvals(np.array([u1, v1, a1]))).max())
+
+
+def lumped_diagonal(M, comm) -> np.ndarray:
+    """This rank's rows of the diagonal of ``M``, checked to be the whole matrix.
+
+    Raises
+    ------
+    ExplicitEngineError
+        When ``M`` has off-diagonal entries above :data:`LUMPED_TOL` of its diagonal or a
+        diagonal entry that is not positive.
+    """
+    from mpi4py import MPI
+
+    ip, ix, v = M.getValuesCSR()
+    r0 = M.getOwnershipRange()[0]
+    rows = np.repeat(np.arange(len(ip) - 1), np.diff(ip))
+    on = ix == rows + r0
+    diag = np.zeros(len(ip) - 1)
+    np.add.at(diag, rows[on], v[on])
+    off = np.zeros(len(ip) - 1)
+    np.add.at(off, rows[~on], np.abs(v[~on]))
+    worst = comm.allreduce(float((off / np.maximum(np.abs(diag), 1e-300)).max(initial=0.0)),
+                           op=MPI.MAX)
+    bad = comm.allreduce(int((diag <= 0.0).sum()), op=MPI.SUM)
+    if worst > LUMPED_TOL or bad:
+        raise ExplicitEngineError(
+            "transient.engine = \"explicit\" needs a lumped (diagonal, positive) mass matrix: "
+            f"off-diagonal mass up to {worst:.2g} x the diagonal, {bad} DOFs without mass; "
+            "set modal.lumped_mass = true")
+    return diag
+
+
+@dataclass(frozen=True)
+class StableStep:
+    """The stability limit of a model (:func:`stability_limit`).
+
+    Attributes
+    ----------
+    omega_max
+        Largest natural frequency of ``K, m`` [rad/s].
+    xi
+        Damping ratio of that mode (``phi^T C phi / (2 omega phi^T m phi)``).
+    dt_critical
+        :func:`critical_step` of that mode [s].
+    limiting_dof
+        Global DOF with the largest amplitude in that mode (where the limit sits).
+    iterations
+        Krylov-Schur iterations the eigensolve took.
+    """
+
+    omega_max: float
+    xi: float
+    dt_critical: float
+    limiting_dof: int
+    iterations: int
+
+    @property
+    def dt_allowed(self) -> float:
+        """The largest step allowed: :data:`STEP_SAFETY` of the critical one."""
+        return STEP_SAFETY * self.dt_critical
+
+
+def stability_limit(K, m: np.ndarray, C, comm) -> StableStep:
+    """The largest frequency of ``K, m`` (SLEPc Krylov-Schur on ``m^-1/2 K m^-1/2``, to
+    :data:`OMEGA_TOL`), its damping ratio, and the critical step (collective).
+
+    The largest eigenvalue converges in a few dozen products (it is the best separated end
+    of the spectrum of a mesh); the mode localises on the elements that limit the step
+    (the stiffest over the lightest: rail beams, thin slabs).
+    """
+    from slepc4py import SLEPc
+
+    d = K.createVecLeft()
+    d.getArray()[:] = 1.0 / np.sqrt(m)
+    S = K.duplicate(copy=True)
+    S.diagonalScale(d, d)
+    eps = SLEPc.EPS().create(comm)
+    eps.setOptionsPrefix(PREFIX)
+    eps.setOperators(S)
+    eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+    eps.setDimensions(1)
+    eps.setTolerances(OMEGA_TOL, 10_000)
+    eps.setFromOptions()
+    eps.solve()
+    if eps.getConverged() < 1:
+        raise ExplicitEngineError("the largest natural frequency of the model did not converge "
+                                  f"in {eps.getIterationNumber()} iterations")
+    x = S.createVecRight()
+    lam = eps.getEigenpair(0, x).real
+    iterations = eps.getIterationNumber()
+    # the mode in displacements (x = m^1/2 phi) and its damping ratio
+    phi = x.getArray() * d.getArray()
+    omega = float(np.sqrt(max(lam, 0.0)))
+    xi = 0.0
+    if C is not None and omega > 0.0:
+        pv, cv = C.createVecRight(), C.createVecLeft()
+        pv.getArray()[:] = phi
+        C.mult(pv, cv)
+        xi = float(pv.dot(cv) / (2.0 * omega * comm.allreduce(float(phi @ (m * phi)))))
+        pv.destroy()
+        cv.destroy()
+    amp = np.abs(phi)
+    r0 = K.getOwnershipRange()[0]
+    local = (float(amp.max(initial=-1.0)), r0 + int(np.argmax(amp)) if amp.size else -1)
+    _, dof = max(comm.allgather(local))
+    for obj in (eps, S, d, x):
+        obj.destroy()
+    return StableStep(omega, max(xi, 0.0), critical_step(omega, max(xi, 0.0)), int(dof),
+                      int(iterations))
+
+
+def contact_frequency(kh: float, static_load: float, rail_mass: float) -> float:
+    """Frequency [rad/s] of the linearised Hertz spring (the tangent stiffness at the static
+    wheel load, :func:`~railvib_hpc.mbs.contact.hertz_linear_stiffness`) on the rail's
+    nodal mass ``rail_mass`` (the wheel, heavier, moves less: an upper bound)."""
+    from ..mbs.contact import hertz_linear_stiffness
+
+    if kh <= 0.0 or static_load <= 0.0 or rail_mass <= 0.0:
+        return 0.0
+    return float(np.sqrt(hertz_linear_stiffness(static_load, kh) / rail_mass))
+
+
+def limiting_element(mesh, dof_index: np.ndarray, dof: int) -> str:
+    """Where the stability limit sits: the part and position of the node of global ``dof``
+    (``dof_index``: the DOF map's (n_nodes, n_components) table)."""
+    from ..schema import PART_ID
+
+    names = {v: k for k, v in PART_ID.items()}
+    hit = np.argwhere(dof_index == dof)
+    if not hit.size:
+        return f"DOF {dof}"
+    node = int(hit[0, 0])
+    x, y, z = mesh.points[node]
+    parts = [names.get(int(p), str(p)) for p in np.unique(mesh.line_part[
+        (mesh.lines == node).any(axis=1)])] if len(mesh.lines) else []
+    parts += [names.get(int(p), str(p)) for p in np.unique(mesh.hex_part[
+        (mesh.hexes == node).any(axis=1)])]
+    return (f"the {'/'.join(parts) or 'element'} elements at node {node} "
+            f"(x = {x:.3f}, y = {y:.3f}, z = {z:.3f} m)")
+
+
+class ExplicitSystem:
+    """K, C and the lumped mass of the model for the explicit engine (collective setup).
+
+    The counterpart of :class:`~.petsc.TransientSystem` without a factor: products with K
+    and C, the mass diagonal, energies. Memory: the matrices and a few vectors, linear in
+    the DOFs.
+    """
+
+    def __init__(self, K, M, C, dt: float, comm):
+        self.K, self.M, self.C, self.dt, self.comm = K, M, C, float(dt), comm
+        self.n_global = K.getSize()[0]
+        self.r0, self.r1 = K.getOwnershipRange()
+        self.n_local = self.r1 - self.r0
+        self.m = lumped_diagonal(M, comm)
+        self._x, self._y = K.createVecRight(), K.createVecLeft()
+        self.time_products = 0.0
+        self.n_products = 0
+
+    def times(self, A, x: np.ndarray) -> np.ndarray:
+        """``A x`` for this rank's rows ``x`` (a new array)."""
+        t0 = time.perf_counter()
+        self._x.getArray()[:] = x
+        A.mult(self._x, self._y)
+        out = self._y.getArray().copy()
+        self.time_products += time.perf_counter() - t0
+        self.n_products += 1
+        return out
+
+    def energy(self, u: np.ndarray, v: np.ndarray) -> float:
+        """Kinetic plus strain energy ``1/2 v^T m v + 1/2 u^T K u`` (collective)."""
+        local = 0.5 * float(v @ (self.m * v)) + 0.5 * float(u @ self.times(self.K, u))
+        return self.comm.allreduce(local)
+
+    def destroy(self) -> None:
+        self._x.destroy()
+        self._y.destroy()
+
+
+class ExplicitSolver:
+    """Step the full-order model explicitly (see the module notes); the interface of
+    :class:`~.integrate.DirectSolver` (``start``, ``step``, ``destroy``).
+
+    Parameters
+    ----------
+    system
+        The matrices and the lumped mass.
+    prescribed
+        ``prescribed(n) -> (dofs, values)``: the prescribed load at step ``n`` (or None).
+    driver
+        A vehicle (or None).
+    """
+
+    def __init__(self, system: ExplicitSystem,
+                 prescribed: Callable[[int], SparseLoad] | None = None,
+                 driver: VehicleDriver | None = None):
+        self.system = system
+        self.prescribed = prescribed
+        self.driver = driver
+        self.time_contact = 0.0
+        if driver is not None:
+            nm = driver.newmark
+            self._mv_inv = np.linalg.inv(nm.mv)
+
+    def start(self, state: State) -> None:
+        """Nothing to prepare: the contact force of step ``n`` is in ``state.force``."""
+
+    def acceleration(self, n: int, u: np.ndarray, v_half: np.ndarray,
+                     contact: SparseLoad | None) -> np.ndarray:
+        """``m^-1 (f_n - K u - C v_half)`` with the prescribed and contact loads of step n."""
+        sys_ = self.system
+        rhs = -sys_.times(sys_.K, u)
+        if sys_.C is not None:
+            rhs -= sys_.times(sys_.C, v_half)
+        for load in ((None if self.prescribed is None else self.prescribed(n)), contact):
+            if load is not None:
+                add_sparse(rhs, sys_.r0, load[0], load[1])
+        return rhs / sys_.m
+
+    def step(self, st: State) -> StepInfo:
+        """Advance ``st`` from ``t_n`` to ``t_{n+1}`` in place; collective."""
+        dt = self.system.dt
+        n1 = st.step + 1
+        u1 = st.u + dt * st.v + (0.5 * dt * dt) * st.a
+        v_half = st.v + (0.5 * dt) * st.a
+        info = StepInfo()
+        contact = None
+        if self.driver is not None:
+            contact = self._contact(st, n1, u1, info)
+        a1 = self.acceleration(n1, u1, v_half, contact)
+        st.u[:], st.v[:], st.a[:] = u1, v_half + (0.5 * dt) * a1, a1
+        st.step = n1
+        return info
+
+    def _contact(self, st: State, n1: int, u1: np.ndarray, info: StepInfo) -> SparseLoad:
+        """Predict the vehicle, evaluate the Hertz force at t_{n+1}, finish the vehicle's
+        step; returns the contact load on the rail."""
+        from ..mbs.integrate import hertz_force_and_slope
+
+        t0 = time.perf_counter()
+        drv, sys_, dt = self.driver, self.system, self.system.dt
+        nm = drv.newmark
+        y1 = st.y + dt * st.y_dot + (0.5 * dt * dt) * st.y_ddot
+        yd_half = st.y_dot + (0.5 * dt) * st.y_ddot
+        dofs, coef, _ = drv.coupling.at(drv.x[n1])
+        w = np.einsum("ij,ij->i", coef, gather_values(sys_.comm, u1, sys_.r0, dofs))
+        r = drv.heights(n1)
+        heights = nm.b.T @ y1
+        delta = w + r - heights
+        kh, cc = drv.vehicle.hertz_constant, drv.vehicle.contact_damping
+        force = np.array([hertz_force_and_slope(float(d), float(d0), kh, cc, dt)[0]
+                          for d, d0 in zip(delta, st.penetration)])
+        ydd = self._mv_inv @ (nm.f0 + nm.b @ force - nm.cv @ yd_half - nm.kv @ y1)
+        st.y, st.y_dot, st.y_ddot = y1, yd_half + (0.5 * dt) * ydd, ydd
+        st.penetration, st.force = delta, force
+        info.wheel_dofs, info.wheel_coef = dofs, coef
+        info.rail_displacement = w
+        info.irregularity = r
+        info.wheel_height = heights
+        self.time_contact += time.perf_counter() - t0
+        return dofs, -coef * force[:, None]
+
+    def destroy(self) -> None:
+        """Nothing to free (the system owns the matrices)."""
+
+
+__all__ = ["ExplicitEngineError", "ExplicitSolver", "ExplicitSystem", "StableStep",
+           "contact_frequency", "critical_step", "lumped_diagonal", "spectral_radius",
+           "stability_limit"]

@@ -651,7 +651,7 @@ class Pipeline:
         ValueError
             For a name that is not a stage (before anything runs).
         """
-        from .io.run_record import RUN_FILE
+        from .io.files import RUN_FILE
 
         names = tuple(names)
         for name in names:

@@ -31,6 +31,7 @@ from pathlib import Path
 from . import __version__
 from .config import Case, load_case, results_folder_name
 from .errors import UserError
+from .io.files import RECORD_DIR, TRANSIENT_DIR
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
 from .pipeline import PIPELINES, single_stage_commands
@@ -109,7 +110,7 @@ def _out_dir(args: argparse.Namespace, case: Case, rep: Reporter) -> Path:
         rep.info(f"note: case.name = {case['case.name']!r} is not a plain folder name; the "
                  f"results go to results/{name}")
     default = Path("results") / name
-    return default / "transient" if args.command == "transient" else default
+    return default / TRANSIENT_DIR if args.command == "transient" else default
 
 
 def _cmd_check(case: Case, rep: Reporter) -> int:
@@ -248,7 +249,7 @@ def _internal_error(args: argparse.Namespace, out: Path | None, comm, exc: Excep
             f"\nrank {comm.rank} of {comm.size}, python {sys.version.split()[0]}\n\n"
             + "".join(traceback.format_exception(exc)))
     log = None
-    candidates = ([out / ".railvib"] if out is not None else []) + [Path(tempfile.gettempdir())]
+    candidates = ([out / RECORD_DIR] if out is not None else []) + [Path(tempfile.gettempdir())]
     for folder in candidates:
         try:
             folder.mkdir(parents=True, exist_ok=True)

@@ -22,7 +22,8 @@ from typing import Any
 import tomllib
 
 from .errors import CaseError
-from .io.stage_files import digest, flat_case, hash_file
+from .io.digests import digest, hash_file
+from .io.products import flat_case
 from .schema import PRESETS, SCHEMA
 from .validation import ALL_KEYS, check_consistency, check_value
 

@@ -82,5 +82,14 @@ def os_error_text(exc: OSError, action: str = "") -> str:
     return f"{head}: {reason}" if head else reason
 
 
+def exception_text(exc: BaseException) -> str:
+    """One line for any exception: :func:`os_error_text` for an ``OSError``, else
+    ``<type>: <first line>`` (the type alone when it says nothing)."""
+    if isinstance(exc, OSError):
+        return os_error_text(exc)
+    text = (str(exc).splitlines() or [""])[0]
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
 class DataError(UserError):
     """Computed or stored data that fail their data checks (non-finite or implausible values)."""

@@ -881,6 +881,14 @@ SCHEMA: dict[str, dict[str, Any]] = {
                          "frequencies (0.8: period error 0.86 % instead of 0.82 % at 20 steps "
                          "per period)",
                          "unit"),
+        "engine": Param("direct", "str", "-",
+                        "time integration of the full-order model: 'direct' (generalized-"
+                        "alpha, one MUMPS factor of K_eff: unconditionally stable, memory "
+                        "~n^(4/3)) or 'explicit' (central differences with the lumped mass: "
+                        "memory and work per step linear in the DOFs, the step limited by the "
+                        "largest natural frequency; needs modal.lumped_mass = true)",
+                        choices=("direct", "explicit"),
+                        source="issue 28: an engine whose memory and cost grow linearly"),
         "checkpoint_interval": Param(120.0, "float", "s",
                                      "wall-clock time between checkpoints of the state (an "
                                      "interrupted run resumes from the last one; 0: none)",

@@ -721,6 +721,10 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("transient.dt", tr["dt"],
                         f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
                         "automatic)"))
+    if tr["engine"] == "explicit" and not case["modal.lumped_mass"]:
+        out.append(("transient.engine", tr["engine"],
+                    "needs a diagonal mass: set modal.lumped_mass = true (or use "
+                    "transient.engine = \"direct\")"))
     return out
 
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 
-from railvib_hpc.io.stage_files import StageFile, write_json
+from railvib_hpc.io.atomic import write_json
+from railvib_hpc.io.products import StageFile
 from railvib_hpc.io.stage_protocol import Stage, StageContext, StageOutput
 from railvib_hpc.parallel import on_root
 

@@ -4,6 +4,12 @@
 before the stages were restructured: the provenance of every product (format version,
 stage, inputs digest, upstream files), every probe's peak velocity and acceleration, and
 which files a rerun (and a rerun after ``output.dt`` changed) reuses or recomputes.
+
+Re-recorded once since, for issue 28's new case key ``transient.engine``: the record of
+issue 27's final code differed from the first one in exactly five inputs digests, those of
+the products whose inputs include ``[transient]`` or the whole case (``transient.h5``, the
+transient ``fields.h5`` and ``probes.h5``, and both ``assessment.json``), on 1 and 2 ranks;
+every other digest, every probe peak and every reuse verdict was unchanged.
 """
 
 from __future__ import annotations

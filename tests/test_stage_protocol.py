@@ -12,8 +12,10 @@ import pytest
 
 import railvib_hpc as rv
 from railvib_hpc import pipeline
+from railvib_hpc.io.locks import holds_lock
+from railvib_hpc.io.products import STAGE_FILES
+from railvib_hpc.io.provenance import read_provenance
 from railvib_hpc.io.stage_checks import CHECKS
-from railvib_hpc.io.stage_files import STAGE_FILES, holds_lock, read_provenance
 from railvib_hpc.io.stage_protocol import StageRunner
 from railvib_hpc.log import Reporter
 
@@ -110,9 +112,10 @@ def test_the_stage_rule_finds_a_direct_import(tmp_path):
     pkg = tmp_path / "railvib_hpc" / "newstage"
     pkg.mkdir(parents=True)
     (pkg / "stage.py").write_text(
-        "from ..io.stage_files import ensure_space, examine\n"
+        "from ..io.atomic import ensure_space\n"
+        "from ..io.provenance import examine\n"
         "from ..io import run_record\n"
-        "import railvib_hpc.io.stage_files as sf\n")
+        "import railvib_hpc.io.locks as locks\n")
     found = stage_rules.violations(tmp_path)
     assert len(found) == 3 and "imports examine" in found[0]
     assert all(line.startswith("railvib_hpc/newstage/stage.py") for line in found)

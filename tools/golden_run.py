@@ -68,7 +68,8 @@ def _verdicts(text: str, out: Path) -> list[str]:
 
 
 def _provenance(out: Path) -> dict[str, dict]:
-    from railvib_hpc.io.stage_files import STAGE_FILES, read_provenance
+    from railvib_hpc.io.products import STAGE_FILES
+    from railvib_hpc.io.provenance import read_provenance
 
     rows = {}
     for spec in STAGE_FILES.values():

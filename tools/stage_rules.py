@@ -20,11 +20,13 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-#: The names of the reuse, provenance, lock and run-record layer a stage may not import.
-FORBIDDEN = frozenset({"examine", "forget", "provenance", "output_lock", "acquire_lock",
-                       "release_lock", "record_stage", "append_entry"})
-#: The modules that hold them (importing one whole would reach them too).
-LAYER_MODULES = frozenset({"stage_files", "run_record"})
+#: The names of the reuse, provenance, lock and run-record layer a stage may not import
+#: (``require_inputs``: the upstream check is ``ctx.require``).
+FORBIDDEN = frozenset({"examine", "forget", "provenance", "require_inputs", "output_lock",
+                       "acquire_lock", "release_lock", "record_stage", "append_entry"})
+#: The modules that hold them (importing one whole would reach them too): ``forget`` is in
+#: ``digests``, the reuse and provenance in ``provenance``, the locks in ``locks``.
+LAYER_MODULES = frozenset({"digests", "provenance", "locks", "run_record"})
 
 
 def stage_modules(root: Path = ROOT) -> list[Path]:
@@ -55,8 +57,8 @@ def violations(root: Path = ROOT) -> list[str]:
         name = path.relative_to(root).as_posix()
         for offence in _offences(ast.parse(path.read_text(), str(path))):
             out.append(f"{name}: {offence} (a stage uses its context: ctx.reuse, "
-                       "ctx.provenance, ctx.discard; the runner holds the lock and writes "
-                       "run.json)")
+                       "ctx.require, ctx.provenance, ctx.discard; the runner holds the lock "
+                       "and writes run.json)")
     return out
 
 

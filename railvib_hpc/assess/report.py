@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from ..io.stage_files import atomic_file
+from ..io.atomic import atomic_file
+from ..io.files import REPORT_HTML, REPORT_JSON, REPORT_MD
 from .standards import (
     STANDARDS,
     THESIS_LIMIT,
@@ -484,8 +485,8 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
                "table": table_txt, "figures": figures}
     text_json = json.dumps(_jsonable(payload), allow_nan=False, indent=1)
 
-    paths = {"markdown": out / "report.md", "html": out / "report.html",
-             "json": out / "report.json"}
+    paths = {"markdown": out / REPORT_MD, "html": out / REPORT_HTML,
+             "json": out / REPORT_JSON}
     for key, text in (("json", text_json), ("markdown", "\n".join(md)),
                       ("html", "\n".join(parts))):
         with atomic_file(paths[key]) as tmp:

@@ -38,8 +38,18 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..config import Case
-from ..io.stage_checks import CHECKS
-from ..io.stage_files import require_inputs, write_json
+from ..io.atomic import write_json
+from ..io.files import (
+    ASSESSMENT_JSON,
+    FIELDS_H5,
+    MBS_H5,
+    MODES_H5,
+    PROBES_H5,
+    STATIC_H5,
+    TRANSIENT_FIELDS,
+    TRANSIENT_H5,
+    TRANSIENT_PROBES,
+)
 from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
@@ -61,7 +71,7 @@ def _contact(out_dir: Path, solver: str):
     ``transient.h5``."""
     import h5py
 
-    path = out_dir / ("transient.h5" if solver == "transient" else "mbs.h5")
+    path = out_dir / (TRANSIENT_H5 if solver == "transient" else MBS_H5)
     if path.exists():
         with h5py.File(path, "r") as f:
             return f["wheels/x"][()], f["wheels/contact_force"][()]
@@ -154,7 +164,7 @@ def peak_map(fields_path: Path, z_ground: float, png: Path) -> dict | None:
         ax.set_title(title)
     fig.colorbar(sc, ax=axes, label="peak velocity magnitude [m/s]")
     png.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.stage_files import atomic_file
+    from ..io.atomic import atomic_file
 
     with atomic_file(png) as tmp:
         fig.savefig(tmp, dpi=110, format="png")
@@ -172,29 +182,29 @@ def _slab_top_nodes(pts: np.ndarray, slab_hexes: np.ndarray) -> np.ndarray:
 
 
 #: The files of the full-order solution the assessment rests on (table names).
-TRANSIENT_INPUTS = ("transient.h5", "transient:fields.h5", "transient:probes.h5")
+TRANSIENT_INPUTS = (TRANSIENT_H5, TRANSIENT_FIELDS, TRANSIENT_PROBES)
 
 
 def solver_of(out_dir: Path) -> str:
     """Which solver's results ``out_dir`` holds (rank 0): ``transient`` when its
     ``probes.h5`` was written by ``railvib transient`` (or, without a readable
     ``probes.h5``, when there is a ``transient.h5`` and no ``modes.h5``), else ``modal``."""
-    from ..io.stage_files import read_provenance
+    from ..io.provenance import read_provenance
 
-    probes = out_dir / "probes.h5"
+    probes = out_dir / PROBES_H5
     if probes.exists():
         try:
             return "transient" if read_provenance(probes).get("stage") == "transient" \
                 else "modal"
         except (OSError, ValueError, KeyError):
             pass
-    return "transient" if (out_dir / "transient.h5").exists() \
-        and not (out_dir / "modes.h5").exists() else "modal"
+    return "transient" if (out_dir / TRANSIENT_H5).exists() \
+        and not (out_dir / MODES_H5).exists() else "modal"
 
 
-def verify_chain(case: Case, out_dir: Path, solver: str = "modal") -> dict[str, str]:
-    """Verify every file the assessment rests on for this case (rank 0): ``modes.h5``
-    (``static.h5``), ``mbs.h5``, ``fields.h5``, ``probes.h5`` (with ``solver =
+def verify_chain(ctx: StageContext, solver: str = "modal") -> dict[str, str]:
+    """Verify every file the assessment rests on for the context's case (rank 0):
+    ``modes.h5`` (``static.h5``), ``mbs.h5``, ``fields.h5``, ``probes.h5`` (with ``solver =
     "transient"``: ``transient.h5`` and the transient ``fields.h5``, ``probes.h5``) must
     exist, be complete, be computed with the case's values from each other, be unchanged
     and sound.
@@ -210,14 +220,15 @@ def verify_chain(case: Case, out_dir: Path, solver: str = "modal") -> dict[str, 
         For the first file (in pipeline order) that is not, naming what differs and the
         command to run.
     """
-    from ..io.stage_files import spec
+    from ..io.products import spec
     from ..mbs.stage import check_context
     from ..reconstruct.stage import input_files
 
-    names = TRANSIENT_INPUTS if solver == "transient" else (*input_files(out_dir), "fields.h5",
-                                                             "probes.h5")
-    verdicts = require_inputs(out_dir, names, case, CHECKS, context=check_context(case, out_dir))
-    return {spec(n).filename: v.sha256 for n, v in verdicts.items()}
+    case, out_dir = ctx.case, ctx.out_dir
+    names = TRANSIENT_INPUTS if solver == "transient" else (*input_files(out_dir), FIELDS_H5,
+                                                             PROBES_H5)
+    digests = ctx.require(names, context=check_context(case, out_dir))
+    return {spec(n).filename: sha for n, sha in digests.items()}
 
 
 def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
@@ -234,9 +245,9 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     ctx = StageContext(case, out_dir, rep=rep)
     rep = ctx.rep
     solver = solver_of(out_dir)
-    upstream = verify_chain(case, out_dir, solver)
-    ctx.discard(out_dir / "assessment.json")
-    hist = read_probes(out_dir / "probes.h5")
+    upstream = verify_chain(ctx, solver)
+    ctx.discard(out_dir / ASSESSMENT_JSON)
+    hist = read_probes(out_dir / PROBES_H5)
     a = case["assessment"]
     results = {}
     for name, h in hist.items():
@@ -261,7 +272,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                           "after_entry": t_det - t_entry,
                           "p_analytic": r / c_p, "s_analytic": r / c_s,
                           "apparent_speed": r / (t_det - t_entry) if t_det > t_entry else None}
-    ours = _thesis_comparison(hist, out_dir / "fields.h5")
+    ours = _thesis_comparison(hist, out_dir / FIELDS_H5)
     comparison = {k: {"thesis": v, "railvib": ours.get(k)} for k, v in THESIS.items()
                   if not k.endswith("arrival_basement_wall")}
     # arrivals on the thesis's clock (t = 0 with the wheel at x = 0) at the wall's far end
@@ -275,7 +286,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     rows = thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
     x, force = _contact(out_dir, solver)
     extra = []
-    pm = peak_map(out_dir / "fields.h5", case["geometry.z1"], out_dir / "figures" / "peak_map.png")
+    pm = peak_map(out_dir / FIELDS_H5, case["geometry.z1"], out_dir / "figures" / "peak_map.png")
     if pm is not None:
         extra.append({"id": "peak_map", "file": "figures/peak_map.png",
                       "title": "Peak velocity map: ground surface and slab tops", "data": pm})
@@ -292,14 +303,14 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                "verdict": {k: v["passed"] for k, v in results.items()},
                "floors": floors,
                "report": {k: str(p) for k, p in files.items()}}
-    write_json(out_dir / "assessment.json", json.loads(json.dumps(summary, default=float)),
-               ctx.provenance("assessment.json", upstream))
+    write_json(out_dir / ASSESSMENT_JSON, json.loads(json.dumps(summary, default=float)),
+               ctx.provenance(ASSESSMENT_JSON, upstream))
     rep.info(format_table(results))
     rep.info(format_floor_table(floors))
     rep.info(format_thesis_table(rows))
     rep.info(format_comparison(comparison, arrivals, c_p, c_s))
     rep.info(f"assessed the results of the {SOLVER_TEXT[solver]}")
-    rep.info(f"wrote {out_dir / 'assessment.json'}, {files.get('html')}, {files.get('markdown')}")
+    rep.info(f"wrote {out_dir / ASSESSMENT_JSON}, {files.get('html')}, {files.get('markdown')}")
     return summary
 
 
@@ -339,11 +350,11 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
              f"{case['modal.hex_formulation']}"]
     if solver == "transient":
         lines.extend(_site_summary(case))
-        lines.extend(_transient_summary(case, out_dir / "transient.h5"))
+        lines.extend(_transient_summary(case, out_dir / TRANSIENT_H5))
         return "\n".join(lines)
     lines.append(f"solver               {SOLVER_TEXT['modal']}")
     lines.extend(_site_summary(case))
-    modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
+    modes_path, mbs_path = out_dir / MODES_H5, out_dir / MBS_H5
     if modes_path.exists():
         with h5py.File(modes_path, "r") as f:
             freq = f["modes/frequency_hz"][()]
@@ -412,7 +423,10 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
     return [f"model                {stats.get('n_nodes', 0):,} nodes, "
             f"{stats.get('n_dofs', 0):,} free DOFs, solved on {stats.get('ranks', '?')} rank(s)",
             f"solver               {SOLVER_TEXT['transient']}, "
-            f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, "
+            + ("central differences (explicit), lumped mass, "
+               if stats.get("engine") == "explicit" else
+               f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, ")
+            +
             f"dt {stats.get('dt', 0):.3e} s, {stats.get('n_steps', '?')} steps",
             f"boundaries           {faces}"
             + (f", virtual thickness {case['boundary.virtual_thickness']:g} m"
@@ -456,7 +470,7 @@ class AssessmentOutput(StageOutput):
             binding = [b.get("utilisation") for b in res.get("standards", {}).values()
                        if not b.get("comparison_only") and b.get("utilisation") is not None]
             utilisation[name] = float(max(binding)) if binding else None
-        return cls(reused=False, summary=summary, assessment_json=out_dir / "assessment.json",
+        return cls(reused=False, summary=summary, assessment_json=out_dir / ASSESSMENT_JSON,
                    report_html=report.get("html"), report_md=report.get("markdown"),
                    report_json=report.get("json"), verdict=dict(summary.get("verdict", {})),
                    max_utilisation=utilisation)
@@ -471,8 +485,8 @@ def compute(ctx: StageContext) -> AssessmentOutput:
 
 
 STAGE = Stage(name="assess", help="evaluate the building response against vibration "
-              "standards", products=("assessment.json",),
-              reads=("modes.h5", "static.h5", "mbs.h5", "fields.h5", "probes.h5",
+              "standards", products=(ASSESSMENT_JSON,),
+              reads=(MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5,
                      *TRANSIENT_INPUTS), compute=compute)
 
 

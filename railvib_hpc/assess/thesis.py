@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Case
+from ..io.files import MBS_H5, MODES_H5
 from ..site import track_lift
 
 #: What the thesis reports, with where (thesis.md / benchmarks.md section 2).
@@ -178,7 +179,7 @@ def thesis_rows(case: Case, out_dir: Path, hist: dict, ours: dict,
     list of dict
         ``quantity``, ``thesis``, ``railvib``, ``explanation`` (strings).
     """
-    modes_path, mbs_path = out_dir / "modes.h5", out_dir / "mbs.h5"
+    modes_path, mbs_path = out_dir / MODES_H5, out_dir / MBS_H5
     have_modes = modal and modes_path.exists()
     freq, counts, n_nodes = _read_modes(modes_path) if have_modes else (np.zeros(0), {}, 0)
     rows = _model_rows(case, counts, n_nodes) if counts else []

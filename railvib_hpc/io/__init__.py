@@ -1,1 +1,19 @@
-"""Input/output: HDF5 + XDMF files for ParaView, atomic writes, result reuse."""
+"""Input/output: the stage-file layer (names, table, provenance, digests, writes, locks), HDF5+XDMF.
+
+The stage-file layer, bottom-up (a module imports only those before it in this list):
+
+* :mod:`.files` -- every file name of an output folder, spelled once;
+* :mod:`.temp_names` -- the temporary name of a file while it is written, stale ones removed;
+* :mod:`.digests` -- content digests (the same on any number of ranks) and their records;
+* :mod:`.atomic` -- checked atomic writes (temporary name, space reserved, fsync, rename,
+  record);
+* :mod:`.locks` -- the lock of an output folder;
+* :mod:`.products` -- the table of stage files: stage, format, case keys, upstream files;
+* :mod:`.provenance` -- what each file records, and the reuse verdict;
+* :mod:`.stage_checks` -- the data checks of each stage file;
+* :mod:`.run_record` -- ``run.json``, the record of every command run into a folder;
+* :mod:`.stage_protocol` -- the stage protocol and its runner (the stages' one way in).
+
+The file formats: :mod:`.parallel_h5` (collective HDF5), :mod:`.xdmf` (the ParaView
+views), :mod:`.modes_io` (``modes.h5``).
+"""

@@ -17,13 +17,13 @@ Layout of ``modes.h5``::
                                            rail-pad spring-dampers (rail node, sleeper node;
                                            0 = x, 1 = y, 2 = z; N/m; N s/m), kept for the
                                            dynamic stage (their damping is not in K or M)
-    attrs: the provenance of :func:`railvib_hpc.io.stage_files.provenance` (inputs_sha256,
+    attrs: the provenance of :func:`railvib_hpc.io.provenance.provenance` (inputs_sha256,
            upstream_sha256, case_toml, format_version, ...), complete, petsc_version,
            slepc_version, stats (JSON), n_modes, n_dofs
 
 With more than one rank and an MPI-enabled h5py, every rank writes its own
 node slice collectively (``driver="mpio"``); otherwise slices are gathered to
-rank 0. The file is written by :func:`railvib_hpc.io.stage_files.write_h5`
+rank 0. The file is written by :func:`railvib_hpc.io.atomic.write_h5`
 (temporary name, space reserved, ``complete`` set last, renamed, recorded): an
 interrupted run never leaves a file that looks complete. ``modes.xdmf`` (rank 0,
 written after the rename, with its sidecar of per-step views ``modes_views.h5``, see
@@ -39,9 +39,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..schema import PART_ID
+from .atomic import write_h5
 from .parallel_h5 import h5py_parallel_ok
 from .stage_checks import check_modes
-from .stage_files import write_h5
 from .xdmf import H5Array, Series, hex_mesh, write_series
 
 if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here

@@ -1,6 +1,6 @@
 """Parallel HDF5 helpers: the ``mpio`` driver, collective hyperslab reads and writes.
 
-Files are created and renamed by :func:`railvib_hpc.io.stage_files.write_h5`; this
+Files are created and renamed by :func:`railvib_hpc.io.atomic.write_h5`; this
 module only moves data in and out of open files.
 """
 

@@ -5,7 +5,7 @@ every ``railvib`` stage command, ``railvib run``, the Python API's
 :class:`~railvib_hpc.api.Pipeline` and the studies' variants) appends one entry to
 ``<out>/run.json`` and replaces the stage's entry in its ``stages`` table. The file is
 rewritten atomically through the stage-file layer
-(:func:`~railvib_hpc.io.stage_files.atomic_file`: temporary name, fsync, rename) by rank 0
+(:func:`~railvib_hpc.io.atomic.atomic_file`: temporary name, fsync, rename) by rank 0
 while the output folder's lock is held, so concurrent commands cannot interleave.
 
 Layout (``format_version`` 1)::
@@ -70,13 +70,12 @@ from typing import TYPE_CHECKING, Any
 from .. import __version__
 from ..constants import BYTES_PER_GB
 from ..errors import UserError
+from .files import RUN_FILE
 
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: File name of the run record in an output folder.
-RUN_FILE = "run.json"
-#: Format of :data:`RUN_FILE` (bumped when its layout changes).
+#: Format of :data:`~railvib_hpc.io.files.RUN_FILE` (bumped when its layout changes).
 RUN_FORMAT = 1
 #: Entries kept in ``calls`` (oldest dropped first): a folder reused for years stays small.
 MAX_CALLS = 500
@@ -214,7 +213,7 @@ def append_entry(out_dir: str | os.PathLike, entry: dict[str, Any]) -> Path:
     OutputError
         When the file cannot be written.
     """
-    from .stage_files import atomic_file
+    from .atomic import atomic_file
 
     out_dir = Path(out_dir)
     path = out_dir / RUN_FILE

@@ -38,6 +38,20 @@ from typing import Any
 
 import numpy as np
 
+from .files import (
+    FIELDS_H5,
+    MBS_H5,
+    MESH_H5,
+    MODAL_DAMPING_H5,
+    MODES_H5,
+    PROBES_H5,
+    STATIC_H5,
+    TRANSIENT_CHECKPOINT_H5,
+    TRANSIENT_FIELDS,
+    TRANSIENT_H5,
+    TRANSIENT_PROBES,
+)
+
 #: Bound of ``sqrt(m_i) |phi_i|`` for mass-normalised modes (sqrt(27) rounded up).
 MODE_SHAPE_BOUND = 6.0
 #: Rotations vs displacement gradient ``max|u| / h_min``.
@@ -507,11 +521,11 @@ def check_checkpoint(path: Path, full: bool = True, context: Mapping[str, Any] |
 
 
 #: The data check of each stage file (by table name).
-CHECKS = {"mesh.h5": check_mesh, "modes.h5": check_modes, "static.h5": check_static,
-          "modal_damping.h5": check_modal_damping, "mbs.h5": check_mbs,
-          "fields.h5": check_fields, "probes.h5": check_probes,
-          "transient.h5": check_transient, "transient:fields.h5": check_fields,
-          "transient:probes.h5": check_probes, "transient_checkpoint.h5": check_checkpoint}
+CHECKS = {MESH_H5: check_mesh, MODES_H5: check_modes, STATIC_H5: check_static,
+          MODAL_DAMPING_H5: check_modal_damping, MBS_H5: check_mbs,
+          FIELDS_H5: check_fields, PROBES_H5: check_probes,
+          TRANSIENT_H5: check_transient, TRANSIENT_FIELDS: check_fields,
+          TRANSIENT_PROBES: check_probes, TRANSIENT_CHECKPOINT_H5: check_checkpoint}
 
 
 def _static_wheel_load(f, context: dict) -> float:

@@ -1,7 +1,7 @@
 """The stage protocol: every stage declared once (:class:`Stage`), run by :class:`StageRunner`.
 
 A stage module declares one :class:`Stage`: its name, its help line, its products (rows of
-:data:`~railvib_hpc.io.stage_files.STAGE_FILES`, whose data checks are
+:data:`~railvib_hpc.io.products.STAGE_FILES`, whose data checks are
 :data:`~railvib_hpc.io.stage_checks.CHECKS`: each row and each check is declared once, in
 that table), the upstream files it reads and ``compute(ctx)``. The case keys it depends
 on are its products' rows' (:attr:`Stage.case_keys`).
@@ -9,8 +9,9 @@ on are its products' rows' (:attr:`Stage.case_keys`).
 ``compute`` gets a :class:`StageContext` (case, output folder, communicator, reporter,
 PETSc options) and returns a frozen result (a :class:`StageOutput`). The context gives
 it the one reuse helper (:meth:`StageContext.reuse`: examine, then ``reusing <file>
-(why)`` or ``recomputing <file>: reason`` and forget) and the provenance of what it
-writes (:meth:`StageContext.provenance`), so no stage module calls the reuse, provenance,
+(why)`` or ``recomputing <file>: reason`` and forget), the check of the upstream files it
+reads (:meth:`StageContext.require`) and the provenance of what it writes
+(:meth:`StageContext.provenance`), so no stage module calls the reuse, provenance,
 lock or run-record layer itself (``tests/test_stage_protocol.py`` checks it).
 
 :class:`StageRunner` does everything else, for any sequence of stages into one output
@@ -37,23 +38,16 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .digests import forget
+from .locks import output_lock
+from .products import STAGE_FILES, Selection, StageFile, spec
+from .provenance import Verdict, examine, provenance, require_inputs
 from .stage_checks import CHECKS
-from .stage_files import (
-    STAGE_FILES,
-    Selection,
-    StageFile,
-    Verdict,
-    examine,
-    forget,
-    output_lock,
-    provenance,
-    spec,
-)
 
 __all__ = ["NotReusable", "Reuse", "Stage", "StageContext", "StageOutput", "StageRun",
            "StageRunner", "declare_product"]
@@ -91,8 +85,8 @@ class Stage:
         The command line's help line.
     products
         The table names of the files it writes (rows of
-        :data:`~railvib_hpc.io.stage_files.STAGE_FILES`); a new stage may give a new row
-        (a :class:`~railvib_hpc.io.stage_files.StageFile`), which is added to the table.
+        :data:`~railvib_hpc.io.products.STAGE_FILES`); a new stage may give a new row
+        (a :class:`~railvib_hpc.io.products.StageFile`), which is added to the table.
     reads
         The table names of the upstream files it reads.
     compute
@@ -151,7 +145,7 @@ class StageOutput:
 
 class NotReusable(Exception):
     """Raised by an ``accept`` callback of :meth:`StageContext.reuse`: the file passed
-    :func:`~railvib_hpc.io.stage_files.examine` but cannot be reused (the message says
+    :func:`~railvib_hpc.io.provenance.examine` but cannot be reused (the message says
     why, ``it ...``)."""
 
 
@@ -164,7 +158,7 @@ class Reuse:
     ok
         True: the file is reused.
     verdict
-        The verdict of :func:`~railvib_hpc.io.stage_files.examine` (``sha256``, ``attrs``).
+        The verdict of :func:`~railvib_hpc.io.provenance.examine` (``sha256``, ``attrs``).
     value
         What the ``accept`` callback returned (None without one, or when not reused).
     """
@@ -229,7 +223,7 @@ class StageContext:
               **examine_options: Any) -> Reuse:
         """Reuse ``product`` when it is current and sound, else forget it, saying why (rank 0).
 
-        Examines the file (:func:`~railvib_hpc.io.stage_files.examine`, with the table's
+        Examines the file (:func:`~railvib_hpc.io.provenance.examine`, with the table's
         data check unless ``data_check`` is given), then runs ``accept(verdict)`` on a
         current file: its value is the reused content; raising :class:`NotReusable`
         rejects the file.
@@ -252,7 +246,7 @@ class StageContext:
         discard
             Delete a file that is not reused, with its record (default).
         **examine_options
-            Passed to :func:`~railvib_hpc.io.stage_files.examine` (``context``,
+            Passed to :func:`~railvib_hpc.io.provenance.examine` (``context``,
             ``inputs_sha256``, ``upstream``, ...).
         """
         path = path or self.path(product)
@@ -300,6 +294,38 @@ class StageContext:
             forget(self.path(name))
         return None
 
+    def require(self, products: Sequence[str], checks: Mapping[str, Callable] | None = None,
+                *, context: Mapping[str, Any] | None = None) -> dict[str, str]:
+        """Verify the upstream files a stage reads, upstream first (rank 0); their digests.
+
+        Each file must be current for the case and sound
+        (:func:`~railvib_hpc.io.provenance.require_inputs`).
+
+        Parameters
+        ----------
+        products
+            Their table names, in pipeline order (e.g. ``("modes.h5", "mbs.h5")``).
+        checks
+            ``{name: data check}`` (None: the table's checks,
+            :data:`~railvib_hpc.io.stage_checks.CHECKS`).
+        context
+            Passed to the data checks.
+
+        Returns
+        -------
+        dict
+            ``{table name: content digest}``, in the order of ``products``.
+
+        Raises
+        ------
+        StaleInputError
+            For the first file that is missing, stale, foreign or corrupt: one line naming
+            it, what differs and the command to run.
+        """
+        verdicts = require_inputs(self.out_dir, products, self.case,
+                                  CHECKS if checks is None else checks, context=context)
+        return {name: v.sha256 for name, v in verdicts.items()}
+
     def discard(self, path: Path) -> None:
         """Delete a result file and its record before it is written anew (rank 0)."""
         forget(path)
@@ -308,7 +334,7 @@ class StageContext:
                    inputs_sha256: str | None = None) -> dict[str, Any]:
         """The provenance attributes of a new ``product`` computed for the case from
         ``upstream`` (``{file name: content digest}``; see
-        :func:`~railvib_hpc.io.stage_files.provenance`)."""
+        :func:`~railvib_hpc.io.provenance.provenance`)."""
         return provenance(product, self.case, upstream, extra, inputs_sha256=inputs_sha256)
 
 

@@ -56,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .stage_files import atomic_file, write_text
+from .atomic import atomic_file, write_text
 
 __all__ = [
     "CellBlock",

@@ -20,7 +20,7 @@ Pure numpy, meant to run on rank 0. Modules:
 from .contact import hertz_force, hertz_penetration, jenkins_hertz_constant
 from .coupling import RailCoupling, shape_functions
 from .integrate import (
-    MBSResult,
+    PassageHistory,
     auto_time_step,
     coupled_energy,
     simulate_moving_force,
@@ -32,8 +32,8 @@ from .propagator import ModalPropagator, modal_propagator
 from .vehicles import SuspendedWheelset, Vehicle, static_equilibrium
 
 __all__ = [
-    "MBSResult",
     "ModalPropagator",
+    "PassageHistory",
     "RailCoupling",
     "RailModes",
     "SuspendedWheelset",

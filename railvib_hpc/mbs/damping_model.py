@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..io.files import MODAL_DAMPING_H5, MODES_H5
+from ..io.provenance import require_inputs
 from ..io.stage_checks import check_modal_damping, check_modes
-from ..io.stage_files import require_inputs
 from .case_vehicle import MBSInputError
 
 if TYPE_CHECKING:
@@ -83,12 +84,12 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     from ..modal.projection import read_damping_parts
 
     out_dir = Path(modes_path).parent
-    if not (out_dir / "modal_damping.h5").exists():
-        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / 'modal_damping.h5'}: "
+    if not (out_dir / MODAL_DAMPING_H5).exists():
+        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / MODAL_DAMPING_H5}: "
                             "run 'railvib modal' with modal.damping = 'full' first")
-    require_inputs(out_dir, ("modes.h5", "modal_damping.h5"), case,
-                   {"modes.h5": check_modes, "modal_damping.h5": check_modal_damping})
-    return read_damping_parts(out_dir / "modal_damping.h5")
+    require_inputs(out_dir, (MODES_H5, MODAL_DAMPING_H5), case,
+                   {MODES_H5: check_modes, MODAL_DAMPING_H5: check_modal_damping})
+    return read_damping_parts(out_dir / MODAL_DAMPING_H5)
 
 
 def _override_diagonal(case: Case, d: np.ndarray, omega: np.ndarray, m: int) -> np.ndarray:
@@ -121,7 +122,7 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
             parts = residual_damping_parts(damping_parts(case, modes_path), res, rest_rows,
                                            omega_rest, m)
         except ValueError as exc:
-            raise MBSInputError(f"{Path(modes_path).with_name('modal_damping.h5')}: {exc}; "
+            raise MBSInputError(f"{Path(modes_path).with_name(MODAL_DAMPING_H5)}: {exc}; "
                                 "rerun 'railvib modal' with mbs.static_correction = true") \
                 from exc
         om = np.concatenate([omega, res.omega])

@@ -49,7 +49,7 @@ import numpy as np
 from .contact import hertz_energy, hertz_linear_stiffness
 from .coupling import RailCoupling
 from .propagator import CoupledPropagator, ModalPropagator, make_propagator
-from .results import MBSResult, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
+from .results import PassageHistory, RowEvaluator, Storage, kept_steps, n_steps, rails_tuple
 from .static_correction import ContactResidual
 from .vehicles import Vehicle, missing_members, static_equilibrium
 
@@ -103,7 +103,7 @@ def simulate_moving_force(
     loads: float | np.ndarray, x0: float | np.ndarray, speed: float, t_end: float,
     dt: float | None = None, store_every: int = 1, residual: np.ndarray | None = None,
     load_rail: Sequence[int] | None = None,
-) -> MBSResult:
+) -> PassageHistory:
     """Constant vertical forces moving at constant speed over the rail(s), track at rest at t=0.
 
     Parameters
@@ -134,7 +134,7 @@ def simulate_moving_force(
 
     Returns
     -------
-    MBSResult
+    PassageHistory
         Histories; ``contact_force`` holds the constant loads.
     """
     p = np.atleast_1d(np.asarray(loads, dtype=float))
@@ -342,7 +342,7 @@ def simulate_vehicle(
     points_per_period: int = 20, newton_tol: float = 1e-10, max_iter: int = 50,
     residual: np.ndarray | None = None, progress: Callable[[int, int], None] | None = None,
     drop_height: float = 0.0,
-) -> MBSResult:
+) -> PassageHistory:
     """A vehicle (wheelset, car, train) rolling at constant speed over the modal rail(s).
 
     Parameters
@@ -400,7 +400,7 @@ def simulate_vehicle(
 
     Returns
     -------
-    MBSResult
+    PassageHistory
         Histories (``rail_loads`` holds the rail-DOF loads when ``residual`` is given).
     """
     if drop_height < 0.0:
@@ -601,13 +601,13 @@ def drop_state(vehicle, drop_height: float, rail_height: np.ndarray | None = Non
 def simulate_wheelset(
     omega: np.ndarray, zeta: float | np.ndarray, rails: RailCoupling | Sequence[RailCoupling],
     vehicle: Vehicle, x0: float, speed: float, t_end: float, **kwargs,
-) -> MBSResult:
+) -> PassageHistory:
     """The suspended wheelset rolling over the rails: :func:`simulate_vehicle` (same arguments)."""
     return simulate_vehicle(omega, zeta, rails, vehicle, x0, speed, t_end, **kwargs)
 
 
 def coupled_energy(
-    result: MBSResult, omega: np.ndarray, vehicle: Vehicle
+    result: PassageHistory, omega: np.ndarray, vehicle: Vehicle
 ) -> np.ndarray:
     """Total mechanical energy of track + vehicle + Hertz springs at every stored step.
 
@@ -635,7 +635,7 @@ def coupled_energy(
 
 
 __all__ = [
-    "MBSResult",
+    "PassageHistory",
     "VehicleNewmark",
     "auto_time_step",
     "contact_tolerance",

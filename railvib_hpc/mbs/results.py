@@ -11,7 +11,7 @@ from .coupling import RailCoupling, shape_functions
 
 
 @dataclass
-class MBSResult:
+class PassageHistory:
     """Histories of a reduced multibody simulation (stored every ``store_every`` steps).
 
     Attributes
@@ -144,7 +144,7 @@ def kept_steps(nt: int, store_every: int) -> np.ndarray:
 
 
 class Storage:
-    """Preallocated histories of the kept steps (see :class:`MBSResult`)."""
+    """Preallocated histories of the kept steps (see :class:`PassageHistory`)."""
 
     def __init__(self, keep: np.ndarray, m: int, nw: int, nd: int, nr: int = 0):
         """Allocate for kept steps ``keep``, m modes, nw wheels, nd vehicle DOFs, nr rail DOFs."""
@@ -172,10 +172,10 @@ class Storage:
         """Store the rail-DOF loads of step ``n`` (static correction)."""
         self.loads[self.slot[n]] = loads
 
-    def result(self, t, x, names, dt, nt, lost) -> MBSResult:
+    def result(self, t, x, names, dt, nt, lost) -> PassageHistory:
         """Build the result; ``lost`` is ``[any wheel, wheel 0, wheel 1, ...]`` step counts."""
         k = self.keep
-        return MBSResult(t=t[k], x=x[k], contact_force=self.f, penetration=self.d,
+        return PassageHistory(t=t[k], x=x[k], contact_force=self.f, penetration=self.d,
                          rail_displacement=self.w, q=self.q, q_dot=self.v, q_ddot=self.a,
                          y=self.y, y_dot=self.yd, y_ddot=self.ydd, dof_names=tuple(names),
                          dt=dt, n_steps=nt, n_loss_of_contact=int(lost[0]),

@@ -22,7 +22,7 @@ name, renamed when complete, reused when its inputs are unchanged):
   :func:`.static_correction.residual_modes` (mass, damping and the exact static
   flexibility); ``g = V p`` from their coordinates ``p`` (``/static/residual_omega``,
   ``residual_vectors``), so ``g_dot`` and ``g_ddot`` are exact, not differenced;
-* the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance`
+* the provenance attributes of :func:`railvib_hpc.io.provenance.provenance`
   (``inputs_sha256``, ``upstream_sha256`` of ``modes.h5``/``static.h5``, ``case_toml``,
   ...), ``complete`` and ``stats`` (JSON: time step, steps, wall time, contact-force
   summary).
@@ -50,6 +50,8 @@ import numpy as np
 
 from ..config import Case
 from ..errors import DataError, ResourceError
+from ..io.atomic import atomic_file, ensure_space, write_h5
+from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
 from ..io.stage_checks import (
     check_mbs,
     check_mbs_arrays,
@@ -57,12 +59,6 @@ from ..io.stage_checks import (
     check_modes,
     check_static,
     rail_amplitude,
-)
-from ..io.stage_files import (
-    atomic_file,
-    ensure_space,
-    require_inputs,
-    write_h5,
 )
 from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
@@ -90,7 +86,7 @@ def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
     """``K^-1`` on the rail DOFs and the deflated static fields' mass from ``static.h5``."""
     import h5py
 
-    path = out_dir / "static.h5"
+    path = out_dir / STATIC_H5
     with h5py.File(path, "r") as f:
         x_rr = f["static/rail_flexibility"][()]
         x_mass = f["static/residual_mass"][()]
@@ -103,35 +99,35 @@ def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
 def check_context(case: Case, out_dir: Path) -> dict:
     """What the data check of ``mbs.h5`` needs (see
     :func:`railvib_hpc.io.stage_checks.check_mbs`)."""
-    return {"static_wheel_load": static_wheel_load(case), "modes_path": out_dir / "modes.h5"}
+    return {"static_wheel_load": static_wheel_load(case), "modes_path": out_dir / MODES_H5}
 
 
 def input_files(case: Case) -> tuple[str, ...]:
     """The stage files ``mbs.h5`` is computed from."""
-    return (("modes.h5",) + (("static.h5",) if case["mbs.static_correction"] else ())
-            + (("modal_damping.h5",) if case["modal.damping"] == "full" else ()))
+    return ((MODES_H5,) + ((STATIC_H5,) if case["mbs.static_correction"] else ())
+            + ((MODAL_DAMPING_H5,) if case["modal.damping"] == "full" else ()))
 
 
-def verify_inputs(case: Case, out_dir: Path) -> dict[str, str]:
-    """Verify ``modes.h5`` (and ``static.h5``) for this case (rank 0); returns their digests.
+def verify_inputs(ctx: StageContext) -> dict[str, str]:
+    """Verify ``modes.h5`` (and ``static.h5``) for the context's case (rank 0); returns
+    their digests.
 
     Raises
     ------
     StaleInputError, MBSInputError
         Naming the file that is missing, stale or corrupt and the command to run.
     """
-    if case["mbs.static_correction"] and (out_dir / "modes.h5").exists() \
-            and not (out_dir / "static.h5").exists():
-        raise MBSInputError(f"mbs.static_correction = true needs {out_dir / 'static.h5'}: "
+    case, out_dir = ctx.case, ctx.out_dir
+    if case["mbs.static_correction"] and (out_dir / MODES_H5).exists() \
+            and not (out_dir / STATIC_H5).exists():
+        raise MBSInputError(f"mbs.static_correction = true needs {out_dir / STATIC_H5}: "
                             "run 'railvib modal' with mbs.static_correction = true first")
-    if case["modal.damping"] == "full" and (out_dir / "modes.h5").exists() \
-            and not (out_dir / "modal_damping.h5").exists():
-        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / 'modal_damping.h5'}: "
+    if case["modal.damping"] == "full" and (out_dir / MODES_H5).exists() \
+            and not (out_dir / MODAL_DAMPING_H5).exists():
+        raise MBSInputError(f"modal.damping = 'full' needs {out_dir / MODAL_DAMPING_H5}: "
                             "run 'railvib modal' with modal.damping = 'full' first")
-    verdicts = require_inputs(out_dir, input_files(case), case,
-                              {"modes.h5": check_modes, "static.h5": check_static,
-                               "modal_damping.h5": check_modal_damping})
-    return {n: v.sha256 for n, v in verdicts.items()}
+    return ctx.require(input_files(case), {MODES_H5: check_modes, STATIC_H5: check_static,
+                                           MODAL_DAMPING_H5: check_modal_damping})
 
 
 def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
@@ -196,17 +192,17 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 
     rep = rep or Reporter(0)
     out_dir = Path(out_dir)
-    modes_path = out_dir / "modes.h5"
-    upstream = verify_inputs(case, out_dir)
+    modes_path = out_dir / MODES_H5
+    ctx = StageContext(case, out_dir, rep=rep)
+    upstream = verify_inputs(ctx)
     with h5py.File(modes_path, "r") as f:
         m_file = f["modes/eigenvalue"].shape[0]
     m = case["mbs.n_modes"] or m_file
     if m > m_file:
         raise MBSInputError(f"mbs.n_modes = {m}: {modes_path} has only {m_file} modes")
-    path = out_dir / "mbs.h5"
+    path = out_dir / MBS_H5
     context = check_context(case, out_dir)
-    ctx = StageContext(case, out_dir, rep=rep)
-    old = ctx.reuse("mbs.h5", path=path, why="same modes, vehicle and settings", context=context)
+    old = ctx.reuse(MBS_H5, path=path, why="same modes, vehicle and settings", context=context)
     if old.ok:
         return {**json.loads(old.verdict.attrs.get("stats", "{}")), "reused": True}
 
@@ -271,7 +267,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
         raise DataError(f"the multibody results fail their data checks ({problems[0]}); "
                         f"{path} was not written. Check the vehicle, irregularity and mbs "
                         "settings")
-    attrs = ctx.provenance("mbs.h5", upstream)
+    attrs = ctx.provenance(MBS_H5, upstream)
     attrs["stats"] = json.dumps(stats)
 
     def fill(f, parallel: bool) -> None:
@@ -295,11 +291,11 @@ def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
 
     x_rr, mass_file = _read_static(out_dir, n_r)
     m = rm.omega.size
-    with h5py.File(out_dir / "modes.h5", "r") as f:
+    with h5py.File(out_dir / MODES_H5, "r") as f:
         m_file = f["modes/eigenvalue"].shape[0]
     rest_rows, omega_rest = np.zeros((0, n_r)), np.zeros(0)
     if m_file > m:                                        # the rail rows of the modes not kept
-        every = read_rail_modes(out_dir / "modes.h5")
+        every = read_rail_modes(out_dir / MODES_H5)
         rest_rows, omega_rest = rail_dof_rows(every.rails)[m:], every.omega[m:]
     res = residual_modes(x_rr, kept_residual_mass(mass_file, rest_rows, omega_rest),
                          rm.rails, rm.omega)
@@ -310,7 +306,7 @@ def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
     modes = RailModes(np.concatenate([rm.omega, res.omega]), tuple(rails), rm.rail_y,
                       rm.rail_z, lateral)
     return res, modes, residual_damping(case, zeta, res, rest_rows, rm.omega, omega_rest,
-                                        out_dir / "modes.h5")
+                                        out_dir / MODES_H5)
 
 
 def _auto_step(case: Case, rm, run_modes, vehicle) -> float:
@@ -435,7 +431,7 @@ def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, static, res) ->
             s["q_shift" + suffix] = -(g @ phi_r.T) / rm.omega**2
         s["residual_omega"] = res.omega
         s["residual_vectors"] = res.vectors
-        s.attrs["basis_file"] = "static.h5"
+        s.attrs["basis_file"] = STATIC_H5
         s.attrs["basis"] = "static/translation"
 
 
@@ -519,7 +515,7 @@ class PassageOutput(StageOutput):
     @classmethod
     def of_stats(cls, stats: dict, out_dir: Path) -> PassageOutput:
         """The output of a passage's statistics (``stats`` of ``mbs.h5``) in ``out_dir``."""
-        return cls(reused=stats.get("reused"), summary=stats, mbs_h5=out_dir / "mbs.h5",
+        return cls(reused=stats.get("reused"), summary=stats, mbs_h5=out_dir / MBS_H5,
                    plots=tuple(sorted(out_dir.glob("mbs_*.png"))),
                    n_modes=int(stats["n_modes"]), dt=float(stats["dt"]),
                    n_steps=int(stats["n_steps"]), t_end=float(stats["t_end"]),
@@ -540,7 +536,7 @@ def compute(ctx: StageContext) -> PassageOutput:
 
 
 STAGE = Stage(name="mbs", help="roll the vehicle over the flexible track in modal coordinates",
-              products=("mbs.h5",), reads=("modes.h5", "static.h5", "modal_damping.h5"),
+              products=(MBS_H5,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
               compute=compute)
 
 

@@ -233,7 +233,7 @@ def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
     """
     from contextlib import nullcontext
 
-    from ..io.stage_files import atomic_file
+    from ..io.atomic import atomic_file
 
     timings = {}
     target = (atomic_file(msh_path, suffix=True, check=check_msh, size_hint=msh_size)

@@ -13,7 +13,7 @@ Layout of ``mesh.h5``::
     /mesh/probes/nearest_node (p,) int64
     /mesh/probes/roles      (p,) str         role of each probe (schema.PROBE_ROLES)
     attrs: part_names (JSON {id: name}) and the provenance of
-           :func:`railvib_hpc.io.stage_files.provenance` (inputs_sha256, case_toml, ...)
+           :func:`railvib_hpc.io.provenance.provenance` (inputs_sha256, case_toml, ...)
 
 The XDMF file (:mod:`railvib_hpc.io.xdmf`) holds two grids sharing the points: ``solids``
 (Hexahedron) and ``beams_and_pads`` (Polyline, 2 nodes), each with ``part_id`` as cell
@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.stage_files import write_h5, write_text
+from ..io.atomic import write_h5, write_text
+from ..io.files import MESH_H5, MESH_XDMF
 from ..io.xdmf import CellBlock, H5Array, mesh_document
 from ..schema import PART_ID
 from .model import Mesh
@@ -110,7 +111,7 @@ def mesh_xdmf(h5_name: str, mesh: Mesh) -> str:
 def write_mesh_files(out_dir: Path, mesh: Mesh, attrs: dict[str, str]) -> str:
     """Write ``mesh.h5`` then ``mesh.xdmf`` (XDMF last: it never points at a partial file);
     returns the content digest of ``mesh.h5``."""
-    h5 = out_dir / "mesh.h5"
+    h5 = out_dir / MESH_H5
     sha = write_mesh_h5(h5, mesh, attrs)
-    write_text(out_dir / "mesh.xdmf", mesh_xdmf(h5.name, mesh))
+    write_text(out_dir / MESH_XDMF, mesh_xdmf(h5.name, mesh))
     return sha

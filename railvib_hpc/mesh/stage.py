@@ -12,7 +12,8 @@ import numpy as np
 
 from ..config import Case
 from ..errors import MeshError
-from ..io.stage_files import write_text
+from ..io.atomic import write_text
+from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
@@ -286,9 +287,9 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
     """
     case, out_dir, reporter = ctx.case, ctx.out_dir, ctx.rep
     out_dir.mkdir(parents=True, exist_ok=True)
-    h5 = out_dir / "mesh.h5"
-    report_path = out_dir / "mesh_report.json"
-    msh = None if case["mesh.file"] else out_dir / "mesh.msh"
+    h5 = out_dir / MESH_H5
+    report_path = out_dir / MESH_REPORT_JSON
+    msh = None if case["mesh.file"] else out_dir / MESH_MSH
 
     def read(verdict) -> tuple[Mesh, dict]:
         if msh is not None and not msh.exists():
@@ -301,7 +302,7 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
         except (OSError, KeyError, ValueError) as exc:
             raise NotReusable(f"it cannot be read ({exc})") from None
 
-    old = ctx.reuse("mesh.h5", path=h5, why="same mesh inputs", accept=read)
+    old = ctx.reuse(MESH_H5, path=h5, why="same mesh inputs", accept=read)
     if old.ok:
         mesh, report = old.value
         report["reused"] = True
@@ -316,7 +317,7 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
             msh.unlink(missing_ok=True)
         raise
     t0 = time.perf_counter()
-    sha = write_mesh_files(out_dir, mesh, ctx.provenance("mesh.h5", {}))
+    sha = write_mesh_files(out_dir, mesh, ctx.provenance(MESH_H5, {}))
     report["timings"]["write_h5_xdmf"] = time.perf_counter() - t0
     report["reused"] = False
     write_text(report_path, json.dumps(report, indent=2))
@@ -356,11 +357,11 @@ class MeshOutput(StageOutput):
     def of_report(cls, report: dict, out_dir: Path, user_mesh: bool) -> MeshOutput:
         """The output of a quality report (:func:`build_or_reuse_mesh`) in ``out_dir``."""
         q = report.get("quality", {})
-        msh = out_dir / "mesh.msh"
-        return cls(reused=report.get("reused"), summary=report, mesh_h5=out_dir / "mesh.h5",
-                   mesh_xdmf=out_dir / "mesh.xdmf",
+        msh = out_dir / MESH_MSH
+        return cls(reused=report.get("reused"), summary=report, mesh_h5=out_dir / MESH_H5,
+                   mesh_xdmf=out_dir / MESH_XDMF,
                    mesh_msh=msh if not user_mesh and msh.exists() else None,
-                   report_json=out_dir / "mesh_report.json",
+                   report_json=out_dir / MESH_REPORT_JSON,
                    n_nodes=int(q.get("n_nodes", 0)), n_hexes=int(q.get("n_hexes", 0)),
                    min_scaled_jacobian=float(q.get("min_scaled_jacobian", float("nan"))),
                    max_aspect_ratio=float(q.get("max_aspect_ratio", float("nan"))),
@@ -378,15 +379,15 @@ def compute(ctx: StageContext) -> MeshOutput:
         rep.info(format_report(report))
         rep.info("mesh timings: " + ", ".join(f"{k} {v:.2f} s"
                                                 for k, v in report["timings"].items()))
-        rep.info(f"wrote {out_dir / 'mesh.xdmf'} (open in ParaView), {out_dir / 'mesh.h5'}"
-                 + ("" if case["mesh.file"] else f", {out_dir / 'mesh.msh'}"))
+        rep.info(f"wrote {out_dir / MESH_XDMF} (open in ParaView), {out_dir / MESH_H5}"
+                 + ("" if case["mesh.file"] else f", {out_dir / MESH_MSH}"))
         return MeshOutput.of_report(report, out_dir, bool(case["mesh.file"]))
 
     return on_root(work, ctx.comm)
 
 
 STAGE = Stage(name="mesh", help="build the gmsh model, check its quality, write "
-              "mesh.msh/.h5/.xdmf", products=("mesh.h5",), compute=compute)
+              "mesh.msh/.h5/.xdmf", products=(MESH_H5,), compute=compute)
 
 
 def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.files import BAND_INDEX_JSON, MESH_H5
 from ..resources import (
     current_memory_gb,
     peak_memory_gb,
@@ -45,8 +46,8 @@ from .bands import Band, check_counts, hz, omega2, plan_bands
 from .ritz import (
     PREFIX,
     RETRY_TOL_FACTOR,
+    Eigenpairs,
     EigenSolveError,
-    ModalResult,
     convergence_verdict,
     hopeless,
     in_window,
@@ -125,7 +126,7 @@ class BandCache:
         self.folder, self.key, self.comm = Path(folder), key, comm
         data = None
         if comm.rank == 0:
-            path = self.folder / "index.json"
+            path = self.folder / BAND_INDEX_JSON
             try:
                 data = json.loads(path.read_text()) if path.is_file() else None
             except (OSError, ValueError):
@@ -155,11 +156,11 @@ class BandCache:
     def save(self) -> None:
         """Rank 0 writes the index (call on every rank after the band files exist)."""
         if self.comm.rank == 0:
-            from ..io.stage_files import write_text
+            from ..io.atomic import write_text
 
             data = {"key": self.key, "counts": {repr(k): v for k, v in self.counts.items()},
                     "bands": [r.to_json() for r in self.bands], "chain": self.chain}
-            write_text(self.folder / "index.json", json.dumps(data, indent=1))
+            write_text(self.folder / BAND_INDEX_JSON, json.dumps(data, indent=1))
         self.comm.Barrier()
 
 
@@ -274,7 +275,7 @@ def _band_estimate(band: Band, f_max: float, n_total: int | None) -> int:
 
 def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=None,
                static_rhs: np.ndarray | None = None, progress=None
-               ) -> tuple[ModalResult, int, dict]:
+               ) -> tuple[Eigenpairs, int, dict]:
     """One band: factor, block Lanczos to the band's radius, purify. Collective on ``comm``.
 
     Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
@@ -392,11 +393,11 @@ def band_window(band: Band) -> tuple[float, float]:
             float(omega2(band.hi_hz)) * (1.0 + EDGE_OVERLAP))
 
 
-def _trim(result: ModalResult, band: Band) -> ModalResult:
+def _trim(result: Eigenpairs, band: Band) -> Eigenpairs:
     """The band's own modes (:func:`band_window`): what the merge needs. The pairs beyond
     the edges (the Lanczos margin) are the neighbouring bands' modes, computed there."""
     keep = np.flatnonzero(in_window(result, band_window(band)))
-    out = ModalResult(result.eigenvalues[keep], np.ascontiguousarray(result.phi[:, keep]),
+    out = Eigenpairs(result.eigenvalues[keep], np.ascontiguousarray(result.phi[:, keep]),
                       result.stats, result.static)
     out.residuals = result.residuals[keep]
     out.residual_floors = result.residual_floors[keep]
@@ -407,11 +408,11 @@ def _trim(result: ModalResult, band: Band) -> ModalResult:
     return out
 
 
-def _write_band(path: Path, comm, band: Band, result: ModalResult, n_below: int,
+def _write_band(path: Path, comm, band: Band, result: Eigenpairs, n_below: int,
                 stats: dict) -> None:
     """The band's modes (n_dofs, m) by rows, eigenvalues and residuals (collective)."""
+    from ..io.atomic import write_h5
     from ..io.parallel_h5 import h5py_parallel_ok
-    from ..io.stage_files import write_h5
 
     n_local, m = result.phi.shape
     # rank 0's statistics everywhere: parallel HDF5 needs identical attributes on all ranks
@@ -479,7 +480,7 @@ def plan_for(cache: BandCache, s: BandSettings, n_total: int) -> list[Band]:
 
 def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
                 static_rhs: np.ndarray | None = None, log=None,
-                progress=None) -> ModalResult | None:
+                progress=None) -> Eigenpairs | None:
     """Every mode below ``s.f_max`` by band slicing (collective on ``comm``).
 
     Parameters
@@ -503,7 +504,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
 
     Returns
     -------
-    ModalResult, or None with ``band_only`` (the band is cached, nothing merged).
+    Eigenpairs, or None with ``band_only`` (the band is cached, nothing merged).
     """
     t_start = time.perf_counter()
     plan = _plan_solve(K, M, comm, s, log)
@@ -674,7 +675,7 @@ def _solve_planned(K, M, comm, s: BandSettings, plan: _SolvePlan, assemble=None,
 
 def _merge_planned(K, M, comm, s: BandSettings, plan: _SolvePlan, static: np.ndarray | None,
                    proven: dict[int, BandChecks], log=None, progress=None,
-                   t_start: float = 0.0) -> ModalResult:
+                   t_start: float = 0.0) -> Eigenpairs:
     """Merge the bands of the plan (:func:`_merge`), with the static solutions, the bands'
     reuse flags and timings, and record the merged chain in the cache (collective)."""
     cache, bands = plan.cache, plan.bands
@@ -772,7 +773,7 @@ def _band_gram(A, Phi: np.ndarray, comm, diagonal: list[np.ndarray], progress=No
 
 
 def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
-           n_total: int, progress=None, proven: dict | None = None) -> ModalResult:
+           n_total: int, progress=None, proven: dict | None = None) -> Eigenpairs:
     """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
     counted against the inertia of every stretch. A one-band plan skips the Rayleigh-Ritz
     step (:func:`_merge_one_band`; ``proven``: :class:`BandChecks` by band index, of the
@@ -862,7 +863,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     t_rr = time.perf_counter() - t1
     stats.update(n_candidates=int(W.shape[0]), n_duplicates=n_dup,
                  time_merge_rayleigh_ritz=t_rr, merge_rayleigh_ritz="full")
-    result = ModalResult(lam[:n_total], np.ascontiguousarray(Phi), stats)
+    result = Eigenpairs(lam[:n_total], np.ascontiguousarray(Phi), stats)
     normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
     result.warnings = convergence_verdict(result, s.tol)
     return result
@@ -907,7 +908,7 @@ class BandChecks:
     stiff: np.ndarray | None = None
 
     @classmethod
-    def of(cls, result: ModalResult) -> BandChecks:
+    def of(cls, result: Eigenpairs) -> BandChecks:
         st = result.stats
         return cls(result.residuals.copy(), result.roundoff_floors.copy(),
                    float(st["max_orthonormality_error"]),
@@ -924,7 +925,7 @@ class BandChecks:
 
 def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[float],
                     counts: list[int], n_total: int, s: BandSettings, stats: dict,
-                    progress=None, proven: BandChecks | None = None) -> ModalResult | None:
+                    progress=None, proven: BandChecks | None = None) -> Eigenpairs | None:
     """The merge of a one-band plan: the band's modes ``Phi`` with its eigenvalues ``lam``
     (its own Rayleigh-Ritz step made them M-orthonormal and K-orthogonal), checked by one
     :func:`~railvib_hpc.modal.ritz.normalise_and_check` (K Phi and M Phi afresh from the
@@ -941,7 +942,7 @@ def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[f
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()
-    result = ModalResult(lam[:n_total].copy(), Phi, stats)
+    result = Eigenpairs(lam[:n_total].copy(), Phi, stats)
     if proven is not None:
         # the band's checks measured these very vectors (the band file holds them
         # bit for bit): its residuals, floors and maxima stand
@@ -970,23 +971,18 @@ def cache_key(case) -> str:
     """Key of the band cache: the model and the solver settings that change the modes.
 
     Its keys come from the table of stage files: the sections of ``mesh.h5``
-    (:func:`~railvib_hpc.io.stage_files.whole_sections`), the materials, sections and pads
+    (:func:`~railvib_hpc.io.products.whole_sections`), the materials, sections and pads
     without their damping settings, ``[modal]`` without the keys that do not change the modes
-    (:data:`~railvib_hpc.io.stage_files.MODAL_ONLY_EXCLUDED`) or a band
-    (:data:`~railvib_hpc.io.stage_files.BAND_EXTENT`), and ``[boundary]``.
+    (:data:`~railvib_hpc.io.products.MODAL_ONLY_EXCLUDED`) or a band
+    (:data:`~railvib_hpc.io.products.BAND_EXTENT`), and ``[boundary]``.
     """
     import hashlib
 
-    from ..io.stage_files import (
-        BAND_EXTENT,
-        MODAL_DAMPING_KEYS,
-        MODAL_ONLY_EXCLUDED,
-        whole_sections,
-    )
+    from ..io.products import BAND_EXTENT, MODAL_DAMPING_KEYS, MODAL_ONLY_EXCLUDED, whole_sections
 
     skip = (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)
     modal = {k: v for k, v in case["modal"].items() if k not in skip}
-    text = json.dumps({"mesh": case.digest(*whole_sections("mesh.h5")),
+    text = json.dumps({"mesh": case.digest(*whole_sections(MESH_H5)),
                        "physics": case.digest("materials", "sections", "pads",
                                               exclude=MODAL_DAMPING_KEYS),
                        "modal": modal, "boundary": case.digest("boundary")}, sort_keys=True)

@@ -26,8 +26,8 @@ from .ritz import (  # noqa: F401  (re-exported: the solver's public names)
     NORMALISE_CHUNK,
     PREFIX,
     RETRY_TOL_FACTOR,
+    Eigenpairs,
     EigenSolveError,
-    ModalResult,
     convergence_verdict,
     hopeless,
     in_window,
@@ -82,7 +82,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
                 method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
                 monitor=None, static_rhs: np.ndarray | None = None,
                 out_of_core: str = "auto", bands=None, assemble=None,
-                log=None, progress=None) -> ModalResult | None:
+                log=None, progress=None) -> Eigenpairs | None:
     """Extract mass-normalised modes.
 
     Parameters
@@ -113,7 +113,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
     static_rhs
         (n_local_dofs, k) right-hand sides solved with the factorization of K
         when the block solver factors K itself (shift 0); the solutions are
-        returned in ``ModalResult.static`` (None otherwise: factor K separately).
+        returned in ``Eigenpairs.static`` (None otherwise: factor K separately).
     out_of_core
         MUMPS out-of-core factorization: ``"auto"`` (block Lanczos: when the in-core
         factor would not fit in memory but the out-of-core one does), ``"always"`` or
@@ -138,7 +138,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         When fewer than the requested modes converged, or when a mode's true relative
         residual is above ``tol`` (and above its round-off floor, or above ``sqrt(tol)``):
         see :func:`convergence_verdict`. Round-off-limited modes come back with
-        ``ModalResult.warnings``.
+        ``Eigenpairs.warnings``.
     """
     from petsc4py import PETSc
 
@@ -174,7 +174,7 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
 
 def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, block_size: int,
                  monitor, static_rhs, out_of_core: str, bands, assemble,
-                 log=None, progress=None) -> ModalResult | None:
+                 log=None, progress=None) -> Eigenpairs | None:
     """Band-sliced block Lanczos (:mod:`.band_solve`); a temporary cache without settings."""
     import shutil
     import tempfile
@@ -203,7 +203,7 @@ def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, bl
 
 
 def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float, tol: float,
-                 max_it: int, mpd: int, monitor, progress=None) -> ModalResult:
+                 max_it: int, mpd: int, monitor, progress=None) -> Eigenpairs:
     """SLEPc Krylov-Schur (or spectrum slicing when ``f_max > 0``)."""
     from petsc4py import PETSc
 
@@ -254,7 +254,7 @@ def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: flo
         if A is not None and A.getType() == "sbaij":      # the copies made for slicing
             A.destroy()
     eps.destroy()
-    result = ModalResult(lam, phi, stats)
+    result = Eigenpairs(lam, phi, stats)
     normalise_and_check(result, K, M, comm, tol=stats["tol"], progress=progress)
     result.warnings = convergence_verdict(result, stats["tol"])
     return result
@@ -263,7 +263,7 @@ def _solve_slepc(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: flo
 def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float, max_restarts: int,
                  block_size: int, max_basis: int, monitor,
                  static_rhs: np.ndarray | None = None, out_of_core: str = "auto",
-                 progress=None) -> ModalResult:
+                 progress=None) -> Eigenpairs:
     from mpi4py import MPI
     from petsc4py import PETSc
 

@@ -9,7 +9,7 @@ C of the full-order model (:func:`~.petsc.assemble_damping`, the same ``[damping
 
 So that changing the damping ratios or frequencies reuses the modes, ``modal_damping.h5``
 stores the projected *parts* of C, which do not depend on them (collective computation,
-rank 0 writes; a stage file of :data:`railvib_hpc.io.stage_files.STAGE_FILES`: provenance
+rank 0 writes; a stage file of :data:`railvib_hpc.io.products.STAGE_FILES`: provenance
 with the content digest of the ``modes.h5`` it projects on, checked atomic write, record):
 
 * ``/dashpots`` (m, m): ``Phi^T C_dashpots Phi`` of the absorbing faces;
@@ -114,11 +114,11 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
 def write_damping_parts(path: Path, parts: dict[str, np.ndarray], attrs: dict) -> str:
     """Write ``modal_damping.h5`` (rank 0; checked, atomic, recorded); returns its digest.
 
-    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`, upstream
+    ``attrs``: its provenance (:func:`railvib_hpc.io.provenance.provenance`, upstream
     ``mesh.h5`` and ``modes.h5``).
     """
+    from ..io.atomic import write_h5
     from ..io.stage_checks import check_modal_damping
-    from ..io.stage_files import write_h5
 
     def fill(f, parallel: bool) -> None:
         for name, value in parts.items():

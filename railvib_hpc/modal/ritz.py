@@ -1,6 +1,6 @@
 """Ritz pairs of the shift-invert solvers: results, purification, normalisation, checks.
 
-The modal results (:class:`ModalResult`), the purification and Rayleigh-Ritz step applied to
+The eigenpairs (:class:`Eigenpairs`), the purification and Rayleigh-Ritz step applied to
 block Lanczos's Ritz vectors (:func:`purified_modes`), the unit-modal-mass normalisation with
 the true residuals and their round-off floors (:func:`normalise_and_check`) and the
 convergence verdicts. Used by the single-shift solve (:mod:`.eigen`) and the band-sliced
@@ -28,7 +28,7 @@ class EigenSolveError(UserError):
 
 
 @dataclass
-class ModalResult:
+class Eigenpairs:
     """Eigenpairs with this rank's rows of the mass-normalised mode matrix."""
 
     eigenvalues: np.ndarray
@@ -68,7 +68,7 @@ EXTRA_PURIFICATIONS = 2
 
 def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: float,
                    stats: dict | None = None, window: tuple[float, float] | None = None,
-                   progress=None) -> ModalResult:
+                   progress=None) -> Eigenpairs:
     """Purify and project Ritz vectors, normalise, and purify again (at most
     :data:`EXTRA_PURIFICATIONS` times, with iterative refinement) while some true residual
     is above ``tol`` and above its round-off floor. Needs the factor of ``op``; returns the
@@ -122,7 +122,7 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     kx = np.empty((X.shape[0], n_wanted))
     lam, Xp, solve_res = purify_and_project(op, X[:, :n_wanted], block, select=nearest_first,
                                             progress=progress, timings=timings, kx=kx)
-    result = ModalResult(lam, Xp, {})
+    result = Eigenpairs(lam, Xp, {})
     t0 = time.perf_counter()
     checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress, KPhi=kx)
     t_checks += time.perf_counter() - t0
@@ -152,7 +152,7 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
         n_known = int((chosen < c).sum())
         known_idx = kept[first[:n_known]]
         known = _known_checks(result, checks, known_idx)
-        result = ModalResult(lam_all[first], X[:, :n_wanted], {})
+        result = Eigenpairs(lam_all[first], X[:, :n_wanted], {})
         t0 = time.perf_counter()
         checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress,
                                      known=known)
@@ -251,24 +251,24 @@ def purify_locked(op, X: np.ndarray, n_locked: int, block: int,
     return lam, np.abs(Z).T @ np.sqrt(sres)
 
 
-def _known_checks(result: ModalResult, checks: Checks, idx: np.ndarray) -> Known:
+def _known_checks(result: Eigenpairs, checks: Checks, idx: np.ndarray) -> Known:
     """What :func:`normalise_and_check` measured of the modes ``idx`` (for its ``known``)."""
     return Known(checks.gram[np.ix_(idx, idx)], checks.stiff[np.ix_(idx, idx)],
                  checks.knorm[idx], result.residuals[idx], result.residual_floors[idx])
 
 
-def _permuted(result: ModalResult, checks: Checks, order: np.ndarray, phi: np.ndarray
-              ) -> tuple[ModalResult, Checks]:
+def _permuted(result: Eigenpairs, checks: Checks, order: np.ndarray, phi: np.ndarray
+              ) -> tuple[Eigenpairs, Checks]:
     """The result and its checks with the modes in ``order`` (``phi``: the reordered
     modes)."""
-    out = ModalResult(result.eigenvalues[order], phi, result.stats)
+    out = Eigenpairs(result.eigenvalues[order], phi, result.stats)
     out.residuals, out.residual_floors = result.residuals[order], result.residual_floors[order]
     ix = np.ix_(order, order)
     return out, Checks(checks.scale[order], checks.knorm[order], checks.gram[ix],
                        checks.stiff[ix])
 
 
-def in_window(result: ModalResult, window: tuple[float, float] | None) -> np.ndarray:
+def in_window(result: Eigenpairs, window: tuple[float, float] | None) -> np.ndarray:
     """Modes whose eigenvalue lies in ``window`` (all without one)."""
     lam = result.eigenvalues
     if window is None:
@@ -276,12 +276,12 @@ def in_window(result: ModalResult, window: tuple[float, float] | None) -> np.nda
     return (lam >= window[0]) & (lam <= window[1])
 
 
-def unconverged(result: ModalResult, tol: float) -> np.ndarray:
+def unconverged(result: Eigenpairs, tol: float) -> np.ndarray:
     """Modes whose relative residual exceeds both ``tol`` and its round-off floor."""
     return result.residuals > np.maximum(tol, result.residual_floors)
 
 
-def hopeless(result: ModalResult, tol: float) -> np.ndarray:
+def hopeless(result: Eigenpairs, tol: float) -> np.ndarray:
     """Modes :func:`convergence_verdict` rejects: above ``RETRY_TOL_FACTOR * tol`` and above
     their round-off floor, or above ``sqrt(tol)`` and ``tol``."""
     res, floor = result.residuals, result.residual_floors
@@ -289,7 +289,7 @@ def hopeless(result: ModalResult, tol: float) -> np.ndarray:
         ((res > np.sqrt(tol)) & (res > tol))
 
 
-def convergence_verdict(result: ModalResult, tol: float) -> list[str]:
+def convergence_verdict(result: Eigenpairs, tol: float) -> list[str]:
     """Judge the final residuals: raise, warn, or accept (the documented rule).
 
     With ``rho`` the relative residual ``||K phi - lambda M phi|| / ||K phi||`` of a mode
@@ -371,7 +371,7 @@ class Known(NamedTuple):
 NORMALISE_CHUNK = 64
 
 
-def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, tol: float = 0.0,
+def normalise_and_check(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float = 0.0,
                         progress=None, KPhi: np.ndarray | None = None,
                         known: Known | None = None) -> Checks:
     """Scale modes to unit modal mass and record max |Phi^T M Phi - I| and residuals.
@@ -461,7 +461,7 @@ def normalise_and_check(result: ModalResult, K, M, comm: MPI.Comm, tol: float = 
     return Checks(scale, knorm, gram + np.triu(gram, 1).T, stiff + np.triu(stiff, 1).T)
 
 
-def _residual_floors(result: ModalResult, K, M, comm: MPI.Comm, tol: float,
+def _residual_floors(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float,
                      knorm: np.ndarray, progress, first: int = 0) -> np.ndarray:
     """The round-off floors of :func:`normalise_and_check` for the modes from ``first`` on
     that are above ``tol`` (0 elsewhere); ``knorm``: ``||K phi_i||``."""

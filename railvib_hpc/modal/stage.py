@@ -13,9 +13,10 @@ import numpy as np
 from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
+from ..io.atomic import ensure_space
+from ..io.files import BANDS_DIR, MESH_H5, MODAL_DAMPING_H5, MODES_H5, MODES_XDMF, STATIC_H5
 from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
 from ..io.stage_checks import check_eigenvalues, check_mode_shapes
-from ..io.stage_files import ensure_space
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
@@ -97,7 +98,8 @@ class EigenProgress:
 
 @dataclass(frozen=True)
 class ModesOutput(StageOutput):
-    """What the ``modal`` stage returns (the API's ``ModalResult`` has these fields).
+    """What the ``modal`` stage returns (the API's ``ModalResult`` has these fields but
+    the mesh size).
 
     Attributes
     ----------
@@ -113,6 +115,8 @@ class ModesOutput(StageOutput):
         The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
     peak_rss_gb_total
         Peak memory over all ranks of the eigensolve [GB] (None when reused).
+    n_nodes, n_hexes
+        Size of the mesh of the modes (None with ``modal.band_only``).
     """
 
     modes_h5: Path | None
@@ -123,24 +127,29 @@ class ModesOutput(StageOutput):
     max_orthonormality_error: float | None
     max_relative_residual: float | None
     peak_rss_gb_total: float | None
+    n_nodes: int | None = None
+    n_hexes: int | None = None
 
     @classmethod
-    def of_summary(cls, summary: dict, frequencies, out_dir: Path,
-                   static_correction: bool) -> ModesOutput:
-        """The output of a summary and the frequencies of its modes, in ``out_dir``."""
+    def of_summary(cls, summary: dict, frequencies, out_dir: Path, static_correction: bool,
+                   mesh_size: tuple[int, int | None] | None = None) -> ModesOutput:
+        """The output of a summary and the frequencies of its modes, in ``out_dir``
+        (``mesh_size``: nodes and hexahedra of their mesh)."""
         def present(name: str) -> Path | None:
             return out_dir / name if (out_dir / name).exists() else None
 
-        modes = present("modes.h5") if not summary.get("band_only") else None
+        modes = present(MODES_H5) if not summary.get("band_only") else None
         return cls(reused=summary.get("reused"), summary=summary, modes_h5=modes,
-                   modes_xdmf=present("modes.xdmf") if modes else None,
-                   static_h5=present("static.h5") if static_correction else None,
+                   modes_xdmf=present(MODES_XDMF) if modes else None,
+                   static_h5=present(STATIC_H5) if static_correction else None,
                    frequencies_hz=np.asarray(frequencies if modes else [], dtype=float),
                    n_dofs=summary.get("n_dofs"),
                    max_orthonormality_error=summary.get("max_orthonormality_error"),
                    max_relative_residual=summary.get("max_relative_residual"),
                    peak_rss_gb_total=None if summary.get("reused")
-                   else summary.get("peak_rss_gb_total"))
+                   else summary.get("peak_rss_gb_total"),
+                   n_nodes=mesh_size[0] if mesh_size else None,
+                   n_hexes=mesh_size[1] if mesh_size else None)
 
 
 def compute(ctx: StageContext) -> ModesOutput:
@@ -153,13 +162,13 @@ def compute(ctx: StageContext) -> ModesOutput:
     old = _reused_modes(ctx)
     if old is not None:
         return old
-    summary, freqs = _modal(ctx)
+    summary, freqs, mesh_size = _modal(ctx)
     return ModesOutput.of_summary(summary, freqs, ctx.out_dir,
-                                  bool(ctx.case["mbs.static_correction"]))
+                                  bool(ctx.case["mbs.static_correction"]), mesh_size)
 
 
 STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
-              products=("modes.h5", "static.h5", "modal_damping.h5"), reads=("mesh.h5",),
+              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5), reads=(MESH_H5,),
               compute=compute, petsc=True)
 
 
@@ -176,7 +185,7 @@ def _reused_modes(ctx: StageContext) -> ModesOutput | None:
     """Current modes (and their static fields and projected damping, recomputed when only
     those are stale), or None when the modes are to be recomputed (collective)."""
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
-    path = out_dir / "modes.h5"
+    path = out_dir / MODES_H5
     want_static = bool(case["mbs.static_correction"])
 
     def read(verdict):
@@ -186,10 +195,13 @@ def _reused_modes(ctx: StageContext) -> ModesOutput | None:
         if not has_probe_roles(path):
             raise NotReusable("it has no probe roles (written by an older version)")
         with h5py_file(path) as f:
-            return f["modes/frequency_hz"][()], str(f.attrs.get("stats", "{}"))
+            hexes = f.get("mesh/hexes")
+            return (f["modes/frequency_hz"][()], str(f.attrs.get("stats", "{}")),
+                    (int(f["mesh/points"].shape[0]),
+                     int(hexes.shape[0]) if hexes is not None else None))
 
     def previous():
-        old = ctx.reuse("modes.h5", path=path, why="same model and modal settings",
+        old = ctx.reuse(MODES_H5, path=path, why="same model and modal settings",
                         detail=lambda v: f"{len(v[0])} modes, {v[0][0]:.3f} - "
                                          f"{v[0][-1]:.3f} Hz", accept=read)
         return (*old.value, old.sha256) if old.ok else None
@@ -197,35 +209,36 @@ def _reused_modes(ctx: StageContext) -> ModesOutput | None:
     old = on_root(previous, comm)
     if old is None:
         return None
-    f, stats, modes_sha = old
+    f, stats, mesh_size, modes_sha = old
     xdmf = path.with_suffix(".xdmf")
     if on_root(lambda: ensure_views(xdmf, lambda: write_modes_xdmf(path)), comm):
         rep.info(f"rewrote {xdmf} (per-step views for both ParaView XDMF readers)")
-    if want_static and not on_root(lambda: ctx.reuse("static.h5", discard=False).ok, comm):
+    if want_static and not on_root(lambda: ctx.reuse(STATIC_H5, discard=False).ok, comm):
         _static_only(ctx, modes_sha)
     if case["modal.damping"] == "full":
         def projected(verdict) -> None:
-            if want_static and damping_size(ctx.path("modal_damping.h5")) <= len(f):
+            if want_static and damping_size(ctx.path(MODAL_DAMPING_H5)) <= len(f):
                 raise NotReusable("it holds the modes only (mbs.static_correction = true "
                                   "needs the static fields projected too)")
 
-        if not on_root(lambda: ctx.reuse("modal_damping.h5", accept=projected,
+        if not on_root(lambda: ctx.reuse(MODAL_DAMPING_H5, accept=projected,
                                          discard=False).ok, comm):
             _damping_only(ctx, modes_sha, len(f))
     summary = {"reused": True, "n_modes": len(f), "f_min": float(f[0]), "f_max": float(f[-1]),
                **json.loads(stats)}
-    return ModesOutput.of_summary(summary, f, out_dir, want_static)
+    return ModesOutput.of_summary(summary, f, out_dir, want_static, mesh_size)
 
 
-def _modal(ctx: StageContext) -> tuple[dict, np.ndarray]:
+def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]:
     """Mesh, DOFs, K and M, the eigensolve and the files written from it (collective);
-    returns the summary and the frequencies."""
+    returns the summary, the frequencies and the mesh size (nodes, hexahedra; None with
+    ``modal.band_only``)."""
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
-    path = out_dir / "modes.h5"
-    static_path = out_dir / "static.h5"
+    path = out_dir / MODES_H5
+    static_path = out_dir / STATIC_H5
     want_static = bool(case["mbs.static_correction"])
     want_damping = case["modal.damping"] == "full"
-    damping_path = out_dir / "modal_damping.h5"
+    damping_path = out_dir / MODAL_DAMPING_H5
     with rep.stage("mesh (load/build + broadcast)"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
     t0 = time.perf_counter()
@@ -257,7 +270,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray]:
         M.destroy()
         rep.info(f"band {case['modal.band_only']} written to {out_dir / 'bands'}; run with "
                  "modal.band_only = 0 to merge the bands into modes.h5")
-        return {"reused": False, "band_only": case["modal.band_only"], "n_modes": 0}, []
+        return {"reused": False, "band_only": case["modal.band_only"], "n_modes": 0}, [], None
     for warning in result.warnings:
         rep.info(f"WARNING: {warning}")
     if result.stats.get("out_of_core"):
@@ -302,7 +315,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray]:
         stats["ranks"] = comm.size
         # rank 0's (timings differ per rank): parallel HDF5 needs identical attributes
         stats = comm.bcast(stats, root=0)
-        attrs = on_root(lambda: ctx.provenance("modes.h5", {"mesh.h5": mesh_sha}), comm)
+        attrs = on_root(lambda: ctx.provenance(MODES_H5, {MESH_H5: mesh_sha}), comm)
         attrs.update({"petsc_version": _versions()[0], "slepc_version": _versions()[1],
                       "stats": json.dumps(stats), "n_dofs": dofmap.n_dofs})
         modes_sha = write_modes(path, comm, mesh, nodes, result.eigenvalues, translation,
@@ -322,14 +335,14 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray]:
                  "(modal.damping = 'full')")
     if want_static:
         with rep.stage("write static.h5"):
-            sattrs = on_root(lambda: ctx.provenance("static.h5", {"mesh.h5": mesh_sha,
-                                                                  "modes.h5": modes_sha}), comm)
+            sattrs = on_root(lambda: ctx.provenance(STATIC_H5, {MESH_H5: mesh_sha,
+                                                                  MODES_H5: modes_sha}), comm)
             on_root(lambda: ctx.discard(static_path), comm)
             write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table,
                          sattrs, x_mass)
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
-    return summary, f
+    return summary, f, (int(mesh.n_nodes), len(mesh.hexes))
 
 
 def band_settings(case: Case, out_dir: Path):
@@ -343,7 +356,7 @@ def band_settings(case: Case, out_dir: Path):
                         band_modes=md["band_modes"], groups=md["band_groups"],
                         band_only=md["band_only"], tol=md["tol"],
                         block_size=md["block_size"], max_restarts=md["max_restarts"],
-                        out_of_core=md["out_of_core"], cache_dir=out_dir / "bands",
+                        out_of_core=md["out_of_core"], cache_dir=out_dir / BANDS_DIR,
                         key=cache_key(case))
 
 
@@ -393,16 +406,16 @@ def _static_only(ctx: StageContext, modes_sha: str) -> None:
     with rep.stage("static solves"):
         try:
             x_static = solve_static(K, M, comm, rhs)
-            phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, None)
+            phi = read_phi_rows(out_dir / MODES_H5, dofmap, comm.rank, None)
             x_mass = residual_mass(M, phi, x_static, free, load_dofs.size, comm)[1]
             del phi
         finally:
             K.destroy()
             M.destroy()
-    static_path = out_dir / "static.h5"
+    static_path = out_dir / STATIC_H5
     with rep.stage("write static.h5"):
-        attrs = on_root(lambda: ctx.provenance("static.h5", {"mesh.h5": mesh_sha,
-                                                             "modes.h5": modes_sha}), comm)
+        attrs = on_root(lambda: ctx.provenance(STATIC_H5, {MESH_H5: mesh_sha,
+                                                             MODES_H5: modes_sha}), comm)
         on_root(lambda: ctx.discard(static_path), comm)
         write_static(static_path, comm, mesh, dofmap, x_static, free, load_dofs, table, attrs,
                      x_mass)
@@ -418,13 +431,13 @@ def damping_size(path: Path) -> int:
 
 def _write_damping(ctx: StageContext, parts: dict, mesh_sha: str, modes_sha: str) -> None:
     """Write ``modal_damping.h5`` on rank 0 (a stage file: provenance, checked, atomic)."""
-    path = ctx.path("modal_damping.h5")
+    path = ctx.path(MODAL_DAMPING_H5)
 
     def write() -> None:
         ctx.discard(path)
-        write_damping_parts(path, parts, ctx.provenance("modal_damping.h5",
-                                                        {"mesh.h5": mesh_sha,
-                                                         "modes.h5": modes_sha}))
+        write_damping_parts(path, parts, ctx.provenance(MODAL_DAMPING_H5,
+                                                        {MESH_H5: mesh_sha,
+                                                         MODES_H5: modes_sha}))
 
     on_root(write, ctx.comm)
 
@@ -437,7 +450,7 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
         dofmap = case_dofmap(mesh, case, comm.size)
         want_static = bool(case["mbs.static_correction"])
         K, M, _ = assemble(mesh, case, dofmap, comm, mass=want_static)
-        phi = read_phi_rows(out_dir / "modes.h5", dofmap, comm.rank, m)
+        phi = read_phi_rows(out_dir / MODES_H5, dofmap, comm.rank, m)
         if want_static:           # the residual vectors' rows too (their rotations included)
             load_dofs, _ = rail_load_dofs(mesh, dofmap)
             rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
@@ -448,7 +461,7 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
         parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
         K.destroy()
     _write_damping(ctx, parts, mesh_sha, modes_sha)
-    rep.info(f"wrote {out_dir / 'modal_damping.h5'} (modal.damping = 'full')")
+    rep.info(f"wrote {out_dir / MODAL_DAMPING_H5} (modal.damping = 'full')")
 
 
 def pad_table(mesh, case: Case) -> dict[str, np.ndarray]:

@@ -15,7 +15,7 @@ with its own factorization. Written to ``static.h5`` (collective, like
   the residual vectors of :func:`railvib_hpc.mbs.static_correction.residual_modes`, formed
   without the cancellation of ``X^T M X - Phi_r^T Lambda^-2 Phi_r``);
 * ``/static/load_dofs`` (n_r, 3): rail index, node (global id), component (0 w, 1 ry);
-* the provenance attributes of :func:`railvib_hpc.io.stage_files.provenance` (its
+* the provenance attributes of :func:`railvib_hpc.io.provenance.provenance` (its
   ``upstream_sha256`` names the ``modes.h5`` it belongs to) and ``complete``.
 
 Column ordering ``(rail * k + node) * 2 + c`` as in :mod:`railvib_hpc.mbs.static_correction`.
@@ -29,9 +29,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
+from ..io.atomic import write_h5
 from ..io.parallel_h5 import h5py_parallel_ok
 from ..io.stage_checks import check_static
-from ..io.stage_files import write_h5
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -126,7 +126,7 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
                  dofs: np.ndarray, table: np.ndarray, attrs: dict, mass: np.ndarray) -> str:
     """Write ``static.h5`` (collective; checked, atomic, recorded); returns its digest.
 
-    ``attrs``: its provenance (:func:`railvib_hpc.io.stage_files.provenance`); ``mass``:
+    ``attrs``: its provenance (:func:`railvib_hpc.io.provenance.provenance`); ``mass``:
     ``X'^T M X'`` (n_r, n_r) of :func:`residual_mass`, the same on every rank.
     """
     n_r = dofs.size

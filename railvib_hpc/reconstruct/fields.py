@@ -41,7 +41,7 @@ receive buffer is bounded by the same budget).
     attrs: complete, n_modes, n_extra, float32, block_steps, modes_file, railvib_version
            (+ the caller's attrs: the provenance of the reconstruct stage)
 
-The file is written by :func:`railvib_hpc.io.stage_files.write_h5`: under a hidden
+The file is written by :func:`railvib_hpc.io.atomic.write_h5`: under a hidden
 temporary name with its space reserved, ``complete`` set and renamed by rank 0 only
 after every rank finished (a failed or killed run never leaves a ``fields.h5``), then
 recorded. Every block is checked for non-finite values before it is written.
@@ -63,9 +63,9 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 
 from .. import __version__
+from ..io.atomic import write_h5
 from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
 from ..io.stage_checks import check_fields, nonfinite
-from ..io.stage_files import write_h5
 from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
 from ..parallel import check_collective, on_root
@@ -191,7 +191,7 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
         written and before the file is marked complete and renamed (e.g. to add
         ``/stress``): if it raises, no ``fields.h5`` is produced.
     record
-        Record the content digest of the new file (see :mod:`railvib_hpc.io.stage_files`).
+        Record the content digest of the new file (see :mod:`railvib_hpc.io.digests`).
     extra_bytes
         What ``before_complete`` adds (reserved with the fields).
 

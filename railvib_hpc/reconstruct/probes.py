@@ -42,7 +42,7 @@ import numpy as np
 
 from ..errors import UserError
 from ..fem.reference import hex_shape_values
-from ..io.stage_files import write_h5, write_text
+from ..io.atomic import write_h5, write_text
 from ..mesh.model import Mesh
 from ..mesh.search import locate
 from ..schema import DEFAULT_PROBE_ROLE, PROBE_ROLES

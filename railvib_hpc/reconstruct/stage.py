@@ -37,7 +37,7 @@ Outputs (in ``out_dir``)
 
 Reuse
 -----
-Each product records its provenance (:mod:`railvib_hpc.io.stage_files`): the inputs hash
+Each product records its provenance (:mod:`railvib_hpc.io.provenance`): the inputs hash
 of the case keys and options it depends on and the content digests of ``modes.h5``,
 ``mbs.h5`` and the static basis it was computed from. A complete ``fields.h5`` (and
 ``/stress``, ``probes.h5``) with the same inputs and upstream digests whose content is
@@ -64,8 +64,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import UserError
+from ..io.atomic import ensure_space
+from ..io.digests import digest, file_digest, record_file
+from ..io.files import (
+    FIELDS_H5,
+    FIELDS_XDMF,
+    MBS_H5,
+    MODES_H5,
+    PROBES_CSV_DIR,
+    PROBES_H5,
+    STATIC_H5,
+    STRESS_XDMF,
+)
 from ..io.stage_checks import check_mbs, check_modes, check_static
-from ..io.stage_files import digest, ensure_space, file_digest, record_file, require_inputs
 from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
@@ -258,7 +269,7 @@ def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[
 
 def _upstream(info: dict) -> dict[str, str]:
     """Content digests of the files the outputs are computed from."""
-    up = {"modes.h5": info["modes_key"], "mbs.h5": info["mbs_key"]}
+    up = {MODES_H5: info["modes_key"], MBS_H5: info["mbs_key"]}
     if info["static_key"]:
         up[Path(info["static_file"]).name] = info["static_key"]
     return up
@@ -283,13 +294,13 @@ def _expected(case, options: dict) -> dict:
     def one(name: str, opts: dict) -> str:
         if case is None:
             return digest({"file": name, "options": opts})
-        from ..io.stage_files import inputs_hash
+        from ..io.products import inputs_hash
 
         return inputs_hash(case, name, opts)
 
-    fields = one("fields.h5", options["fields"])
+    fields = one(FIELDS_H5, options["fields"])
     return {"fields": fields, "stress": digest({"fields": fields, **options["stress"]}),
-            "probes": one("probes.h5", options["probes"])}
+            "probes": one(PROBES_H5, options["probes"])}
 
 
 def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
@@ -304,18 +315,18 @@ def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) 
 
     out_dir = ctx.out_dir
     ok = {"fields": False, "stress": False, "probes": False}
-    fields = out_dir / "fields.h5"
-    ok["fields"] = ctx.reuse("fields.h5", path=fields, inputs_sha256=keys["fields"],
+    fields = out_dir / FIELDS_H5
+    ok["fields"] = ctx.reuse(FIELDS_H5, path=fields, inputs_sha256=keys["fields"],
                              upstream=upstream).ok
     if ok["fields"] and want_stress:
         try:
             with h5py.File(fields, "r") as f:
                 ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
                                 and _attr(f["stress"], "inputs_sha256") == keys["stress"]
-                                and (out_dir / "stress.xdmf").is_file())
+                                and (out_dir / STRESS_XDMF).is_file())
         except (OSError, KeyError):
             ok["stress"] = False
-    ok["probes"] = ctx.reuse("probes.h5", path=out_dir / "probes.h5",
+    ok["probes"] = ctx.reuse(PROBES_H5, path=out_dir / PROBES_H5,
                              inputs_sha256=keys["probes"], upstream=upstream).ok
     return ok
 
@@ -325,7 +336,7 @@ def reconstruct_options(case, out_dir: Path) -> dict:
     the stride is ``output.dt`` over the step of ``mbs.h5``)."""
     import h5py
 
-    mbs = out_dir / "mbs.h5"
+    mbs = out_dir / MBS_H5
     stride = 1
     if mbs.exists() and case["output.dt"] > 0:
         with h5py.File(mbs, "r") as f:
@@ -347,11 +358,11 @@ def input_files(out_dir: Path) -> tuple[str, ...]:
     static correction)."""
     import h5py
 
-    names = ["modes.h5", "mbs.h5"]
+    names = [MODES_H5, MBS_H5]
     try:
-        with h5py.File(out_dir / "mbs.h5", "r") as f:
+        with h5py.File(out_dir / MBS_H5, "r") as f:
             if "static" in f:
-                names.insert(1, "static.h5")
+                names.insert(1, STATIC_H5)
     except OSError:
         pass
     return tuple(names)
@@ -395,13 +406,12 @@ def compute(ctx: StageContext) -> FieldsOutput:
 
     def prepare() -> dict:
         names = input_files(out_dir)
-        require_inputs(out_dir, names, case, {"modes.h5": check_modes, "static.h5": check_static,
-                                              "mbs.h5": check_mbs},
-                       context=check_context(case, out_dir))
+        ctx.require(names, {MODES_H5: check_modes, STATIC_H5: check_static,
+                            MBS_H5: check_mbs}, context=check_context(case, out_dir))
         return reconstruct_options(case, out_dir)
 
     opts = on_root(prepare, ctx.comm)
-    summary = _outputs(ctx, out_dir / "modes.h5", out_dir / "mbs.h5", **opts)
+    summary = _outputs(ctx, out_dir / MODES_H5, out_dir / MBS_H5, **opts)
 
     def output() -> FieldsOutput:
         from .probes import probe_peaks, read_probes
@@ -411,19 +421,19 @@ def compute(ctx: StageContext) -> FieldsOutput:
 
         threshold = case["assessment.wave_threshold"]
         peaks = {name: {"role": h["role"], **probe_peaks(h, threshold)}
-                 for name, h in read_probes(out_dir / "probes.h5").items()}
+                 for name, h in read_probes(out_dir / PROBES_H5).items()}
         return FieldsOutput(reused=summary.get("reused"), summary=summary,
-                            fields_h5=out_dir / "fields.h5", fields_xdmf=present("fields.xdmf"),
-                            stress_xdmf=present("stress.xdmf")
+                            fields_h5=out_dir / FIELDS_H5, fields_xdmf=present(FIELDS_XDMF),
+                            stress_xdmf=present(STRESS_XDMF)
                             if case["output.stress_times"] else None,
-                            probes_h5=out_dir / "probes.h5", probes=peaks)
+                            probes_h5=out_dir / PROBES_H5, probes=peaks)
 
     return on_root(output, ctx.comm)
 
 
 STAGE = Stage(name="reconstruct", help="rebuild displacement/velocity/acceleration fields of "
-              "every node", products=("fields.h5", "probes.h5"),
-              reads=("modes.h5", "static.h5", "mbs.h5"), compute=compute)
+              "every node", products=(FIELDS_H5, PROBES_H5),
+              reads=(MODES_H5, STATIC_H5, MBS_H5), compute=compute)
 
 
 def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,
@@ -546,14 +556,14 @@ def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MP
                  rep: Reporter, stress_times, user_probes, user_probe_roles, float32: bool,
                  stride: int, window, full: dict, t_start: float) -> dict:
     info, keys, reuse, attrs = on_root(load, comm)
-    fields_path = out_dir / "fields.h5"
+    fields_path = out_dir / FIELDS_H5
     result: dict = {"reused": dict(reuse), "seconds": {}}
 
     # ---- fields
     if reuse["fields"]:
         rep.info(f"reusing {fields_path} (same modes, histories and options)")
         result["fields"] = on_root(lambda: _fields_summary(fields_path), comm)
-        _refresh_xdmf(out_dir / "fields.xdmf", lambda: write_fields_xdmf(fields_path), comm,
+        _refresh_xdmf(out_dir / FIELDS_XDMF, lambda: write_fields_xdmf(fields_path), comm,
                       rep)
     else:
         with rep.stage("reconstruct fields"):
@@ -590,13 +600,13 @@ def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MP
             result["seconds"]["stress"] = stress_stats["seconds"]
             result["seconds"]["fields"] -= stress_stats["seconds"]
         elif comm.rank == 0:                     # a new fields.h5 has no /stress
-            remove_xdmf(out_dir / "stress.xdmf")
+            remove_xdmf(out_dir / STRESS_XDMF)
 
     # ---- stresses of reused fields: written into the existing fields.h5
     if stress_times and reuse["fields"]:
         if reuse["stress"]:
             rep.info(f"reusing /stress of {fields_path}")
-            _refresh_xdmf(out_dir / "stress.xdmf", lambda: write_stress_xdmf(fields_path),
+            _refresh_xdmf(out_dir / STRESS_XDMF, lambda: write_stress_xdmf(fields_path),
                           comm, rep)
         else:
             with rep.stage("reconstruct stress"):
@@ -611,7 +621,7 @@ def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MP
 
     # ---- probes and rail moments (rank 0)
     if reuse["probes"]:
-        rep.info(f"reusing {out_dir / 'probes.h5'}")
+        rep.info(f"reusing {out_dir / PROBES_H5}")
     else:
         with rep.stage("reconstruct probes"):
             t0 = time.perf_counter()
@@ -620,7 +630,7 @@ def _reconstruct(load, modes_path: Path, mbs_path: Path, out_dir: Path, comm: MP
                                        comm)
             result["seconds"]["probes"] = time.perf_counter() - t0
             rep.info(f"  {result['probes']['n_probes']} probes x {result['probes']['n_steps']}"
-                     f" steps -> {out_dir / 'probes.h5'}, {out_dir / 'probes'}/*.csv")
+                     f" steps -> {out_dir / PROBES_H5}, {out_dir / PROBES_CSV_DIR}/*.csv")
     result["seconds"]["total"] = time.perf_counter() - t_start
     fstats = result.get("fields") or {}
     for key in ("gemm_gflops", "write_gb_per_s", "bytes_written"):
@@ -682,7 +692,7 @@ def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, user_roles
                                                                      rail["moment_ends"])}
     attrs = {**prov, "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
              "rail_moment_static_correction_included": 0}
-    write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
-    write_probes_csv(out_dir / "probes", hist)
+    write_probes_h5(out_dir / PROBES_H5, hist, attrs=attrs, groups=groups)
+    write_probes_csv(out_dir / PROBES_CSV_DIR, hist)
     return {"n_probes": len(hist), "n_steps": len(t), "names": list(hist),
             "rail_moment": bool(groups)}

@@ -58,8 +58,9 @@ from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
 from ..fem.reference import hex_centre_gradients
+from ..io.files import STRESS_XDMF
 from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
-from ..io.stage_files import final_name
+from ..io.temp_names import final_name
 from ..log import Reporter
 from ..parallel import check_collective, on_root
 from ..schema import MIN_SOIL_LAYER_THICKNESS, PART_ID
@@ -552,6 +553,6 @@ def write_stress_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Pa
         times = f["stress/time"][()]
         series = [Series(k, H5Array.of(f, f"/stress/{k}", name), "Cell")
                   for k in ("von_mises", "strain_eq")]
-    xdmf = h5_path.with_name("stress.xdmf")
+    xdmf = h5_path.with_name(STRESS_XDMF)
     write_series(xdmf, points, block, times, series)
     return xdmf

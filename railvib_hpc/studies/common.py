@@ -19,7 +19,7 @@ the static-correction basis when it is on, for displacements only unless
 writes to ``probes.h5`` for these points, without the full fields (GBs per variant).
 
 ``result.json`` (schema ``railvib_hpc.study/1``, a stage file of
-:mod:`railvib_hpc.io.stage_files`)::
+:mod:`railvib_hpc.io.products`)::
 
     study, variant, parameter {..}, overrides [..], inputs_sha256, provenance {..},
     complete = true,
@@ -61,15 +61,19 @@ import numpy as np
 from .. import __version__
 from ..config import Case, build_case
 from ..errors import UserError
-from ..io.stage_files import (
-    copy_file,
-    digest,
-    examine,
-    file_digest,
-    provenance,
-    write_json,
-    write_text,
+from ..io.atomic import copy_file, write_json, write_text
+from ..io.digests import digest, file_digest
+from ..io.files import (
+    FAILED_JSON,
+    MBS_H5,
+    MODAL_DAMPING_H5,
+    MODES_H5,
+    PROBES_H5,
+    RESULT_JSON,
+    STATIC_H5,
+    TRANSIENT_H5,
 )
+from ..io.provenance import examine, provenance
 from ..io.stage_protocol import StageRunner
 from ..log import Reporter
 from ..parallel import on_root
@@ -84,11 +88,11 @@ ASSESSMENT_BAND_HZ = (1.0, 80.0)
 
 #: Bumped when the content of ``result.json`` changes (part of the variant digest).
 RESULT_FORMAT = "railvib_hpc.study/1"
-RESULT_NAME = "result.json"
-FAILED_NAME = "failed.json"
+RESULT_NAME = RESULT_JSON
+FAILED_NAME = FAILED_JSON
 SHARED_DIR = "model"
 #: Files of the shared model linked into each variant folder.
-SHARED_FILES = ("modes.h5", "static.h5", "modal_damping.h5")
+SHARED_FILES = (MODES_H5, STATIC_H5, MODAL_DAMPING_H5)
 
 
 class StudyError(UserError):
@@ -190,8 +194,8 @@ def write_result(vdir: Path, result: dict, vcase: Case | None = None) -> None:
     """Write ``result.json`` atomically with its provenance (the digests of the variant's
     ``modes.h5``, ``static.h5``, ``mbs.h5`` and ``probes.h5``, or of the full-order
     solution's ``transient.h5`` and ``probes.h5``) and drop an old ``failed.json``."""
-    upstream = {n: file_digest(vdir / n).sha256 for n in ("modes.h5", "static.h5", "mbs.h5",
-                                                          "transient.h5", "probes.h5")
+    upstream = {n: file_digest(vdir / n).sha256 for n in (MODES_H5, STATIC_H5, MBS_H5,
+                                                          TRANSIENT_H5, PROBES_H5)
                 if (vdir / n).exists()}
     prov = provenance(RESULT_NAME, vcase, upstream, inputs_sha256=result.get("inputs_sha256"))
     write_json(vdir / RESULT_NAME, jsonable(result), prov)
@@ -224,16 +228,14 @@ def link_shared(shared: Path, vdir: Path) -> list[str]:
     return done
 
 
-def model_info(modes_path: Path, modes_used: int | None, n_frequencies: int = 10) -> dict:
-    """Size, frequencies and solver statistics of a ``modes.h5`` (rank 0)."""
-    import h5py
-
-    with h5py.File(modes_path, "r") as f:
-        freq = f["modes/frequency_hz"][()]
-        stats = json.loads(f.attrs.get("stats", "{}"))
-        info = {"n_nodes": int(f["mesh/points"].shape[0]),
-                "n_hexes": int(f["mesh/hexes"].shape[0]),
-                "n_dofs": int(f.attrs.get("n_dofs", stats.get("n_dofs", 0)))}
+def model_info(modal, modes_used: int | None, n_frequencies: int = 10) -> dict:
+    """Size, frequencies and solver statistics of the modes the ``modal`` stage returned
+    (its :class:`~railvib_hpc.modal.stage.ModesOutput`, computed or reused)."""
+    freq = np.asarray(modal.frequencies_hz)
+    stats = modal.summary
+    info = {"n_nodes": int(modal.n_nodes),
+            "n_hexes": None if modal.n_hexes is None else int(modal.n_hexes),
+            "n_dofs": int(modal.n_dofs or 0)}
     m = int(modes_used or len(freq))
     keep = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
             "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks", "time_assembly_total",
@@ -287,7 +289,7 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
     from ..reconstruct.probes import probe_histories, write_probes_h5
     from ..reconstruct.stage import read_inputs
 
-    modes, mbs = vdir / "modes.h5", vdir / "mbs.h5"
+    modes, mbs = vdir / MODES_H5, vdir / MBS_H5
     info = read_inputs(modes, mbs, correction_rates=case["output.static_correction_rates"])
     hist = probe_histories(modes, info["t"], info["q"], info["q_dot"], info["q_ddot"],
                            extra=info["extra"])
@@ -295,12 +297,12 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
     if missing:
         raise StudyError(f"study setting probes = {list(probes)}: {missing} are not probes "
                          f"of the mesh; available: {', '.join(hist)}")
-    upstream = {n: file_digest(vdir / n).sha256 for n in ("modes.h5", "static.h5", "mbs.h5")
+    upstream = {n: file_digest(vdir / n).sha256 for n in (MODES_H5, STATIC_H5, MBS_H5)
                 if (vdir / n).exists()}
-    attrs = provenance("probes.h5", case, upstream, {"source": "study (from modes)",
+    attrs = provenance(PROBES_H5, case, upstream, {"source": "study (from modes)",
                                                      "probes": "mesh"})
     attrs["source"] = "study (from modes)"
-    write_probes_h5(vdir / "probes.h5", hist, attrs=attrs)
+    write_probes_h5(vdir / PROBES_H5, hist, attrs=attrs)
     return response_metrics(hist, case, probes)
 
 
@@ -397,7 +399,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, runner: St
     try:
         t0 = time.perf_counter()
         if v.shared:
-            prepare_shared(plan, case, root, comm, rep)       # reused when current
+            modal = prepare_shared(plan, case, root, comm, rep)   # reused when current
             on_root(lambda: link_shared(root / SHARED_DIR, vdir), comm)
             modes_reused = True
         else:
@@ -423,7 +425,7 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, runner: St
                 "parameter": v.parameter, "overrides": list(v.overrides),
                 "inputs_sha256": digest, "railvib_version": __version__,
                 "ranks": comm.size,
-                "model": model_info(vdir / "modes.h5", vcase["mbs.n_modes"] or None),
+                "model": model_info(modal, vcase["mbs.n_modes"] or None),
                 "mbs": mbs_metrics(mbs), **resp, "timings": timings,
                 "reused": {"modes": modes_reused, "mbs": bool(mbs.reused)},
                 "complete": True,
@@ -470,7 +472,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
 
         def finish() -> dict:
             t1 = time.perf_counter()
-            resp = response_metrics(read_probes(vdir / "probes.h5"), vcase, settings["probes"])
+            resp = response_metrics(read_probes(vdir / PROBES_H5), vcase, settings["probes"])
             timings["response"] = time.perf_counter() - t1
             timings["total"] = time.perf_counter() - t_start
             model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,

@@ -20,7 +20,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ..io.stage_files import atomic_file, write_text
+from ..io.atomic import atomic_file, write_text
+from ..io.files import REPORT_JSON, REPORT_MD
 from .common import jsonable
 
 REPORT_FORMAT = "railvib_hpc.study_report/1"
@@ -151,7 +152,7 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
         lines += ["## Figures", ""]
         lines += [f"![{p.stem}](figures/{p.name})" for p in figures]
         lines.append("")
-    md = root / "report.md"
+    md = root / REPORT_MD
     write_text(md, "\n".join(lines))
     payload = {"schema": REPORT_FORMAT, "study": kind, "case": case_info,
                "settings": settings, "generated": now, "variants": status,
@@ -160,6 +161,6 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
                             if k not in ("verdict", "sections", "title", "tables")},
                "tables": analysis.get("tables", []),
                "figures": [f"figures/{p.name}" for p in figures]}
-    js = root / "report.json"
+    js = root / REPORT_JSON
     write_text(js, json.dumps(jsonable(payload), indent=1))
     return {"markdown": md, "json": js}

@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..config import Case
-from ..io.stage_files import output_lock
+from ..io.locks import output_lock
 from ..log import Reporter
 from ..parallel import on_root
 from . import convergence, mitigation, modes, reflection, speed, thesis

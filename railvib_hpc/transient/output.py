@@ -7,10 +7,10 @@ them unchanged:
   ``velocity``, ``acceleration`` (ns, n, 3) of every node at the output steps, ``/mesh``,
   and ``/stress`` at ``output.stress_times``; ``fields.xdmf``, ``stress.xdmf`` (with their
   per-step views). Written collectively while the run goes on (each rank its contiguous
-  node range) under :func:`~railvib_hpc.io.stage_files.resume_path` (created with its
-  space reserved by :func:`~railvib_hpc.io.stage_files.start_h5`), which a resumed run
+  node range) under :func:`~railvib_hpc.io.temp_names.resume_path` (created with its
+  space reserved by :func:`~railvib_hpc.io.atomic.start_h5`), which a resumed run
   continues, and completed, checked, renamed and recorded by
-  :func:`~railvib_hpc.io.stage_files.commit_h5`;
+  :func:`~railvib_hpc.io.atomic.commit_h5`;
 * probe histories (:class:`PointSampler`): the nodal solution interpolated with the
   trilinear shape functions of the containing hexahedron at every step;
 * rail histories (:class:`RailSampler`): ``uz``, ``ry`` of every flexible-rail node at every
@@ -19,7 +19,7 @@ them unchanged:
 Checkpoints (:func:`write_checkpoint`, :func:`read_checkpoint`) hold the state vectors by
 global DOF number (the numbering does not depend on the number of ranks, so a run may
 resume on another number of ranks) and rank 0's histories. They are stage files
-(``transient_checkpoint.h5``, written by :func:`~railvib_hpc.io.stage_files.write_h5` with
+(``transient_checkpoint.h5``, written by :func:`~railvib_hpc.io.atomic.write_h5` with
 their provenance); whether one may be resumed is decided by the stage
 (:mod:`.stage`).
 """
@@ -120,7 +120,7 @@ class FieldWriter:
     Parameters
     ----------
     path
-        The final file; the data go to its :func:`~railvib_hpc.io.stage_files.resume_path`
+        The final file; the data go to its :func:`~railvib_hpc.io.temp_names.resume_path`
         until :meth:`finish`.
     comm
         MPI communicator.
@@ -144,8 +144,9 @@ class FieldWriter:
     def __init__(self, path: Path, comm, mesh: Mesh, dofmap: DofMap, times: np.ndarray,
                  steps: np.ndarray, float32: bool, attrs: dict, resume: bool = False,
                  block: int = 16, extra_bytes: int = 0):
+        from ..io.atomic import start_h5
         from ..io.parallel_h5 import h5py_parallel_ok, open_h5
-        from ..io.stage_files import resume_path, start_h5
+        from ..io.temp_names import resume_path
         from ..parallel import check_collective
 
         self.final = Path(path)
@@ -294,8 +295,8 @@ class FieldWriter:
         """Close, add the stresses (``stress(partial_path)``, collective), complete, check,
         rename and record ``fields.h5``; write ``fields.xdmf`` (rank 0). Returns the content
         digest."""
+        from ..io.atomic import commit_h5
         from ..io.stage_checks import check_fields
-        from ..io.stage_files import commit_h5
         from ..parallel import on_root
         from ..reconstruct.fields import write_fields_xdmf
 
@@ -318,9 +319,9 @@ def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_wri
     ``attrs`` (rank 0) are its provenance and run id; ``history`` (rank 0: name -> array)
     holds the recorded histories.
     """
+    from ..io.atomic import write_h5
     from ..io.parallel_h5 import h5py_parallel_ok
     from ..io.stage_checks import check_checkpoint
-    from ..io.stage_files import write_h5
 
     parallel = h5py_parallel_ok(comm)
     r0, r1 = dofmap.owned_dofs(comm.rank)

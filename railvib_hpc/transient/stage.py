@@ -12,7 +12,7 @@ waves travel at the speeds of the mesh, with no truncation of a modal basis.
 
 Outputs in the output folder (the layout of ``reconstruct``'s files, so ``assess`` and the
 studies read them unchanged; their own rows of
-:data:`railvib_hpc.io.stage_files.STAGE_FILES`):
+:data:`railvib_hpc.io.products.STAGE_FILES`):
 
 * ``fields.h5`` + ``fields.xdmf`` (+ ``fields_views.h5``): every node at the steps of
   ``output.dt`` within ``output.window``; ``/stress`` + ``stress.xdmf`` (+
@@ -25,7 +25,7 @@ studies read them unchanged; their own rows of
   ``/rail/x, uz, ry``; attribute ``stats`` (run statistics, contact forces).
 
 Every file carries its provenance and is written checked, atomically and recorded
-(:mod:`railvib_hpc.io.stage_files`); the mesh is ``mesh.h5`` of the same folder (built or
+(:mod:`railvib_hpc.io.atomic`); the mesh is ``mesh.h5`` of the same folder (built or
 reused as by ``railvib mesh``).
 
 Size: before the mesh is built, the number of steps and the memory of the histories are
@@ -64,9 +64,23 @@ import numpy as np
 
 from ..config import Case
 from ..errors import ResourceError, UserError
+from ..io.atomic import ensure_space, write_h5
+from ..io.digests import digest, record_file
+from ..io.files import (
+    FIELDS_H5,
+    MESH_H5,
+    PROBES_CSV_DIR,
+    PROBES_H5,
+    STRESS_XDMF,
+    TRANSIENT_CHECKPOINT_H5,
+    TRANSIENT_FIELDS,
+    TRANSIENT_H5,
+    TRANSIENT_PROBES,
+)
+from ..io.products import inputs_hash
 from ..io.stage_checks import check_transient
-from ..io.stage_files import digest, ensure_space, inputs_hash, record_file, resume_path, write_h5
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
+from ..io.temp_names import resume_path
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
@@ -83,11 +97,11 @@ from .output import FieldWriter, PointSampler, RailSampler, read_checkpoint, wri
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
 
-#: Table names of the products (:data:`railvib_hpc.io.stage_files.STAGE_FILES`), in the
+#: Table names of the products (:data:`railvib_hpc.io.products.STAGE_FILES`), in the
 #: order they are checked (the solution first; it is written last).
-FIELDS, PROBES, HISTORIES = "transient:fields.h5", "transient:probes.h5", "transient.h5"
+FIELDS, PROBES, HISTORIES = TRANSIENT_FIELDS, TRANSIENT_PROBES, TRANSIENT_H5
 PRODUCTS = (HISTORIES, FIELDS, PROBES)
-CHECKPOINT = "transient_checkpoint.h5"
+CHECKPOINT = TRANSIENT_CHECKPOINT_H5
 #: Output steps buffered per collective write of fields.h5.
 FIELD_BLOCK = 16
 #: Rail nodes ahead of each wheel whose columns are computed in one block.
@@ -121,7 +135,7 @@ def previous_results(ctx: StageContext) -> dict | None:
     """The run statistics of current, sound transient results in the folder (rank 0).
 
     ``fields.h5``, ``probes.h5`` and ``transient.h5`` must all pass
-    :func:`~railvib_hpc.io.stage_files.examine` for the case (with their data checks and
+    :func:`~railvib_hpc.io.provenance.examine` for the case (with their data checks and
     companions). Otherwise the reason is printed in one line (unless there is nothing
     at all), the three are deleted, and None is returned
     (:meth:`~railvib_hpc.io.stage_protocol.StageContext.reuse_together`).
@@ -143,19 +157,19 @@ def _stress_current(out_dir: Path, key: str) -> bool:
     import h5py
 
     try:
-        with h5py.File(out_dir / "fields.h5", "r") as f:
+        with h5py.File(out_dir / FIELDS_H5, "r") as f:
             ok = ("stress" in f and int(f.attrs.get("stress_complete", 0)) == 1
                   and f["stress"].attrs.get("inputs_sha256") == key)
     except (OSError, KeyError):
         return False
-    return ok and (out_dir / "stress.xdmf").is_file()
+    return ok and (out_dir / STRESS_XDMF).is_file()
 
 
 def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
     """``/stress`` of reused fields: kept when current, else recomputed in place."""
     if not case["output.stress_times"]:
         return
-    fields = out_dir / "fields.h5"
+    fields = out_dir / FIELDS_H5
     key = on_root(lambda: stress_key(case), comm)
     if on_root(lambda: _stress_current(out_dir, key), comm):
         rep.info(f"reusing /stress of {fields}")
@@ -195,13 +209,13 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
     """The run id of a checkpoint this run may resume, or None (rank 0).
 
     The checkpoint must be current for the case and computed from this ``mesh.h5``,
-    unchanged and sound (:func:`~railvib_hpc.io.stage_files.examine`), and the partial
+    unchanged and sound (:func:`~railvib_hpc.io.provenance.examine`), and the partial
     ``fields.h5`` must carry the fields' provenance and the checkpoint's run id. Anything
     else is deleted, saying why.
     """
     import h5py
 
-    partial = resume_path(ctx.out_dir / "fields.h5")
+    partial = resume_path(ctx.out_dir / FIELDS_H5)
 
     def matching(v) -> str:
         run_id = str(v.attrs.get("run_id", ""))
@@ -224,7 +238,7 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
                               "written")
         return run_id
 
-    old = ctx.reuse(CHECKPOINT, accept=matching, upstream={"mesh.h5": mesh_sha},
+    old = ctx.reuse(CHECKPOINT, accept=matching, upstream={MESH_H5: mesh_sha},
                     stale=lambda ckpt, why: f"not resuming from {ckpt}: {why}; starting at "
                                             "t = 0")
     if old.ok:
@@ -471,7 +485,7 @@ def compute(ctx: StageContext) -> TransientOutput:
 
 STAGE = Stage(name="transient", help="direct time integration of the full FE model "
               "(absorbing faces, causal waves)", products=PRODUCTS + (CHECKPOINT,),
-              reads=("mesh.h5",), compute=compute, petsc=True)
+              reads=(MESH_H5,), compute=compute, petsc=True)
 
 
 def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
@@ -506,7 +520,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     init = _setup(ctx)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
-    upstream = {"mesh.h5": init["mesh_sha"]}
+    upstream = {MESH_H5: init["mesh_sha"]}
     recorder = Recorder(nt, init["n_wheels"], init["n_dof"], len(init["probe_names"]),
                         init["rails"].dofs.shape[:2] + (2,)) if comm.rank == 0 else None
     out_index = np.full(nt + 1, -1, dtype=np.int64)
@@ -538,7 +552,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                 "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1 else 1,
                 "window": json.dumps(case["output.window"] or None)}
 
-    writer = FieldWriter(out_dir / "fields.h5", comm, mesh, dofmap, steps_out * dt, steps_out,
+    writer = FieldWriter(out_dir / FIELDS_H5, comm, mesh, dofmap, steps_out * dt, steps_out,
                          case["output.float32"],
                          on_root(fields_attrs, comm) if not resume_ok else {},
                          resume=resume_ok, block=FIELD_BLOCK,
@@ -614,14 +628,14 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
             stress = _stress_writer(case, comm, rep, on_root(lambda: stress_key(case), comm))
         writer.finish(stress)
         if not case["output.stress_times"] and comm.rank == 0:
-            remove_xdmf(out_dir / "stress.xdmf")
+            remove_xdmf(out_dir / STRESS_XDMF)
     rss = comm.allgather(peak_memory_gb())
     stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
                    recorder, nt - first_step, comm)
     with rep.stage("transient: probes, histories"):
         def write_rank0() -> None:
             _write_probes(out_dir, init, recorder, case, ctx.provenance(PROBES, upstream))
-            _write_histories(out_dir / "transient.h5", case, init, recorder, stats,
+            _write_histories(out_dir / TRANSIENT_H5, case, init, recorder, stats,
                              ctx.provenance(HISTORIES, upstream))
             ctx.discard(ckpt_path)
 
@@ -632,8 +646,8 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         if A is not None:
             A.destroy()
     rep.info(format_summary(stats))
-    rep.info(f"wrote {out_dir / 'fields.h5'}, {out_dir / 'probes.h5'}, "
-             f"{out_dir / 'transient.h5'}")
+    rep.info(f"wrote {out_dir / FIELDS_H5}, {out_dir / PROBES_H5}, "
+             f"{out_dir / TRANSIENT_H5}")
     return {**stats, "reused": False}
 
 
@@ -642,7 +656,6 @@ def _setup(ctx: StageContext) -> dict:
     from ..mbs.case_vehicle import build_vehicle, passage, passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, case_dofmap, layer_line, support_warning
-    from ..modal.petsc import assemble, assemble_damping
     from .petsc import TransientSystem
 
     case, comm, rep = ctx.case, ctx.comm, ctx.rep
@@ -668,6 +681,13 @@ def _setup(ctx: StageContext) -> dict:
     speed = float(np.max(np.abs(run["speeds"])))
     h_min = float(np.diff(rails.x, axis=1).min())
     dt = time_step(case, h_min / speed, rep)
+    explicit = case["transient.engine"] == "explicit"
+    if explicit:
+        # the step follows from the matrices: assemble first
+        K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
+        with rep.stage("transient: stability limit"):
+            system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle, K, M, C,
+                                                 dt)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
     # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
@@ -680,23 +700,21 @@ def _setup(ctx: StageContext) -> dict:
     steps_out = output_steps(case, dt, nt)
     if case["output.stress_times"]:
         _check_stress_times(case, steps_out * dt)
+    scheme_text = (f"central differences (explicit), {limit}" if explicit else
+                   f"generalized-alpha rho_inf = {case['transient.rho_inf']:g}")
     rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
-             f"steps; generalized-alpha rho_inf = {case['transient.rho_inf']:g}")
-    with rep.stage("transient: assembly"):
-        K, M, _ = assemble(mesh, case, dofmap, comm)
-        C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
-        if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
-                and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
-            C.destroy()
-            C = None
+             f"steps; {scheme_text}")
     n_wheels = run["wheel_rail"].size
-    col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
-    with rep.stage("transient: factorization"):
-        scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
-        system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
-        rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
-                 f"~{system.factor_memory_gb:.2f} GB" + (" (out of core)" if system.out_of_core
-                                                          else ""))
+    scheme = None
+    if not explicit:
+        K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
+        col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
+        with rep.stage("transient: factorization"):
+            scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
+            system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
+            rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
+                     f"~{system.factor_memory_gb:.2f} GB"
+                     + (" (out of core)" if system.out_of_core else ""))
     driver = columns = prescribed = None
     forces = run["forces"]
     if vehicle is None:
@@ -709,8 +727,14 @@ def _setup(ctx: StageContext) -> dict:
         coupling = WheelCoupling(rails, run["wheel_rail"], getattr(vehicle, "conicity", 0.0))
         irregularity = passage_irregularity(case, vehicle, run)
         driver = VehicleDriver(vehicle, coupling, x, irregularity, dt)
-        columns = RailColumns(system, rails, LOOKAHEAD_NODES)
-    solver = DirectSolver(system, prescribed, driver, columns)
+        if not explicit:
+            columns = RailColumns(system, rails, LOOKAHEAD_NODES)
+    if explicit:
+        from .explicit import ExplicitSolver
+
+        solver = ExplicitSolver(system, prescribed, driver)
+    else:
+        solver = DirectSolver(system, prescribed, driver, columns)
     names, coords = probe_points(mesh, case)
     return {"mesh": mesh, "mesh_sha": mesh_sha, "dofmap": dofmap, "rails": rails,
             "vehicle": vehicle, "run": run,
@@ -724,6 +748,79 @@ def _setup(ctx: StageContext) -> dict:
             "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme}
 
 
+def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
+    """K, M, C (None when nothing damps) and the damping summary (collective)."""
+    from ..modal.petsc import assemble, assemble_damping
+
+    case, comm = ctx.case, ctx.comm
+    with ctx.rep.stage("transient: assembly"):
+        K, M, _ = assemble(mesh, case, dofmap, comm)
+        C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
+        if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
+                and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
+            C.destroy()
+            C = None
+    return K, M, C, cinfo
+
+
+def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, K, M, C,
+                     dt_band: float) -> tuple:
+    """The explicit engine's system, its step and a line on its stability limit.
+
+    The limit is :data:`~.explicit.STEP_SAFETY` of the critical step of the model's largest
+    natural frequency (:func:`~.explicit.stability_limit`) and, with a vehicle, of the
+    linearised Hertz spring on the lightest rail node (:func:`~.explicit.contact_frequency`).
+    ``transient.dt`` above it is refused, naming what sets it; the automatic step is the
+    band's step ``dt_band`` or the limit, whichever is smaller, divided into ``output.dt``.
+    """
+    from .explicit import (
+        STEP_SAFETY,
+        ExplicitSystem,
+        contact_frequency,
+        critical_step,
+        limiting_element,
+        stability_limit,
+    )
+
+    case, comm = ctx.case, ctx.comm
+    probe = ExplicitSystem(K, M, C, 1.0, comm)
+    lim = stability_limit(K, probe.m, C, comm)
+    critical, omega = lim.dt_critical, lim.omega_max
+    where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
+    if vehicle is not None:
+        uz = rails.dofs[:, :, 0].ravel()
+        own = uz[(uz >= probe.r0) & (uz < probe.r1)] - probe.r0
+        rail_mass = comm.allreduce(float(probe.m[own].min(initial=np.inf)), op=_MPI_MIN())
+        w_c = contact_frequency(vehicle.hertz_constant,
+                                float(np.max(vehicle.static_wheel_loads())), rail_mass)
+        if w_c > 0 and critical_step(w_c) < critical:
+            critical, omega = critical_step(w_c), w_c
+            where = (f"the wheel-rail contact (linearised Hertz spring on a {rail_mass:.3g} kg "
+                     "rail node)")
+    probe.destroy()
+    allowed = STEP_SAFETY * critical
+    text = (f"stable up to {allowed:.4g} s ({STEP_SAFETY:g} x the critical step "
+            f"{critical:.4g} s; omega_max = {omega:.4g} rad/s = {omega / (2 * math.pi):.4g} Hz, "
+            f"set by {where}; damping ratio there {lim.xi:.3g})")
+    dt = case["transient.dt"]
+    if dt > 0 and dt > allowed * (1 + 1e-9):
+        raise TransientInputError(
+            f"transient.dt = {dt:g} s: the explicit engine is {text}; allowed: "
+            f"0 < transient.dt <= {allowed:.4g} s, or 0 (automatic)")
+    if dt <= 0:
+        dt = min(dt_band, allowed)
+        odt = case["output.dt"]
+        if odt > 0:
+            dt = odt / math.ceil(odt / dt * (1.0 - 1e-6))
+    return ExplicitSystem(K, M, C, dt, comm), dt, text
+
+
+def _MPI_MIN():
+    from mpi4py import MPI
+
+    return MPI.MIN
+
+
 def _initial_state(init: dict, comm, rep: Reporter) -> State:
     """At rest; a vehicle in static equilibrium on the (possibly deflected) rail."""
     from ..mbs.vehicles import static_equilibrium
@@ -734,7 +831,12 @@ def _initial_state(init: dict, comm, rep: Reporter) -> State:
     vehicle, driver = init["vehicle"], init["driver"]
     if vehicle is None:
         if init["prescribed"] is not None:
-            initial_acceleration(system, state, [init["prescribed"](0)])
+            if init["scheme"] is None:
+                from .explicit import initial_acceleration as explicit_acceleration
+
+                explicit_acceleration(system, state, [init["prescribed"](0)])
+            else:
+                initial_acceleration(system, state, [init["prescribed"](0)])
         return state
     dofs, coef, _ = driver.coupling.at(driver.x[0])
     r = driver.heights(0)
@@ -778,7 +880,7 @@ def _stress_writer(case: Case, comm, rep: Reporter, key: str):
     def write(path: Path) -> None:
         stats = stress_from_fields(path, comm, case["output.stress_times"], materials, rep=rep,
                                    attrs={"inputs_sha256": key},
-                                   require_complete=path.name == "fields.h5")
+                                   require_complete=path.name == FIELDS_H5)
         rep.info(f"  stresses at {stats['n_times']} time(s), max von Mises "
                  f"{stats['max_von_mises'] / 1e3:.3f} kPa")
 
@@ -790,7 +892,9 @@ def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, c
     stats = {"solver": "transient", "dt": init["dt"], "n_steps": nt, "steps_run": n_done,
              "t_end": nt * init["dt"], "n_dofs": init["dofmap"].n_dofs,
              "n_nodes": init["mesh"].n_nodes, "ranks": comm.size,
-             "rho_inf": init["scheme"].rho_inf, "damping": init["damping"],
+             "engine": "direct" if init["scheme"] is not None else "explicit",
+             "rho_inf": init["scheme"].rho_inf if init["scheme"] is not None else None,
+             "damping": init["damping"],
              "time_integration": t_integration, "time_total": t_wall,
              "steps_per_second": n_done / max(t_integration, 1e-9),
              "time_factorization": system.time_factorization,
@@ -885,8 +989,8 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     attrs = {**prov, "solver": "transient",
              "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
              "rail_moment_static_correction_included": 1}
-    write_probes_h5(out_dir / "probes.h5", hist, attrs=attrs, groups=groups)
-    write_probes_csv(out_dir / "probes", hist)
+    write_probes_h5(out_dir / PROBES_H5, hist, attrs=attrs, groups=groups)
+    write_probes_csv(out_dir / PROBES_CSV_DIR, hist)
 
 
 def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, stats: dict,

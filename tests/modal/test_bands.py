@@ -513,11 +513,11 @@ def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():
     """Issue 26: the single-shift checks take K Phi from the purification (its K products
     rotated with the modes) and M Phi afresh; checking the returned modes again with both
     products afresh gives the same residuals (to their round-off floors) and orthonormality."""
-    from railvib_hpc.modal.ritz import ModalResult, normalise_and_check
+    from railvib_hpc.modal.ritz import Eigenpairs, normalise_and_check
 
     mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
     res, K, M, _ = solve(mesh, soil_case(), rules, 20)
-    again = ModalResult(res.eigenvalues.copy(), res.phi.copy(), {})
+    again = Eigenpairs(res.eigenvalues.copy(), res.phi.copy(), {})
     checks = normalise_and_check(again, K, M, MPI.COMM_SELF, tol=0.0)
     assert np.allclose(checks.scale, 1.0, rtol=0, atol=1e-12)      # already unit modal mass
     floors = again.residual_floors                 # (tol = 0: the floor of every mode)

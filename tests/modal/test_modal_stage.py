@@ -185,7 +185,7 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     with h5py.File(old / "modes.h5", "a") as f:
         del f["modes/strain_energy"]
     # as if written that way (an edit after writing is otherwise detected as corruption)
-    from railvib_hpc.io.stage_files import record_file
+    from railvib_hpc.io.digests import record_file
 
     record_file(old / "modes.h5")
     # with uniform damping such a file is simply reused

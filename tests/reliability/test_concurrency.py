@@ -86,7 +86,7 @@ def test_lock_is_reentrant_and_released(tmp_path):
     same process) and releases it at the end."""
     import fcntl
 
-    from railvib_hpc.io.stage_files import acquire_lock, holds_lock, release_lock
+    from railvib_hpc.io.locks import acquire_lock, holds_lock, release_lock
 
     out = tmp_path / "o"
     acquire_lock(out, "outer")
@@ -107,7 +107,7 @@ def test_lock_is_reentrant_and_released(tmp_path):
 def test_temporary_files_of_dead_runs_are_removed(work, capsys, tally):
     """The issue: .part files were never cleaned (142 MB on the coarse model) and one
     blocked the next run."""
-    from railvib_hpc.io.stage_files import temp_path
+    from railvib_hpc.io.temp_names import temp_path
 
     dead = 2**22 + 12345                      # above the default pid_max: never alive
     while True:

@@ -210,11 +210,11 @@ def test_nan_in_the_modes_never_makes_a_complete_fields_file(prepared, tmp_path,
     """The issue: NaN in modes/translation gave fields.h5 with NaNs and complete = 1.
     Even when the NaN slips past the input checks (here: they are switched off), the
     write-time check of every block stops before a fields.h5 exists."""
-    from railvib_hpc.reconstruct import stage
+    from railvib_hpc.io.stage_protocol import StageContext
 
     out = copy_results(prepared, tmp_path / "o", ("modes.h5", "mbs.h5"))
     inject(out / "modes.h5", "nan-unrecorded", "modes/translation")
-    monkeypatch.setattr(stage, "require_inputs", lambda *a, **k: {})
+    monkeypatch.setattr(StageContext, "require", lambda self, *a, **k: {})
     code = run(["reconstruct", B, "--out", str(out), *COARSE])
     err = capsys.readouterr().err
     _record(tally, "nan modes.h5 past the input checks", code, err)

@@ -65,7 +65,7 @@ def test_full_disk_at_the_mesh(tmpfs, tally):
 
 def test_reservation_fails_cleanly_on_a_full_disk(tmpfs):
     from railvib_hpc.errors import OutputError
-    from railvib_hpc.io.stage_files import reserve
+    from railvib_hpc.io.atomic import reserve
 
     out = tmpfs(1)
     f = out / "x"
@@ -79,8 +79,8 @@ def test_write_failure_on_a_full_disk_is_collective(shared_tmp):
     """The data outgrow a (wrong) size prediction on a full tmpfs: every rank raises the
     same clear error (no hang), and no file or temporary file is left."""
     from railvib_hpc.errors import OutputError
+    from railvib_hpc.io.atomic import write_h5
     from railvib_hpc.io.parallel_h5 import write_slab
-    from railvib_hpc.io.stage_files import write_h5
 
     comm = MPI.COMM_WORLD
     ok = comm.bcast(can_mount() if comm.rank == 0 else None, root=0)

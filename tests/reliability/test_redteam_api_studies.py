@@ -23,7 +23,7 @@ import railvib_hpc as rv
 from railvib_hpc.api import AssessResult, ProbePeak, ReconstructResult
 from railvib_hpc.cli import run
 from railvib_hpc.errors import OutputLockedError, UserError
-from railvib_hpc.io import stage_files as sf
+from railvib_hpc.io import locks, temp_names
 
 ROOT = Path(__file__).resolve().parents[2]
 MITIGATION = ROOT / "jobs" / "mitigation_study.toml"
@@ -128,28 +128,28 @@ def test_lock_keeps_other_threads_out_and_temp_names_are_unique(tmp_path, tally)
     held, release, log = threading.Event(), threading.Event(), []
 
     def holder():
-        sf.acquire_lock(out, "holder")
-        sf.acquire_lock(out, "holder again")            # re-entrant in its own thread
-        sf.release_lock(out)
-        log.append(("held", sf.holds_lock(out)))
+        locks.acquire_lock(out, "holder")
+        locks.acquire_lock(out, "holder again")            # re-entrant in its own thread
+        locks.release_lock(out)
+        log.append(("held", locks.holds_lock(out)))
         held.set()
         release.wait(30)
         log.append(("released", time.monotonic()))
-        sf.release_lock(out)
+        locks.release_lock(out)
 
     t = threading.Thread(target=holder)
     t.start()
     assert held.wait(30)
     try:
-        assert not sf.holds_lock(out)                    # not this thread's
+        assert not locks.holds_lock(out)                    # not this thread's
         with pytest.raises(OutputLockedError, match=r"in use by thread \d+ of this process"):
-            sf.acquire_lock(out, "second")
-        sf.release_lock(out)                             # not ours: nothing happens
+            locks.acquire_lock(out, "second")
+        locks.release_lock(out)                             # not ours: nothing happens
         assert t.is_alive() and log == [("held", True)]
         names = []
 
         def temp():
-            names.append(sf.temp_path(out / "mbs.h5"))
+            names.append(temp_names.temp_path(out / "mbs.h5"))
 
         others = [threading.Thread(target=temp) for _ in range(4)]
         for o in others:
@@ -157,16 +157,16 @@ def test_lock_keeps_other_threads_out_and_temp_names_are_unique(tmp_path, tally)
         for o in others:
             o.join()
         assert len(set(names)) == 4                      # one name per writer
-        assert all(sf.final_name(n.name) == "mbs.h5" for n in names)
+        assert all(temp_names.final_name(n.name) == "mbs.h5" for n in names)
         threading.Timer(0.3, release.set).start()
-        sf.acquire_lock(out, "waiting", wait=True)        # waits for the holder
+        locks.acquire_lock(out, "waiting", wait=True)        # waits for the holder
         got = time.monotonic()
-        assert sf.holds_lock(out)
+        assert locks.holds_lock(out)
     finally:
         release.set()
         t.join(30)
-    sf.release_lock(out)
-    assert not sf.holds_lock(out)
+    locks.release_lock(out)
+    assert not locks.holds_lock(out)
     ok = log[-1][0] == "released" and got >= log[-1][1]
     tally.add("lock of one folder from two threads", "clear error" if ok else "data loss")
     assert ok
@@ -175,11 +175,11 @@ def test_lock_keeps_other_threads_out_and_temp_names_are_unique(tmp_path, tally)
 def test_temporary_files_of_live_threads_are_kept(tmp_path):
     """The new temporary names still carry the pid: a live process's files are kept, a
     dead one's removed (``remove_stale_temps``)."""
-    mine = sf.temp_path(tmp_path / "mesh.msh", suffix=True)
+    mine = temp_names.temp_path(tmp_path / "mesh.msh", suffix=True)
     mine.write_bytes(b"1")
-    dead = tmp_path / f".modes.h5.part-{sf._host()}-999999999_t12_abcdef"
+    dead = tmp_path / f".modes.h5.part-{temp_names._host()}-999999999_t12_abcdef"
     dead.write_bytes(b"12")
-    assert sf.remove_stale_temps(tmp_path) == (1, 2)
+    assert temp_names.remove_stale_temps(tmp_path) == (1, 2)
     assert mine.exists() and not dead.exists()
 
 

@@ -53,8 +53,8 @@ def test_corrupt_shared_model_and_result_are_recomputed_and_busy_variants_refuse
     assert ok, out
     # v20 busy in another process: refused at once; v60 runs meanwhile
     holder = subprocess.Popen([sys.executable, "-c", (
-        "import time; from pathlib import Path; from railvib_hpc.io import stage_files as sf\n"
-        f"sf.acquire_lock(Path({str(root / 'v20')!r}), 'railvib study speed --variant 0')\n"
+        "import time; from pathlib import Path; from railvib_hpc.io import locks\n"
+        f"locks.acquire_lock(Path({str(root / 'v20')!r}), 'railvib study speed --variant 0')\n"
         "print('held', flush=True); time.sleep(60)")], stdout=subprocess.PIPE, text=True,
         env=ENV)
     try:

@@ -171,13 +171,14 @@ def test_supported_box_gives_no_warning(mesh):
 @pytest.fixture(scope="module")
 def tiny_setup(tmp_path_factory):
     """The tiny full-order case of tests/transient set up (mesh, factor), serial."""
+    from railvib_hpc.io.stage_protocol import StageContext
     from railvib_hpc.log import Reporter
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.transient.stage import _setup
 
     init_petsc([])
-    init = _setup(load_case(BASELINE, TINY), tmp_path_factory.mktemp("tiny"), MPI.COMM_SELF,
-                  Reporter(0))
+    init = _setup(StageContext(load_case(BASELINE, TINY), tmp_path_factory.mktemp("tiny"),
+                               MPI.COMM_SELF, Reporter(0)))
     yield init
     init["solver"].destroy()
     init["system"].destroy()

@@ -783,27 +783,27 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
     )
 
     case, comm = ctx.case, ctx.comm
-    probe = ExplicitSystem(K, M, C, 1.0, comm)
-    lim = stability_limit(K, probe.m, C, comm)
+    system = ExplicitSystem(K, M, C, 0.0, comm)      # (its step is set below)
+    lim = stability_limit(K, system.m, C, comm)
     critical, omega = lim.dt_critical, lim.omega_max
     where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
     if vehicle is not None:
         uz = rails.dofs[:, :, 0].ravel()
-        own = uz[(uz >= probe.r0) & (uz < probe.r1)] - probe.r0
-        rail_mass = comm.allreduce(float(probe.m[own].min(initial=np.inf)), op=_MPI_MIN())
+        own = uz[(uz >= system.r0) & (uz < system.r1)] - system.r0
+        rail_mass = comm.allreduce(float(system.m[own].min(initial=np.inf)), op=_MPI_MIN())
         w_c = contact_frequency(vehicle.hertz_constant,
                                 float(np.max(vehicle.static_wheel_loads())), rail_mass)
         if w_c > 0 and critical_step(w_c) < critical:
             critical, omega = critical_step(w_c), w_c
             where = (f"the wheel-rail contact (linearised Hertz spring on a {rail_mass:.3g} kg "
                      "rail node)")
-    probe.destroy()
     allowed = STEP_SAFETY * critical
     text = (f"stable up to {allowed:.4g} s ({STEP_SAFETY:g} x the critical step "
             f"{critical:.4g} s; omega_max = {omega:.4g} rad/s = {omega / (2 * math.pi):.4g} Hz, "
             f"set by {where}; damping ratio there {lim.xi:.3g})")
     dt = case["transient.dt"]
     if dt > 0 and dt > allowed * (1 + 1e-9):
+        system.destroy()
         raise TransientInputError(
             f"transient.dt = {dt:g} s: the explicit engine is {text}; allowed: "
             f"0 < transient.dt <= {allowed:.4g} s, or 0 (automatic)")
@@ -812,7 +812,8 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
         odt = case["output.dt"]
         if odt > 0:
             dt = odt / math.ceil(odt / dt * (1.0 - 1e-6))
-    return ExplicitSystem(K, M, C, dt, comm), dt, text
+    system.dt = float(dt)
+    return system, dt, text
 
 
 def _MPI_MIN():

@@ -4,6 +4,11 @@ Usage (under the shared lock; one configuration per process, so peak memory is i
 
     flock /tmp/railvib-heavy.lock python bench/explicit_bench.py --dofs 0.5e6 1e6 2e6 4e6
     flock /tmp/railvib-heavy.lock python bench/explicit_bench.py --dofs 1e6 --ranks 2
+    flock /tmp/railvib-heavy.lock python bench/explicit_bench.py --engine imex --dofs 1e6
+
+``--engine imex``: the same box with a 2 m wide concrete strip (part ``slab``, one element
+deep, along x through the load: a stand-in for a track) integrated implicitly
+(:mod:`railvib_hpc.transient.imex`): its factor, the explicit part's limit, the step.
 
 Each line: a box of soil (the thesis subgrade, c_S 212 m/s, in 1 m hexahedra, 2:2:1,
 sized to the asked DOF count; all five truncation faces absorbing; Rayleigh damping 3 %)
@@ -13,7 +18,8 @@ with a vertical point load on the surface, through the real path: distributed as
 :class:`~railvib_hpc.transient.explicit.ExplicitSolver` at 0.9 of the critical step.
 
 Printed: DOFs, ranks, assembly and stability-limit times, the step, time per step, time per
-step per DOF, the stored matrix entries (K and C) and their bytes, peak resident memory
+step per DOF, the stored matrix entries (K, the diagonal M and the dashpots; Rayleigh's
+``alpha M + beta K`` is applied, not stored) and their bytes, peak resident memory
 summed over the ranks (``VmHWM``) and per DOF, and the achieved memory traffic of the
 products (12 bytes per stored entry of K and C, plus 8 per DOF for the vectors each
 product reads and writes) against a STREAM-like triad measured on the same cores.
@@ -47,7 +53,7 @@ def triad_gbs(n: int = 20_000_000, repeat: int = 5) -> float:
     return 4 * 8 * n / best / 1e9          # (two passes: read c, write a; read a, b, write a)
 
 
-def box(n_dofs: float):
+def box(n_dofs: float, strip: bool = False):
     """A soil box of about ``n_dofs`` free DOFs: 2:2:1 aspect, 1 m hexahedra scaled."""
     from railvib_hpc.mesh.model import Mesh
     from railvib_hpc.schema import PART_ID
@@ -65,6 +71,11 @@ def box(n_dofs: float):
     hexes = np.stack([c, c + sx, c + sx + sy, c + sy,
                       c + 1, c + sx + 1, c + sx + sy + 1, c + sy + 1], axis=1)
     part = np.full(len(hexes), PART_ID["subgrade"])
+    if strip:       # the top layer of a 2-element-wide strip along x through the centre
+        centre = pts[hexes].mean(axis=1)
+        on = ((np.abs(centre[:, 1] - 0.5 * ny * h) < h) & (centre[:, 2] > -h)
+              & (centre[:, 0] > h) & (centre[:, 0] < (nx - 1) * h))   # (soil at the faces)
+        part[on] = PART_ID["slab"]
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     sets = {"bottom": np.flatnonzero(np.isclose(pts[:, 2], lo[2])),
             "x_faces": np.flatnonzero(np.isclose(pts[:, 0], lo[0]) | np.isclose(pts[:, 0], hi[0])),
@@ -76,7 +87,7 @@ def box(n_dofs: float):
     return mesh, top
 
 
-def one(n_dofs: float, steps: int) -> dict:
+def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
     """One configuration in this process (collective)."""
     from mpi4py import MPI
 
@@ -84,12 +95,26 @@ def one(n_dofs: float, steps: int) -> dict:
     from railvib_hpc.io.run_record import peak_memory_gb
     from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
     from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.modal.petsc import (
+        assemble,
+        assemble_damping,
+        assemble_partition,
+        destroy_damping,
+        rayleigh_operator,
+        rayleigh_parts,
+    )
     from railvib_hpc.petsc_env import init_petsc
 
     init_petsc([])
-    from railvib_hpc.transient.explicit import ExplicitSolver, ExplicitSystem, stability_limit
-    from railvib_hpc.transient.integrate import State
+    from railvib_hpc.transient.explicit import (
+        ExplicitSolver,
+        ExplicitSystem,
+        critical_step,
+        lumped_diagonal,
+        stability_limit,
+    )
+    from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR, ImexSystem
+    from railvib_hpc.transient.integrate import DirectSolver, State
 
     comm = MPI.COMM_WORLD
     case = load_case(None, [*(f"boundary.{f}=absorbing" for f in
@@ -97,24 +122,32 @@ def one(n_dofs: float, steps: int) -> dict:
                             "modal.lumped_mass=true", "damping.model=rayleigh",
                             "modal.damping_ratio=0.03"])
     t0 = time.perf_counter()
-    mesh, top = box(n_dofs)
+    imex = engine == "imex"
+    mesh, top = box(n_dofs, strip=imex)
     dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(case),
                           node_sets=face_node_sets(mesh))
-    K, M, _ = assemble(mesh, case, dofmap, comm)
-    C, _ = assemble_damping(mesh, case, dofmap, comm, K, M)
+    K, M, _ = assemble(mesh, case, dofmap, comm, mass="diagonal")
+    # as the stage does: Rayleigh damping applied around K, the dashpots stored alone
+    C, _ = rayleigh_operator(mesh, case, dofmap, comm, K, lumped_diagonal(M, comm))
+    if C is None:
+        C, _ = assemble_damping(mesh, case, dofmap, comm, K, M)
+    partition = assemble_partition(mesh, case, dofmap, comm, ("slab",)) if imex else None
     t_assembly = time.perf_counter() - t0
     t0 = time.perf_counter()
-    probe = ExplicitSystem(K, M, C, 1.0, comm)
-    lim = stability_limit(K, probe.m, C, comm)
-    probe.destroy()
+    lim = stability_limit(K, lumped_diagonal(M, comm), C, comm, minus=partition)
+    dt = (0.9 * critical_step(lim.omega_max, DAMPING_STABILITY_FACTOR * lim.xi) if imex
+          else lim.dt_allowed)
     t_limit = time.perf_counter() - t0
-    system = ExplicitSystem(K, M, C, lim.dt_allowed, comm)
+    t0 = time.perf_counter()
+    system = (ImexSystem(K, M, C, *partition, dt, comm) if imex
+              else ExplicitSystem(K, M, C, dt, comm))
+    t_factor = time.perf_counter() - t0
     dof = int(dofmap.index[top, 2])
 
     def load(n: int):
         return np.array([dof]), np.array([-1e4 * np.sin(2 * np.pi * 20.0 * n * system.dt)])
 
-    solver = ExplicitSolver(system, load)
+    solver = DirectSolver(system, load) if imex else ExplicitSolver(system, load)
     st = State(0, *(np.zeros(system.n_local) for _ in range(3)))
     solver.step(st)                                      # (warm-up)
     comm.Barrier()
@@ -123,15 +156,23 @@ def one(n_dofs: float, steps: int) -> dict:
         solver.step(st)
     comm.Barrier()
     t_steps = (time.perf_counter() - t0) / steps
-    nnz = K.getInfo()["nz_used"] + C.getInfo()["nz_used"]          # (summed over the ranks)
+    ray = rayleigh_parts(C)
+    stored = [K, M, *([C] if ray is None else [ray.C_b])]
+    nnz = sum(A.getInfo()["nz_used"] for A in stored)              # (summed over the ranks)
+    implicit_rows = system.implicit_rows if imex else 0
+    factor_gb = system.factor_memory_gb
     peak, _ = peak_memory_gb()
     peak = comm.allreduce(peak)
     n = dofmap.n_dofs
     traffic = (12.0 * nnz + 2 * 2 * 8.0 * n + 10 * 8.0 * n) / t_steps / 1e9
-    for A in (K, M, C):
+    solver.destroy()
+    system.destroy()
+    for A in (K, M):
         A.destroy()
+    destroy_damping(C)
     return {"dofs": n, "ranks": comm.size, "assembly_s": t_assembly, "limit_s": t_limit,
-            "limit_iterations": lim.iterations, "dt": lim.dt_allowed, "step_s": t_steps,
+            "factor_s": t_factor, "implicit_rows": implicit_rows, "factor_gb": factor_gb,
+            "limit_iterations": lim.iterations, "dt": dt, "step_s": t_steps,
             "step_ns_per_dof": 1e9 * t_steps / n, "nnz": int(nnz),
             "matrix_gb": 12.0 * nnz / 1e9, "peak_gb": peak, "bytes_per_dof": peak * 1e9 / n,
             "traffic_gbs": traffic}
@@ -142,26 +183,28 @@ def main() -> None:
     p.add_argument("--dofs", type=float, nargs="+", default=[0.5e6, 1e6, 2e6, 4e6])
     p.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     p.add_argument("--steps", type=int, default=50)
+    p.add_argument("--engine", choices=("explicit", "imex"), default="explicit")
     p.add_argument("--one", type=float, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.one:
-        out = one(args.one, args.steps)
+        out = one(args.one, args.steps, args.engine)
         from mpi4py import MPI
 
         if MPI.COMM_WORLD.rank == 0:
             print("RESULT " + json.dumps(out))
         return
     bw = triad_gbs()
-    print(f"# one-core triad bandwidth {bw:.1f} GB/s; {os.cpu_count()} cores")
-    print("| DOFs | ranks | assembly [s] | limit [s] (its.) | dt [s] | step [s] | "
-          "step / DOF [ns] | K + C entries | matrices [GB] | peak [GB] | peak / DOF [B] | "
-          "traffic [GB/s] | of ranks x triad |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print(f"# engine {args.engine}; one-core triad bandwidth {bw:.1f} GB/s; "
+          f"{os.cpu_count()} cores")
+    print("| DOFs | ranks | assembly [s] | limit [s] (its.) | factor [s] (implicit rows, GB) | "
+          "dt [s] | step [s] | step / DOF [ns] | K + C entries | matrices [GB] | peak [GB] | "
+          "peak / DOF [B] | traffic [GB/s] | of ranks x triad |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
     for n in args.dofs:
         for ranks in args.ranks:
             cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, __file__,
-                   "--one", str(n), "--steps", str(args.steps)]
+                   "--one", str(n), "--steps", str(args.steps), "--engine", args.engine]
             proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
             line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
             if proc.returncode or not line:
@@ -169,7 +212,8 @@ def main() -> None:
                 continue
             r = json.loads(line[0][7:])
             print(f"| {r['dofs']:,} | {ranks} | {r['assembly_s']:.1f} | {r['limit_s']:.1f} "
-                  f"({r['limit_iterations']}) | {r['dt']:.3e} | {r['step_s']:.4f} | "
+                  f"({r['limit_iterations']}) | {r['factor_s']:.1f} ({r['implicit_rows']:,}, "
+                  f"{r['factor_gb']:.2f}) | {r['dt']:.3e} | {r['step_s']:.4f} | "
                   f"{r['step_ns_per_dof']:.1f} | {r['nnz']:,} | {r['matrix_gb']:.2f} | "
                   f"{r['peak_gb']:.2f} | {r['bytes_per_dof']:.0f} | {r['traffic_gbs']:.1f} | "
                   f"{r['traffic_gbs'] / (ranks * bw):.0%} |", flush=True)

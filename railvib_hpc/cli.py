@@ -146,6 +146,10 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     for section, what in (("trench", "trench"), ("wib", "wave-impeding block")):
         if case[f"{section}.type"] != "none":
             rep.info(f"  {what}: " + ", ".join(f"{k} {v}" for k, v in case[section].items()))
+    from .site import site_lines
+
+    for line in site_lines(case):                 # [site] keys given, [[probes.line]]
+        rep.info(f"  {line}")
     return 0
 
 

@@ -25,11 +25,14 @@ from .errors import CaseError
 from .io.digests import digest, hash_file
 from .io.products import flat_case
 from .schema import PRESETS, SCHEMA
+from .site import derive_keys
 from .validation import ALL_KEYS, check_consistency, check_value
 
 #: Shortest wavelength of the FRA spectra's fitted range (5 ft; Hamid et al., FRA 1980) [m].
 FRA_FITTED_WAVELENGTH_MIN = 1.524
 _SECTION_KEYS = {k.rsplit(".", 1)[0] for k in ALL_KEYS}
+#: The kinds of key written as a list of tables (``[[soil.layers]]``), with what one is.
+_TABLE_LISTS = {"layers": "layer", "probe_lines": "line"}
 
 
 class CaseKeyError(KeyError):
@@ -362,10 +365,10 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
     _group_tables(flat)
     for key in list(flat):
         if key not in ALL_KEYS:
-            table = next((k for k, prm in ALL_KEYS.items()
-                          if prm.kind == "layers" and key.startswith(k + ".")), None)
+            table = next((k for k, prm in ALL_KEYS.items() if prm.kind in _TABLE_LISTS
+                          and key.startswith(k + ".")), None)
             hint = (f"{table} is a list of tables: write [[{table}]] (double brackets), one "
-                    "per layer" if table else _did_you_mean(key))
+                    f"per {_TABLE_LISTS[ALL_KEYS[table].kind]}" if table else _did_you_mean(key))
             problems.append((key, flat.pop(key), hint))
 
     preset = flat.get("case.preset", ALL_KEYS["case.preset"].default)
@@ -377,6 +380,11 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         _set(data, key, check_value(key, ALL_KEYS[key], value, problems))
     if problems:
         raise CaseError(problems)
+    derived, problems = derive_keys(flat_case(data), flat)   # [site], X4, the sleepers...
+    if problems:
+        raise CaseError(problems)
+    for key, value in derived.items():
+        _set(data, key, value)
     notes = []
     if isinstance(preset, str) and PRESETS.get(preset):
         shadowed = [k for k, v in PRESETS[preset].items() if k in flat and flat[k] != v]

@@ -52,6 +52,8 @@ def case_reference_markdown() -> str:
         out.append("|---|---|---|---|---|")
         for leaf, p in rows:
             extra = f" Allowed: {', '.join(p.choices)}." if p.choices else ""
+            if p.derived:
+                extra += f" Derived when not given: `{p.derived}` (a given value must agree)."
             src = source(f"{sec}.{leaf}").replace("|", "/")
             out.append(f"| `{leaf}` | `{_fmt(p.default)}` | {p.unit} | {p.doc}.{extra} | "
                        f"{src} |")
@@ -75,6 +77,8 @@ def default_case_toml() -> str:
         "# `python -m railvib_hpc.docs`. The thesis's band instead of its mode count:",
         "# --set modal.f_max=57.87 (all modes below 57.87 Hz; see docs/thesis.md).",
         "# Units are SI (m, kg, s, N, Pa). Building coordinates are relative to (xbb, ybb, zbb).",
+        "# Keys commented out are derived from others (docs/sites.md); giving one is allowed",
+        "# when it agrees.",
         "",
     ]
 
@@ -85,8 +89,9 @@ def default_case_toml() -> str:
             for k, p in leaves:
                 unit = "" if p.unit == "-" else f" [{p.unit}]"
                 src = source(f"{path}.{k}")
-                lines.append(f"{k} = {_fmt(p.default)}  # {p.doc}{unit}"
-                             + (f" (source: {src})" if src else ""))
+                lines.append(("# " if p.derived else "") + f"{k} = {_fmt(p.default)}  # "
+                             + (f"derived: {p.derived}; " if p.derived else "")
+                             + f"{p.doc}{unit}" + (f" (source: {src})" if src else ""))
             lines.append("")
         for k, v in tree.items():
             if not isinstance(v, Param):

@@ -59,6 +59,10 @@ class Param:
         shown in the case reference; ``""`` for the numerical settings of this program
         (solver tolerances, output steps...). A preset's values carry their own
         (:data:`PRESET_SOURCES`).
+    derived
+        How the value follows from other keys when the case does not give it (``""``: it
+        does not; :func:`railvib_hpc.site.derive_keys` computes it; a given value must
+        agree). The baseline case lists such a key commented out.
     """
 
     default: Any
@@ -70,6 +74,7 @@ class Param:
     unique: bool = False
     maximum: float | None = None
     source: str = ""
+    derived: str = ""
 
 
 _APDL = "thesis App. A (APDL)"
@@ -205,16 +210,36 @@ SOIL_LAYER_KEYS: dict[str, tuple[bool, str]] = {
     "damping_ratio": (False, "damping ratio (0 <= x < 1; default 0.03), used by "
                              "modal.damping = 'strain_energy' and damping.model = 'per_material'"),
 }
+#: Sides of the track a probe line may run to (``[[probes.line]]``, ``side``).
+PROBE_LINE_SIDES = ("building", "away")
+#: Keys of one ``[[probes.line]]`` entry: (required, meaning).
+PROBE_LINE_KEYS: dict[str, tuple[bool, str]] = {
+    "name": (True, "name of the line (letters, digits and _.+-); its points are the probes "
+                   "<name>_<d>m"),
+    "distances": (True, "distances in m from the centreline of track 1, across the track, "
+                        "on the ground surface (a non-empty list of distinct numbers > 0)"),
+    "side": (False, "side of the track: 'building' (default: towards the building, y < 0) or "
+                    "'away' (y > 0)"),
+    "x": (False, "position along the track in m (default: the middle of the flexible track, "
+                 "geometry.x1 + track.rail_length / 2)"),
+}
 #: Foundations of the building (``building.foundation``).
 FOUNDATION_TYPES = ("pad", "strip", "raft")
 BEAM_PARTS = ("rail", "rigid_rail", "sleeper")
 PAD_PARTS = ("pad_x", "pad_y", "pad_z")
+#: Groups of parts that ``transient.implicit_parts`` may name (the IMEX engine's implicit
+#: partition): the track's beams and springs, the building and its base isolation.
+IMPLICIT_GROUPS: dict[str, tuple[str, ...]] = {
+    "track": (*BEAM_PARTS, *PAD_PARTS, *INTERFACE_PARTS["usp"], *INTERFACE_PARTS["ballast_mat"]),
+    "building": (*BUILDING_PARTS, *INTERFACE_PARTS["isolation"]),
+}
 PART_ID = {name: i + 1 for i, name in enumerate(PARTS)}
 #: Roles of probe points, carried as metadata from where a probe is defined (the mesh
 #: layout's named probes, ``output.probe_roles`` for the user's): ``floor`` a floor slab
 #: (DIN 4150-3 floor limit), ``wall`` a building wall, ``foundation`` a footing or
-#: foundation, ``ground`` the ground surface.
-PROBE_ROLES = ("floor", "wall", "foundation", "ground")
+#: foundation, ``ground`` the ground surface, ``free_field`` a point of a probe line
+#: (``[[probes.line]]``, :func:`railvib_hpc.site.line_probes`) on the ground.
+PROBE_ROLES = ("floor", "wall", "foundation", "ground", "free_field")
 #: Role of a user probe without one.
 DEFAULT_PROBE_ROLE = "ground"
 #: Conditions of a truncation face of the soil box (``[boundary]``).
@@ -240,12 +265,43 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "solved, Appendix A) or 'table1' (the thesis's Table I)",
                         choices=("apdl", "table1")),
     },
+    # The site as an engineer gives it (docs/sites.md): each key 0 = not given; a given one
+    # computes the geometry keys it names (railvib_hpc.site.derive_keys), and a case that
+    # also gives one of those with another value is refused.
+    "site": {
+        "building_distance": Param(
+            0.0, "float", "m",
+            "distance from the centreline of track 1 to the building's near face; sets "
+            "geometry.ys2 = -distance and moves ys3, ybb, ys4 with it (0: not given)",
+            "nonneg"),
+        "building_width": Param(
+            0.0, "float", "m",
+            "building plan across the track, near face to far face; sets geometry.ys3, ybb "
+            "and ys4 (the soil beyond the building stays 12 m wide: more with "
+            "domain.extra_width) (0: not given)", "nonneg"),
+        "building_length": Param(
+            0.0, "float", "m",
+            "building plan along the track; sets geometry.x2, x3 and xbb about the building's "
+            "centre (the middle of the track with site.track_length), its start on a sleeper "
+            "(0: not given)", "nonneg"),
+        "track_length": Param(
+            0.0, "float", "m",
+            "length of the flexible track (and of the soil along it), a whole number of "
+            "sleeper bays; sets track.rail_length, geometry.x4 and centres the building along "
+            "it (geometry.x2, x3, xbb) (0: not given)", "nonneg"),
+        "soil_depth": Param(
+            0.0, "float", "m",
+            "depth of the soil below the ground level (geometry.z1) down to the base; sets "
+            "domain.extra_depth (deeper than Z1 - Z0) or geometry.z0 (shallower) (0: not "
+            "given)", "nonneg"),
+    },
     "geometry": {
         "x0": _apdl_coordinate("X0", 0.0, "start of the first rigid rail"),
         "x1": _apdl_coordinate("X1", 3.0, "start of the flexible rail and of the soil"),
         "x2": _apdl_coordinate("X2", 12.6, "building (and its excavation) starts"),
         "x3": _apdl_coordinate("X3", 19.8, "building ends"),
-        "x4": _apdl_coordinate("X4", 24.6, "end of the flexible rail and of the soil"),
+        "x4": Param(24.6, "float", "m", "X4: end of the flexible rail and of the soil",
+                    source=f"{_APDL}: X4=24.6", derived="geometry.x1 + track.rail_length"),
         "ys0": Param(8.25, "float", "m", "YS0: soil edge on the side away from the building",
                      source=f"{_APDL}: YSO=8.25"),
         "ys1": _apdl_coordinate("YS1", -4.25,
@@ -258,8 +314,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "z2": _apdl_coordinate("Z2", 5.3, "top of the subballast"),
         "z3": _apdl_coordinate("Z3", 5.8, "top of the ballast = sleeper axis"),
         "z4": _apdl_coordinate("Z4", 6.00424, "rail axis height"),
-        "xbb": _apdl_coordinate("XBB", 16.2, "x of the building base point (centre of its plan)"),
-        "ybb": _apdl_coordinate("YBB", -13.5, "y of the building base point (centre of its plan)"),
+        "xbb": Param(16.2, "float", "m", "XBB: x of the building base point (centre of its plan)",
+                     source=f"{_APDL}: XBB=16.2", derived="(geometry.x2 + geometry.x3) / 2"),
+        "ybb": Param(-13.5, "float", "m", "YBB: y of the building base point (centre of its plan)",
+                     source=f"{_APDL}: YBB=-13.5", derived="(geometry.ys2 + geometry.ys3) / 2"),
         "zbb": _apdl_coordinate("ZBB", 2.4, "z of the building base (underside of footings)"),
         "ballast_top_half_width": Param(3.25, "float", "m",
                                         "half-width of the ballast crest (top of the shoulder)",
@@ -278,7 +336,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "sleeper_spacing": Param(0.6, "float", "m", "distance between sleepers", "pos",
                                  source=f"{_APDL}: Distance_betw_sleepers=0.6; {_T1}"),
         "n_sleepers": Param(37, "int", "-", "number of sleepers (first at X1, last at X4)", "pos",
-                            source=f"{_APDL}: No_sleeper_div_total=36 (+1)"),
+                            source=f"{_APDL}: No_sleeper_div_total=36 (+1)",
+                            derived="track.rail_length / track.sleeper_spacing + 1"),
         "sleeper_length": Param(2.5, "float", "m", "sleeper length across the track", "pos",
                                 source=f"{_APDL}: K,...,Rigid,+-1.25,Z3; {_T1}"),
         "embankment_height": Param(0.0, "float", "m",
@@ -465,6 +524,19 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                              "consistent mass is (k h)^2 / 24: 4.6 % at 6, "
                                              "1.6 % at 10)",
                                              "pos"),
+        "max_dispersion_error": Param(0.0, "float", "-",
+                                      "with mesh.wavelength_hz > 0: the largest predicted "
+                                      "peak-velocity error at the farthest probe (numerical "
+                                      "dispersion of the soil grid over the distance from the "
+                                      "track, a conservative bound) the mesh stage accepts, "
+                                      "e.g. 0.05; 0: no limit. The prediction is reported, "
+                                      "warned about above 5 %, and a band the mesh cannot "
+                                      "resolve there (the wave half a period off) is refused "
+                                      "whatever this value",
+                                      "unit",
+                                      source="issue 28, item 2: accuracy that holds over "
+                                             "distance (docs/transient.md, numerical "
+                                             "dispersion)"),
     },
     "soil": {
         "layers": Param([], "layers", "-",
@@ -886,9 +958,22 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "alpha, one MUMPS factor of K_eff: unconditionally stable, memory "
                         "~n^(4/3)) or 'explicit' (central differences with the lumped mass: "
                         "memory and work per step linear in the DOFs, the step limited by the "
-                        "largest natural frequency; needs modal.lumped_mass = true)",
-                        choices=("direct", "explicit"),
+                        "largest natural frequency; needs modal.lumped_mass = true) or "
+                        "'imex' (implicit-explicit, Hughes & Liu 1978: the elements of "
+                        "transient.implicit_parts by the trapezoidal rule with one small "
+                        "MUMPS factor, the rest (the soil) explicit with the lumped mass: the "
+                        "step limited by the soil's elements only; needs modal.lumped_mass = "
+                        "true)",
+                        choices=("direct", "explicit", "imex"),
                         source="issue 28: an engine whose memory and cost grow linearly"),
+        "implicit_parts": Param(["track", "building"], "strs", "-",
+                                "transient.engine = 'imex': the parts integrated implicitly "
+                                "(part names, or the groups 'track' = rails, sleepers, pads, "
+                                "under-sleeper pads, ballast mats and 'building' = the "
+                                "building's parts and its base isolation); every other "
+                                "element is explicit and sets the stable step",
+                                source="issue 28: the stiff, small track and building "
+                                       "implicit, the soil explicit"),
         "checkpoint_interval": Param(120.0, "float", "s",
                                      "wall-clock time between checkpoints of the state (an "
                                      "interrupted run resumes from the last one; 0: none)",
@@ -918,6 +1003,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                          "and stresses corrected, velocities and accelerations "
                                          "from the modes (R g'' carries the node-to-node "
                                          "stepping of the moving load far above the modal band)"),
+    },
+    "probes": {
+        "line": Param([], "probe_lines", "-",
+                      "free-field probe lines as [[probes.line]] tables with name, distances, "
+                      "side and x (docs/sites.md): each distance is a probe <name>_<d>m of role "
+                      "free_field on the ground, assessed by PPV, the largest 1 s running RMS "
+                      "and the one-third-octave velocity spectrum; [] = none"),
     },
     "assessment": {
         "standards": Param(list(STANDARDS), "strs", "-",

@@ -4,18 +4,21 @@ Functions of a validated case that the mesh, the stages and the case checks
 (:mod:`railvib_hpc.validation`) share: the soil layers' levels and moduli, the
 embankment's lift and toe, the building's plan turned by whole quarter turns and the
 twist of the soil round it, the slab levels, the second train's vehicle and each solid
-part's material. They read the case with ``case[key]`` only (duck-typed: anything
-indexed like a :class:`~railvib_hpc.config.Case` serves), so this module imports no
-case module.
+part's material; the keys a case need not give (:func:`derive_keys`: what ``[site]``
+sets, X4, the sleepers and the building's centre) and the points of its probe lines
+(:func:`line_probes`, :func:`line_ranges`). They read the case with ``case[key]`` only
+(duck-typed: anything indexed like a :class:`~railvib_hpc.config.Case` serves), so this
+module imports no case module.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from .schema import MAX_ROTATION_DEG, SOIL_LAYER_PARTS
+from .schema import MAX_ROTATION_DEG, SOIL_LAYER_PARTS, iter_params
 
 if TYPE_CHECKING:
     from .config import Case
@@ -246,3 +249,326 @@ def solid_material(case: Case, name: str) -> dict[str, float]:
             raise KeyError(f"{name}: the case gives {len(layers)} soil layer(s)")
         return {key: layers[k][key] for key in ("E", "nu", "rho", "damping_ratio")}
     return case[f"materials.{name}"]
+
+
+# --------------------------------------------------------------------------------------
+# the keys a case need not give: the site keys and the derived geometry keys
+
+#: Decimals to which computed lengths are rounded (1 nm, far below the 0.1 um within
+#: which the layouts merge lines): X1 + 21.6 is then the APDL script's X4 = 24.6 exactly.
+DERIVED_DECIMALS = 9
+#: The keys each ``[site]`` key sets (docs/sites.md); a case giving one of them with another
+#: value is refused.
+SITE_SETS: dict[str, tuple[str, ...]] = {
+    "site.building_distance": ("geometry.ys2", "geometry.ys3", "geometry.ybb", "geometry.ys4"),
+    "site.building_width": ("geometry.ys3", "geometry.ybb", "geometry.ys4"),
+    "site.building_length": ("geometry.x2", "geometry.x3", "geometry.xbb"),
+    "site.track_length": ("track.rail_length", "geometry.x4", "geometry.x2", "geometry.x3",
+                          "geometry.xbb"),
+    "site.soil_depth": ("geometry.z0", "domain.extra_depth"),
+}
+_DEFAULTS = {key: param.default for key, param in iter_params()}
+
+Problem = tuple[str, Any, str]
+
+
+def _round(x: float) -> float:
+    return round(float(x), DERIVED_DECIMALS)
+
+
+def _close(a: float, b: float, tol: float = 1e-6) -> bool:
+    return abs(a - b) <= tol * max(1.0, abs(a), abs(b))
+
+
+def _site_y(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[dict, list]:
+    """ys2, ys3, ybb, ys4 of ``site.building_distance`` / ``building_width``."""
+    out: dict[str, float] = {}
+    problems: list[Problem] = []
+    dist, width = active.get("site.building_distance"), active.get("site.building_width")
+    if dist is None and width is None:
+        return out, problems
+    ys2 = -dist if dist is not None else base("geometry.ys2")
+    if width is None:
+        width = base("geometry.ys2") - base("geometry.ys3")
+    margin = base("geometry.ys3") - base("geometry.ys4")
+    toe = embankment_toe(values)
+    if dist is not None and not dist > toe:
+        problems.append(("site.building_distance", dist,
+                         f"must be > {toe:g} m, the embankment toe (|geometry.ys1| + "
+                         "track.embankment_slope x track.embankment_height): the building "
+                         "stands beside the embankment"))
+    if dist is not None:
+        out["geometry.ys2"] = _round(ys2)
+    out.update({"geometry.ys3": _round(ys2 - width), "geometry.ybb": _round(ys2 - width / 2),
+                "geometry.ys4": _round(ys2 - width - margin)})
+    return out, problems
+
+
+def _site_x(values: Mapping[str, Any], active: dict[str, float], base,
+            rail_length: float) -> tuple[dict, list]:
+    """x2, x3, xbb of ``site.building_length`` / ``track_length`` (the building centred on
+    the track with the latter), its start on a sleeper."""
+    out: dict[str, float] = {}
+    track, length = active.get("site.track_length"), active.get("site.building_length")
+    if track is None and length is None:
+        return out, []
+    x1, sp = values["geometry.x1"], values["track.sleeper_spacing"]
+    if length is None:
+        length = base("geometry.x3") - base("geometry.x2")
+    centre = x1 + rail_length / 2 if track is not None else base("geometry.xbb")
+    x2 = x1 + sp * round((centre - length / 2 - x1) / sp)
+    out = {"geometry.x2": _round(x2), "geometry.x3": _round(x2 + length),
+           "geometry.xbb": _round(x2 + length / 2)}
+    if not (x2 > x1 and x2 + length < x1 + rail_length):
+        key = "site.track_length" if track is not None else "site.building_length"
+        return out, [(key, active[key],
+                      f"the building ({length:g} m long, its start on a sleeper) must lie "
+                      f"beside the flexible track of {rail_length:g} m, inside the soil: "
+                      f"give site.track_length >= {length + 2 * sp:g} m or a shorter "
+                      "building")]
+    return out, []
+
+
+def _site_z(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[dict, list]:
+    """z0 and ``domain.extra_depth`` of ``site.soil_depth`` (the reflection study's rule:
+    deeper than Z1 - Z0 adds extra depth, shallower raises the base)."""
+    depth = active.get("site.soil_depth")
+    if depth is None:
+        return {}, []
+    z1, z0 = values["geometry.z1"], base("geometry.z0")
+    out = ({"geometry.z0": z0, "domain.extra_depth": _round(depth - (z1 - z0))}
+           if depth >= z1 - z0 else {"geometry.z0": _round(z1 - depth), "domain.extra_depth": 0.0})
+    basement = z1 - values["geometry.zbb"]
+    if not depth > basement:
+        return out, [("site.soil_depth", depth,
+                      f"must be > {basement:g} m, the depth of the building's base below the "
+                      "ground (geometry.z1 - geometry.zbb)")]
+    return out, []
+
+
+def derive_keys(values: Mapping[str, Any], given: Collection[str]
+                ) -> tuple[dict[str, Any], list[Problem]]:
+    """The values of the keys a case need not give: what its ``[site]`` keys set
+    (:data:`SITE_SETS`), and the derived keys it leaves out (:attr:`Param.derived
+    <railvib_hpc.schema.Param>`: X4 from the rail length, or the rail length from X4; the
+    sleepers; the building's centre).
+
+    Parameters
+    ----------
+    values
+        The flat case (``{dotted key: value}``: defaults, preset and the given entries,
+        type-checked).
+    given
+        The keys the case gives.
+
+    Returns
+    -------
+    derived : dict
+        ``{key: value}`` to set (lengths rounded to :data:`DERIVED_DECIMALS`).
+    problems : list
+        A given key that a site key sets to another value (one line naming both), and site
+        keys the site cannot take.
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import defaults
+    >>> from railvib_hpc.io.products import flat_case
+    >>> flat = flat_case(defaults())
+    >>> derive_keys({**flat, "track.rail_length": 30.0}, {"track.rail_length"})[0]
+    {'geometry.x4': 33.0, 'track.n_sleepers': 51, 'geometry.xbb': 16.2, 'geometry.ybb': -13.5}
+    >>> flat["site.building_distance"] = 12.0
+    >>> derive_keys(flat, {"site.building_distance", "geometry.ys2"})[1]  # doctest: +ELLIPSIS
+    [('geometry.ys2', -9.9, 'site.building_distance = 12 m sets it to -12: ...')]
+    """
+    active = {s: float(values[s]) for s in SITE_SETS if values[s] > 0}
+    set_by: dict[str, str] = {}
+    for s in active:
+        for key in SITE_SETS[s]:
+            set_by.setdefault(key, s)
+
+    def base(key: str) -> float:                  # what a site key starts from
+        return _DEFAULTS[key] if key in set_by else values[key]
+
+    x1 = values["geometry.x1"]
+    if "site.track_length" in active:
+        rail = active["site.track_length"]
+    elif "geometry.x4" in given and "track.rail_length" not in given:
+        rail = values["geometry.x4"] - x1
+    else:
+        rail = values["track.rail_length"]
+    out: dict[str, Any] = {}
+    problems: list[Problem] = []
+    sp = values["track.sleeper_spacing"]
+    if "site.track_length" in active:
+        bays = rail / sp
+        if abs(bays - round(bays)) > 1e-6:
+            lo, hi = math.floor(bays) * sp, math.ceil(bays) * sp
+            problems.append(("site.track_length", rail,
+                             f"must be a whole number of sleeper bays (track.sleeper_spacing "
+                             f"= {sp:g} m), e.g. {_round(lo):g} or {_round(hi):g} m"))
+        out["track.rail_length"] = rail
+    for part in (_site_y(values, active, base), _site_x(values, active, base, rail),
+                 _site_z(values, active, base)):
+        out.update(part[0])
+        problems.extend(part[1])
+    if "track.rail_length" not in given and "track.rail_length" not in out:
+        out["track.rail_length"] = _round(rail)
+    if "geometry.x4" not in given or "geometry.x4" in set_by:
+        out["geometry.x4"] = _round(x1 + rail)
+    if "track.n_sleepers" not in given:
+        out["track.n_sleepers"] = int(round(rail / sp)) + 1
+    now = {**values, **out}
+    for key, pair in (("geometry.xbb", ("geometry.x2", "geometry.x3")),
+                      ("geometry.ybb", ("geometry.ys2", "geometry.ys3"))):
+        if key not in given and key not in out:
+            out[key] = _round(0.5 * (now[pair[0]] + now[pair[1]]))
+    for key, s in set_by.items():
+        if key in given and key in out and not _close(values[key], out[key]):
+            problems.append((key, values[key], f"{s} = {active[s]:g} m sets it to "
+                             f"{out[key]:g}: give one of them (docs/sites.md)"))
+    return {k: v for k, v in out.items() if k not in given or k in set_by}, problems
+
+
+# --------------------------------------------------------------------------------------
+# probe lines ([[probes.line]]): free-field points on the ground
+
+
+@dataclass(frozen=True)
+class LineProbe:
+    """One point of a probe line: a probe of role ``free_field`` on the ground.
+
+    Attributes
+    ----------
+    name
+        ``<line>_<d>m`` (:func:`line_probe_name`).
+    line
+        The line's name.
+    distance
+        From the centreline of track 1, across the track [m].
+    side
+        ``"building"`` (y = -distance) or ``"away"`` (y = +distance).
+    point
+        ``(x, y, z)``, z the ground level ``geometry.z1`` [m].
+    """
+
+    name: str
+    line: str
+    distance: float
+    side: str
+    point: tuple[float, float, float]
+
+
+def line_probe_name(line: str, distance: float) -> str:
+    """The probe name of a line's point: ``<line>_<d>m``, d in :func:`format` ``g``.
+
+    Examples
+    --------
+    >>> line_probe_name("ff", 10.0), line_probe_name("ff", 12.5)
+    ('ff_10m', 'ff_12.5m')
+    """
+    return f"{line}_{distance:g}m"
+
+
+def line_x(case: Case, entry: Mapping[str, Any]) -> float:
+    """The position of a probe line along the track: its ``x``, or the middle of the
+    flexible track."""
+    if "x" in entry:
+        return float(entry["x"])
+    return case["geometry.x1"] + 0.5 * case["track.rail_length"]
+
+
+def line_probes(case: Case) -> dict[str, LineProbe]:
+    """The points of every ``[[probes.line]]`` of a validated case, by probe name, in the
+    order of the lines and their distances."""
+    out = {}
+    z = case["geometry.z1"]
+    for entry in case["probes.line"]:
+        x, sign = line_x(case, entry), (-1.0 if entry["side"] == "building" else 1.0)
+        for d in entry["distances"]:
+            name = line_probe_name(entry["name"], d)
+            out[name] = LineProbe(name, entry["name"], float(d), entry["side"],
+                                  (x, sign * float(d), z))
+    return out
+
+
+def _footprint(case: Case, x: float) -> tuple[float, float] | None:
+    """The open interval of distances (building side, y = -d) where the line at ``x`` runs
+    through the building's plan ``[X2, X3] x [YS3, YS2]`` turned by ``building.rotation``
+    about its centre; None where it passes by."""
+    g = case["geometry"]
+    cx, cy = 0.5 * (g["x2"] + g["x3"]), 0.5 * (g["ys2"] + g["ys3"])
+    hx, hy = 0.5 * (g["x3"] - g["x2"]), 0.5 * (g["ys2"] - g["ys3"])
+    th = math.radians(case["building.rotation"])
+    c, s = math.cos(th), math.sin(th)
+    lo, hi = -math.inf, math.inf
+    # the point (x, -d) in the building's own frame: q = R(-th) (p - centre), affine in d
+    for a, b, h in ((c * (x - cx) - s * cy, -s, hx), (-s * (x - cx) - c * cy, -c, hy)):
+        if abs(b) < 1e-12:
+            if not abs(a) < h:
+                return None
+            continue
+        d0, d1 = sorted(((-h - a) / b, (h - a) / b))
+        lo, hi = max(lo, d0), min(hi, d1)
+    return (lo, hi) if lo < hi else None
+
+
+def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:
+    """The distances [m] a probe line at ``x`` may reach on ``side``: closed intervals of
+    the ground between the embankment toe and the soil's edge, without the building's plan
+    and an open trench (building side).
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case
+    >>> line_ranges(Case.defaults(), 13.8, "building")
+    [(4.25, 9.9), (17.1, 29.1)]
+    >>> line_ranges(Case.defaults(), 5.0, "away")
+    [(4.25, 8.25)]
+    """
+    if side == "away":
+        near = (case["track.spacing"] if case["track.count"] == 2 else 0.0) \
+            + embankment_toe(case)
+        return [(near, case["geometry.ys0"])] if near < case["geometry.ys0"] else []
+    out = [(embankment_toe(case), -(case["geometry.ys4"] - case["domain.extra_width"]))]
+    tr = case["trench"]
+    holes = [_footprint(case, x)]
+    if tr["type"] == "open" and tr["width"] > 0:
+        holes.append((tr["distance"], tr["distance"] + tr["width"]))
+    for hole in holes:
+        if hole is None:
+            continue
+        out = [piece for lo, hi in out for piece in ((lo, min(hi, hole[0])),
+                                                      (max(lo, hole[1]), hi))
+               if piece[0] < piece[1]]
+    return [(_round(lo), _round(hi)) for lo, hi in out]
+
+
+def site_lines(case: Case) -> list[str]:
+    """What ``railvib check`` says of the ``[site]`` keys given (and the geometry they set)
+    and of the probe lines.
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case
+    >>> case = Case.defaults().replace({"site.building_distance": 15.0, "probes.line": [
+    ...     {"name": "ff", "distances": [5.0, 30.0]}]})
+    >>> for line in site_lines(case):
+    ...     print(line)  # doctest: +NORMALIZE_WHITESPACE
+    site: building_distance 15 m -> ys2 -15, ys3 -22.2, ybb -18.6, ys4 -34.2 m
+    probe line ff: 2 free-field points 5-30 m from track 1 (building side) at x = 13.8 m:
+    ff_5m, ff_30m
+    """
+    out = []
+    given = [s for s in SITE_SETS if case[s] > 0]
+    if given:
+        keys = list(dict.fromkeys(k for s in given for k in SITE_SETS[s]))
+        out.append("site: " + ", ".join(f"{s.split('.')[1]} {case[s]:g}" for s in given)
+                   + " m -> " + ", ".join(f"{k.split('.')[1]} {case[k]:g}" for k in keys)
+                   + " m")
+    for entry in case["probes.line"]:
+        d = entry["distances"]
+        names = [line_probe_name(entry["name"], v) for v in d]
+        out.append(f"probe line {entry['name']}: {len(d)} free-field points {min(d):g}-"
+                   f"{max(d):g} m from track 1 ({entry['side']} side) at x = "
+                   f"{line_x(case, entry):g} m: {', '.join(names)}")
+    return out

@@ -17,9 +17,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .schema import (
+    IMPLICIT_GROUPS,
     MAX_ROTATION_DEG,
     MAX_SOIL_LAYERS,
     MIN_SOIL_LAYER_THICKNESS,
+    PARTS,
+    PROBE_LINE_KEYS,
+    PROBE_LINE_SIDES,
     SOIL_LAYER_KEYS,
     Param,
     iter_params,
@@ -28,6 +32,9 @@ from .site import (
     MAX_TWIST_SHEAR,
     building_turn,
     embankment_toe,
+    line_probe_name,
+    line_ranges,
+    line_x,
     placed_plan,
     quarter_turns,
     slab_bases,
@@ -208,6 +215,94 @@ def _check_layers(key: str, value: Any, problems: list) -> Any:
     return value if len(problems) > n_before else out
 
 
+def _check_probe_line(where: str, entry: dict, problems: list) -> dict:
+    """One ``[[probes.line]]`` table: its keys, types and ranges; the entry with floats and
+    ``side`` filled in."""
+    out: dict[str, Any] = {}
+    for name in sorted(set(entry) - set(PROBE_LINE_KEYS)):
+        problems.append((f"{where}.{name}", entry[name],
+                         "unknown key; allowed: " + ", ".join(PROBE_LINE_KEYS)))
+    for name, (required, meaning) in PROBE_LINE_KEYS.items():
+        if required and name not in entry:
+            problems.append((f"{where}.{name}", None, f"missing ({meaning})"))
+    if "name" in entry:
+        if not isinstance(entry["name"], str) or not _NAME.match(entry["name"]):
+            problems.append((f"{where}.name", entry["name"], PROBE_LINE_KEYS["name"][1]))
+        out["name"] = entry["name"]
+    if "distances" in entry:
+        d = entry["distances"]
+        if not isinstance(d, list) or not d or not all(_number(v) and v > 0 for v in d) \
+                or len(set(d)) != len(d):
+            problems.append((f"{where}.distances", d, PROBE_LINE_KEYS["distances"][1]))
+        else:
+            out["distances"] = [float(v) for v in d]
+    if "side" in entry and entry["side"] not in PROBE_LINE_SIDES:
+        problems.append((f"{where}.side", entry["side"], "allowed values: "
+                         + ", ".join(map(repr, PROBE_LINE_SIDES))))
+    out["side"] = entry.get("side", PROBE_LINE_SIDES[0])
+    if "x" in entry:
+        if not _number(entry["x"]):
+            problems.append((f"{where}.x", entry["x"],
+                             f"expected a number: {PROBE_LINE_KEYS['x'][1]}"))
+        else:
+            out["x"] = float(entry["x"])
+    return out
+
+
+def _check_probe_lines(key: str, value: Any, problems: list) -> Any:
+    """The ``probe_lines`` kind: a list of tables (:data:`~railvib_hpc.schema.PROBE_LINE_KEYS`)
+    with distinct names; where the points lie is :func:`_check_line_points`'s."""
+    if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+        problems.append((key, value, "expected a list of tables ([[probes.line]] with "
+                         + ", ".join(PROBE_LINE_KEYS) + ")"))
+        return value
+    n_before = len(problems)
+    out = [_check_probe_line(f"{key}[{k + 1}]", entry, problems)
+           for k, entry in enumerate(value)]
+    names = [e.get("name") for e in out]
+    for k, name in enumerate(names):
+        if name is not None and name in names[:k]:
+            problems.append((f"{key}[{k + 1}].name", name, "must differ from the names of the "
+                             "lines before it"))
+    return value if len(problems) > n_before else out
+
+
+def _check_line_points(case: Case) -> list[tuple[str, Any, str]]:
+    """Every point of a probe line on the ground of the model: along the soil, between
+    the embankment and the soil's edge, outside the building and an open trench
+    (:func:`railvib_hpc.site.line_ranges`); distinct probe names."""
+    out: list[tuple[str, Any, str]] = []
+    g, d = case["geometry"], case["domain"]
+    x_lo, x_hi = g["x1"] - d["extra_length"], g["x4"] + d["extra_length"]
+    seen: set[str] = set()
+    for k, entry in enumerate(case["probes.line"]):
+        where = f"probes.line[{k + 1}]"
+        x = line_x(case, entry)
+        if not x_lo <= x <= x_hi:
+            out.append((f"{where}.x", x, f"must lie along the soil, {x_lo:g} to {x_hi:g} m "
+                        "(geometry.x1 - domain.extra_length to geometry.x4 + "
+                        "domain.extra_length)"))
+            continue
+        ranges = line_ranges(case, x, entry["side"])
+        bad = [v for v in entry["distances"]
+               if not any(lo - 1e-9 <= v <= hi + 1e-9 for lo, hi in ranges)]
+        if bad:
+            allowed = " or ".join(f"{lo:g} to {hi:g} m" for lo, hi in ranges) or "none"
+            out.append((f"{where}.distances", bad[0] if len(bad) == 1 else bad,
+                        f"outside the soil's ground on the {entry['side']} side at x = {x:g} "
+                        f"m: allowed {allowed} from the centreline of track 1 (the ground "
+                        "between the embankment toe and the soil's edge, outside the "
+                        "building's plan and an open trench)"))
+        names = [line_probe_name(entry["name"], v) for v in entry["distances"]]
+        clash = sorted({n for n in names if n in seen or names.count(n) > 1})
+        if clash:
+            out.append((f"{where}.distances", entry["distances"],
+                        f"the probe names {clash} occur twice: give distances (or line "
+                        "names) that differ in their first 6 digits"))
+        seen.update(names)
+    return out
+
+
 def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
     """Type-check and convert one value; append problems; return the converted value.
 
@@ -220,6 +315,8 @@ def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
         return _check_list(key, param, value, problems)
     if kind == "layers":
         return _check_layers(key, value, problems)
+    if kind == "probe_lines":
+        return _check_probe_lines(key, value, problems)
     if kind == "vehicle":
         return _check_vehicle_table(key, param, value, problems)
     if kind == "float":
@@ -290,15 +387,17 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must equal X1 - X0 = {g['x1'] - g['x0']:g} m"))
     if not _close(g["x4"] - g["x1"], t["rail_length"]):
         out.append(("track.rail_length", t["rail_length"],
-                    f"must equal X4 - X1 = {g['x4'] - g['x1']:g} m (the soil spans the "
-                    "flexible rail)"))
+                    f"must equal geometry.x4 - x1 = {g['x4'] - g['x1']:g} m (the soil spans "
+                    "the flexible rail): give one of track.rail_length and geometry.x4, the "
+                    "other follows"))
     nbays = t["rail_length"] / t["sleeper_spacing"]
     if abs(nbays - round(nbays)) > 1e-6:
         out.append(("track.sleeper_spacing", t["sleeper_spacing"],
                     f"must divide the flexible rail length {t['rail_length']:g} m into whole bays"))
     elif t["n_sleepers"] != round(nbays) + 1:
         out.append(("track.n_sleepers", t["n_sleepers"],
-                    f"must be rail_length / sleeper_spacing + 1 = {round(nbays) + 1}"))
+                    f"must be rail_length / sleeper_spacing + 1 = {round(nbays) + 1} (it is "
+                    "derived: leave it out)"))
     half_sleeper = t["sleeper_length"] / 2
     if not t["gauge"] / 2 < half_sleeper:
         out.append(("track.gauge", t["gauge"],
@@ -320,10 +419,12 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
         out.append(("geometry.xbb", g["xbb"],
-                    f"must be the centre of [X2, X3] = {0.5 * (g['x2'] + g['x3']):g} m"))
+                    f"must be the centre of [X2, X3] = {0.5 * (g['x2'] + g['x3']):g} m (it is "
+                    "derived: leave it out)"))
     if not _close(g["ybb"], 0.5 * (g["ys2"] + g["ys3"])):
         out.append(("geometry.ybb", g["ybb"],
-                    f"must be the centre of [YS3, YS2] = {0.5 * (g['ys2'] + g['ys3']):g} m"))
+                    f"must be the centre of [YS3, YS2] = {0.5 * (g['ys2'] + g['ys3']):g} m (it "
+                    "is derived: leave it out)"))
     if not g["z0"] < g["zbb"] < g["z1"]:
         out.append(("geometry.zbb", g["zbb"],
                     f"the building base must lie inside the subgrade: Z0 = {g['z0']:g} < ZBB < "
@@ -379,6 +480,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_dynamics(case))
     out.extend(_check_soil(case))
     out.extend(_check_measures(case))
+    out.extend(_check_line_points(case))
     return out
 
 
@@ -721,10 +823,15 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("transient.dt", tr["dt"],
                         f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
                         "automatic)"))
-    if tr["engine"] == "explicit" and not case["modal.lumped_mass"]:
+    if tr["engine"] in ("explicit", "imex") and not case["modal.lumped_mass"]:
         out.append(("transient.engine", tr["engine"],
                     "needs a diagonal mass: set modal.lumped_mass = true (or use "
                     "transient.engine = \"direct\")"))
+    unknown = [p for p in tr["implicit_parts"] if p not in IMPLICIT_GROUPS and p not in PARTS]
+    if unknown:
+        out.append(("transient.implicit_parts", unknown[0],
+                    "must be a part name or one of the groups "
+                    + ", ".join(IMPLICIT_GROUPS) + " (parts: " + ", ".join(PARTS) + ")"))
     return out
 
 

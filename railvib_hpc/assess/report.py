@@ -372,7 +372,8 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
                  histories: Mapping[str, Mapping[str, Any]],
                  contact: tuple[Any, Any] | None = None,
                  extra_figures: Sequence[Mapping[str, Any]] = (),
-                 extra_text: Sequence[tuple[str, str]] = ()) -> dict[str, Path]:
+                 extra_text: Sequence[tuple[str, str]] = (),
+                 extra_data: Mapping[str, Any] | None = None) -> dict[str, Path]:
     """Write the assessment report (markdown, HTML, PNG figures, JSON).
 
     Parameters
@@ -393,6 +394,8 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
         (relative path), ``title`` and ``data`` (JSON-serialisable).
     extra_text
         ``(title, preformatted text)`` sections added after the summary.
+    extra_data
+        Further JSON-serialisable entries of ``report.json`` (e.g. ``free_field``).
 
     Returns
     -------
@@ -482,7 +485,7 @@ def write_report(out_dir: str | os.PathLike, results: Mapping[str, Mapping[str, 
 
     # ---- json
     payload = {"schema": "railvib_hpc.assess.report/1", "results": results,
-               "table": table_txt, "figures": figures}
+               "table": table_txt, "figures": figures, **dict(extra_data or {})}
     text_json = json.dumps(_jsonable(payload), allow_nan=False, indent=1)
 
     paths = {"markdown": out / REPORT_MD, "html": out / REPORT_HTML,

@@ -54,7 +54,7 @@ from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
-from ..site import track_lift
+from ..site import line_probes, track_lift
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
 from .waves import wave_arrival, wave_speeds  # re-exported
 
@@ -238,6 +238,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     input file belongs to it.
     """
     from .floors import floor_summary, format_floor_table
+    from .free_field import format_free_field, free_field_summary
     from .report import write_report
     from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
@@ -295,18 +296,24 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
             ("Assessment per floor", format_floor_table(floors)),
             ("Comparison with the thesis", format_thesis_table(rows)),
             ("Wave arrivals", format_comparison(comparison, arrivals, c_p, c_s))]
+    free = free_field_summary(hist, line_probes(case))            # [[probes.line]]
+    if free:
+        text.insert(2, ("Free field (probe lines)", format_free_field(free)))
     files = write_report(out_dir, results, hist, None if x is None else (x, force),
-                         extra_figures=extra, extra_text=text)
+                         extra_figures=extra, extra_text=text,
+                         extra_data={"free_field": free} if free else None)
     summary = {"solver": solver, "results": results, "wave_speeds": {"c_P": c_p, "c_S": c_s},
                "wave_arrivals": arrivals, "thesis_comparison": comparison,
                "thesis_table": rows,
                "verdict": {k: v["passed"] for k, v in results.items()},
-               "floors": floors,
+               "floors": floors, "free_field": free,
                "report": {k: str(p) for k, p in files.items()}}
     write_json(out_dir / ASSESSMENT_JSON, json.loads(json.dumps(summary, default=float)),
                ctx.provenance(ASSESSMENT_JSON, upstream))
     rep.info(format_table(results))
     rep.info(format_floor_table(floors))
+    if free:
+        rep.info(format_free_field(free))
     rep.info(format_thesis_table(rows))
     rep.info(format_comparison(comparison, arrivals, c_p, c_s))
     rep.info(f"assessed the results of the {SOLVER_TEXT[solver]}")
@@ -423,9 +430,10 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
     return [f"model                {stats.get('n_nodes', 0):,} nodes, "
             f"{stats.get('n_dofs', 0):,} free DOFs, solved on {stats.get('ranks', '?')} rank(s)",
             f"solver               {SOLVER_TEXT['transient']}, "
-            + ("central differences (explicit), lumped mass, "
-               if stats.get("engine") == "explicit" else
-               f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, ")
+            + {"explicit": "central differences (explicit), lumped mass, ",
+               "imex": "implicit-explicit Newmark (track and building implicit, soil "
+                       "explicit), lumped mass, "}.get(
+                stats.get("engine"), f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, ")
             +
             f"dt {stats.get('dt', 0):.3e} s, {stats.get('n_steps', '?')} steps",
             f"boundaries           {faces}"

@@ -166,9 +166,11 @@ PERIODS = ("day", "night")
 FTA_EVENTS = ("frequent", "occasional", "infrequent")
 DIN4150_3_LOCATIONS = ("foundation", "floor", "top_floor")
 #: DIN 4150-3 location of a probe by its role (railvib_hpc.schema.PROBE_ROLES): floor slabs
-#: get the vertical floor limit; footings, walls and ground points the foundation limits.
+#: get the vertical floor limit; footings, walls and ground points (free-field points of the
+#: probe lines too) the foundation limits.
 DIN4150_3_LOCATION_OF_ROLE = {"floor": "floor", "wall": "foundation",
-                              "foundation": "foundation", "ground": "foundation"}
+                              "foundation": "foundation", "ground": "foundation",
+                              "free_field": "foundation"}
 VC_LOW_FREQUENCY = ("constant_acceleration", "flat")
 
 

@@ -32,9 +32,13 @@ __all__ = [
     "GAUSS_POINTS",
     "GAUSS_WEIGHTS",
     "HEX_CORNERS",
+    "HEX_CORNER_NEIGHBOURS",
+    "HEX_EDGES",
     "ElementGeometryError",
+    "element_batches",
     "hex_centre_gradients",
     "hex_centre_jacobians",
+    "hex_corner_determinants",
     "hex_gauss_geometry",
     "hex_shape_gradients",
     "hex_shape_values",
@@ -44,6 +48,28 @@ __all__ = [
 #: Reference coordinates of the 8 corners (gmsh/VTK order), shape (8, 3).
 HEX_CORNERS = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
                         [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
+
+#: For each corner, its three edge neighbours in right-handed order: the edge vectors to
+#: them span a positive volume at every corner of a valid (VTK-ordered) hexahedron.
+HEX_CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
+                                  [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
+#: The 12 edges of the hexahedron (corner pairs).
+HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
+                      [0, 4], [1, 5], [2, 6], [3, 7]])
+#: Elements per batch of the whole-mesh geometry checks (:func:`element_batches`): the
+#: coordinates of a batch, (batch, 8, 3) float64, are 3.1 MB and each temporary of a corner
+#: or edge loop 1.6 MB, so a check of any mesh size stays within a few tens of MB and in
+#: cache (measured on 2.7 M hexahedra: 2**14 to 2**17 within 10 % of each other).
+ELEMENT_BATCH = 2**14
+
+
+def element_batches(n: int, size: int = ELEMENT_BATCH):
+    """Slices ``[0:size], [size:2 size], ...`` covering ``range(n)``.
+
+    >>> [(s.start, s.stop) for s in element_batches(5, 2)]
+    [(0, 2), (2, 4), (4, 5)]
+    """
+    return (slice(k, min(k + size, n)) for k in range(0, n, size))
 
 
 class ElementGeometryError(ValueError):
@@ -146,6 +172,45 @@ def hex_volumes(x: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=float)
     J = np.matmul(_GAUSS_GRADIENTS_T[None], x[:, None])
     return np.linalg.det(J) @ GAUSS_WEIGHTS
+
+
+def hex_corner_determinants(x: np.ndarray, scaled: bool = False) -> np.ndarray:
+    """Determinants of the three edge vectors leaving each corner (towards
+    :data:`HEX_CORNER_NEIGHBOURS`), by the triple product; batched over elements.
+
+    Parameters
+    ----------
+    x
+        Nodal coordinates, shape (nel, 8, 3).
+    scaled
+        Normalise the edge vectors first: the corner's *scaled Jacobian* (1 at a
+        right-angled corner, <= 0 at an inverted one); a zero-length edge gives 0.
+
+    Returns
+    -------
+    ndarray, shape (nel, 8)
+        Positive at every corner of a valid element.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> cube = (HEX_CORNERS + 1.0)[None]                   # edge 2
+    >>> hex_corner_determinants(cube)[0].tolist() == [8.0] * 8
+    True
+    >>> float(hex_corner_determinants(cube[:, [4, 5, 6, 7, 0, 1, 2, 3]], True).min())
+    -1.0
+    """
+    x = np.asarray(x, dtype=float)
+    out = np.empty(x.shape[:1] + (8,))
+    for k, nbr in enumerate(HEX_CORNER_NEIGHBOURS):     # a loop over the 8 corners
+        a, b, c = (x[:, m] - x[:, k] for m in nbr)           # (nel, 3) each
+        if scaled:
+            a, b, c = (e / np.maximum(np.sqrt(np.einsum("ei,ei->e", e, e)), 1e-300)[:, None]
+                       for e in (a, b, c))
+        out[:, k] = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+                     + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
+                     + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
+    return out
 
 
 def hex_centre_jacobians(x: np.ndarray) -> np.ndarray:

@@ -22,7 +22,7 @@ mbs.h5           mbs          + damping settings, [damping], vehicle,     modes.
 fields.h5        reconstruct  + output.dt, window, float32,               modes.h5, mbs.h5
                               static_correction_rates                     (static.h5)
 probes.h5        reconstruct  + output.window, probes,                    modes.h5, mbs.h5
-                              static_correction_rates                     (static.h5)
+                              static_correction_rates, [probes]           (static.h5)
 assessment.json  assess       the whole case                              modes.h5, mbs.h5,
                                                                           fields.h5, probes.h5
 result.json      study        the whole variant case, study, probes       modes.h5, mbs.h5,
@@ -58,11 +58,15 @@ transient.h5              transient    mesh keys (as mesh.h5), materials,      m
 transient:fields.h5       transient    + output.window, float32                mesh.h5
 (fields.h5)                            (``/stress`` records its own hash with
                                        output.stress_times)
-transient:probes.h5       transient    + output.probes, probe_roles            mesh.h5
+transient:probes.h5       transient    + output.probes, probe_roles, [probes]  mesh.h5
 (probes.h5)
 transient_checkpoint.h5   transient    the union of the three above (it        mesh.h5
                                        resumes all of them)
 ========================  ===========  ======================================  =============
+
+The keys of :data:`DIGEST_NEUTRAL_SECTIONS` (``[site]``, ``[probes]``) enter an inputs
+digest only where they differ from their defaults; those of :data:`CHECK_ONLY_KEYS`
+(``mesh.max_dispersion_error``) never.
 
 The three products come from one time integration: they are reused only together, and
 one stale or missing product recomputes all three. The checkpoint is resumed only when
@@ -82,6 +86,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from ..schema import iter_params
 from .digests import digest, hash_file
 from .files import (
     ASSESSMENT_JSON,
@@ -105,6 +110,16 @@ from .files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+
+#: Sections whose defaults are the model as it was before they existed (``[site]``: no key
+#: given, the geometry keys apply; ``[probes]``: no probe lines). A key of theirs at its
+#: default stays out of every inputs digest, so a case that does not use them keeps the
+#: digests, and the results, it had (the golden record, ``tests/data/golden_run.json``,
+#: stands). A given site key's effect is in the geometry keys it sets (hashed anyway).
+DIGEST_NEUTRAL_SECTIONS = ("site", "probes")
+#: Keys that only decide whether a stage accepts what it computed (a check's limit), never
+#: what a file holds: they enter no inputs digest, and the stage checks a reused file again.
+CHECK_ONLY_KEYS = ("mesh.max_dispersion_error",)
 
 #: A selection of case keys: (dotted prefix, leaf names left out below it).
 Selection = tuple[tuple[str, tuple[str, ...]], ...]
@@ -142,7 +157,7 @@ _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
 _FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
                   ("output.static_correction_rates", ()))
 _PROBES = _MBS + (("output.window", ()), ("output.probes", ()),
-                  ("output.static_correction_rates", ()))
+                  ("output.static_correction_rates", ()), ("probes", ()))
 _ALL: Selection = (("", ()),)
 
 
@@ -194,8 +209,10 @@ _TRANSIENT = _MESH + (("materials", ()), ("sections", ()), ("pads", ()), ("bound
                       ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
                       ("output.dt", ()))
 _TRANSIENT_FIELD_KEYS = _TRANSIENT + (("output.window", ()), ("output.float32", ()))
-_TRANSIENT_PROBE_KEYS = _TRANSIENT + (("output.probes", ()), ("output.probe_roles", ()))
-_TRANSIENT_STATE = _TRANSIENT_FIELD_KEYS + (("output.probes", ()), ("output.probe_roles", ()))
+_TRANSIENT_PROBE_KEYS = _TRANSIENT + (("output.probes", ()), ("output.probe_roles", ()),
+                                      ("probes", ()))
+_TRANSIENT_STATE = _TRANSIENT_FIELD_KEYS + (("output.probes", ()), ("output.probe_roles", ()),
+                                           ("probes", ()))
 _FILES = ("mesh.file", "irregularity.file")
 
 
@@ -284,8 +301,27 @@ def external_files(case, keys: Sequence[str]) -> dict[str, str]:
     return out
 
 
+_NEUTRAL_DEFAULTS = {key: param.default for key, param in iter_params()
+                     if key.split(".", 1)[0] in DIGEST_NEUTRAL_SECTIONS}
+
+
+def _neutral(key: str, value: Any) -> bool:
+    """A key of :data:`DIGEST_NEUTRAL_SECTIONS` at its default, or of :data:`CHECK_ONLY_KEYS`."""
+    return key in CHECK_ONLY_KEYS or (key in _NEUTRAL_DEFAULTS
+                                      and value == _NEUTRAL_DEFAULTS[key])
+
+
+def hashed_keys(flat: Mapping[str, Any], selection: Selection) -> dict[str, Any]:
+    """The entries of a flat case that a selection names and an inputs digest holds: those
+    of :func:`select` less the keys of :data:`DIGEST_NEUTRAL_SECTIONS` at their defaults
+    and of :data:`CHECK_ONLY_KEYS`."""
+    return {k: v for k, v in select(flat, selection).items() if not _neutral(k, v)}
+
+
 def inputs_hash(case, name: str, extra: Any = None) -> str:
-    """SHA-256 of the case keys (and external files) that ``name`` depends on."""
+    """SHA-256 of the case keys (and external files) that ``name`` depends on
+    (:func:`hashed_keys`)."""
     s = spec(name)
-    return digest({"keys": select(flat_case(case.data), s.inputs),
-                   "files": external_files(case, s.input_files), "extra": extra})
+    keys = hashed_keys(flat_case(case.data), s.inputs)
+    return digest({"keys": keys, "files": external_files(case, s.input_files),
+                   "extra": extra})

@@ -47,7 +47,7 @@ import tomllib
 from .. import __version__
 from ..errors import StaleInputError, exception_text
 from .digests import file_digest, utc_now
-from .products import STAGE_FILES, external_files, flat_case, inputs_hash, select, spec
+from .products import STAGE_FILES, external_files, flat_case, hashed_keys, inputs_hash, spec
 
 
 def provenance(name: str, case, upstream: Mapping[str, str], extra: Any = None,
@@ -134,10 +134,10 @@ def case_differences(name: str, stored_toml: str, case, stored_files: str = "{}"
     if not stored_toml:
         raise ValueError("no case recorded")
     try:
-        old = select(flat_case(tomllib.loads(stored_toml)), s.inputs)
+        old = hashed_keys(flat_case(tomllib.loads(stored_toml)), s.inputs)
     except (tomllib.TOMLDecodeError, TypeError) as exc:
         raise ValueError(f"the recorded case is not readable ({exc})") from None
-    new = select(flat_case(case.data), s.inputs)
+    new = hashed_keys(flat_case(case.data), s.inputs)
     diffs = [f"{k} = {_fmt(old.get(k))}, the case says {_fmt(new.get(k))}"
              for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
     try:

@@ -95,22 +95,16 @@ def _need(f, names) -> list[str]:
 # ----------------------------------------------------------------------------- mesh.h5
 def inverted_hexes(points: np.ndarray, hexes: np.ndarray) -> int:
     """Number of hexahedra (VTK order) with a non-positive corner Jacobian (inverted or
-    garbled; a valid mesh has none: the mesh stage refuses inverted elements)."""
-    if len(hexes) == 0:
-        return 0
-    x = np.asarray(points)[np.asarray(hexes)]               # (ne, 8, 3)
-    # the three edges leaving each corner, in the right-handed order of the VTK hexahedron
-    nbr = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
-                    [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
-    e = x[:, nbr, :] - x[:, :, None, :]                     # (ne, 8, 3, 3)
-    det = np.einsum("ijk,...i,...j,...k->...", _LEVI_CIVITA, e[..., 0, :], e[..., 1, :],
-                    e[..., 2, :])
-    return int(np.count_nonzero(~(det.min(axis=1) > 0)))
+    garbled; a valid mesh has none: the mesh stage refuses inverted elements). Batched over
+    the elements (:func:`~railvib_hpc.fem.reference.element_batches`)."""
+    from ..fem.reference import element_batches, hex_corner_determinants
 
-
-_LEVI_CIVITA = np.zeros((3, 3, 3))
-_LEVI_CIVITA[0, 1, 2] = _LEVI_CIVITA[1, 2, 0] = _LEVI_CIVITA[2, 0, 1] = 1.0
-_LEVI_CIVITA[0, 2, 1] = _LEVI_CIVITA[2, 1, 0] = _LEVI_CIVITA[1, 0, 2] = -1.0
+    points, hexes = np.asarray(points), np.asarray(hexes)
+    bad = 0
+    for s in element_batches(len(hexes)):
+        det = hex_corner_determinants(points[hexes[s]])
+        bad += int(np.count_nonzero(~(det.min(axis=1) > 0)))
+    return bad
 
 
 def check_mesh_arrays(points, hexes, hex_part, lines, line_part, node_sets=None) -> list[str]:

@@ -265,6 +265,9 @@ def generate(lay: Layout, msh_path: Path | None = None, verbose: bool = False,
             gmsh.option.setNumber("Mesh.Binary", 1)
             gmsh.write(str(tmp))
             timings["write_msh"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+    # gmsh's model freed, and the .msh read back (check_msh), synced and renamed
+    timings["close_msh"] = time.perf_counter() - t0
     return mesh, timings
 
 

@@ -66,7 +66,7 @@ def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> str:
         pr.create_dataset("roles", data=np.array([mesh.probe_roles.get(n, "") for n in names],
                                                  dtype=h5py.string_dtype()))
         pr.create_dataset("nearest_node",
-                          data=np.array([mesh.nearest_node(c) for c in coords], dtype=np.int64))
+                          data=mesh.nearest_nodes(coords))
         f.attrs["part_names"] = json.dumps({v: k for k, v in PART_ID.items()})
 
     return write_h5(path, None, fill, size_hint=mesh_nbytes(mesh), attrs=attrs,

@@ -10,14 +10,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..fem.reference import hex_volumes
+from ..fem.reference import (
+    GAUSS_GRADIENTS,
+    GAUSS_WEIGHTS,
+    HEX_EDGES,
+    element_batches,
+    hex_corner_determinants,
+)
 from ..schema import PART_ID, PARTS, SOIL_LAYER_PARTS
-
-#: For each hex corner, its three edge neighbours in right-handed order.
-_CORNER_NEIGHBOURS = np.array([[1, 3, 4], [2, 0, 5], [3, 1, 6], [0, 2, 7],
-                               [7, 5, 0], [4, 6, 1], [5, 7, 2], [6, 4, 3]])
-_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
-                   [0, 4], [1, 5], [2, 6], [3, 7]])
 
 #: Decimals of the node coordinates in the ordering key (0.1 um: coincident nodes tie).
 ORDER_DECIMALS = 7
@@ -77,17 +77,25 @@ class Mesh:
     def nodes_per_part(self) -> dict[str, int]:
         """Number of distinct nodes used by each part."""
         out = {}
+        used = np.zeros(self.n_nodes, dtype=bool)
         for p in PARTS:
             pid = PART_ID[p]
-            conn = np.concatenate([self.hexes[self.hex_part == pid].ravel(),
-                                   self.lines[self.line_part == pid].ravel()])
-            if conn.size or p not in SOIL_LAYER_PARTS:
-                out[p] = int(np.unique(conn).size)
+            hexes, lines = self.hexes[self.hex_part == pid], self.lines[self.line_part == pid]
+            if hexes.size or lines.size or p not in SOIL_LAYER_PARTS:
+                used[:] = False
+                used[hexes] = True
+                used[lines] = True
+                out[p] = int(np.count_nonzero(used))
         return out
 
     def hex_volumes(self) -> np.ndarray:
-        """Signed element volumes (:func:`railvib_hpc.fem.reference.hex_volumes`, exact)."""
-        return hex_volumes(self.points[self.hexes])
+        """Signed element volumes: :func:`railvib_hpc.fem.reference.hex_volumes` (the 2x2x2
+        Gauss rule of det J, exact), to round-off, with the determinants as triple products
+        (:func:`_hex_volumes`)."""
+        out = np.empty(len(self.hexes))
+        for s in element_batches(len(self.hexes)):
+            out[s] = _hex_volumes(self.points[self.hexes[s]])
+        return out
 
     def volume_per_part(self) -> dict[str, float]:
         vol = self.hex_volumes()
@@ -96,26 +104,41 @@ class Mesh:
 
     def scaled_jacobians(self) -> np.ndarray:
         """Minimum corner scaled Jacobian per hex (1 for a cube, <= 0 when inverted)."""
-        x = self.points[self.hexes]                              # (ne, 8, 3)
-        e = x[:, _CORNER_NEIGHBOURS, :] - x[:, :, None, :]       # (ne, 8, 3, 3)
-        e /= np.maximum(np.linalg.norm(e, axis=-1, keepdims=True), 1e-300)
-        return np.linalg.det(e).min(axis=1)
+        return self.element_measures()[0]
+
+    def element_measures(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per hex, in one pass over the elements: the minimum corner scaled Jacobian
+        (:func:`~railvib_hpc.fem.reference.hex_corner_determinants`), the shortest and the
+        longest edge, each shape (n_hexes,)."""
+        ne = len(self.hexes)
+        sj, shortest, longest = np.empty(ne), np.empty(ne), np.empty(ne)
+        for s in element_batches(ne):
+            x = self.points[self.hexes[s]]
+            sj[s] = hex_corner_determinants(x, scaled=True).min(axis=1)
+            lengths = _edge_lengths(x)
+            shortest[s], longest[s] = lengths.min(axis=1), lengths.max(axis=1)
+        return sj, shortest, longest
 
     def edge_lengths(self) -> np.ndarray:
         """(n_hexes, 12) edge lengths."""
-        x = self.points[self.hexes]
-        return np.linalg.norm(x[:, _EDGES[:, 1]] - x[:, _EDGES[:, 0]], axis=-1)
+        out = np.empty((len(self.hexes), len(HEX_EDGES)))
+        for s in element_batches(len(self.hexes)):
+            out[s] = _edge_lengths(self.points[self.hexes[s]])
+        return out
 
     def aspect_ratios(self) -> np.ndarray:
         """Longest over shortest edge per hex."""
-        lengths = self.edge_lengths()
-        return lengths.max(axis=1) / np.maximum(lengths.min(axis=1), 1e-300)
+        _, shortest, longest = self.element_measures()
+        return longest / np.maximum(shortest, 1e-300)
 
     def duplicate_nodes(self, tol: float = 1e-8) -> int:
-        """Number of nodes that coincide (within ``tol``) with another node."""
+        """Number of nodes that coincide (within ``tol``) with another node: nodes whose
+        coordinates rounded to multiples of ``tol`` equal those of another node."""
+        if self.n_nodes < 2:
+            return 0
         key = np.round(self.points / tol).astype(np.int64)
-        _, counts = np.unique(key, axis=0, return_counts=True)
-        return int((counts - 1).sum())
+        key = key[np.lexsort(key.T[::-1])]
+        return int(np.count_nonzero((key[1:] == key[:-1]).all(axis=1)))
 
     def unused_nodes(self) -> int:
         used = np.zeros(self.n_nodes, dtype=bool)
@@ -123,11 +146,12 @@ class Mesh:
         used[self.lines.ravel()] = True
         return int((~used).sum())
 
-    def quality(self) -> dict[str, float]:
-        """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count."""
-        sj = self.scaled_jacobians()
-        edges = self.edge_lengths()
-        ar = edges.max(axis=1) / np.maximum(edges.min(axis=1), 1e-300)
+    def quality(self, measures: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                ) -> dict[str, float]:
+        """Summary: element counts, min scaled Jacobian, max aspect ratio, inverted count
+        (``measures``: :meth:`element_measures` when already computed)."""
+        sj, shortest, longest = self.element_measures() if measures is None else measures
+        ar = longest / np.maximum(shortest, 1e-300)
         size = float(np.linalg.norm(np.ptp(self.points, axis=0))) if self.n_nodes else 0.0
         return {
             "n_nodes": self.n_nodes,
@@ -136,7 +160,7 @@ class Mesh:
             "min_scaled_jacobian": float(sj.min()) if len(sj) else 1.0,
             "max_aspect_ratio": float(ar.max()) if len(ar) else 1.0,
             "n_inverted": int((sj <= 0).sum()),
-            "min_edge": float(edges.min()) if len(edges) else 0.0,
+            "min_edge": float(shortest.min()) if len(shortest) else 0.0,
             "model_size": size,
         }
 
@@ -158,6 +182,34 @@ class Mesh:
 
     def nearest_node(self, xyz: tuple[float, float, float]) -> int:
         return int(np.argmin(np.linalg.norm(self.points - np.asarray(xyz), axis=1)))
+
+    def nearest_nodes(self, xyz: np.ndarray) -> np.ndarray:
+        """:meth:`nearest_node` of each point of ``xyz`` (m, 3): the same distances to the
+        bit (``np.linalg.norm`` sums the squares in this order), the first node of a tie,
+        from contiguous coordinate columns (no (n, 3) temporary per point)."""
+        columns = [np.ascontiguousarray(self.points[:, i]) for i in range(3)]
+        out = np.empty(len(xyz), dtype=np.int64)
+        for k, c in enumerate(np.asarray(xyz, dtype=float).reshape(-1, 3)):
+            d = [col - c[i] for i, col in enumerate(columns)]
+            out[k] = np.argmin(np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]))
+        return out
+
+
+def _hex_volumes(x: np.ndarray) -> np.ndarray:
+    """Signed volumes (nel,) of hexahedra with corners ``x`` (nel, 8, 3): the Jacobians at
+    the 8 Gauss points in one matrix product, their determinants as triple products."""
+    jac = np.tensordot(x, GAUSS_GRADIENTS, axes=([1], [1]))    # (nel, 3 j, 8 q, 3 i)
+    a, b, c = jac[..., 0], jac[..., 1], jac[..., 2]            # rows dx/dxi_i: (nel, 3, 8)
+    det = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+           + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
+           + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
+    return det @ GAUSS_WEIGHTS
+
+
+def _edge_lengths(x: np.ndarray) -> np.ndarray:
+    """(nel, 12) edge lengths of hexahedra with corners ``x`` (nel, 8, 3)."""
+    d = x[:, HEX_EDGES[:, 1]] - x[:, HEX_EDGES[:, 0]]
+    return np.sqrt(np.einsum("eki,eki->ek", d, d))
 
 
 def renumbered(mesh: Mesh) -> Mesh:

@@ -17,7 +17,7 @@ from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
-from ..resources import check_memory
+from ..resources import check_memory, release_memory
 from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
 from .gmsh_model import generate, read_msh
 from .interfaces import interface_nodes, split_interfaces
@@ -30,9 +30,10 @@ from .turn import turn_building, turn_line, turn_map
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: Memory per hexahedron while gmsh meshes and the mesh is extracted: 0.7 kB measured on the
-#: thesis model (52,056 hexahedra: +29 MB over 8,556), times 3 for the quality checks.
-MESH_BYTES_PER_HEX = 2.0e3
+#: Memory per hexahedron of the mesh stage: its peak is gmsh's model while it meshes and the
+#: mesh is extracted, 2.17 GB for 2,674,714 hexahedra (0.81 kB each; ``bench/mesh_bench.py
+#: --site``, issue 28 item 6), the batched checks and writes stay below it; rounded up.
+MESH_BYTES_PER_HEX = 1.0e3
 #: Size of the binary ``mesh.msh`` per hexahedron: 3.57 MB for the 8,556 of refinement 0.5
 #: (417 B, with the nodes, beams, pads and boundary quads), rounded up.
 MSH_BYTES_PER_HEX = 450
@@ -108,9 +109,31 @@ def wavelength_warnings(quality: dict, case: Case) -> list[str]:
     return out
 
 
-def max_edge_per_soil_part(mesh: Mesh) -> dict[str, float]:
-    """Longest hexahedron edge of every soil part present (m)."""
-    longest = mesh.edge_lengths().max(axis=1) if len(mesh.hexes) else np.zeros(0)
+def add_dispersion(report: dict, case: Case) -> None:
+    """The numerical dispersion at the farthest probe into ``report`` (``dispersion``, its
+    warnings; :func:`~.dispersion_check.dispersion_report`); nothing when
+    ``mesh.wavelength_hz`` is 0.
+
+    Raises
+    ------
+    DispersionError
+        (a :class:`MeshError`) When the predicted error reaches ``mesh.max_dispersion_error``.
+    """
+    from .dispersion_check import dispersion_report
+
+    report.pop("dispersion", None)
+    found = dispersion_report(report["quality"], case, report.get("probes", {}))
+    if found is not None:
+        report["dispersion"] = found
+        report["warnings"] = report["warnings"] + found["warnings"]
+
+
+def max_edge_per_soil_part(mesh: Mesh, longest: np.ndarray | None = None
+                           ) -> dict[str, float]:
+    """Longest hexahedron edge of every soil part present (m); ``longest``: each hex's
+    longest edge when already computed (:meth:`~.model.Mesh.element_measures`)."""
+    if longest is None:
+        longest = mesh.element_measures()[2]
     out = {}
     for part in SOIL_PARTS:
         sel = mesh.hex_part == PART_ID[part]
@@ -152,19 +175,13 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
         mesh = turn_building(mesh, case, layout, twist_map)  # building.rotation
         source = "generated"
     mesh.probe_roles = {k: r for k, r in layout.probe_roles.items() if k in mesh.probes}
-    t0 = time.perf_counter()
-    quality = mesh.quality()
-    # the elastic interfaces' node pairs coincide and their faces are not shared, by design
-    joined = interface_nodes(mesh)
-    quality["duplicate_nodes"] = mesh.duplicate_nodes() - joined.size // 2
-    quality["unused_nodes"] = mesh.unused_nodes()
-    quality["nonconformal_faces"] = nonconformal_faces(mesh, exclude_nodes=joined)
-    quality["max_edge_per_soil_part"] = max_edge_per_soil_part(mesh)
-    timings["quality"] = time.perf_counter() - t0
+    release_memory()                    # gmsh's freed model (GBs at millions of elements)
+    quality = check_quality(mesh, timings)
     if quality["n_inverted"]:
         raise MeshError(f"mesh has {quality['n_inverted']} inverted hexahedra (non-positive "
                         f"scaled Jacobian, min {quality['min_scaled_jacobian']:.3g}); fix the "
                         "geometry or the mesh file")
+    t0 = time.perf_counter()
     report = {
         "source": source,
         "quality": quality,
@@ -184,7 +201,33 @@ def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
                                    else ""),
         "timings": timings,
     }
+    timings["report"] = time.perf_counter() - t0
+    add_dispersion(report, case)            # may refuse: before any file but mesh.msh
     return mesh, report
+
+
+def check_quality(mesh: Mesh, timings: dict[str, float]) -> dict:
+    """The mesh check's numbers (:meth:`~.model.Mesh.quality`, duplicate and unused nodes,
+    non-conformal faces, the longest edge per soil part); adds the seconds of its parts to
+    ``timings`` (``check_elements``, ``check_nodes``, ``check_faces``) and their sum
+    (``quality``)."""
+    t0 = time.perf_counter()
+    measures = mesh.element_measures()                  # one pass over the elements
+    quality = mesh.quality(measures)
+    longest = max_edge_per_soil_part(mesh, measures[2])
+    del measures
+    t1 = time.perf_counter()
+    # the elastic interfaces' node pairs coincide and their faces are not shared, by design
+    joined = interface_nodes(mesh)
+    quality["duplicate_nodes"] = mesh.duplicate_nodes() - joined.size // 2
+    quality["unused_nodes"] = mesh.unused_nodes()
+    t2 = time.perf_counter()
+    quality["nonconformal_faces"] = nonconformal_faces(mesh, exclude_nodes=joined)
+    quality["max_edge_per_soil_part"] = longest
+    t3 = time.perf_counter()
+    timings.update(check_elements=t1 - t0, check_nodes=t2 - t1, check_faces=t3 - t2,
+                   quality=t3 - t0)
+    return quality
 
 
 def present_parts(mesh: Mesh) -> list[str]:
@@ -259,6 +302,8 @@ def format_report(report: dict) -> str:
     ]
     if report.get("turn"):
         lines.append(report["turn"])
+    if report.get("dispersion"):
+        lines.append(report["dispersion"]["line"])
     lines += user_mesh_notes(report)
     return "\n".join(lines)
 
@@ -308,6 +353,7 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
         report["reused"] = True
         report["warnings"] = (quality_warnings(report["quality"], case["modal.tol"])
                               + wavelength_warnings(report["quality"], case))
+        add_dispersion(report, case)        # output.probes and the limit are not mesh inputs
         _print_warnings(report, reporter)
         return mesh, report, old.sha256
     try:

@@ -40,6 +40,12 @@ class LocalPattern:
     line_mask: np.ndarray
 
 
+#: Owned nodes per chunk of :func:`local_pattern`: its temporaries (about 1.5 kB per DOF of a
+#: chunk) stay bounded, so the assembly's peak is K and its column indices, not the pattern's
+#: construction (measured: 3.1 kB per DOF at 0.5 M DOFs with the whole pattern at once).
+PATTERN_CHUNK_NODES = 50_000
+
+
 def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
                   parts: Collection[str] | None = None) -> LocalPattern:
     """Sparsity pattern of the rows owned by ``rank`` (pure numpy).
@@ -47,8 +53,11 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
     Built on the node graph (8 x 8 pairs per hexahedron instead of 24 x 24 entries): all DOF
     rows of a node share the node's column list, the free DOFs of its neighbours in order.
     ``parts`` restricts it to the elements of those parts (every owned row keeps its
-    diagonal).
+    diagonal). Built by chunks of :data:`PATTERN_CHUNK_NODES` owned nodes; the arrays are of
+    PETSc's integer type (``indptr`` int64).
     """
+    from petsc4py import PETSc
+
     nodes = dofmap.owned_nodes(rank)
     n0, n1 = nodes.start, nodes.stop
     n_nodes = mesh.n_nodes
@@ -64,9 +73,27 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
         ids = [PART_ID[p] for p in parts]
         hex_mask &= np.isin(mesh.hex_part, ids)
         line_mask &= np.isin(mesh.line_part, ids)
-    # every owned node pairs with itself, so each owned row has its diagonal
+    conns = (mesh.hexes[hex_mask], mesh.lines[line_mask])
+    lengths, pieces = [], []
+    for c0 in range(n0, max(n1, n0 + 1), PATTERN_CHUNK_NODES):
+        c1 = min(c0 + PATTERN_CHUNK_NODES, n1)
+        row_len, cols = _pattern_rows(conns, c0, c1, n_nodes, nfree, first)
+        lengths.append(row_len)
+        pieces.append(cols.astype(PETSc.IntType))
+    row_len = np.concatenate(lengths)
+    indptr = np.concatenate(([0], np.cumsum(row_len))).astype(np.int64)
+    indices = np.concatenate(pieces) if pieces else np.zeros(0, PETSc.IntType)
+    return LocalPattern(indptr, indices, hex_mask, line_mask)
+
+
+def _pattern_rows(conns, n0: int, n1: int, n_nodes: int, nfree: np.ndarray,
+                  first: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row lengths and column indices of the DOF rows of nodes ``[n0, n1)`` (see
+    :func:`local_pattern`)."""
+    # every node pairs with itself, so each row has its diagonal
     keys = [np.arange(n0, n1, dtype=np.int64) * (n_nodes + 1) - n0 * n_nodes]
-    for conn in (mesh.hexes[hex_mask], mesh.lines[line_mask]):
+    for conn in conns:
+        conn = conn[((conn >= n0) & (conn < n1)).any(axis=1)]
         a = np.broadcast_to(conn[:, :, None], conn.shape + conn.shape[1:])
         b = np.broadcast_to(conn[:, None, :], conn.shape + conn.shape[1:])
         own = (a >= n0) & (a < n1)
@@ -80,20 +107,22 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
                  + np.arange(int(width.sum())))
     rows_per_node = nfree[n0:n1]
     row_len = np.repeat(rowlen, rows_per_node)
-    indptr = np.concatenate(([0], np.cumsum(row_len))).astype(np.int64)
-    nnz = int(indptr[-1])
+    starts = np.concatenate(([0], np.cumsum(row_len)))
+    nnz = int(starts[-1])
     row_node = np.repeat(np.arange(n1 - n0), rows_per_node)
     entry_row = np.repeat(np.arange(len(row_len)), row_len)
-    indices = cols_node[node_col_start[row_node[entry_row]] + np.arange(nnz) - indptr[entry_row]]
-    return LocalPattern(indptr, indices.astype(np.int64), hex_mask, line_mask)
+    return row_len, cols_node[node_col_start[row_node[entry_row]] + np.arange(nnz)
+                              - starts[entry_row]]
 
 
 def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
-             parts: Collection[str] | None = None, mass: bool = True):
+             parts: Collection[str] | None = None, mass: bool | str = True):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
-    the stiffness of one material; ``mass=False`` assembles K only (M is returned as None).
+    the stiffness of one material; ``mass=False`` assembles K only (M is returned as None);
+    ``mass="diagonal"`` (with ``modal.lumped_mass``) stores the lumped M on the diagonal
+    alone, not in K's pattern (the explicit engines: 1 kB less per DOF).
     The whole model's K (``parts=None``) includes the springs of absorbing faces with
     ``boundary.virtual_thickness > 0`` (:mod:`.boundary`).
     """
@@ -105,12 +134,22 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
     r0, r1 = dofmap.owned_dofs(comm.rank)
     n_local, n_global = r1 - r0, dofmap.n_dofs
     ip = pat.indptr.astype(PETSc.IntType)
-    ix = pat.indices.astype(PETSc.IntType)
+    ix = pat.indices.astype(PETSc.IntType, copy=False)
+    del pat                      # (only the masks are needed below)
+    diagonal = mass == "diagonal"
+    if diagonal and not case["modal.lumped_mass"]:
+        raise ValueError("mass='diagonal' needs modal.lumped_mass = true")
     mats = []
-    for _ in range(2 if mass else 1):
+    for k in range(2 if mass else 1):
+        pattern = (ip, ix) if not (diagonal and k == 1) else (
+            np.arange(n_local + 1, dtype=PETSc.IntType),
+            np.arange(r0, r1, dtype=PETSc.IntType))
         A = PETSc.Mat().createAIJ(size=((n_local, n_global), (n_local, n_global)),
-                                  csr=(ip, ix, np.zeros(len(ix))), comm=comm)
+                                  csr=pattern, comm=comm)         # (values zero)
         A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        if diagonal and k == 1:
+            # the lumped element masses' exact zeros off the diagonal are not stored
+            A.setOption(PETSc.Mat.Option.IGNORE_ZERO_ENTRIES, True)
         mats.append(A)
     K, M = mats if mass else (mats[0], None)
     t1 = time.perf_counter()
@@ -207,7 +246,9 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
         alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
                                             case["damping.f2"])
         C.axpy(beta, K, structure=same)
-        C.axpy(alpha, M, structure=same)
+        # M in K's pattern, or the lumped M on the diagonal alone (assemble(mass="diagonal"))
+        C.axpy(alpha, M, structure=same if M.getInfo()["nz_used"] == K.getInfo()["nz_used"]
+               else subset)
         info["alpha"], info["beta"] = alpha, beta
     elif model == "per_material":
         from .elements import material_groups
@@ -234,8 +275,124 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
     return C, info
 
 
-def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> None:
-    """Add the rail pads' dashpots ``pads.cx, cy, cz`` to C (owned rows; K's pattern)."""
+class RayleighOperator:
+    """``C = alpha M + beta K + C_b`` applied, not stored: the context of a PETSc shell
+    matrix (``Mat.createPython``) for the explicit engines with a lumped M.
+
+    ``C_b`` holds what is not proportional to M or K: the absorbing faces' dashpots and the
+    rail pads' dashpots, in a pattern of the diagonal node blocks and the pad elements only
+    (a few entries per DOF instead of K's ~81: 1 kB per DOF less, and
+    :func:`stiffness_and_damping` folds ``beta K`` into the stiffness product: one product
+    with K per step instead of two).
+    """
+
+    def __init__(self, K, m, alpha: float, beta: float, C_b):
+        self.K, self.alpha, self.beta, self.C_b = K, float(alpha), float(beta), C_b
+        self.m = K.createVecLeft()
+        self.m.getArray()[:] = m
+        self._w = K.createVecLeft()
+
+    def mult(self, mat, x, y) -> None:
+        """``y = C x``."""
+        self.K.mult(x, y)
+        y.scale(self.beta)
+        if self.C_b is not None:
+            self.C_b.multAdd(x, y, y)
+        if self.alpha != 0.0:
+            self._w.pointwiseMult(x, self.m)
+            y.axpy(self.alpha, self._w)
+
+    def release(self) -> None:
+        """Free the vectors and C_b now (collective; :func:`destroy_damping`). Not the
+        shell's ``destroy`` hook: petsc4py calls that during ``PetscFinalize`` for a shell
+        still alive at exit, where freeing PETSc objects crashes."""
+        for obj in (self.m, self._w, self.C_b):
+            if obj is not None:
+                obj.destroy()
+        self.m = self._w = self.C_b = None
+
+
+def destroy_damping(C) -> None:
+    """Destroy a damping matrix: assembled, or the shell of a :class:`RayleighOperator`
+    with what it holds (collective; None is ignored)."""
+    if C is None:
+        return
+    ray = rayleigh_parts(C)
+    if ray is not None:
+        ray.release()
+    C.destroy()
+
+
+def rayleigh_operator(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, m: np.ndarray):
+    """The damping of ``damping.model = 'rayleigh'`` as a shell matrix around K (see
+    :class:`RayleighOperator`), or None where the model's C is not of that form
+    (another damping model, graded absorbing layers) and must be assembled
+    (:func:`assemble_damping`). ``m``: this rank's rows of the lumped mass. Returns
+    ``(C, info)`` as :func:`assemble_damping` does."""
+    from petsc4py import PETSc
+
+    from .boundary import boundary_node_blocks, layer_weights
+    from .damping import rayleigh_coefficients
+    from .elements import PAD_DIRECTION
+
+    if case["damping.model"] != "rayleigh" or layer_weights(mesh, case).any():
+        return None, None
+    alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
+                                        case["damping.f2"])
+    pads = tuple(PAD_DIRECTION) if case["damping.pads"] else ()
+    pat = local_pattern(mesh, dofmap, comm.rank, pads)
+    r0, r1 = dofmap.owned_dofs(comm.rank)
+    n_local, n_global = r1 - r0, dofmap.n_dofs
+    C_b = PETSc.Mat().createAIJ(size=((n_local, n_global), (n_local, n_global)),
+                                csr=(pat.indptr.astype(PETSc.IntType),
+                                     pat.indices.astype(PETSc.IntType),
+                                     np.zeros(len(pat.indices))), comm=comm)
+    C_b.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    insert_node_blocks(C_b, dofmap, comm.rank, nodes, blocks)
+    if pads:
+        insert_pad_dashpots(C_b, mesh, case, dofmap, comm.rank)
+    C_b.assemble()
+    op = RayleighOperator(K, m, alpha, beta, C_b)
+    C = PETSc.Mat().createPython(K.getSizes(), op, comm=comm)
+    C.setUp()
+    info = {"model": "rayleigh", "alpha": alpha, "beta": beta, "dashpot_nodes": len(nodes),
+            "layer_elements": 0, "operator": True}
+    return C, info
+
+
+def rayleigh_parts(C) -> RayleighOperator | None:
+    """The :class:`RayleighOperator` of a shell C, or None for an assembled C."""
+    if C is None or C.getType() != "python":
+        return None
+    ctx = C.getPythonContext()
+    return ctx if isinstance(ctx, RayleighOperator) else None
+
+
+def stiffness_and_damping(K, C, u, v, out, work) -> None:
+    """``out = K u + C v`` (PETSc vectors; ``work`` a spare one): with a
+    :class:`RayleighOperator` C as ``K (u + beta v) + C_b v + alpha m v``, one product with
+    K."""
+    ray = rayleigh_parts(C)
+    if ray is None:
+        K.mult(u, out)
+        if C is not None:
+            C.mult(v, work)
+            out.axpy(1.0, work)
+        return
+    work.waxpy(ray.beta, v, u)
+    K.mult(work, out)
+    if ray.C_b is not None:
+        ray.C_b.multAdd(v, out, out)
+    if ray.alpha != 0.0:
+        work.pointwiseMult(v, ray.m)
+        out.axpy(ray.alpha, work)
+
+
+def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int,
+                        parts: Collection[str] | None = None) -> None:
+    """Add the rail pads' dashpots ``pads.cx, cy, cz`` to C (owned rows; K's pattern); only
+    those of the pad parts in ``parts`` when given."""
     from petsc4py import PETSc
 
     from ..fem.spring import spring_matrices
@@ -244,7 +401,7 @@ def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) ->
     r0, r1 = dofmap.owned_dofs(rank)
     for part, (key, direction) in PAD_DIRECTION.items():
         conn = mesh.lines[mesh.line_part == PART_ID[part]]
-        if not len(conn):
+        if not len(conn) or (parts is not None and part not in parts):
             continue
         c = case[f"pads.c{key[1]}"]
         cols = dofmap.index[conn, direction]
@@ -253,6 +410,60 @@ def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) ->
                        np.ascontiguousarray(cols, dtype=PETSc.IntType),
                        spring_matrices(c, np.full(len(conn), direction)),
                        addv=PETSc.InsertMode.ADD_VALUES)
+
+
+def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str]):
+    """Stiffness and damping of the elements of ``parts`` alone: ``(K_p, C_p)``, C_p in
+    K_p's pattern or None when nothing of them damps (collective).
+
+    The implicit partition of the IMEX engine (:mod:`railvib_hpc.transient.imex`): with
+    ``damping.model = 'rayleigh'`` ``C_p = beta K_p`` (the mass-proportional ``alpha M``
+    stays with the explicit part: it is diagonal and weak at high frequency), with
+    ``'per_material'`` ``sum_g beta_g K_g`` over the material groups' elements in ``parts``,
+    and the rail pads' dashpots of the pad parts in ``parts`` (``damping.pads``). The
+    absorbing faces' dashpots, springs and graded layers are soil: never in a partition.
+    """
+    from petsc4py import PETSc
+
+    from .damping import material_rayleigh, rayleigh_coefficients
+
+    parts = tuple(parts)
+    K_p, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=False)
+    C_p = None
+    model = case["damping.model"]
+    if model == "rayleigh":
+        _, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
+                                        case["damping.f2"])
+        if beta != 0.0:
+            C_p = K_p.duplicate(copy=True)
+            C_p.scale(beta)
+    elif model == "per_material":
+        from .elements import material_groups
+
+        groups = material_groups(mesh)
+        coeffs = material_rayleigh(case, list(groups))
+        for group, group_parts in groups.items():
+            mine = [p for p in group_parts if p in parts]
+            beta = coeffs[group][1]
+            if not mine or beta == 0.0:
+                continue
+            if C_p is None:
+                C_p = K_p.duplicate(copy=False)
+            K_g, _, _ = assemble(mesh, case, dofmap, comm, parts=mine, mass=False)
+            C_p.axpy(beta, K_g, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            K_g.destroy()
+    from .elements import PAD_DIRECTION
+
+    if case["damping.pads"] and any(p in parts for p in PAD_DIRECTION):
+        if C_p is None:
+            C_p = K_p.duplicate(copy=False)
+        C_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        insert_pad_dashpots(C_p, mesh, case, dofmap, comm.rank, parts)
+        C_p.assemble()
+    if C_p is not None:
+        C_p.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+        C_p.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
+    return K_p, C_p
 
 
 def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, which: str):

@@ -81,6 +81,7 @@ from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
+from ..site import line_probes
 from .fields import reconstruct_fields, write_fields_xdmf
 from .probes import (
     UserProbes,
@@ -346,11 +347,14 @@ def reconstruct_options(case, out_dir: Path) -> dict:
     w = case["output.window"]
     probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
     names = [f"user_{i + 1}" for i in range(len(probes))]
+    lines = line_probes(case)                      # [[probes.line]]: free-field points
     return {"stride": stride, "window": tuple(w) if w else None,
             "float32": case["output.float32"], "stress_times": case["output.stress_times"],
             "correction_rates": case["output.static_correction_rates"],
-            "user_probes": dict(zip(names, probes)),
-            "user_probe_roles": dict(zip(names, case["output.probe_roles"]))}
+            "user_probes": {**dict(zip(names, probes)),
+                            **{n: np.asarray(p.point, dtype=float) for n, p in lines.items()}},
+            "user_probe_roles": {**dict(zip(names, case["output.probe_roles"])),
+                                 **{n: "free_field" for n in lines}}}
 
 
 def input_files(out_dir: Path) -> tuple[str, ...]:

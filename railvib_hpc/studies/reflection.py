@@ -64,6 +64,8 @@ def domain_overrides(case: Case, change: tuple[float, float, float]) -> list[str
     base = case["domain"]
     depth = base["extra_depth"] + d
     out = []
+    if case["site.soil_depth"] > 0:      # the base it set, given now (the variant's own)
+        out += ["site.soil_depth=0.0", f"geometry.z0={case['geometry.z0']!r}"]
     if depth < 0.0:
         out.append(f"geometry.z0={case['geometry.z0'] - depth!r}")
         depth = 0.0

@@ -73,6 +73,20 @@ class GeneralizedAlpha:
         beta = 0.25 * (1.0 - am + af) ** 2
         return cls(float(dt), float(rho_inf), am, af, gamma, beta)
 
+    @classmethod
+    def newmark(cls, dt: float) -> GeneralizedAlpha:
+        """The Newmark average-acceleration (trapezoidal) rule itself, ``alpha_m = alpha_f =
+        0``, ``gamma = 1/2``, ``beta = 1/4``: equilibrium at ``t_{n+1}`` (the implicit part
+        of the IMEX engine, :mod:`.imex`; second order, no numerical damping).
+
+        >>> s = GeneralizedAlpha.newmark(1e-3)
+        >>> (s.alpha_m, s.alpha_f, s.gamma, s.beta, s.load_weights())
+        (0.0, 0.0, 0.5, 0.25, (0.0, 1.0))
+        """
+        if not dt > 0.0:
+            raise ValueError(f"dt must be positive, got {dt}")
+        return cls(float(dt), 1.0, 0.0, 0.0, 0.5, 0.25)
+
     # ---------------------------------------------------------------- effective matrix
     @property
     def c_mass(self) -> float:

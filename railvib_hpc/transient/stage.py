@@ -85,6 +85,7 @@ from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory, peak_memory_gb
+from ..site import line_probes
 from .integrate import (
     DirectSolver,
     RailColumns,
@@ -342,7 +343,8 @@ def precheck_size(case: Case) -> None:
     else:
         dt = choose_time_step(tr["f_max"], tr["steps_per_period"], case["output.dt"])
         how = f"the automatic step (at most {dt:.3g} s)"
-    n_user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3).shape[0]
+    n_user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3).shape[0] \
+        + len(line_probes(case))
     n_rail_nodes = lay.rail_div * max(len(lay.sleeper_x) - 1, 1) + 1
     check_run_size(case, run, dt, how, run["wheel_rail"].size,
                    0 if vehicle is None else vehicle.n_dof, len(lay.probes) + n_user,
@@ -379,13 +381,17 @@ def output_steps(case: Case, dt: float, nt: int) -> np.ndarray:
 
 
 def probe_points(mesh, case: Case) -> tuple[list[str], np.ndarray]:
-    """Names and coordinates: the mesh probes, then ``output.probes`` (``user_1``, ...)."""
+    """Names and coordinates: the mesh probes, then ``output.probes`` (``user_1``, ...),
+    then the points of the probe lines (:func:`railvib_hpc.site.line_probes`)."""
     names = list(mesh.probes)
     coords = [mesh.probes[k] for k in names]
     user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
     for i, p in enumerate(user):
         names.append(f"user_{i + 1}")
         coords.append(p)
+    for name, point in line_probes(case).items():
+        names.append(name)
+        coords.append(point.point)
     return names, np.asarray(coords, dtype=float).reshape(-1, 3)
 
 
@@ -642,9 +648,12 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         on_root(write_rank0, comm)
     solver.destroy()
     system.destroy()
-    for A in (init["K"], init["M"], init["C"]):
+    for A in (init["K"], init["M"]):
         if A is not None:
             A.destroy()
+    from ..modal.petsc import destroy_damping
+
+    destroy_damping(init["C"])
     rep.info(format_summary(stats))
     rep.info(f"wrote {out_dir / FIELDS_H5}, {out_dir / PROBES_H5}, "
              f"{out_dir / TRANSIENT_H5}")
@@ -681,13 +690,17 @@ def _setup(ctx: StageContext) -> dict:
     speed = float(np.max(np.abs(run["speeds"])))
     h_min = float(np.diff(rails.x, axis=1).min())
     dt = time_step(case, h_min / speed, rep)
-    explicit = case["transient.engine"] == "explicit"
-    if explicit:
+    engine = case["transient.engine"]
+    explicit = engine == "explicit"
+    if engine != "direct":
         # the step follows from the matrices: assemble first
         K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
         with rep.stage("transient: stability limit"):
-            system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle, K, M, C,
-                                                 dt)
+            if explicit:
+                system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle, K, M,
+                                                     C, dt)
+            else:
+                partition, dt, limit = _imex_partition(ctx, mesh, dofmap, K, M, C, dt)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
     # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
@@ -700,21 +713,32 @@ def _setup(ctx: StageContext) -> dict:
     steps_out = output_steps(case, dt, nt)
     if case["output.stress_times"]:
         _check_stress_times(case, steps_out * dt)
-    scheme_text = (f"central differences (explicit), {limit}" if explicit else
-                   f"generalized-alpha rho_inf = {case['transient.rho_inf']:g}")
+    scheme_text = (f"generalized-alpha rho_inf = {case['transient.rho_inf']:g}"
+                   if engine == "direct" else
+                   {"explicit": "central differences (explicit), ",
+                    "imex": "implicit-explicit Newmark (Hughes-Liu), "}[engine] + limit)
     rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
              f"steps; {scheme_text}")
     n_wheels = run["wheel_rail"].size
     scheme = None
     if not explicit:
-        K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
+        if engine == "direct":
+            K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
-            scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
-            system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
+            if engine == "direct":
+                scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
+                system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
+            else:
+                from .imex import ImexSystem
+
+                system = ImexSystem(K, M, C, *partition, dt, comm, extra_gb=col_gb)
+                scheme = system.scheme
             rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
                      f"~{system.factor_memory_gb:.2f} GB"
-                     + (" (out of core)" if system.out_of_core else ""))
+                     + (" (out of core)" if system.out_of_core else "")
+                     + (f"; {system.implicit_rows:,} of {dofmap.n_dofs:,} rows implicit"
+                        if engine == "imex" else ""))
     driver = columns = prescribed = None
     forces = run["forces"]
     if vehicle is None:
@@ -741,7 +765,7 @@ def _setup(ctx: StageContext) -> dict:
             "dt": dt, "nt": nt, "times": times, "x": x, "steps_out": steps_out, "K": K, "M": M,
             "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
             "columns": columns, "coupling": coupling, "forces": forces,
-            "prescribed": prescribed, "n_wheels": n_wheels,
+            "prescribed": prescribed, "n_wheels": n_wheels, "engine": engine,
             "n_dof": 0 if vehicle is None else vehicle.n_dof,
             "probe_names": names, "probe_coords": coords,
             "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),
@@ -750,15 +774,24 @@ def _setup(ctx: StageContext) -> dict:
 
 def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
     """K, M, C (None when nothing damps) and the damping summary (collective)."""
-    from ..modal.petsc import assemble, assemble_damping
+    from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
     with ctx.rep.stage("transient: assembly"):
-        K, M, _ = assemble(mesh, case, dofmap, comm)
-        C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
+        # the explicit engines keep the lumped mass on the diagonal alone
+        K, M, _ = assemble(mesh, case, dofmap, comm,
+                           mass=True if case["transient.engine"] == "direct" else "diagonal")
+        C = None
+        if case["transient.engine"] != "direct":
+            # Rayleigh damping applied, not stored, where it can be (the explicit engines)
+            from .explicit import lumped_diagonal
+
+            C, cinfo = rayleigh_operator(mesh, case, dofmap, comm, K, lumped_diagonal(M, comm))
+        if C is None:
+            C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
         if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
                 and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
-            C.destroy()
+            destroy_damping(C)
             C = None
     return K, M, C, cinfo
 
@@ -774,7 +807,6 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
     band's step ``dt_band`` or the limit, whichever is smaller, divided into ``output.dt``.
     """
     from .explicit import (
-        STEP_SAFETY,
         ExplicitSystem,
         contact_frequency,
         critical_step,
@@ -797,23 +829,65 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
             critical, omega = critical_step(w_c), w_c
             where = (f"the wheel-rail contact (linearised Hertz spring on a {rail_mass:.3g} kg "
                      "rail node)")
+    try:
+        dt, text = _stable_step(case, critical, omega, where, lim.xi, dt_band, "explicit")
+    except TransientInputError:
+        system.destroy()
+        raise
+    system.dt = float(dt)
+    return system, dt, text
+
+
+def _stable_step(case: Case, critical: float, omega: float, where: str, xi: float,
+                 dt_band: float, engine: str) -> tuple[float, str]:
+    """The step of a conditionally stable engine and a line on its limit: ``transient.dt``
+    (refused above :data:`~.explicit.STEP_SAFETY` of ``critical``, naming ``where`` the
+    limit sits) or the automatic one, ``min(dt_band, allowed)`` divided into ``output.dt``.
+    """
+    from .explicit import STEP_SAFETY
+
     allowed = STEP_SAFETY * critical
     text = (f"stable up to {allowed:.4g} s ({STEP_SAFETY:g} x the critical step "
             f"{critical:.4g} s; omega_max = {omega:.4g} rad/s = {omega / (2 * math.pi):.4g} Hz, "
-            f"set by {where}; damping ratio there {lim.xi:.3g})")
+            f"set by {where}; damping ratio there {xi:.3g})")
     dt = case["transient.dt"]
     if dt > 0 and dt > allowed * (1 + 1e-9):
-        system.destroy()
         raise TransientInputError(
-            f"transient.dt = {dt:g} s: the explicit engine is {text}; allowed: "
+            f"transient.dt = {dt:g} s: the {engine} engine is {text}; allowed: "
             f"0 < transient.dt <= {allowed:.4g} s, or 0 (automatic)")
     if dt <= 0:
         dt = min(dt_band, allowed)
         odt = case["output.dt"]
         if odt > 0:
             dt = odt / math.ceil(odt / dt * (1.0 - 1e-6))
-    system.dt = float(dt)
-    return system, dt, text
+    return float(dt), text
+
+
+def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) -> tuple:
+    """The IMEX engine's implicit partition ``(K_I, C_I)``, its step and a line on the
+    explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
+    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`)."""
+    from ..mesh.stage import present_parts
+    from ..modal.petsc import assemble_partition
+    from .explicit import critical_step, limiting_element, lumped_diagonal, stability_limit
+    from .imex import DAMPING_STABILITY_FACTOR, implicit_part_names
+
+    case, comm = ctx.case, ctx.comm
+    parts = implicit_part_names(list(case["transient.implicit_parts"]), present_parts(mesh))
+    K_I, C_I = assemble_partition(mesh, case, dofmap, comm, parts)
+    try:
+        m = lumped_diagonal(M, comm)
+        lim = stability_limit(K, m, C, comm, minus=(K_I, C_I))
+        where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
+        critical = critical_step(lim.omega_max, DAMPING_STABILITY_FACTOR * lim.xi)
+        dt, text = _stable_step(case, critical, lim.omega_max, where, lim.xi, dt_band, "imex")
+    except BaseException:
+        for A in (K_I, C_I):
+            if A is not None:
+                A.destroy()
+        raise
+    text = f"implicit: {', '.join(parts) or 'none'}; explicit part {text}"
+    return (K_I, C_I), dt, text
 
 
 def _MPI_MIN():
@@ -893,7 +967,7 @@ def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, c
     stats = {"solver": "transient", "dt": init["dt"], "n_steps": nt, "steps_run": n_done,
              "t_end": nt * init["dt"], "n_dofs": init["dofmap"].n_dofs,
              "n_nodes": init["mesh"].n_nodes, "ranks": comm.size,
-             "engine": "direct" if init["scheme"] is not None else "explicit",
+             "engine": init["engine"],
              "rho_inf": init["scheme"].rho_inf if init["scheme"] is not None else None,
              "damping": init["damping"],
              "time_integration": t_integration, "time_total": t_wall,
@@ -960,9 +1034,12 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     sampler = init["probe_sampler"]
     mesh = init["mesh"]
     user_roles = list(case["output.probe_roles"])
+    lines = line_probes(case)
     for i, name in enumerate(init["probe_names"]):
         if name in mesh.probes:
             role = mesh.probe_roles.get(name, DEFAULT_PROBE_ROLE)
+        elif name in lines:
+            role = "free_field"
         else:
             k = int(name.rsplit("_", 1)[1]) - 1
             role = user_roles[k] if k < len(user_roles) else DEFAULT_PROBE_ROLE

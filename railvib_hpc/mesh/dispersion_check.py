@@ -1,0 +1,249 @@
+"""The mesh check's numerical dispersion at the farthest probe (issue 28, item 2).
+
+A wave of ``mesh.wavelength_hz`` that travels from the track to the farthest probe
+accumulates the grid's phase error (:mod:`railvib_hpc.fem.dispersion`): the check predicts
+the resulting peak-velocity error there and refuses a band the mesh cannot resolve.
+
+Conservative choices, each an upper bound of what it replaces:
+
+* the distance is the largest horizontal distance, across the track, from any track's
+  centre line (y = 0 and ``track.spacing``) to any probe: the mesh's named probes,
+  ``output.probes`` and the points of ``[[probes.line]]``;
+* the whole path is taken in the ground part (``subgrade``, ``soil_layer_k``) with the
+  largest predicted error, with its longest element edge as the edge of a cubic grid
+  (the embankment's ballast and the mitigation measures are crossed over a few metres only
+  and are left out);
+* the wave is the Rayleigh wave that carries most of the energy to a surface probe, with the
+  S-wave relation evaluated at its wavelength (Viktorov's ``c_R``, 5-13 % shorter than the
+  S wavelength; the P part of the Rayleigh wave is resolved better), in the worst of the
+  directions of :data:`~railvib_hpc.fem.dispersion.DIRECTIONS`;
+* the error is the harmonic bound of :func:`~railvib_hpc.fem.dispersion.peak_velocity_error`
+  at the band's top frequency, the larger of the semidiscretisation (the modal path, and a
+  step tending to 0) and the transient engine at its largest step (``transient.dt`` or the
+  automatic step's bound ``1 / (transient.steps_per_period transient.f_max)`` for the
+  direct engine; for the explicit ones the soil grid's own limit, 0.9 of its critical step,
+  which only lowers the lumped mass's lag): the time scheme's error is monotone in the step
+  and of the opposite sign, so the worst lies at one of the two ends.
+
+The check runs after meshing, with the measured edges, and before ``mesh.h5`` is written;
+on a reused mesh it runs again (``output.probes`` and the limits are not mesh inputs).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+
+from ..config import Case
+from ..errors import MeshError
+from ..fem.boundary import wave_speeds
+from ..fem.dispersion import critical_courant, elements_needed, worst_peak_error
+from ..schema import SOIL_LAYER_PARTS
+
+#: The target of issue 28, item 2: below 5 % peak-velocity error at the farthest probe; a
+#: larger predicted error is warned about.
+DISPERSION_TARGET = 0.05
+#: Phase error at the farthest probe, in periods of the band's top frequency, from which the
+#: mesh cannot resolve the band there: the wave arrives in antiphase (the harmonic bound has
+#: long reached 100 %, at a quarter period).
+UNRESOLVED_PHASE = 0.5
+#: Fraction of the critical step the explicit engines take (``STEP_SAFETY`` of
+#: :mod:`railvib_hpc.transient.explicit`, which the mesh layer cannot import; a test keeps
+#: the two equal).
+EXPLICIT_STEP_SAFETY = 0.9
+#: The ground parts a wave crosses on its way to the probes.
+GROUND_PARTS = ("subgrade", *SOIL_LAYER_PARTS)
+#: Engines whose soil is integrated with central differences and the lumped mass.
+EXPLICIT_ENGINES = ("explicit", "imex")
+
+
+class DispersionError(MeshError):
+    """A band the mesh cannot resolve at the farthest probe (``mesh.max_dispersion_error``)."""
+
+
+def rayleigh_ratio(nu: float) -> float:
+    """``c_R / c_S`` (Viktorov 1967, "Rayleigh and Lamb Waves": ``(0.862 + 1.14 nu) /
+    (1 + nu)``, within 1.5 % of the exact root for ``0 <= nu <= 0.5``, 0.2 % at 0.25).
+
+    >>> round(rayleigh_ratio(0.25), 4)
+    0.9176
+    """
+    return (0.862 + 1.14 * nu) / (1.0 + nu)
+
+
+def track_centres(case: Case) -> tuple[float, ...]:
+    """y of the track centre lines: track 1 at 0, track 2 ``track.spacing`` further from
+    the building (:class:`~railvib_hpc.mesh.layout.Layout`)."""
+    return (0.0,) + ((float(case["track.spacing"]),) if case["track.count"] == 2 else ())
+
+
+def farthest_probe(case: Case, probes: Mapping[str, Any]) -> tuple[str, float, int]:
+    """The probe farthest across the track from any track centre line.
+
+    Returns
+    -------
+    name, distance, track : str, float, int
+        The probe, its distance [m] and the track (1 or 2); ``("", 0.0, 1)`` without probes.
+    """
+    from ..site import line_probes
+
+    points = {k: tuple(v) for k, v in probes.items()}
+    user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
+    points.update({f"user_{i + 1}": tuple(p) for i, p in enumerate(user)})
+    points.update({k: p.point for k, p in line_probes(case).items()})
+    best = ("", 0.0, 1)
+    for name, p in points.items():
+        for k, y in enumerate(track_centres(case), start=1):
+            d = abs(float(p[1]) - y)
+            if d > best[1]:
+                best = (name, d, k)
+    return best
+
+
+def _schemes(case: Case, c_p: float, c_r: float, f: float, nu: float
+             ) -> Callable[[float], tuple[tuple[str, float], ...]]:
+    """The ``(scheme, courant)`` ends of the step range, as a function of the elements per
+    Rayleigh wavelength ``n`` (the element edge is ``c_R / (f n)``)."""
+    engine = case["transient.engine"]
+    if engine in EXPLICIT_ENGINES:
+        cc = EXPLICIT_STEP_SAFETY * critical_courant(nu, case["modal.hex_formulation"])
+        return lambda n: (("none", 0.0), ("central", cc))
+    if engine == "direct":
+        dt = case["transient.dt"] or 1.0 / (case["transient.steps_per_period"]
+                                            * case["transient.f_max"])
+        return lambda n: (("none", 0.0), ("generalized_alpha", c_p * dt * f * n / c_r))
+    return lambda n: (("none", 0.0),)
+
+
+def part_error(case: Case, part: str, h: float, f: float, distance: float) -> dict | None:
+    """The predicted error of the whole path in ground part ``part`` (edge ``h``); None for a
+    part the case does not give."""
+    from ..site import solid_material
+
+    try:
+        mat = solid_material(case, part)
+    except KeyError:
+        return None
+    c_p, c_s = (float(v) for v in wave_speeds(mat["E"], mat["nu"], mat["rho"]))
+    c_r = rayleigh_ratio(mat["nu"]) * c_s
+    n_r = c_r / (f * h)
+    wavelengths = distance * f / c_r
+    schemes = _schemes(case, c_p, c_r, f, mat["nu"])
+    args = (n_r, wavelengths, mat["nu"], _mass(case), schemes(n_r), case["transient.rho_inf"],
+            case["modal.hex_formulation"])
+    err, where = worst_peak_error(*args)
+    phase, _ = worst_peak_error(*args, measure="phase")
+    return {"h": h, "c_s": c_s, "nu": float(mat["nu"]), "epw": c_s / (f * h),
+            "epw_rayleigh": n_r, "wavelengths": wavelengths, "error": err, "where": where,
+            "phase": phase, "schemes": schemes}
+
+
+def _mass(case: Case) -> str:
+    return "lumped" if case["modal.lumped_mass"] else "consistent"
+
+
+def _needed(case: Case, p: dict, limit: float, measure: str = "peak") -> float:
+    """Elements per S wavelength for an error (or a phase error, ``measure = "phase"``)
+    below ``limit`` in part ``p`` (inf: none)."""
+    ratio = p["epw_rayleigh"] / p["epw"]
+    n = elements_needed(limit, p["wavelengths"], lo=p["epw_rayleigh"], schemes=p["schemes"],
+                        nu=p["nu"], mass=_mass(case), rho_inf=case["transient.rho_inf"],
+                        formulation=case["modal.hex_formulation"], measure=measure)
+    return n / ratio
+
+
+def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> dict | None:
+    """The dispersion check of a meshed model (None when ``mesh.wavelength_hz`` is 0).
+
+    Returns
+    -------
+    dict or None
+        ``frequency_hz``, ``probe``, ``distance_m``, ``track``, ``parts`` (per ground part:
+        edge, c_S, elements per wavelength, wavelengths to the probe, error), ``part`` (the
+        worst), ``error``, ``needed`` (elements per S wavelength for
+        :data:`DISPERSION_TARGET`, when missed), ``line`` (the report line) and
+        ``warnings``.
+
+    Raises
+    ------
+    DispersionError
+        When the band cannot be resolved at the farthest probe (the phase off by
+        :data:`UNRESOLVED_PHASE` or more, or beyond the grid's cut-off), or the error reaches
+        ``mesh.max_dispersion_error`` (> 0).
+    """
+    f = case["mesh.wavelength_hz"]
+    if f <= 0:
+        return None
+    name, distance, track = farthest_probe(case, probes)
+    edges = quality.get("max_edge_per_soil_part", {})
+    parts = {}
+    for part in GROUND_PARTS:
+        if part in edges and distance > 0:
+            p = part_error(case, part, edges[part], f, distance)
+            if p is not None:
+                parts[part] = p
+    if not parts:
+        return None
+    worst = max(parts, key=lambda k: (parts[k]["error"], parts[k]["phase"]))
+    p = parts[worst]
+    out = {"frequency_hz": f, "probe": name, "distance_m": distance, "track": track,
+           "part": worst, "error": p["error"], "phase_periods": _finite(p["phase"]),
+           "warnings": [],
+           "parts": {k: {**{key: v[key] for key in ("h", "c_s", "epw", "wavelengths", "error")},
+                         "phase_periods": _finite(v["phase"])} for k, v in parts.items()}}
+    head = (f"numerical dispersion at the farthest probe, {name} ({distance:.3g} m from "
+            f"track {track}'s centre line): at mesh.wavelength_hz = {f:g} Hz {worst} has "
+            f"{p['epw']:.3g} elements per S wavelength ({p['h']:.3g} m edges, c_S "
+            f"{p['c_s']:.4g} m/s, {p['wavelengths']:.3g} Rayleigh wavelengths to the probe)")
+    out["line"] = (f"{head}: phase off by {p['phase']:.2g} period, predicted peak-velocity "
+                   f"error {100 * p['error']:.3g} % ({_mass(case)} mass, worst of "
+                   f"{p['where']}; the whole path in the worst ground part, a conservative "
+                   "bound)")
+    if p["error"] > DISPERSION_TARGET:
+        target = _needed(case, p, DISPERSION_TARGET)
+        out["needed"] = target if np.isfinite(target) else None
+        out["warnings"].append(
+            f"{head}: predicted peak-velocity error {100 * p['error']:.3g} % > "
+            f"{100 * DISPERSION_TARGET:g} %; {_advice(target)}")
+    _refuse(case, out, p)
+    return out
+
+
+def _refuse(case: Case, out: dict, p: dict) -> None:
+    """Refuse a band the mesh cannot resolve at the farthest probe (a phase error of
+    :data:`UNRESOLVED_PHASE` or beyond the cut-off), or an error at or above
+    ``mesh.max_dispersion_error`` (> 0)."""
+    limit = case["mesh.max_dispersion_error"]
+    where = (f"mesh.wavelength_hz = {out['frequency_hz']:g}: at the farthest probe "
+             f"{out['probe']} ({out['distance_m']:.3g} m from track {out['track']}) "
+             f"{out['part']} has {p['epw']:.3g} elements per S wavelength")
+    if p["phase"] >= UNRESOLVED_PHASE:
+        off = ("beyond the grid's cut-off" if not np.isfinite(p["phase"]) else
+               f"{p['phase']:.2g} period off")
+        need = _needed(case, p, UNRESOLVED_PHASE, "phase")
+        raise DispersionError(
+            f"{where}: the mesh cannot resolve the band there (the wave arrives {off}; "
+            f"allowed: less than {UNRESOLVED_PHASE:g} period); {_advice(need)}")
+    if limit > 0 and p["error"] >= limit:
+        need = _needed(case, p, limit)
+        raise DispersionError(
+            f"{where}: predicted peak-velocity error {100 * p['error']:.3g} % >= "
+            f"mesh.max_dispersion_error = {limit:g}; {_advice(need)}, or raise "
+            "mesh.max_dispersion_error (0: no limit)")
+
+
+def _finite(x: float) -> float | None:
+    """JSON-safe: None for inf."""
+    return float(x) if np.isfinite(x) else None
+
+
+def _advice(need: float) -> str:
+    """What makes the error small enough."""
+    if np.isfinite(need):
+        return (f"raise mesh.elements_per_wavelength to >= {np.ceil(need * 10) / 10:g} or "
+                "lower mesh.wavelength_hz")
+    return ("no element size suffices at this time step (the time scheme's own error): "
+            "lower transient.dt or raise transient.steps_per_period, or lower "
+            "mesh.wavelength_hz")

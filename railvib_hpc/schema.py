@@ -809,6 +809,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                  "thesis's formula; it gives no value)", "nonneg",
                                  source="thesis §4.2 formula F = K_H d^1.5 + C d' |d|; C not "
                                         "given"),
+        "supercritical": Param(False, "bool", "-",
+                               "accept a train at or above the ground's Rayleigh speed "
+                               "(the critical speed of a track on soft soil: the response "
+                               "grows and forms a Mach cone; without this key such a speed "
+                               "is refused)",
+                               source="issue 28: reaching the soil's Rayleigh speed must be "
+                                      "handled"),
         "drop_height": Param(0.0, "float", "m",
                              "initial condition: 0 starts the vehicle at rest in static "
                              "equilibrium; > 0 drops it: at t = 0 the track is at rest and "
@@ -1146,7 +1153,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
 #: car's (no lateral dynamics) do not.
 TRAIN2_SHARED_VEHICLE_KEYS = ("type", "speed", "x_start", "x_end", "t_after", "drop_height",
                               "n_cars", "wheel_radius", "k_hertz", "contact_damping",
-                              "conicity")
+                              "conicity", "supercritical")
 SCHEMA["train2"]["vehicle"] = Param(
     {}, "vehicle", "-",
     "the second train's own vehicle, of [vehicle]'s type: a [train2.vehicle] table of the "

@@ -18,10 +18,39 @@ from collections.abc import Collection, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from .schema import MAX_ROTATION_DEG, SOIL_LAYER_PARTS, iter_params
 
 if TYPE_CHECKING:
     from .config import Case
+
+def rayleigh_speed(c_s: float, nu: float) -> float:
+    """Rayleigh-wave speed of an elastic half-space [m/s]: the real root in (0, c_s) of
+    Rayleigh's equation ``x^3 - 8 x^2 + (24 - 16 k) x - 16 (1 - k) = 0`` in ``x = (c_R /
+    c_S)^2``, ``k = (c_S / c_P)^2`` (Achenbach, Wave propagation in elastic solids, 1973,
+    eq. 5.62).
+
+    >>> round(rayleigh_speed(100.0, 0.25) / 100.0, 4)     # 0.9194 (Achenbach, Table 5.1)
+    0.9194
+    """
+    k = (1.0 - 2.0 * nu) / (2.0 * (1.0 - nu))
+    roots = np.roots([1.0, -8.0, 24.0 - 16.0 * k, -16.0 * (1.0 - k)])
+    real = roots[(np.abs(roots.imag) < 1e-12) & (roots.real > 0) & (roots.real < 1)].real
+    return float(c_s * np.sqrt(real.min()))
+
+
+def ground_rayleigh_speeds(case: Case) -> dict[str, float]:
+    """Rayleigh speed [m/s] of each ground material: the soil layers, or the subgrade."""
+    layers = soil_layers(case)
+    mats = ({name: (lay["c_s"], lay["nu"]) for name, lay in zip(SOIL_LAYER_PARTS, layers)}
+            if layers else None)
+    if mats is None:
+        m = case["materials.subgrade"]
+        mats = {"subgrade": (float(np.sqrt(m["E"] / (2.0 * (1.0 + m["nu"]) * m["rho"]))),
+                             m["nu"])}
+    return {name: rayleigh_speed(c_s, nu) for name, (c_s, nu) in mats.items()}
+
 
 def soil_layers(case: Case) -> list[dict[str, float]]:
     """The case's soil layers, top down, with ``E``, ``c_s``, ``nu``, ``rho``, ``damping_ratio``,

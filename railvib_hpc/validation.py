@@ -32,6 +32,7 @@ from .site import (
     MAX_TWIST_SHEAR,
     building_turn,
     embankment_toe,
+    ground_rayleigh_speeds,
     line_probe_name,
     line_ranges,
     line_x,
@@ -855,11 +856,33 @@ def _vehicle_problems(v: dict[str, Any], gauge: float, section: str
     return out
 
 
+def _speed_problems(case: Case) -> list[tuple[str, Any, str]]:
+    """A train at or above the ground's lowest Rayleigh speed, unless vehicle.supercritical
+    accepts it."""
+    if case["vehicle.supercritical"]:
+        return []
+    try:
+        speeds = ground_rayleigh_speeds(case)
+    except (KeyError, ValueError, ZeroDivisionError):
+        return []                        # (bad materials are reported by their own checks)
+    part, c_r = min(speeds.items(), key=lambda kv: kv[1])
+    trains = [("vehicle.speed", case["vehicle.speed"])]
+    if case["track.count"] == 2 and case["train2.speed"] > 0:
+        trains.append(("train2.speed", case["train2.speed"]))
+    return [(key, v, f"is at or above the ground's Rayleigh speed c_R = {c_r:.1f} m/s "
+             f"({part}; " + ", ".join(f"{k} {c:.1f}" for k, c in speeds.items())
+             + " m/s): the track's critical speed, where the response grows and forms a "
+             f"Mach cone; allowed: < {c_r:.1f} m/s, or set vehicle.supercritical = true "
+             "to run it")
+            for key, v in trains if v >= c_r]
+
+
 def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     """Cross-key checks of [vehicle], [irregularity] and [mbs]."""
     out: list[tuple[str, Any, str]] = []
     v, irr, mbs = case["vehicle"], case["irregularity"], case["mbs"]
     out.extend(_vehicle_problems(v, case["track.gauge"], "vehicle"))
+    out.extend(_speed_problems(case))
     if v["drop_height"] > 0 and v["type"] == "moving_force":
         out.append(("vehicle.drop_height", v["drop_height"],
                     "a drop needs a vehicle with masses: vehicle.type = 'wheelset' or "

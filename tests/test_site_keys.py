@@ -214,3 +214,30 @@ def test_the_reflection_study_changes_the_depth_a_site_gave():
         variant = case.replace(overrides)
         base = variant["geometry.z0"] - variant["domain.extra_depth"]
         assert variant["geometry.z1"] - base == pytest.approx(depth)
+
+
+def test_rayleigh_speed_is_the_root_of_rayleighs_equation():
+    """Against Achenbach's table (c_R / c_S = 0.8740 at nu = 0, 0.9194 at 0.25, 0.9554 at
+    0.5)."""
+    from railvib_hpc.site import rayleigh_speed
+
+    for nu, ratio in ((0.0, 0.8740), (0.25, 0.9194), (0.4999, 0.9553)):
+        assert rayleigh_speed(1.0, nu) == pytest.approx(ratio, abs=2e-4)
+
+
+def test_a_train_at_the_rayleigh_speed_is_refused_unless_accepted(tmp_path, capsys):
+    from railvib_hpc.cli import run
+    from railvib_hpc.config import load_case
+    from railvib_hpc.transient.stage import speed_warning
+
+    base = Path(__file__).resolve().parents[1] / "jobs" / "thesis_baseline.toml"
+    assert run(["check", str(base), "--set", "vehicle.speed=200"]) == 2
+    err = capsys.readouterr().err
+    assert "vehicle.speed = 200.0: is at or above the ground's Rayleigh speed c_R = 193.3 m/s" \
+        in err and "set vehicle.supercritical = true" in err and "Traceback" not in err
+    assert run(["check", str(base), "--set", "vehicle.speed=200",
+                "--set", "vehicle.supercritical=true"]) == 0
+    case = load_case(base, ["vehicle.speed=200", "vehicle.supercritical=true"])
+    assert "above the ground's Rayleigh speed" in speed_warning(case, 200.0)
+    assert "near the ground's Rayleigh speed" in speed_warning(case, 150.0)
+    assert speed_warning(case, 30.0) == ""

@@ -66,7 +66,7 @@ transient_checkpoint.h5   transient    the union of the three above (it        m
 
 The keys of :data:`DIGEST_NEUTRAL_SECTIONS` (``[site]``, ``[probes]``) enter an inputs
 digest only where they differ from their defaults; those of :data:`CHECK_ONLY_KEYS`
-(``mesh.max_dispersion_error``) never.
+(``mesh.max_dispersion_error``, ``vehicle.supercritical``) never.
 
 The three products come from one time integration: they are reused only together, and
 one stale or missing product recomputes all three. The checkpoint is resumed only when
@@ -119,7 +119,7 @@ from .files import (
 DIGEST_NEUTRAL_SECTIONS = ("site", "probes")
 #: Keys that only decide whether a stage accepts what it computed (a check's limit), never
 #: what a file holds: they enter no inputs digest, and the stage checks a reused file again.
-CHECK_ONLY_KEYS = ("mesh.max_dispersion_error",)
+CHECK_ONLY_KEYS = ("mesh.max_dispersion_error", "vehicle.supercritical")
 
 #: A selection of case keys: (dotted prefix, leaf names left out below it).
 Selection = tuple[tuple[str, tuple[str, ...]], ...]

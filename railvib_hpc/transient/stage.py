@@ -688,6 +688,9 @@ def _setup(ctx: StageContext) -> dict:
     vehicle = build_vehicle(case)
     run = passage(case, vehicle, float(rails.x.max()))
     speed = float(np.max(np.abs(run["speeds"])))
+    critical = speed_warning(case, speed)
+    if critical:
+        rep.info(critical)
     h_min = float(np.diff(rails.x, axis=1).min())
     dt = time_step(case, h_min / speed, rep)
     engine = case["transient.engine"]
@@ -770,6 +773,28 @@ def _setup(ctx: StageContext) -> dict:
             "probe_names": names, "probe_coords": coords,
             "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),
             "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme}
+
+
+#: Fraction of the ground's Rayleigh speed from which a train's speed is warned about: the
+#: dynamic amplification of a track on a half-space grows steeply above about 0.7 c_R
+#: (Dieterman & Metrikine 1996; the Ledsgard measurements, Madshus & Kaynia 2000).
+NEAR_CRITICAL_SPEED = 0.7
+
+
+def speed_warning(case: Case, speed: float) -> str:
+    """A warning line when ``speed`` is at least :data:`NEAR_CRITICAL_SPEED` of the ground's
+    lowest Rayleigh speed (at or above it only with ``vehicle.supercritical``), else ''."""
+    from ..site import ground_rayleigh_speeds
+
+    speeds = ground_rayleigh_speeds(case)
+    part, c_r = min(speeds.items(), key=lambda kv: kv[1])
+    if speed < NEAR_CRITICAL_SPEED * c_r:
+        return ""
+    what = ("above the ground's Rayleigh speed (accepted by vehicle.supercritical)"
+            if speed >= c_r else "near the ground's Rayleigh speed")
+    return (f"WARNING: the train's speed {speed:g} m/s is {speed / c_r:.0%} of c_R = "
+            f"{c_r:.1f} m/s ({part}): {what}; the response near the track grows steeply "
+            "there (the track's critical speed)")
 
 
 def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:

@@ -973,6 +973,17 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "true)",
                         choices=("direct", "explicit", "imex"),
                         source="issue 28: an engine whose memory and cost grow linearly"),
+        "implicit_elements": Param("parts", "str", "-",
+                                   "transient.engine = 'imex': 'parts' integrates the parts "
+                                   "of transient.implicit_parts implicitly; 'auto' also every "
+                                   "solid element whose own stable step (its largest "
+                                   "frequency with the lumped mass and its Rayleigh damping) is "
+                                   "below the target step (transient.dt, or the band's step), "
+                                   "at most the 5 % with the smallest steps: thin slices and "
+                                   "heavily damped elements of the soil no longer set the "
+                                   "step of the whole model",
+                                   choices=("parts", "auto"),
+                                   source="issue 28: element-wise stable steps"),
         "implicit_parts": Param(["track", "building"], "strs", "-",
                                 "transient.engine = 'imex': the parts integrated implicitly "
                                 "(part names, or the groups 'track' = rails, sleepers, pads, "

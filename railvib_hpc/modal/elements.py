@@ -150,6 +150,28 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
                                         np.full(len(conn), direction)), None)
 
 
+def hex_max_frequencies(mesh: Mesh, case: Case) -> np.ndarray:
+    """Largest natural frequency [rad/s] of every hexahedron alone, free, with its row-sum
+    lumped mass: ``sqrt(lambda_max(m_e^-1/2 K_e m_e^-1/2))`` (once per distinct shape and
+    material). By Irons' element eigenvalue theorem the model's largest frequency is at
+    most the largest of these, so an element's own critical step bounds what it allows
+    (the IMEX engine's element-wise partition, :mod:`railvib_hpc.transient.imex`)."""
+    out = np.zeros(len(mesh.hexes))
+    for part, mat_name in SOLID_MATERIAL.items():
+        sel = np.flatnonzero(mesh.hex_part == PART_ID[part])
+        if not len(sel):
+            continue
+        mat = solid_material(case, mat_name)
+        x = mesh.points[mesh.hexes[sel]]
+        first, shape_of = unique_shapes(x)
+        xs = x[first]
+        Ks = hex8_stiffness(xs, mat["E"], mat["nu"], formulation=case["modal.hex_formulation"])
+        d = 1.0 / np.sqrt(hex8_lumped_mass_diagonal(xs, mat["rho"]))
+        lam = np.linalg.eigvalsh(d[:, :, None] * Ks * d[:, None, :])[:, -1]
+        out[sel] = np.sqrt(np.maximum(lam, 0.0))[shape_of]
+    return out
+
+
 def interface_stiffness(case: Case, kind: str, area: np.ndarray, direction: int) -> np.ndarray:
     """Stiffness of an elastic interface's springs along ``direction`` from the tributary
     ``area`` of their upper nodes (:func:`railvib_hpc.mesh.interfaces.tributary_areas`): the

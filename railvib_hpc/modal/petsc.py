@@ -47,13 +47,15 @@ PATTERN_CHUNK_NODES = 50_000
 
 
 def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
-                  parts: Collection[str] | None = None) -> LocalPattern:
+                  parts: Collection[str] | None = None,
+                  extra_hexes: np.ndarray | None = None) -> LocalPattern:
     """Sparsity pattern of the rows owned by ``rank`` (pure numpy).
 
     Built on the node graph (8 x 8 pairs per hexahedron instead of 24 x 24 entries): all DOF
     rows of a node share the node's column list, the free DOFs of its neighbours in order.
     ``parts`` restricts it to the elements of those parts (every owned row keeps its
-    diagonal). Built by chunks of :data:`PATTERN_CHUNK_NODES` owned nodes; the arrays are of
+    diagonal); ``extra_hexes`` (a mask over the hexahedra) adds those elements to them.
+    Built by chunks of :data:`PATTERN_CHUNK_NODES` owned nodes; the arrays are of
     PETSc's integer type (``indptr`` int64).
     """
     from petsc4py import PETSc
@@ -71,7 +73,10 @@ def local_pattern(mesh: Mesh, dofmap: DofMap, rank: int,
     line_mask = node_mask[mesh.lines].any(axis=1)
     if parts is not None:
         ids = [PART_ID[p] for p in parts]
-        hex_mask &= np.isin(mesh.hex_part, ids)
+        chosen = np.isin(mesh.hex_part, ids)
+        if extra_hexes is not None:
+            chosen |= extra_hexes
+        hex_mask &= chosen
         line_mask &= np.isin(mesh.line_part, ids)
     conns = (mesh.hexes[hex_mask], mesh.lines[line_mask])
     lengths, pieces = [], []
@@ -116,11 +121,13 @@ def _pattern_rows(conns, n0: int, n1: int, n_nodes: int, nfree: np.ndarray,
 
 
 def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
-             parts: Collection[str] | None = None, mass: bool | str = True):
+             parts: Collection[str] | None = None, mass: bool | str = True,
+             extra_hexes: np.ndarray | None = None):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
-    the stiffness of one material; ``mass=False`` assembles K only (M is returned as None);
+    the stiffness of one material (``extra_hexes``: a mask of hexahedra added to them);
+    ``mass=False`` assembles K only (M is returned as None);
     ``mass="diagonal"`` (with ``modal.lumped_mass``) stores the lumped M on the diagonal
     alone, not in K's pattern (the explicit engines: 1 kB less per DOF).
     The whole model's K (``parts=None``) includes the springs of absorbing faces with
@@ -129,7 +136,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
     from petsc4py import PETSc
 
     t0 = time.perf_counter()
-    pat = local_pattern(mesh, dofmap, comm.rank, parts)
+    pat = local_pattern(mesh, dofmap, comm.rank, parts, extra_hexes)
     hex_mask, line_mask = pat.hex_mask, pat.line_mask
     r0, r1 = dofmap.owned_dofs(comm.rank)
     n_local, n_global = r1 - r0, dofmap.n_dofs
@@ -412,7 +419,8 @@ def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int,
                        addv=PETSc.InsertMode.ADD_VALUES)
 
 
-def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str]):
+def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str],
+                       extra_hexes: np.ndarray | None = None, boundary: bool = False):
     """Stiffness and damping of the elements of ``parts`` alone: ``(K_p, C_p)``, C_p in
     K_p's pattern or None when nothing of them damps (collective).
 
@@ -422,13 +430,17 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
     ``'per_material'`` ``sum_g beta_g K_g`` over the material groups' elements in ``parts``,
     and the rail pads' dashpots of the pad parts in ``parts`` (``damping.pads``). The
     absorbing faces' dashpots, springs and graded layers are soil: never in a partition.
+    ``extra_hexes`` (a mask over the hexahedra) adds single elements of other parts;
+    ``boundary`` the absorbing faces' springs and dashpots (their lumped node blocks: a
+    face node's small mass on a stiff, heavily damped block would set the explicit step).
     """
     from petsc4py import PETSc
 
     from .damping import material_rayleigh, rayleigh_coefficients
 
     parts = tuple(parts)
-    K_p, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=False)
+    K_p, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=False,
+                         extra_hexes=extra_hexes)
     C_p = None
     model = case["damping.model"]
     if model == "rayleigh":
@@ -444,16 +456,32 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
         coeffs = material_rayleigh(case, list(groups))
         for group, group_parts in groups.items():
             mine = [p for p in group_parts if p in parts]
+            extra = None
+            if extra_hexes is not None:
+                extra = extra_hexes & np.isin(mesh.hex_part, [PART_ID[p] for p in group_parts])
             beta = coeffs[group][1]
-            if not mine or beta == 0.0:
+            if (not mine and (extra is None or not extra.any())) or beta == 0.0:
                 continue
             if C_p is None:
                 C_p = K_p.duplicate(copy=False)
-            K_g, _, _ = assemble(mesh, case, dofmap, comm, parts=mine, mass=False)
+            K_g, _, _ = assemble(mesh, case, dofmap, comm, parts=mine, mass=False,
+                                 extra_hexes=extra)
             C_p.axpy(beta, K_g, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             K_g.destroy()
+    from .boundary import boundary_node_blocks
     from .elements import PAD_DIRECTION
 
+    if boundary:
+        K_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+        insert_node_blocks(K_p, dofmap, comm.rank, *boundary_node_blocks(mesh, case, "spring"))
+        K_p.assemble()
+        nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+        if len(nodes):
+            if C_p is None:
+                C_p = K_p.duplicate(copy=False)
+            C_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+            insert_node_blocks(C_p, dofmap, comm.rank, nodes, blocks)
+            C_p.assemble()
     if case["damping.pads"] and any(p in parts for p in PAD_DIRECTION):
         if C_p is None:
             C_p = K_p.duplicate(copy=False)

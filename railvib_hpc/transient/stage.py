@@ -894,12 +894,24 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
     C - C_I``; the implicit elements do not limit the step, :mod:`.imex`)."""
     from ..mesh.stage import present_parts
     from ..modal.petsc import assemble_partition
-    from .explicit import critical_step, limiting_element, lumped_diagonal, stability_limit
-    from .imex import DAMPING_STABILITY_FACTOR, implicit_part_names
+    from ..schema import PART_ID
+    from .explicit import (
+        STEP_SAFETY,
+        critical_step,
+        limiting_element,
+        lumped_diagonal,
+        stability_limit,
+    )
+    from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names
 
     case, comm = ctx.case, ctx.comm
     parts = implicit_part_names(list(case["transient.implicit_parts"]), present_parts(mesh))
-    K_I, C_I = assemble_partition(mesh, case, dofmap, comm, parts)
+    extra = None
+    if case["transient.implicit_elements"] == "auto":
+        target = case["transient.dt"] if case["transient.dt"] > 0 else dt_band
+        extra = auto_implicit_hexes(mesh, case, target, STEP_SAFETY,
+                                    ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts]))
+    K_I, C_I = assemble_partition(mesh, case, dofmap, comm, parts, extra, boundary=True)
     try:
         m = lumped_diagonal(M, comm)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I))
@@ -911,7 +923,10 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
             if A is not None:
                 A.destroy()
         raise
-    text = f"implicit: {', '.join(parts) or 'none'}; explicit part {text}"
+    auto = (f" and {int(extra.sum()):,} elements below the target step" if extra is not None
+            else "")
+    text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
+            f"dashpots; explicit part {text}")
     return (K_I, C_I), dt, text
 
 

@@ -197,3 +197,47 @@ def test_imex_is_stable_up_to_the_explicit_parts_limit(damping):
         if model.mats[key] is not None:
             model.mats[key].destroy()
     model.destroy()
+
+
+def test_damped_critical_steps_is_the_central_differences_limit_at_twice_the_ratio():
+    from railvib_hpc.transient.imex import damped_critical_steps
+
+    omega = np.array([300.0, 1000.0, 5000.0])
+    alpha, beta = 2.0, 2e-4
+    got = damped_critical_steps(omega, alpha, beta)
+    for w, dt in zip(omega, got):
+        xi = alpha / (2 * w) + beta * w / 2
+        assert dt == pytest.approx(critical_step(w, DAMPING_STABILITY_FACTOR * xi), rel=1e-9)
+
+
+def test_auto_partition_takes_the_thin_elements_and_bounds_the_model():
+    """A soil box whose top layer is 10 x thinner: the element-wise partition takes exactly
+    that layer (target between the two element steps), the share cap bounds it, and the
+    model's largest frequency is at most the largest element's (Irons)."""
+    from railvib_hpc.modal.elements import hex_max_frequencies
+    from railvib_hpc.transient.imex import auto_implicit_hexes
+
+    mesh = box_mesh((4, 4, 4), (4.0, 4.0, 4.0))
+    top = np.isclose(mesh.points[:, 2], 4.0)
+    mesh.points[top, 2] = 3.1                       # the top layer 0.1 m thick
+    thin = np.ptp(mesh.points[mesh.hexes][:, :, 2], axis=1) < 0.2
+    assert thin.sum() == 16
+    case = soil_case("modal.lumped_mass=true", "damping.model=none")
+    w = hex_max_frequencies(mesh, case)
+    steps = 0.9 * 2.0 / w
+    target = np.sqrt(steps[thin].max() * steps[~thin].min())
+    assert np.array_equal(auto_implicit_hexes(mesh, case, target, 0.9, share=0.5), thin)
+    capped = auto_implicit_hexes(mesh, case, target, 0.9, share=0.1)
+    assert capped.sum() <= 0.1 * len(w) + 1 and not (capped & ~thin).any()
+    from scipy.linalg import eigh
+
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.petsc import assemble
+
+    K, M, _ = assemble(mesh, case, build_dofmap(mesh, 1, rules=RULES), MPI.COMM_SELF)
+    lam = eigh(K.convert("dense").getDenseArray(), M.convert("dense").getDenseArray(),
+               eigvals_only=True).max()
+    K.destroy()
+    M.destroy()
+    assert math.sqrt(lam) <= w.max() * (1 + 1e-9)
+    assert math.sqrt(lam) > 0.5 * w.max()

@@ -255,7 +255,7 @@ class ImexSystem(ExplicitSystem):
         dt, b, g = self.dt, self.scheme.beta, self.scheme.gamma
         u_, v_, a_ = (self.local(x) for x in (u, v, a))
         u_pred = u_ + dt * v_ + (dt * dt * (0.5 - b)) * a_
-        res = self._c_mass * self.m * u_pred
+        res = self._diagonal * u_pred              # (c_mass m, formed once)
         res -= self.internal_force(u_pred, damping_velocity(v_, a_, dt))
         res += self.times(self.h_implicit, u_pred)
         if self.C_I is not None:

@@ -73,7 +73,7 @@ def test_the_pattern_by_chunks_is_the_pattern_at_once(monkeypatch):
     from railvib_hpc.modal import petsc
     from railvib_hpc.modal.dofmap import build_dofmap
 
-    mesh, case, _ = _model()
+    mesh = _model()[0]
     for ranks in (1, 2, 3):
         dofmap = build_dofmap(mesh, ranks, rules={"bottom": ("ux", "uy", "uz")})
         for rank in range(ranks):

@@ -184,6 +184,8 @@ def main() -> None:
     p.add_argument("--ranks", type=int, nargs="+", default=[1, 2])
     p.add_argument("--steps", type=int, default=50)
     p.add_argument("--engine", choices=("explicit", "imex"), default="explicit")
+    p.add_argument("--json", help="append each result as a JSON line to this file (input of "
+                   "bench/transient_scaling_model.py --measured)")
     p.add_argument("--one", type=float, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.one:
@@ -211,6 +213,10 @@ def main() -> None:
                 print(f"| {n:.3g} | {ranks} | failed: {proc.stderr.strip()[-300:]} |")
                 continue
             r = json.loads(line[0][7:])
+            if args.json:
+                with open(args.json, "a") as f:
+                    f.write(json.dumps({**r, "engine": args.engine,
+                                        "triad_fraction": r["traffic_gbs"] / bw}) + "\n")
             print(f"| {r['dofs']:,} | {ranks} | {r['assembly_s']:.1f} | {r['limit_s']:.1f} "
                   f"({r['limit_iterations']}) | {r['factor_s']:.1f} ({r['implicit_rows']:,}, "
                   f"{r['factor_gb']:.2f}) | {r['dt']:.3e} | {r['step_s']:.4f} | "

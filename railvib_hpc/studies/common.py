@@ -478,7 +478,8 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
             model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,
                      "n_hexes": None, "modes_in_file": None, "modes_used": None,
                      "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
-                     "solver": "direct", "dt": stats.dt, "n_steps": stats.n_steps,
+                     "solver": "direct", "engine": stats.summary.get("engine", "direct"),
+                     "dt": stats.dt, "n_steps": stats.n_steps,
                      "time_integration": stats.time_integration,
                      "peak_rss_gb_total": stats.peak_rss_gb_total}
             result = {
@@ -576,7 +577,8 @@ def band_coverage(plan: StudyPlan, results: dict[str, dict]) -> dict:
     -------
     dict
         ``assessment_band_hz`` ``[low, high]``; ``variants``: per finished variant its
-        ``solver``, ``modes`` used, lowest natural frequency ``f1_hz`` (modal) and
+        ``solver``, ``engine`` (``transient.engine`` of a direct variant, else None),
+        ``modes`` used, lowest natural frequency ``f1_hz`` (modal) and
         ``f_max_hz`` (highest mode used, or ``transient.f_max``), ``top_band_hz`` (the
         highest one-third-octave band reported); ``f_max_hz``: the lowest of them;
         ``warning``: a sentence when a variant's band ends below the top of the assessment
@@ -594,6 +596,7 @@ def band_coverage(plan: StudyPlan, results: dict[str, dict]) -> dict:
         top = resolved_up_to(r)
         bands = [f for f in _third_octave_nominals(lo, hi) if band_resolved(f, top)]
         per.append({"variant": v.name, "solver": "direct" if direct else "modal",
+                    "engine": m.get("engine", "direct") if direct else None,
                     "modes": m.get("modes_used"), "f1_hz": None if direct or not freqs
                     else freqs[0], "f_max_hz": top,
                     "top_band_hz": bands[-1] if bands else None})

@@ -181,6 +181,14 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
             "rows": analysis.get("rows", []), "figures": [str(p) for p in figs]}
 
 
+def _solver_text(variant: dict) -> str:
+    """``modal``, or ``direct`` with the time-domain engine that ran it (``direct/imex``)."""
+    engine = variant.get("engine")
+    if variant["solver"] != "direct" or engine in (None, "direct"):
+        return variant["solver"]
+    return f"direct/{engine}"
+
+
 def _annotate(analysis: dict, entries: list[dict], coverage: dict) -> dict:
     """The analysis with what every study's report says: the unfinished variants (in the
     verdict), the band of each finished variant (a table) and the band warning."""
@@ -203,14 +211,16 @@ def _annotate(analysis: dict, entries: list[dict], coverage: dict) -> dict:
     analysis["band_coverage"] = coverage
     if coverage["variants"]:
         lo, hi = coverage["assessment_band_hz"]
-        rows = [[p["variant"], p["solver"], fmt(p["modes"]), fmt(p["f1_hz"]),
+        rows = [[p["variant"], _solver_text(p), fmt(p["modes"]), fmt(p["f1_hz"]),
                  fmt(p["f_max_hz"]), fmt(p["top_band_hz"])] for p in coverage["variants"]]
         analysis["tables"] = [*analysis.get("tables", []), {
             "title": "Frequency band of each variant",
             "head": ["variant", "solver", "modes", "f1 [Hz]", "resolved up to [Hz]",
                      "highest band reported [Hz]"], "rows": rows,
             "note": f"The assessment band is {lo:g}–{hi:g} Hz. resolved up to: the highest "
-                    "mode used (modal) or transient.f_max (direct). One-third-octave bands "
+                    "mode used (modal) or transient.f_max (direct; direct/explicit and "
+                    "direct/imex: the full model by that transient.engine). "
+                    "One-third-octave bands "
                     "above it are not reported; peaks and assessments miss the response "
                     "above it." + (f" WARNING: {coverage['warning']}."
                                    if coverage["warning"] else "")}]

@@ -12,6 +12,8 @@ The stage-file layer, bottom-up (a module imports only those before it in this l
 * :mod:`.provenance` -- what each file records, and the reuse verdict;
 * :mod:`.stage_checks` -- the data checks of each stage file;
 * :mod:`.run_record` -- ``run.json``, the record of every command run into a folder;
+* :mod:`.stage_outputs` -- the stages' result types (the API's results inherit their
+  fields; light: no numpy, no stage module);
 * :mod:`.stage_protocol` -- the stage protocol and its runner (the stages' one way in).
 
 The file formats: :mod:`.parallel_h5` (collective HDF5), :mod:`.xdmf` (the ParaView

@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -60,7 +59,8 @@ from ..io.stage_checks import (
     check_static,
     rail_amplitude,
 )
-from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
+from ..io.stage_outputs import PassageOutput
+from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory
@@ -477,54 +477,6 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
            "wheel position x [m]", "rail displacement under the wheel [mm]",
            "Rail deflection under the wheels")
     return paths
-
-
-@dataclass(frozen=True)
-class PassageOutput(StageOutput):
-    """What the ``mbs`` stage returns (the API's ``MBSResult`` has these fields).
-
-    Attributes
-    ----------
-    mbs_h5
-        The histories (contact forces, vehicle, modal coordinates).
-    plots
-        The PNG plots written with it.
-    n_modes, dt, n_steps, t_end
-        Modes used, time step [s], steps, end time [s].
-    static_wheel_load, mean_contact_force, peak_contact_force, min_contact_force
-        Per wheel [N] (the mean on the flexible rail).
-    max_rail_deflection
-        Largest rail deflection under a wheel [m].
-    loss_of_contact_steps
-        Steps in which a wheel lost contact.
-    """
-
-    mbs_h5: Path
-    plots: tuple[Path, ...]
-    n_modes: int
-    dt: float
-    n_steps: int
-    t_end: float
-    static_wheel_load: np.ndarray
-    mean_contact_force: np.ndarray
-    peak_contact_force: np.ndarray
-    min_contact_force: np.ndarray
-    max_rail_deflection: float
-    loss_of_contact_steps: int
-
-    @classmethod
-    def of_stats(cls, stats: dict, out_dir: Path) -> PassageOutput:
-        """The output of a passage's statistics (``stats`` of ``mbs.h5``) in ``out_dir``."""
-        return cls(reused=stats.get("reused"), summary=stats, mbs_h5=out_dir / MBS_H5,
-                   plots=tuple(sorted(out_dir.glob("mbs_*.png"))),
-                   n_modes=int(stats["n_modes"]), dt=float(stats["dt"]),
-                   n_steps=int(stats["n_steps"]), t_end=float(stats["t_end"]),
-                   static_wheel_load=np.array(stats["static_wheel_load"], dtype=float),
-                   mean_contact_force=np.array(stats["mean_contact_force"], dtype=float),
-                   peak_contact_force=np.array(stats["peak_contact_force"], dtype=float),
-                   min_contact_force=np.array(stats["min_contact_force"], dtype=float),
-                   max_rail_deflection=float(stats["max_rail_deflection"]),
-                   loss_of_contact_steps=int(stats["loss_of_contact_steps"]))
 
 
 def compute(ctx: StageContext) -> PassageOutput:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,10 +13,11 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.atomic import ensure_space
-from ..io.files import BANDS_DIR, MESH_H5, MODAL_DAMPING_H5, MODES_H5, MODES_XDMF, STATIC_H5
+from ..io.files import BANDS_DIR, MESH_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
 from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
 from ..io.stage_checks import check_eigenvalues, check_mode_shapes
-from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
+from ..io.stage_outputs import ModesOutput
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
@@ -94,62 +94,6 @@ class EigenProgress:
         self.rep.progress(f"eigensolve, {name} ({done}/{total})", done, total, self.t_phase)
         if finished:
             self.current = None
-
-
-@dataclass(frozen=True)
-class ModesOutput(StageOutput):
-    """What the ``modal`` stage returns (the API's ``ModalResult`` has these fields but
-    the mesh size).
-
-    Attributes
-    ----------
-    modes_h5, modes_xdmf
-        The modes and their ParaView view (None with ``modal.band_only``: one band only).
-    static_h5
-        The static solutions of the static correction (None when it is off).
-    frequencies_hz
-        The natural frequencies [Hz].
-    n_dofs
-        Free degrees of freedom of the model.
-    max_orthonormality_error, max_relative_residual
-        The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
-    peak_rss_gb_total
-        Peak memory over all ranks of the eigensolve [GB] (None when reused).
-    n_nodes, n_hexes
-        Size of the mesh of the modes (None with ``modal.band_only``).
-    """
-
-    modes_h5: Path | None
-    modes_xdmf: Path | None
-    static_h5: Path | None
-    frequencies_hz: np.ndarray
-    n_dofs: int | None
-    max_orthonormality_error: float | None
-    max_relative_residual: float | None
-    peak_rss_gb_total: float | None
-    n_nodes: int | None = None
-    n_hexes: int | None = None
-
-    @classmethod
-    def of_summary(cls, summary: dict, frequencies, out_dir: Path, static_correction: bool,
-                   mesh_size: tuple[int, int | None] | None = None) -> ModesOutput:
-        """The output of a summary and the frequencies of its modes, in ``out_dir``
-        (``mesh_size``: nodes and hexahedra of their mesh)."""
-        def present(name: str) -> Path | None:
-            return out_dir / name if (out_dir / name).exists() else None
-
-        modes = present(MODES_H5) if not summary.get("band_only") else None
-        return cls(reused=summary.get("reused"), summary=summary, modes_h5=modes,
-                   modes_xdmf=present(MODES_XDMF) if modes else None,
-                   static_h5=present(STATIC_H5) if static_correction else None,
-                   frequencies_hz=np.asarray(frequencies if modes else [], dtype=float),
-                   n_dofs=summary.get("n_dofs"),
-                   max_orthonormality_error=summary.get("max_orthonormality_error"),
-                   max_relative_residual=summary.get("max_relative_residual"),
-                   peak_rss_gb_total=None if summary.get("reused")
-                   else summary.get("peak_rss_gb_total"),
-                   n_nodes=mesh_size[0] if mesh_size else None,
-                   n_hexes=mesh_size[1] if mesh_size else None)
 
 
 def compute(ctx: StageContext) -> ModesOutput:

@@ -59,7 +59,7 @@ def test_result_fields_are_declared_once_in_a_light_module():
     stages = [f"railvib_hpc.{s}.stage" for s in ("mesh", "modal", "mbs", "reconstruct",
                                                  "assess")]
     code = ("import sys, railvib_hpc.io.stage_outputs; a = 'numpy' in sys.modules; "
-            "import railvib_hpc.api; print(a, [m for m in %r if m in sys.modules])" % stages)
+            f"import railvib_hpc.api; print(a, [m for m in {stages!r} if m in sys.modules])")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "False []"

@@ -29,7 +29,7 @@ The ``modal`` stage's declaration (``tests/example_stage.py`` is a whole new sta
 >>> from railvib_hpc.pipeline import stage
 >>> modal = stage("modal")
 >>> modal.products, modal.reads, modal.petsc
-(('modes.h5', 'static.h5', 'modal_damping.h5'), ('mesh.h5',), True)
+(('modes.h5', 'static.h5', 'modal_damping.h5', 'bands/index.json'), ('mesh.h5',), True)
 >>> [key for key, _ in modal.case_keys][:3]
 ['geometry', 'track', 'building']
 """

@@ -31,7 +31,7 @@ Before it integrates, the stage verifies its inputs (``modes.h5``, ``static.h5``
 for the case, unchanged, sound; otherwise it refuses naming the file and what differs),
 checks that the passage is not empty, that the number of steps stays below
 :data:`MAX_MBS_STEPS` and that the histories fit in memory. The computed histories pass
-the data checks of :func:`railvib_hpc.io.stage_checks.check_mbs_arrays` before they are
+the data checks of :func:`railvib_hpc.io.formats.mbs.check_mbs_arrays` before they are
 written.
 
 PNG plots next to it: ``mbs_contact_force.png`` (force vs position),
@@ -51,14 +51,10 @@ from ..config import Case
 from ..errors import DataError, ResourceError
 from ..io.atomic import atomic_file, ensure_space, write_h5
 from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
-from ..io.stage_checks import (
-    check_mbs,
-    check_mbs_arrays,
-    check_modal_damping,
-    check_modes,
-    check_static,
-    rail_amplitude,
-)
+from ..io.formats.mbs import check_mbs, check_mbs_arrays, rail_amplitude
+from ..io.formats.modal_damping import check_modal_damping
+from ..io.formats.modes import check_modes
+from ..io.formats.static import check_static
 from ..io.stage_outputs import PassageOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
@@ -98,7 +94,7 @@ def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
 
 def check_context(case: Case, out_dir: Path) -> dict:
     """What the data check of ``mbs.h5`` needs (see
-    :func:`railvib_hpc.io.stage_checks.check_mbs`)."""
+    :func:`railvib_hpc.io.formats.mbs.check_mbs`)."""
     return {"static_wheel_load": static_wheel_load(case), "modes_path": out_dir / MODES_H5}
 
 

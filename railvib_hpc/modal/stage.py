@@ -13,9 +13,17 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.atomic import ensure_space
-from ..io.files import BANDS_DIR, MESH_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
-from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
-from ..io.stage_checks import check_eigenvalues, check_mode_shapes
+from ..io.files import BAND_CACHE, MESH_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
+from ..io.formats.bands import read_index
+from ..io.formats.modal_damping import write_damping_parts
+from ..io.formats.modes import (
+    check_eigenvalues,
+    check_mode_shapes,
+    has_probe_roles,
+    read_strain_energies,
+    write_modes,
+    write_modes_xdmf,
+)
 from ..io.stage_outputs import ModesOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
@@ -29,7 +37,7 @@ from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
-from .projection import project_damping_parts, read_phi_rows, write_damping_parts
+from .projection import project_damping_parts, read_phi_rows
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
@@ -112,7 +120,7 @@ def compute(ctx: StageContext) -> ModesOutput:
 
 
 STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
-              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5), reads=(MESH_H5,),
+              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5, BAND_CACHE), reads=(MESH_H5,),
               compute=compute, petsc=True)
 
 
@@ -206,7 +214,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=progress,
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
-            bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
+            bands=band_settings(ctx), assemble=lambda sub: assemble(
                 mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info,
             progress=progress.phase)
     if result is None:                                   # modal.band_only: one band cached
@@ -289,19 +297,33 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     return summary, f, (int(mesh.n_nodes), len(mesh.hexes))
 
 
-def band_settings(case: Case, out_dir: Path):
-    """The band-sliced solve's settings (``modal.f_max`` with block Lanczos), else None."""
-    from .band_solve import BandSettings, cache_key
+def band_settings(ctx: StageContext):
+    """The band-sliced solve's settings (``modal.f_max`` with block Lanczos), else None;
+    with the band cache (:data:`~railvib_hpc.io.files.BAND_CACHE`, a product of this
+    stage) as the product layer judged it (collective)."""
+    from .band_solve import BandSettings
 
-    md = case["modal"]
+    md = ctx.case["modal"]
     if md["f_max"] <= 0 or md["method"] != "block_lanczos":
         return None
+    index, prov = on_root(lambda: _band_cache(ctx), ctx.comm)
     return BandSettings(f_max=md["f_max"], edges=list(md["bands"]),
                         band_modes=md["band_modes"], groups=md["band_groups"],
                         band_only=md["band_only"], tol=md["tol"],
                         block_size=md["block_size"], max_restarts=md["max_restarts"],
-                        out_of_core=md["out_of_core"], cache_dir=out_dir / BANDS_DIR,
-                        key=cache_key(case))
+                        out_of_core=md["out_of_core"], cache_dir=ctx.path(BAND_CACHE).parent,
+                        index=index, provenance=prov)
+
+
+def _band_cache(ctx: StageContext) -> tuple[dict | None, dict]:
+    """The band cache's index when it is current and sound (``reusing ...``; else
+    ``recomputing ...: <reason>`` and None), and the provenance its index is written with
+    (rank 0)."""
+    path = ctx.path(BAND_CACHE)
+    old = ctx.reuse(BAND_CACHE, why="same model and solver settings",
+                    detail=lambda index: f"{len(index['bands'])} band(s) solved",
+                    accept=lambda verdict: read_index(path))
+    return old.value, ctx.provenance(BAND_CACHE, {})
 
 
 def _check_space(case: Case, out_dir: Path, mesh, dofmap, want_static: bool) -> None:

@@ -2,7 +2,7 @@
 
 Inputs
 ------
-``modes.h5`` (complete, see :mod:`railvib_hpc.io.modes_io`) and ``mbs.h5``::
+``modes.h5`` (complete, see :mod:`railvib_hpc.io.formats.modes`) and ``mbs.h5``::
 
     /time                 (nt,)     strictly increasing [s]
     /modal/q              (nt, m)   modal coordinates of the first m modes (m <= modes)
@@ -75,7 +75,9 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
-from ..io.stage_checks import check_mbs, check_modes, check_static
+from ..io.formats.mbs import check_mbs
+from ..io.formats.modes import check_modes
+from ..io.formats.static import check_static
 from ..io.stage_outputs import FieldsOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf

@@ -66,7 +66,7 @@ PHASES = {
     "HDF5 write (total)": "railvib_hpc.mesh.mesh_io:write_mesh_h5",
     "probes' nearest nodes": "railvib_hpc.mesh.model:Mesh.nearest_node",
     "probes' nearest nodes (batch)": "railvib_hpc.mesh.model:Mesh.nearest_nodes",
-    "mesh.h5 re-read check": "railvib_hpc.io.stage_checks:check_mesh",
+    "mesh.h5 re-read check": "railvib_hpc.io.formats.mesh:check_mesh",
     "mesh.h5 digest": "railvib_hpc.io.atomic:record_file",
     "XDMF text": "railvib_hpc.mesh.mesh_io:mesh_xdmf",
 }

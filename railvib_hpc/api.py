@@ -53,6 +53,13 @@ import numpy as np
 
 from .config import Case
 from .errors import CaseError, UserError
+from .io.stage_outputs import (
+    AssessmentOutput,
+    FieldsOutput,
+    MeshOutput,
+    ModesOutput,
+    PassageOutput,
+)
 from .io.stage_protocol import StageRun, StageRunner
 from .log import Reporter
 from .parallel import on_root, world
@@ -217,62 +224,15 @@ class StageResult(_Frozen):
 
 
 @dataclass(frozen=True)
-class MeshResult(StageResult):
-    """``mesh``: the model's files, its size and quality warnings.
-
-    Attributes
-    ----------
-    mesh_h5, mesh_xdmf, report_json
-        The mesh in HDF5, its XDMF view (ParaView), the quality report.
-    mesh_msh
-        gmsh's mesh (None when ``mesh.file`` gave one).
-    n_nodes, n_hexes
-        Size of the mesh.
-    min_scaled_jacobian, max_aspect_ratio
-        Worst element quality.
-    warnings
-        The mesh check's warnings.
-    """
-
-    mesh_h5: Path
-    mesh_xdmf: Path
-    mesh_msh: Path | None
-    report_json: Path
-    n_nodes: int
-    n_hexes: int
-    min_scaled_jacobian: float
-    max_aspect_ratio: float
-    warnings: tuple[str, ...]
+class MeshResult(MeshOutput, StageResult):
+    """``mesh``: the model's files, its size and quality warnings (the fields of
+    :class:`~railvib_hpc.io.stage_outputs.MeshOutput`, declared there once)."""
 
 
 @dataclass(frozen=True)
-class ModalResult(StageResult):
-    """``modal``: the mass-normalised modes.
-
-    Attributes
-    ----------
-    modes_h5, modes_xdmf
-        The modes and their ParaView view (None with ``modal.band_only``: one band only).
-    static_h5
-        The static solutions of the static correction (None when it is off).
-    frequencies_hz
-        The natural frequencies [Hz] (read-only array).
-    n_dofs
-        Free degrees of freedom of the model.
-    max_orthonormality_error, max_relative_residual
-        The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
-    peak_rss_gb_total
-        Peak memory over all ranks of the eigensolve [GB] (None when reused).
-    """
-
-    modes_h5: Path | None
-    modes_xdmf: Path | None
-    static_h5: Path | None
-    frequencies_hz: np.ndarray
-    n_dofs: int | None
-    max_orthonormality_error: float | None
-    max_relative_residual: float | None
-    peak_rss_gb_total: float | None
+class ModalResult(ModesOutput, StageResult):
+    """``modal``: the mass-normalised modes (the fields of
+    :class:`~railvib_hpc.io.stage_outputs.ModesOutput`; ``frequencies_hz`` read-only)."""
 
     @property
     def n_modes(self) -> int:
@@ -281,37 +241,9 @@ class ModalResult(StageResult):
 
 
 @dataclass(frozen=True)
-class MBSResult(StageResult):
-    """``mbs``: the vehicle's passage over the modal track.
-
-    Attributes
-    ----------
-    mbs_h5
-        The histories (contact forces, vehicle, modal coordinates).
-    plots
-        The PNG plots written with it.
-    n_modes, dt, n_steps, t_end
-        Modes used, time step [s], steps, end time [s].
-    static_wheel_load, mean_contact_force, peak_contact_force, min_contact_force
-        Per wheel [N] (read-only arrays; the mean on the flexible rail).
-    max_rail_deflection
-        Largest rail deflection under a wheel [m].
-    loss_of_contact_steps
-        Steps in which a wheel lost contact.
-    """
-
-    mbs_h5: Path
-    plots: tuple[Path, ...]
-    n_modes: int
-    dt: float
-    n_steps: int
-    t_end: float
-    static_wheel_load: np.ndarray
-    mean_contact_force: np.ndarray
-    peak_contact_force: np.ndarray
-    min_contact_force: np.ndarray
-    max_rail_deflection: float
-    loss_of_contact_steps: int
+class MBSResult(PassageOutput, StageResult):
+    """``mbs``: the vehicle's passage over the modal track (the fields of
+    :class:`~railvib_hpc.io.stage_outputs.PassageOutput`; the arrays read-only)."""
 
 
 @dataclass(frozen=True)
@@ -344,50 +276,16 @@ class ProbePeak(_Frozen):
 
 
 @dataclass(frozen=True)
-class ReconstructResult(StageResult):
-    """``reconstruct``: fields of every node, stresses, probe histories.
-
-    Attributes
-    ----------
-    fields_h5, fields_xdmf
-        Displacement, velocity and acceleration of every node and their ParaView view.
-    stress_xdmf
-        Element stresses at ``output.stress_times`` (None when there are none).
-    probes_h5
-        Probe histories (and ``probes/<name>.csv``).
-    probes
-        ``{probe: ProbePeak}``.
-    """
-
-    fields_h5: Path
-    fields_xdmf: Path | None
-    stress_xdmf: Path | None
-    probes_h5: Path
-    probes: dict[str, ProbePeak]
+class ReconstructResult(FieldsOutput, StageResult):
+    """``reconstruct``: fields of every node, stresses, probe histories (the fields of
+    :class:`~railvib_hpc.io.stage_outputs.FieldsOutput`; ``probes`` is
+    ``{probe: ProbePeak}``)."""
 
 
 @dataclass(frozen=True)
-class AssessResult(StageResult):
-    """``assess``: verdicts per probe and standard, and the report.
-
-    Attributes
-    ----------
-    assessment_json
-        Everything assessed (``results``, wave arrivals, thesis comparison).
-    report_html, report_md, report_json
-        The report.
-    verdict
-        ``{probe: passed}`` (True, False, or None when undetermined).
-    max_utilisation
-        ``{probe: largest value / limit over the binding standards}``.
-    """
-
-    assessment_json: Path
-    report_html: Path | None
-    report_md: Path | None
-    report_json: Path | None
-    verdict: dict[str, bool | None]
-    max_utilisation: dict[str, float | None]
+class AssessResult(AssessmentOutput, StageResult):
+    """``assess``: verdicts per probe and standard, and the report (the fields of
+    :class:`~railvib_hpc.io.stage_outputs.AssessmentOutput`)."""
 
     @property
     def passed(self) -> bool:
@@ -401,7 +299,7 @@ class AssessResult(StageResult):
 
 
 #: The typed result of each of the pipeline's stages (built from the stage's own result
-#: object, which has the same fields).
+#: object, whose fields it inherits).
 _RESULTS: dict[str, type[StageResult]] = {"mesh": MeshResult, "modal": ModalResult,
                                           "mbs": MBSResult, "reconstruct": ReconstructResult,
                                           "assess": AssessResult}

@@ -21,7 +21,7 @@ Example
 >>> PIPELINES["transient"]
 ('transient', 'assess')
 >>> stage("modal").products
-('modes.h5', 'static.h5', 'modal_damping.h5')
+('modes.h5', 'static.h5', 'modal_damping.h5', 'bands/index.json')
 """
 
 from __future__ import annotations

@@ -37,6 +37,34 @@ def test_flat_api_is_importable_and_light():
     assert out.strip() == "[]"
 
 
+def test_result_fields_are_declared_once_in_a_light_module():
+    """Each API result inherits its fields from the stage's output type
+    (railvib_hpc/io/stage_outputs.py); that module loads neither numpy nor a stage module,
+    and the API loads no stage module."""
+    import subprocess
+    import sys
+
+    from railvib_hpc.io import stage_outputs as so
+
+    pairs = {rv.MeshResult: so.MeshOutput, rv.ModalResult: so.ModesOutput,
+             rv.MBSResult: so.PassageOutput, rv.ReconstructResult: so.FieldsOutput,
+             rv.AssessResult: so.AssessmentOutput}
+    common = [f.name for f in dataclasses.fields(rv.StageResult)]
+    for result, output in pairs.items():
+        assert issubclass(result, output) and issubclass(result, rv.StageResult)
+        own = [f.name for f in dataclasses.fields(output)]
+        assert [f.name for f in dataclasses.fields(result)] == \
+            common + [n for n in own if n not in common]
+        assert not set(vars(result).get("__annotations__", {})) & set(own), result
+    stages = [f"railvib_hpc.{s}.stage" for s in ("mesh", "modal", "mbs", "reconstruct",
+                                                 "assess")]
+    code = ("import sys, railvib_hpc.io.stage_outputs; a = 'numpy' in sys.modules; "
+            f"import railvib_hpc.api; print(a, [m for m in {stages!r} if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "False []"
+
+
 def test_case_replace_is_typed_validated_and_leaves_the_original():
     case = rv.Case.from_file(BASELINE)
     soft = case.replace({"materials.subgrade.E": 1.5e8, "vehicle.speed": 20,

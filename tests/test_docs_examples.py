@@ -24,6 +24,7 @@ MODULES = [
     "railvib_hpc.io.digests",
     "railvib_hpc.io.products",
     "railvib_hpc.io.stage_protocol",
+    "railvib_hpc.io.stage_outputs",
     "railvib_hpc.reconstruct.probes",
     "railvib_hpc.mesh.turn",
     "railvib_hpc.modal.block_lanczos",

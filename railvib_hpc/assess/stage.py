@@ -31,7 +31,6 @@ how well the modes represent wave propagation.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -50,7 +49,8 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
-from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
+from ..io.stage_outputs import AssessmentOutput
+from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
@@ -443,45 +443,6 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
             f"multibody            {case['vehicle.type']} at {case['vehicle.speed']:g} m/s, "
             f"irregularity {case['irregularity.type']}",
             f"transient.h5 inputs  sha256 {key}"]
-
-
-@dataclass(frozen=True)
-class AssessmentOutput(StageOutput):
-    """What the ``assess`` stage returns (the API's ``AssessResult`` has these fields).
-
-    Attributes
-    ----------
-    assessment_json
-        Everything assessed (``results``, wave arrivals, thesis comparison).
-    report_html, report_md, report_json
-        The report.
-    verdict
-        ``{probe: passed}`` (True, False, or None when undetermined).
-    max_utilisation
-        ``{probe: largest value / limit over the binding standards}``.
-    """
-
-    assessment_json: Path
-    report_html: Path | None
-    report_md: Path | None
-    report_json: Path | None
-    verdict: dict[str, bool | None]
-    max_utilisation: dict[str, float | None]
-
-    @classmethod
-    def of_summary(cls, summary: dict, out_dir: Path) -> AssessmentOutput:
-        """The output of an assessment's summary (:func:`assess_case`) in ``out_dir``; it is
-        always computed anew (``reused`` False)."""
-        report = {k: Path(v) for k, v in summary.get("report", {}).items()}
-        utilisation: dict[str, float | None] = {}
-        for name, res in summary.get("results", {}).items():
-            binding = [b.get("utilisation") for b in res.get("standards", {}).values()
-                       if not b.get("comparison_only") and b.get("utilisation") is not None]
-            utilisation[name] = float(max(binding)) if binding else None
-        return cls(reused=False, summary=summary, assessment_json=out_dir / ASSESSMENT_JSON,
-                   report_html=report.get("html"), report_md=report.get("markdown"),
-                   report_json=report.get("json"), verdict=dict(summary.get("verdict", {})),
-                   max_utilisation=utilisation)
 
 
 def compute(ctx: StageContext) -> AssessmentOutput:

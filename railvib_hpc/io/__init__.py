@@ -10,10 +10,15 @@ The stage-file layer, bottom-up (a module imports only those before it in this l
 * :mod:`.locks` -- the lock of an output folder;
 * :mod:`.products` -- the table of stage files: stage, format, case keys, upstream files;
 * :mod:`.provenance` -- what each file records, and the reuse verdict;
-* :mod:`.stage_checks` -- the data checks of each stage file;
+* :mod:`.formats` -- one module per file format: its layout, its data check and, where
+  they belong to this layer, its writer and reader;
+* :mod:`.stage_checks` -- the data check of each stage file (the table of
+  :mod:`.formats`' checks);
 * :mod:`.run_record` -- ``run.json``, the record of every command run into a folder;
+* :mod:`.stage_outputs` -- the stages' result types (the API's results inherit their
+  fields; light: no numpy, no stage module);
 * :mod:`.stage_protocol` -- the stage protocol and its runner (the stages' one way in).
 
-The file formats: :mod:`.parallel_h5` (collective HDF5), :mod:`.xdmf` (the ParaView
-views), :mod:`.modes_io` (``modes.h5``).
+Beside them: :mod:`.parallel_h5` (collective HDF5) and :mod:`.xdmf` (the ParaView views),
+which the formats' writers use.
 """

@@ -47,6 +47,9 @@ MODAL_DAMPING_H5 = "modal_damping.h5"
 #: The band cache of the band-sliced modal solve: a folder and its index.
 BANDS_DIR = "bands"
 BAND_INDEX_JSON = "index.json"
+#: The band cache's table name: its index, where its provenance is
+#: (:mod:`railvib_hpc.io.formats.bands`).
+BAND_CACHE = f"{BANDS_DIR}/{BAND_INDEX_JSON}"
 
 #: ``railvib mbs``: the vehicle passage in modal coordinates.
 MBS_H5 = "mbs.h5"

@@ -16,6 +16,9 @@ modes.h5         modal        + materials, sections, pads, modal (without  mesh.
                               and the band split), boundary
 static.h5        modal        as modes.h5                                 mesh.h5, modes.h5
 modal_damping.h5 modal        + pads, [damping]                           mesh.h5, modes.h5
+bands/index.json modal        as modes.h5, without f_max, n_modes,        --
+                              max_basis, shift_hz (the band cache,
+                              :mod:`~railvib_hpc.io.formats.bands`)
 mbs.h5           mbs          + damping settings, [damping], vehicle,     modes.h5
                               irregularity (and its file), mbs            (static.h5,
                                                                           modal_damping.h5)
@@ -90,6 +93,7 @@ from ..schema import iter_params
 from .digests import digest, hash_file
 from .files import (
     ASSESSMENT_JSON,
+    BAND_CACHE,
     FIELDS_H5,
     FIELDS_XDMF,
     MBS_H5,
@@ -141,11 +145,15 @@ MODAL_DAMPING_KEYS = ("damping_ratio", "damping")
 MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
 #: A band of the band-sliced solve (its cache in ``<out>/bands``) depends on [modal] as the
 #: modes do, except on how many modes up to which frequency are wanted and on the basis
-#: and shift of an unsliced solve (:func:`railvib_hpc.modal.band_solve.cache_key`).
+#: and shift of an unsliced solve: the band cache's inputs leave them out, so raising
+#: ``modal.f_max`` keeps the cache and only adds bands.
 BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
                   ("boundary", ()))
+_BANDS = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
+                  ("pads", MODAL_ONLY_EXCLUDED),
+                  ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ()))
 #: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
 #: dashpots and [damping] (the ratios only enter when composed, but the whole section is
 #: kept for safety). Whether the static fields are projected too is in the file's shape:
@@ -222,6 +230,7 @@ STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
     StageFile(STATIC_H5, "modal", 2, _MODAL, (MESH_H5, MODES_H5), (), ("mesh.file",)),
     StageFile(MODAL_DAMPING_H5, "modal", 2, _MODAL_DAMPING, (MESH_H5, MODES_H5), (),
               ("mesh.file",)),
+    StageFile(BAND_CACHE, "modal", 2, _BANDS, (), (), ("mesh.file",)),
     StageFile(MBS_H5, "mbs", 2, _MBS, (MODES_H5, STATIC_H5, MODAL_DAMPING_H5), (),
               ("mesh.file", "irregularity.file")),
     StageFile(FIELDS_H5, "reconstruct", 2, _FIELDS, (MODES_H5, MBS_H5, STATIC_H5),

@@ -29,7 +29,7 @@ The ``modal`` stage's declaration (``tests/example_stage.py`` is a whole new sta
 >>> from railvib_hpc.pipeline import stage
 >>> modal = stage("modal")
 >>> modal.products, modal.reads, modal.petsc
-(('modes.h5', 'static.h5', 'modal_damping.h5'), ('mesh.h5',), True)
+(('modes.h5', 'static.h5', 'modal_damping.h5', 'bands/index.json'), ('mesh.h5',), True)
 >>> [key for key, _ in modal.case_keys][:3]
 ['geometry', 'track', 'building']
 """
@@ -48,6 +48,7 @@ from .locks import output_lock
 from .products import STAGE_FILES, Selection, StageFile, spec
 from .provenance import Verdict, examine, provenance, require_inputs
 from .stage_checks import CHECKS
+from .stage_outputs import StageOutput
 
 __all__ = ["NotReusable", "Reuse", "Stage", "StageContext", "StageOutput", "StageRun",
            "StageRunner", "declare_product"]
@@ -125,22 +126,6 @@ class Stage:
         for row in self.rows:
             keys += [k for k in row.inputs if k not in keys]
         return tuple(keys)
-
-
-@dataclass(frozen=True)
-class StageOutput:
-    """What ``compute`` returns; each stage's result type adds its own fields.
-
-    Attributes
-    ----------
-    reused
-        What it reused instead of computing (a bool, or per file); ``run.json`` records it.
-    summary
-        Its full summary (the statistics it printed and recorded).
-    """
-
-    reused: Any
-    summary: Mapping[str, Any]
 
 
 class NotReusable(Exception):

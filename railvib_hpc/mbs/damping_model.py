@@ -13,8 +13,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..io.files import MODAL_DAMPING_H5, MODES_H5
+from ..io.formats.modal_damping import check_modal_damping
+from ..io.formats.modes import check_modes
 from ..io.provenance import require_inputs
-from ..io.stage_checks import check_modal_damping, check_modes
 from .case_vehicle import MBSInputError
 
 if TYPE_CHECKING:
@@ -47,7 +48,7 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
         with h5py.File(modes_path, "r") as f:
             omega = np.sqrt(np.maximum(f["modes/eigenvalue"][:m], 0.0))
     if kind == "strain_energy":
-        from ..io.modes_io import read_strain_energies
+        from ..io.formats.modes import read_strain_energies
         from ..modal.energy import damping_from_energies
 
         energies = read_strain_energies(modes_path) if modes_path is not None else None
@@ -81,7 +82,7 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     MBSInputError
         Without a ``modal_damping.h5`` of these modes and settings.
     """
-    from ..modal.projection import read_damping_parts
+    from ..io.formats.modal_damping import read_damping_parts
 
     out_dir = Path(modes_path).parent
     if not (out_dir / MODAL_DAMPING_H5).exists():

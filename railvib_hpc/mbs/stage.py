@@ -31,7 +31,7 @@ Before it integrates, the stage verifies its inputs (``modes.h5``, ``static.h5``
 for the case, unchanged, sound; otherwise it refuses naming the file and what differs),
 checks that the passage is not empty, that the number of steps stays below
 :data:`MAX_MBS_STEPS` and that the histories fit in memory. The computed histories pass
-the data checks of :func:`railvib_hpc.io.stage_checks.check_mbs_arrays` before they are
+the data checks of :func:`railvib_hpc.io.formats.mbs.check_mbs_arrays` before they are
 written.
 
 PNG plots next to it: ``mbs_contact_force.png`` (force vs position),
@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,15 +51,12 @@ from ..config import Case
 from ..errors import DataError, ResourceError
 from ..io.atomic import atomic_file, ensure_space, write_h5
 from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
-from ..io.stage_checks import (
-    check_mbs,
-    check_mbs_arrays,
-    check_modal_damping,
-    check_modes,
-    check_static,
-    rail_amplitude,
-)
-from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
+from ..io.formats.mbs import check_mbs, check_mbs_arrays, rail_amplitude
+from ..io.formats.modal_damping import check_modal_damping
+from ..io.formats.modes import check_modes
+from ..io.formats.static import check_static
+from ..io.stage_outputs import PassageOutput
+from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory
@@ -98,7 +94,7 @@ def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
 
 def check_context(case: Case, out_dir: Path) -> dict:
     """What the data check of ``mbs.h5`` needs (see
-    :func:`railvib_hpc.io.stage_checks.check_mbs`)."""
+    :func:`railvib_hpc.io.formats.mbs.check_mbs`)."""
     return {"static_wheel_load": static_wheel_load(case), "modes_path": out_dir / MODES_H5}
 
 
@@ -477,54 +473,6 @@ def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
            "wheel position x [m]", "rail displacement under the wheel [mm]",
            "Rail deflection under the wheels")
     return paths
-
-
-@dataclass(frozen=True)
-class PassageOutput(StageOutput):
-    """What the ``mbs`` stage returns (the API's ``MBSResult`` has these fields).
-
-    Attributes
-    ----------
-    mbs_h5
-        The histories (contact forces, vehicle, modal coordinates).
-    plots
-        The PNG plots written with it.
-    n_modes, dt, n_steps, t_end
-        Modes used, time step [s], steps, end time [s].
-    static_wheel_load, mean_contact_force, peak_contact_force, min_contact_force
-        Per wheel [N] (the mean on the flexible rail).
-    max_rail_deflection
-        Largest rail deflection under a wheel [m].
-    loss_of_contact_steps
-        Steps in which a wheel lost contact.
-    """
-
-    mbs_h5: Path
-    plots: tuple[Path, ...]
-    n_modes: int
-    dt: float
-    n_steps: int
-    t_end: float
-    static_wheel_load: np.ndarray
-    mean_contact_force: np.ndarray
-    peak_contact_force: np.ndarray
-    min_contact_force: np.ndarray
-    max_rail_deflection: float
-    loss_of_contact_steps: int
-
-    @classmethod
-    def of_stats(cls, stats: dict, out_dir: Path) -> PassageOutput:
-        """The output of a passage's statistics (``stats`` of ``mbs.h5``) in ``out_dir``."""
-        return cls(reused=stats.get("reused"), summary=stats, mbs_h5=out_dir / MBS_H5,
-                   plots=tuple(sorted(out_dir.glob("mbs_*.png"))),
-                   n_modes=int(stats["n_modes"]), dt=float(stats["dt"]),
-                   n_steps=int(stats["n_steps"]), t_end=float(stats["t_end"]),
-                   static_wheel_load=np.array(stats["static_wheel_load"], dtype=float),
-                   mean_contact_force=np.array(stats["mean_contact_force"], dtype=float),
-                   peak_contact_force=np.array(stats["peak_contact_force"], dtype=float),
-                   min_contact_force=np.array(stats["min_contact_force"], dtype=float),
-                   max_rail_deflection=float(stats["max_rail_deflection"]),
-                   loss_of_contact_steps=int(stats["loss_of_contact_steps"]))
 
 
 def compute(ctx: StageContext) -> PassageOutput:

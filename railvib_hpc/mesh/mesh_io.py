@@ -46,7 +46,7 @@ def write_mesh_h5(path: Path, mesh: Mesh, attrs: dict[str, str]) -> str:
     content digest."""
     import h5py
 
-    from ..io.stage_checks import check_mesh
+    from ..io.formats.mesh import check_mesh
 
     def fill(f, parallel: bool) -> None:
         g = f.create_group("mesh")

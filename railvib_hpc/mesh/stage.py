@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,7 +13,8 @@ from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text
 from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
-from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
+from ..io.stage_outputs import MeshOutput
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory, release_memory
@@ -369,49 +369,6 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
     write_text(report_path, json.dumps(report, indent=2))
     _print_warnings(report, reporter)
     return mesh, report, sha
-
-
-@dataclass(frozen=True)
-class MeshOutput(StageOutput):
-    """What the ``mesh`` stage returns (the API's ``MeshResult`` has these fields).
-
-    Attributes
-    ----------
-    mesh_h5, mesh_xdmf, report_json
-        The mesh in HDF5, its XDMF view (ParaView), the quality report.
-    mesh_msh
-        gmsh's mesh (None when ``mesh.file`` gave one).
-    n_nodes, n_hexes
-        Size of the mesh.
-    min_scaled_jacobian, max_aspect_ratio
-        Worst element quality.
-    warnings
-        The mesh check's warnings.
-    """
-
-    mesh_h5: Path
-    mesh_xdmf: Path
-    mesh_msh: Path | None
-    report_json: Path
-    n_nodes: int
-    n_hexes: int
-    min_scaled_jacobian: float
-    max_aspect_ratio: float
-    warnings: tuple[str, ...]
-
-    @classmethod
-    def of_report(cls, report: dict, out_dir: Path, user_mesh: bool) -> MeshOutput:
-        """The output of a quality report (:func:`build_or_reuse_mesh`) in ``out_dir``."""
-        q = report.get("quality", {})
-        msh = out_dir / MESH_MSH
-        return cls(reused=report.get("reused"), summary=report, mesh_h5=out_dir / MESH_H5,
-                   mesh_xdmf=out_dir / MESH_XDMF,
-                   mesh_msh=msh if not user_mesh and msh.exists() else None,
-                   report_json=out_dir / MESH_REPORT_JSON,
-                   n_nodes=int(q.get("n_nodes", 0)), n_hexes=int(q.get("n_hexes", 0)),
-                   min_scaled_jacobian=float(q.get("min_scaled_jacobian", float("nan"))),
-                   max_aspect_ratio=float(q.get("max_aspect_ratio", float("nan"))),
-                   warnings=tuple(report.get("warnings", ())))
 
 
 def compute(ctx: StageContext) -> MeshOutput:

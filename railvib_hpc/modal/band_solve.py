@@ -20,14 +20,16 @@ The plan and its proof are in :mod:`railvib_hpc.modal.bands`. Here:
    below ``f_max`` are kept and counted against the inertia of every stretch between two
    counted points (:func:`railvib_hpc.modal.bands.check_counts`).
 
-Cache: ``<out>/bands/index.json`` records the bands, the inertia counts and the merged
-chain under a key of the model and solver settings; a later run reuses every band of its
-plan, and a higher ``f_max`` only adds bands above the old one.
+Cache: ``<out>/bands`` (:mod:`railvib_hpc.io.formats.bands`: its layout, writer, reader
+and check) records the bands, the inertia counts and the merged chain. It is a product of
+the modal stage: the stage reuses it through the product layer (its inputs digest leaves
+out ``f_max`` and the band split) and gives its index and provenance in
+:class:`BandSettings`; a run reuses every band of its plan, and a higher ``f_max`` only
+adds bands above the old one.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -35,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.files import BAND_INDEX_JSON, MESH_H5
+from ..io.files import BAND_INDEX_JSON
+from ..io.formats.bands import band_file_name, empty_index, read_band, write_band, write_index
 from ..resources import (
     current_memory_gb,
     peak_memory_gb,
@@ -100,19 +103,22 @@ class BandRecord:
     cover_lo_hz: float
     cover_hi_hz: float
     stats: dict = field(default_factory=dict)
+    #: the band file's content digest (the cache's check compares it)
+    sha256: str = ""
 
     def to_json(self) -> dict:
         b = self.band
         return {"index": b.index, "lo_hz": b.lo_hz, "hi_hz": b.hi_hz, "shift_hz": b.shift_hz,
                 "file": self.file, "n_below": self.n_below, "n_modes": self.n_modes,
                 "cover_lo_hz": self.cover_lo_hz, "cover_hi_hz": self.cover_hi_hz,
-                "stats": self.stats}
+                "stats": self.stats, "sha256": self.sha256}
 
     @classmethod
     def from_json(cls, d: dict) -> BandRecord:
         return cls(Band(int(d["index"]), float(d["lo_hz"]), float(d["hi_hz"]),
                         float(d["shift_hz"])), d["file"], int(d["n_below"]), int(d["n_modes"]),
-                   float(d["cover_lo_hz"]), float(d["cover_hi_hz"]), dict(d.get("stats", {})))
+                   float(d["cover_lo_hz"]), float(d["cover_hi_hz"]), dict(d.get("stats", {})),
+                   str(d.get("sha256", "")))
 
 
 def _same(a: float, b: float) -> bool:
@@ -120,24 +126,16 @@ def _same(a: float, b: float) -> bool:
 
 
 class BandCache:
-    """``<out>/bands/index.json`` (read on every rank, written by rank 0 atomically)."""
+    """The band cache in memory: the index of ``<out>/bands`` as the modal stage reused it
+    (checked and current, on every rank; None: empty), saved by rank 0 with its provenance
+    (:mod:`railvib_hpc.io.formats.bands`)."""
 
-    def __init__(self, folder: Path, key: str, comm):
-        self.folder, self.key, self.comm = Path(folder), key, comm
-        data = None
-        if comm.rank == 0:
-            path = self.folder / BAND_INDEX_JSON
-            try:
-                data = json.loads(path.read_text()) if path.is_file() else None
-            except (OSError, ValueError):
-                data = None
-            if data is not None and data.get("key") != key:
-                data = None                  # another model or solver setting
-        data = comm.bcast(data, root=0)
-        data = data or {"key": key, "counts": {}, "bands": [], "chain": None}
+    def __init__(self, folder: Path, comm, index: dict | None = None,
+                 provenance: dict | None = None):
+        self.folder, self.comm, self.provenance = Path(folder), comm, provenance
+        data = index or empty_index()
         self.counts: dict[float, int] = {float(k): int(v) for k, v in data["counts"].items()}
-        self.bands = [BandRecord.from_json(d) for d in data["bands"]
-                      if (self.folder / d["file"]).is_file()]
+        self.bands = [BandRecord.from_json(d) for d in data["bands"]]
         self.chain = data.get("chain")
 
     def find(self, band: Band) -> BandRecord | None:
@@ -156,11 +154,9 @@ class BandCache:
     def save(self) -> None:
         """Rank 0 writes the index (call on every rank after the band files exist)."""
         if self.comm.rank == 0:
-            from ..io.atomic import write_text
-
-            data = {"key": self.key, "counts": {repr(k): v for k, v in self.counts.items()},
+            data = {"counts": {repr(k): v for k, v in self.counts.items()},
                     "bands": [r.to_json() for r in self.bands], "chain": self.chain}
-            write_text(self.folder / BAND_INDEX_JSON, json.dumps(data, indent=1))
+            write_index(self.folder / BAND_INDEX_JSON, data, self.provenance)
         self.comm.Barrier()
 
 
@@ -178,7 +174,10 @@ class BandSettings:
     max_restarts: int
     out_of_core: str
     cache_dir: Path
-    key: str
+    #: the cache's index as the modal stage reused it (None: an empty cache)
+    index: dict | None = None
+    #: the provenance its index is written with (None: a temporary cache, never reused)
+    provenance: dict | None = None
 
 
 def _factor(K, M, comm, sigma: float, extra_gb: float, out_of_core: str, inertia: bool):
@@ -408,57 +407,11 @@ def _trim(result: Eigenpairs, band: Band) -> Eigenpairs:
     return out
 
 
-def _write_band(path: Path, comm, band: Band, result: Eigenpairs, n_below: int,
-                stats: dict) -> None:
-    """The band's modes (n_dofs, m) by rows, eigenvalues and residuals (collective)."""
-    from ..io.atomic import write_h5
-    from ..io.parallel_h5 import h5py_parallel_ok
-
-    n_local, m = result.phi.shape
-    # rank 0's statistics everywhere: parallel HDF5 needs identical attributes on all ranks
-    stats = comm.bcast(stats, root=0)
-    r0 = comm.exscan(n_local) or 0
-    n = comm.allreduce(n_local)
-    parallel = h5py_parallel_ok(comm)
-    rows = [result.phi]
-    if not parallel and comm.size > 1:
-        parts = comm.gather(result.phi, root=0)
-        rows = [np.concatenate(parts)] if comm.rank == 0 else [None]
-        r0 = 0
-
-    def fill(f, par: bool) -> None:
-        d = f.create_dataset("modes", (n, m), "f8")
-        f.create_dataset("eigenvalue", data=result.eigenvalues)
-        f.create_dataset("residual", data=result.residuals)
-        for k, v in (("lo_hz", band.lo_hz), ("hi_hz", band.hi_hz),
-                     ("shift_hz", band.shift_hz), ("n_below", n_below)):
-            f.attrs[k] = v
-        f.attrs["stats"] = json.dumps(stats, default=float)
-        if rows[0] is not None and rows[0].shape[0]:
-            d[r0:r0 + rows[0].shape[0], :] = rows[0]
-
-    # a cache of one run (its key in index.json), not a stage file: no content record
-    write_h5(path, comm, fill, size_hint=8 * (n * m + 2 * m), parallel=parallel, record=False)
-
-
-def _read_band(path: Path, r0: int, r1: int) -> tuple[np.ndarray, np.ndarray]:
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            raise EigenSolveError(f"{path} is incomplete: delete it and rerun")
-        return f["eigenvalue"][()], f["modes"][r0:r1, :]
-
-
 def _record(cache: BandCache, rec: BandRecord) -> None:
     """Put a solved band (and the inertia count at its shift) into the cache's index."""
     cache.bands = [c for c in cache.bands if c.file != rec.file] + [rec]
     if rec.band.shift_hz > 0:
         cache.counts[float(rec.band.shift_hz)] = rec.n_below
-
-
-def _band_file(band: Band) -> str:
-    return f"band_{band.lo_hz:.6f}_{band.hi_hz:.6f}_{band.shift_hz:.6f}.h5"
 
 
 def plan_for(cache: BandCache, s: BandSettings, n_total: int) -> list[Band]:
@@ -543,7 +496,7 @@ def _plan_solve(K, M, comm, s: BandSettings, log=None) -> _SolvePlan:
     before any band is solved (collective)."""
     s.cache_dir.mkdir(parents=True, exist_ok=True) if comm.rank == 0 else None
     comm.Barrier()
-    cache = BandCache(s.cache_dir, s.key, comm)
+    cache = BandCache(s.cache_dir, comm, s.index, s.provenance)
     t0 = time.perf_counter()
     n_total = cache.count(s.f_max)
     if n_total is None and not (s.band_only and s.edges):
@@ -636,13 +589,13 @@ def _solve_planned(K, M, comm, s: BandSettings, plan: _SolvePlan, assemble=None,
             result = _trim(result, band)
             if groups == 1 and result.roundoff_floors is not None:
                 proven[band.index] = BandChecks.of(result)
-            name = _band_file(band)
+            name = band_file_name(band)
             st["rss_before_gb"] = rss_before
-            _write_band(s.cache_dir / name, sub, band, result, n_below, st)
+            sha = write_band(s.cache_dir / name, sub, band, result, n_below, st)
             f = result.frequencies_hz
             rec = BandRecord(band, name, n_below, len(f),     # (a band may hold no mode)
                              float(f[0]) if len(f) else band.lo_hz,
-                             float(f[-1]) if len(f) else band.hi_hz, st)
+                             float(f[-1]) if len(f) else band.hi_hz, st, sha)
             st["rss_band_end_gb"] = _total(sub, current_memory_gb())
             del result, f
             free_memory(sub)
@@ -807,7 +760,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     Phi = np.empty((r1 - r0, sum(len(k) for k in keeps)))
     col = 0
     for rec, keep in zip(per_band, keeps):
-        _, rows = _read_band(s.cache_dir / rec.file, r0, r1)
+        _, rows = read_band(s.cache_dir / rec.file, r0, r1)
         Phi[:, col:col + len(keep)] = rows[:, keep]
         col += len(keep)
         del rows
@@ -827,7 +780,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
              "time_solve": float(sum(r.stats.get("time_band", 0.0) for r in per_band)),
              "time_extract": 0.0}
     if len(per_band) == 1:
-        lam1 = _read_band(s.cache_dir / per_band[0].file, r0, r0)[0][keeps[0]]
+        lam1 = read_band(s.cache_dir / per_band[0].file, r0, r0)[0][keeps[0]]
         if len(lam1) >= n_total and (np.diff(lam1) >= 0).all():
             # the modes above the count are not needed: the first n_total, in place
             Phi = narrow_columns(Phi, n_total)
@@ -965,25 +918,3 @@ def _merge_one_band(K, M, comm, Phi: np.ndarray, lam: np.ndarray, points: list[f
                  time_merge_rayleigh_ritz=0.0, time_merge_checks=time.perf_counter() - t0)
     result.warnings = convergence_verdict(result, s.tol)
     return result
-
-
-def cache_key(case) -> str:
-    """Key of the band cache: the model and the solver settings that change the modes.
-
-    Its keys come from the table of stage files: the sections of ``mesh.h5``
-    (:func:`~railvib_hpc.io.products.whole_sections`), the materials, sections and pads
-    without their damping settings, ``[modal]`` without the keys that do not change the modes
-    (:data:`~railvib_hpc.io.products.MODAL_ONLY_EXCLUDED`) or a band
-    (:data:`~railvib_hpc.io.products.BAND_EXTENT`), and ``[boundary]``.
-    """
-    import hashlib
-
-    from ..io.products import BAND_EXTENT, MODAL_DAMPING_KEYS, MODAL_ONLY_EXCLUDED, whole_sections
-
-    skip = (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)
-    modal = {k: v for k, v in case["modal"].items() if k not in skip}
-    text = json.dumps({"mesh": case.digest(*whole_sections(MESH_H5)),
-                       "physics": case.digest("materials", "sections", "pads",
-                                              exclude=MODAL_DAMPING_KEYS),
-                       "modal": modal, "boundary": case.digest("boundary")}, sort_keys=True)
-    return hashlib.sha256(text.encode()).hexdigest()

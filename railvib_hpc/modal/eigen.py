@@ -192,7 +192,7 @@ def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, bl
         tmp = comm.bcast(tempfile.mkdtemp(prefix="railvib-bands-") if comm.rank == 0 else None)
         bands = BandSettings(f_max=f_max, edges=[], band_modes=250, groups=1, band_only=0,
                              tol=tol, block_size=block_size, max_restarts=max_it,
-                             out_of_core=out_of_core, cache_dir=Path(tmp), key="temporary")
+                             out_of_core=out_of_core, cache_dir=Path(tmp))
     try:
         return solve_bands(K, M, comm, bands, assemble=assemble, monitor=monitor,
                            static_rhs=static_rhs, log=log, progress=progress)

@@ -111,33 +111,8 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
     return out
 
 
-def write_damping_parts(path: Path, parts: dict[str, np.ndarray], attrs: dict) -> str:
-    """Write ``modal_damping.h5`` (rank 0; checked, atomic, recorded); returns its digest.
-
-    ``attrs``: its provenance (:func:`railvib_hpc.io.provenance.provenance`, upstream
-    ``mesh.h5`` and ``modes.h5``).
-    """
-    from ..io.atomic import write_h5
-    from ..io.stage_checks import check_modal_damping
-
-    def fill(f, parallel: bool) -> None:
-        for name, value in parts.items():
-            f.create_dataset(name, data=value)
-
-    size = sum(int(v.nbytes) for v in parts.values())
-    return write_h5(path, None, fill, size_hint=size, attrs=attrs,
-                    check=lambda tmp: check_modal_damping(tmp, True))
 
 
-def read_damping_parts(path: Path) -> dict[str, np.ndarray]:
-    """Every projected part of a ``modal_damping.h5`` (verified by the caller)."""
-    import h5py
-
-    out: dict[str, np.ndarray] = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda name, obj: out.__setitem__(name, obj[()])
-                     if hasattr(obj, "shape") else None)
-    return out
 
 
 def compose_damping(case: Case, parts: dict[str, np.ndarray], omega: np.ndarray) -> np.ndarray:

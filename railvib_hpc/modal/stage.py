@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -14,10 +13,19 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.atomic import ensure_space
-from ..io.files import BANDS_DIR, MESH_H5, MODAL_DAMPING_H5, MODES_H5, MODES_XDMF, STATIC_H5
-from ..io.modes_io import has_probe_roles, read_strain_energies, write_modes, write_modes_xdmf
-from ..io.stage_checks import check_eigenvalues, check_mode_shapes
-from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
+from ..io.files import BAND_CACHE, MESH_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
+from ..io.formats.bands import read_index
+from ..io.formats.modal_damping import write_damping_parts
+from ..io.formats.modes import (
+    check_eigenvalues,
+    check_mode_shapes,
+    has_probe_roles,
+    read_strain_energies,
+    write_modes,
+    write_modes_xdmf,
+)
+from ..io.stage_outputs import ModesOutput
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
@@ -29,7 +37,7 @@ from .eigen import solve_modes
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
-from .projection import project_damping_parts, read_phi_rows, write_damping_parts
+from .projection import project_damping_parts, read_phi_rows
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
@@ -96,62 +104,6 @@ class EigenProgress:
             self.current = None
 
 
-@dataclass(frozen=True)
-class ModesOutput(StageOutput):
-    """What the ``modal`` stage returns (the API's ``ModalResult`` has these fields but
-    the mesh size).
-
-    Attributes
-    ----------
-    modes_h5, modes_xdmf
-        The modes and their ParaView view (None with ``modal.band_only``: one band only).
-    static_h5
-        The static solutions of the static correction (None when it is off).
-    frequencies_hz
-        The natural frequencies [Hz].
-    n_dofs
-        Free degrees of freedom of the model.
-    max_orthonormality_error, max_relative_residual
-        The eigensolver's checks (``max |Phi^T M Phi - I|``, largest relative residual).
-    peak_rss_gb_total
-        Peak memory over all ranks of the eigensolve [GB] (None when reused).
-    n_nodes, n_hexes
-        Size of the mesh of the modes (None with ``modal.band_only``).
-    """
-
-    modes_h5: Path | None
-    modes_xdmf: Path | None
-    static_h5: Path | None
-    frequencies_hz: np.ndarray
-    n_dofs: int | None
-    max_orthonormality_error: float | None
-    max_relative_residual: float | None
-    peak_rss_gb_total: float | None
-    n_nodes: int | None = None
-    n_hexes: int | None = None
-
-    @classmethod
-    def of_summary(cls, summary: dict, frequencies, out_dir: Path, static_correction: bool,
-                   mesh_size: tuple[int, int | None] | None = None) -> ModesOutput:
-        """The output of a summary and the frequencies of its modes, in ``out_dir``
-        (``mesh_size``: nodes and hexahedra of their mesh)."""
-        def present(name: str) -> Path | None:
-            return out_dir / name if (out_dir / name).exists() else None
-
-        modes = present(MODES_H5) if not summary.get("band_only") else None
-        return cls(reused=summary.get("reused"), summary=summary, modes_h5=modes,
-                   modes_xdmf=present(MODES_XDMF) if modes else None,
-                   static_h5=present(STATIC_H5) if static_correction else None,
-                   frequencies_hz=np.asarray(frequencies if modes else [], dtype=float),
-                   n_dofs=summary.get("n_dofs"),
-                   max_orthonormality_error=summary.get("max_orthonormality_error"),
-                   max_relative_residual=summary.get("max_relative_residual"),
-                   peak_rss_gb_total=None if summary.get("reused")
-                   else summary.get("peak_rss_gb_total"),
-                   n_nodes=mesh_size[0] if mesh_size else None,
-                   n_hexes=mesh_size[1] if mesh_size else None)
-
-
 def compute(ctx: StageContext) -> ModesOutput:
     """``railvib modal``: compute (or reuse) ``modes.h5`` (and ``static.h5``,
     ``modal_damping.h5``) in the output folder (collective; the runner has started PETSc).
@@ -168,7 +120,7 @@ def compute(ctx: StageContext) -> ModesOutput:
 
 
 STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
-              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5), reads=(MESH_H5,),
+              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5, BAND_CACHE), reads=(MESH_H5,),
               compute=compute, petsc=True)
 
 
@@ -262,7 +214,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
             block_size=case["modal.block_size"],
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=progress,
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
-            bands=band_settings(case, out_dir), assemble=lambda sub: assemble(
+            bands=band_settings(ctx), assemble=lambda sub: assemble(
                 mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info,
             progress=progress.phase)
     if result is None:                                   # modal.band_only: one band cached
@@ -345,19 +297,33 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     return summary, f, (int(mesh.n_nodes), len(mesh.hexes))
 
 
-def band_settings(case: Case, out_dir: Path):
-    """The band-sliced solve's settings (``modal.f_max`` with block Lanczos), else None."""
-    from .band_solve import BandSettings, cache_key
+def band_settings(ctx: StageContext):
+    """The band-sliced solve's settings (``modal.f_max`` with block Lanczos), else None;
+    with the band cache (:data:`~railvib_hpc.io.files.BAND_CACHE`, a product of this
+    stage) as the product layer judged it (collective)."""
+    from .band_solve import BandSettings
 
-    md = case["modal"]
+    md = ctx.case["modal"]
     if md["f_max"] <= 0 or md["method"] != "block_lanczos":
         return None
+    index, prov = on_root(lambda: _band_cache(ctx), ctx.comm)
     return BandSettings(f_max=md["f_max"], edges=list(md["bands"]),
                         band_modes=md["band_modes"], groups=md["band_groups"],
                         band_only=md["band_only"], tol=md["tol"],
                         block_size=md["block_size"], max_restarts=md["max_restarts"],
-                        out_of_core=md["out_of_core"], cache_dir=out_dir / BANDS_DIR,
-                        key=cache_key(case))
+                        out_of_core=md["out_of_core"], cache_dir=ctx.path(BAND_CACHE).parent,
+                        index=index, provenance=prov)
+
+
+def _band_cache(ctx: StageContext) -> tuple[dict | None, dict]:
+    """The band cache's index when it is current and sound (``reusing ...``; else
+    ``recomputing ...: <reason>`` and None), and the provenance its index is written with
+    (rank 0)."""
+    path = ctx.path(BAND_CACHE)
+    old = ctx.reuse(BAND_CACHE, why="same model and solver settings",
+                    detail=lambda index: f"{len(index['bands'])} band(s) solved",
+                    accept=lambda verdict: read_index(path))
+    return old.value, ctx.provenance(BAND_CACHE, {})
 
 
 def _check_space(case: Case, out_dir: Path, mesh, dofmap, want_static: bool) -> None:

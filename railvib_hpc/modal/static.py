@@ -30,8 +30,8 @@ import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..io.atomic import write_h5
+from ..io.formats.static import check_static
 from ..io.parallel_h5 import h5py_parallel_ok
-from ..io.stage_checks import check_static
 
 if TYPE_CHECKING:
     from mpi4py import MPI

@@ -64,8 +64,9 @@ import numpy as np
 
 from .. import __version__
 from ..io.atomic import write_h5
+from ..io.formats.checks import nonfinite
+from ..io.formats.fields import check_fields
 from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
-from ..io.stage_checks import check_fields, nonfinite
 from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
 from ..parallel import check_collective, on_root

@@ -343,7 +343,7 @@ def write_probes_h5(path: str | os.PathLike, histories: Mapping[str, Mapping],
     groups
         Extra groups of datasets, e.g. ``{"rail": {"bending_moment": ..., "x": ...}}``.
     """
-    from ..io.stage_checks import check_probes
+    from ..io.formats.probes import check_probes
 
     names = list(histories)
 

@@ -2,7 +2,7 @@
 
 Inputs
 ------
-``modes.h5`` (complete, see :mod:`railvib_hpc.io.modes_io`) and ``mbs.h5``::
+``modes.h5`` (complete, see :mod:`railvib_hpc.io.formats.modes`) and ``mbs.h5``::
 
     /time                 (nt,)     strictly increasing [s]
     /modal/q              (nt, m)   modal coordinates of the first m modes (m <= modes)
@@ -57,7 +57,6 @@ import json
 import os
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -76,8 +75,11 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
-from ..io.stage_checks import check_mbs, check_modes, check_static
-from ..io.stage_protocol import Stage, StageContext, StageOutput, StageRunner
+from ..io.formats.mbs import check_mbs
+from ..io.formats.modes import check_modes
+from ..io.formats.static import check_static
+from ..io.stage_outputs import FieldsOutput
+from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
@@ -370,30 +372,6 @@ def input_files(out_dir: Path) -> tuple[str, ...]:
     except OSError:
         pass
     return tuple(names)
-
-
-@dataclass(frozen=True)
-class FieldsOutput(StageOutput):
-    """What the ``reconstruct`` stage returns (the API's ``ReconstructResult`` has these
-    fields).
-
-    Attributes
-    ----------
-    fields_h5, fields_xdmf
-        Displacement, velocity and acceleration of every node and their ParaView view.
-    stress_xdmf
-        Element stresses at ``output.stress_times`` (None when there are none).
-    probes_h5
-        Probe histories (and ``probes/<name>.csv``).
-    probes
-        ``{probe: its role and peaks}`` (:func:`~.probes.probe_peaks` with ``role``).
-    """
-
-    fields_h5: Path
-    fields_xdmf: Path | None
-    stress_xdmf: Path | None
-    probes_h5: Path
-    probes: dict[str, dict]
 
 
 def compute(ctx: StageContext) -> FieldsOutput:

@@ -218,8 +218,8 @@ class FieldWriter:
     def flush(self) -> None:
         """Write the buffered steps (collective; consecutive indices). Non-finite values
         (a diverged integration) stop the run on every rank: nothing is written."""
+        from ..io.formats.checks import nonfinite
         from ..io.parallel_h5 import write_slab
-        from ..io.stage_checks import nonfinite
         from ..parallel import check_collective
 
         if not self.pending:
@@ -296,7 +296,7 @@ class FieldWriter:
         rename and record ``fields.h5``; write ``fields.xdmf`` (rank 0). Returns the content
         digest."""
         from ..io.atomic import commit_h5
-        from ..io.stage_checks import check_fields
+        from ..io.formats.fields import check_fields
         from ..parallel import on_root
         from ..reconstruct.fields import write_fields_xdmf
 
@@ -320,8 +320,8 @@ def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_wri
     holds the recorded histories.
     """
     from ..io.atomic import write_h5
+    from ..io.formats.transient import check_checkpoint
     from ..io.parallel_h5 import h5py_parallel_ok
-    from ..io.stage_checks import check_checkpoint
 
     parallel = h5py_parallel_ok(comm)
     r0, r1 = dofmap.owned_dofs(comm.rank)

@@ -77,8 +77,8 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.formats.transient import check_transient
 from ..io.products import inputs_hash
-from ..io.stage_checks import check_transient
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.temp_names import resume_path
 from ..io.xdmf import remove_xdmf

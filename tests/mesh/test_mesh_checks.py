@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from railvib_hpc.fem.reference import element_batches
-from railvib_hpc.io.stage_checks import inverted_hexes
+from railvib_hpc.io.formats.mesh import inverted_hexes
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.search import boundary_faces, inside_any, locate, nonconformal_faces
 from railvib_hpc.mesh.stage import check_quality, max_edge_per_soil_part

@@ -276,12 +276,30 @@ def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, ed
     def on(sub):
         return assemble(mesh, case, build_dofmap(mesh, sub.size, rules=rules), sub)[:2]
 
+    index, prov = _band_cache(Path(cache_dir), comm)
     s = BandSettings(f_max=f_max, edges=list(edges), band_modes=band_modes, groups=groups,
                      band_only=band_only, tol=tol, block_size=block_size, max_restarts=100,
-                     out_of_core="auto", cache_dir=Path(cache_dir), key="test")
+                     out_of_core="auto", cache_dir=Path(cache_dir), index=index,
+                     provenance=prov)
     result = solve_modes(K, M, comm, f_max=f_max, tol=tol, block_size=block_size, bands=s,
                          assemble=on, log=log)
     return result, K, M, dofmap
+
+
+def _band_cache(cache_dir, comm) -> tuple[dict | None, dict]:
+    """The band cache in ``cache_dir`` as the modal stage reuses it (the product layer, with
+    the inputs digest "test" instead of a case's), and the provenance to write it with."""
+    from railvib_hpc.io.files import BAND_CACHE
+    from railvib_hpc.io.formats.bands import index_path, read_index
+    from railvib_hpc.io.stage_protocol import StageContext
+
+    index = prov = None
+    if comm.rank == 0:
+        ctx, path = StageContext(None, cache_dir.parent), index_path(cache_dir)
+        index = ctx.reuse(BAND_CACHE, path=path, inputs_sha256="test",
+                          accept=lambda verdict: read_index(path)).value
+        prov = ctx.provenance(BAND_CACHE, {}, inputs_sha256="test")
+    return comm.bcast((index, prov), root=0)
 
 
 def copies(mesh: Mesh, n: int, dx: float) -> Mesh:

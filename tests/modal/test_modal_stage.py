@@ -116,7 +116,7 @@ def test_rerun_reuses_and_physics_change_recomputes(modal_run, capsys):
 
 @pytest.mark.slow
 def test_incomplete_file_is_recomputed_and_failed_write_leaves_nothing(tmp_path, monkeypatch):
-    from railvib_hpc.io import modes_io
+    from railvib_hpc.io.formats import modes as modes_io
 
     out = tmp_path / "res"
     out.mkdir()
@@ -156,7 +156,7 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     by the modal stage and refused by the MBS with a clear message."""
     from modal_cases import energy_sum_allowance, modes_from_file
 
-    from railvib_hpc.io.modes_io import read_strain_energies
+    from railvib_hpc.io.formats.modes import read_strain_energies
     from railvib_hpc.mbs.case_vehicle import MBSInputError
     from railvib_hpc.mbs.damping_model import modal_damping
     from railvib_hpc.mesh.mesh_io import read_mesh_h5

@@ -68,7 +68,7 @@ def box_mesh(nx: int = 3, ny: int = 2, nz: int = 2, distort: float = 0.15) -> Me
 
 def write_synthetic_modes(path: Path, mesh: Mesh, translation: np.ndarray) -> None:
     """A complete ``modes.h5`` (real writer, one rank) with given mode shapes (m, n, 3)."""
-    from railvib_hpc.io.modes_io import write_modes
+    from railvib_hpc.io.formats.modes import write_modes
 
     m, n = translation.shape[0], mesh.n_nodes
     write_modes(Path(path), MPI.COMM_SELF, mesh, slice(0, n),

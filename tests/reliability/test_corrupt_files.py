@@ -115,7 +115,7 @@ def test_garbled_mesh_is_rebuilt(kind, prepared, tmp_path, capsys, tally):
 
 
 def test_garbage_hexes_without_record_are_found_by_the_data_check(prepared, tmp_path):
-    from railvib_hpc.io.stage_checks import check_mesh
+    from railvib_hpc.io.formats.mesh import check_mesh
 
     out = copy_results(prepared, tmp_path / "o", ("mesh.h5",))
     inject(out / "mesh.h5", "garbage", "mesh/hexes")

@@ -176,7 +176,7 @@ def test_every_phase_after_the_expansions_reports_progress(tmp_path):
         calls.clear()
         s = BandSettings(f_max=60.0, edges=[30.0], band_modes=250, groups=1, band_only=0,
                          tol=1e-10, block_size=4, max_restarts=50, out_of_core="auto",
-                         cache_dir=tmp_path, key="progress")
+                         cache_dir=tmp_path)
         solve_modes(K, M, comm, f_max=60.0, block_size=4, tol=1e-10, bands=s,
                     progress=progress)
         banded = {p for p, d, t in calls if d == t}

@@ -1,9 +1,10 @@
-"""``modes.h5`` + ``modes.xdmf``: mass-normalised modes written in parallel.
+"""``modes.h5`` + ``modes.xdmf``: layout, writer, readers and check (written in parallel).
 
 Layout of ``modes.h5``::
 
     /modes/frequency_hz    (m,)            ascending
     /modes/eigenvalue      (m,)            omega^2 [rad^2/s^2]
+    /modes/strain_energy   (m, g)          per material group (summing to omega^2)
     /modes/translation     (m, n, 3)       ux uy uz of every node (0 where constrained)
     /modes/rotation        (m, nr, 3)      rx ry rz of the beam nodes /mesh/rotation_nodes
     /mesh/points (n, 3), /mesh/node_ids (n,), /mesh/hexes, /mesh/hex_part, /mesh/lines,
@@ -28,26 +29,40 @@ rank 0. The file is written by :func:`railvib_hpc.io.atomic.write_h5`
 interrupted run never leaves a file that looks complete. ``modes.xdmf`` (rank 0,
 written after the rename, with its sidecar of per-step views ``modes_views.h5``, see
 :mod:`railvib_hpc.io.xdmf`) animates the mode shapes in ParaView: one time step per mode.
+
+Check: :func:`check_modes` (eigenvalues, shapes, masses; with ``full`` every mode shape),
+with :func:`check_eigenvalues` and :func:`check_mode_shapes` for the arrays in memory.
+Plausibility bounds (named factors, each with its derivation):
+
+* Mass-normalised modes, ``phi^T M phi = 1``: for a lumped node mass ``m_i`` the
+  translation obeys ``m_i |phi_i|^2 <= 1 / c`` where ``c`` is the smallest eigenvalue of
+  an element's consistent mass matrix relative to its lumped one: ``1/3`` for linear
+  1-D elements, ``1/27`` for the trilinear hexahedron (tensor product). Hence
+  ``sqrt(m_i) |phi_i| <= sqrt(27) = 5.2``; :data:`MODE_SHAPE_BOUND` = 6. (The coarse
+  thesis model reaches 0.06.)
+* Rotations are displacement gradients: ``|theta| <= ROTATION_FACTOR max|u| / h_min``
+  with ``h_min`` the shortest line element (:data:`ROTATION_FACTOR` = 100).
 """
 
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..schema import PART_ID
-from .atomic import write_h5
-from .parallel_h5 import h5py_parallel_ok
-from .stage_checks import check_modes
-from .xdmf import H5Array, Series, hex_mesh, write_series
+from ...schema import PART_ID
+from ..atomic import write_h5
+from ..parallel_h5 import h5py_parallel_ok
+from ..xdmf import H5Array, Series, hex_mesh, write_series
+from .checks import absent, exceeds, h5_read, nonfinite
 
 if TYPE_CHECKING:      # io sits below mesh in the layer order: the mesh is only read here
     from mpi4py import MPI
 
-    from ..mesh.model import Mesh
+    from ...mesh.model import Mesh
 
 
 def write_modes(path: Path, comm: MPI.Comm, mesh: Mesh, node_range: slice, eigenvalues: np.ndarray,
@@ -228,3 +243,100 @@ def read_strain_energies(path: Path) -> dict[str, np.ndarray] | None:
         groups = json.loads(d.attrs["groups"])
         e = d[()]
     return {g: e[:, j] for j, g in enumerate(groups)}
+
+
+#: Bound of ``sqrt(m_i) |phi_i|`` for mass-normalised modes (sqrt(27) rounded up).
+MODE_SHAPE_BOUND = 6.0
+
+#: Rotations vs displacement gradient ``max|u| / h_min``.
+ROTATION_FACTOR = 100.0
+
+#: Modes per block when streaming ``modes/translation``.
+_MODES_PER_BLOCK = 8
+
+
+def check_eigenvalues(eigenvalues: np.ndarray) -> list[str]:
+    """Finite, positive, ascending (to round-off) eigenvalues."""
+    lam = np.asarray(eigenvalues, dtype=float)
+    out = nonfinite("modes/eigenvalue", lam)
+    if out:
+        return out
+    if lam.size == 0:
+        return ["modes/eigenvalue is empty"]
+    if np.any(lam <= 0):
+        out.append(f"modes/eigenvalue has {int(np.sum(lam <= 0))} values <= 0 (the model "
+                   "must be supported: no rigid-body modes)")
+    if np.any(np.diff(lam) < -1e-8 * np.abs(lam[1:])):
+        out.append("modes/eigenvalue is not ascending")
+    return out
+
+
+def mode_bounds(nodal_mass: np.ndarray) -> np.ndarray:
+    """Bound of ``|phi_i|`` per node from the mass normalisation (module notes)."""
+    m = np.asarray(nodal_mass, dtype=float)
+    floor = float(m[m > 0].min()) if np.any(m > 0) else 1.0
+    return MODE_SHAPE_BOUND / np.sqrt(np.where(m > 0, m, floor))
+
+
+def check_mode_shapes(translation: np.ndarray, nodal_mass: np.ndarray, first: int = 0
+                      ) -> list[str]:
+    """Finite, mass-normalisation-bounded translations (m, n, 3) of modes ``first..``."""
+    out = nonfinite(f"modes/translation (modes {first + 1}..)", translation)
+    if out:
+        return out
+    mag = np.linalg.norm(translation, axis=2)
+    return exceeds(f"modes/translation (modes {first + 1}..)", mag,
+                   mode_bounds(nodal_mass)[None, :], "mass normalisation")
+
+
+def check_modes(path: Path, full: bool = True, context: Mapping[str, Any] | None = None
+                ) -> list[str]:
+    """``modes.h5``: eigenvalues, shapes, masses; with ``full`` every mode shape."""
+    with h5_read(path) as f:
+        missing = absent(f, ("modes/eigenvalue", "modes/frequency_hz", "modes/translation",
+                            "modes/rotation", "mesh/points", "mesh/nodal_mass",
+                            "mesh/rail_nodes", "mesh/rotation_nodes", "dofs/index"))
+        if missing:
+            return missing
+        lam = f["modes/eigenvalue"][()]
+        out = check_eigenvalues(lam)
+        n = f["mesh/points"].shape[0]
+        tr, rot = f["modes/translation"], f["modes/rotation"]
+        nr = f["mesh/rotation_nodes"].shape[0]
+        if tr.shape != (len(lam), n, 3):
+            out.append(f"modes/translation has shape {tr.shape}, expected ({len(lam)}, {n}, 3)")
+        if rot.shape != (len(lam), nr, 3):
+            out.append(f"modes/rotation has shape {rot.shape}, expected ({len(lam)}, {nr}, 3)")
+        mass = f["mesh/nodal_mass"][()]
+        out += nonfinite("mesh/nodal_mass", mass)
+        if mass.shape != (n,) or np.any(mass < 0):
+            out.append("mesh/nodal_mass must be (n,) and >= 0")
+        freq = f["modes/frequency_hz"][()]
+        if freq.shape == lam.shape and not out and not np.allclose(
+                freq, np.sqrt(np.maximum(lam, 0)) / (2 * np.pi), rtol=1e-9):
+            out.append("modes/frequency_hz does not match modes/eigenvalue")
+        if out or not full:
+            return out
+        h_min = _shortest_line(f)
+        umax = 0.0
+        for k in range(0, len(lam), _MODES_PER_BLOCK):
+            block = tr[k:k + _MODES_PER_BLOCK]
+            out += check_mode_shapes(block, mass, k)
+            if out:
+                return out
+            umax = max(umax, float(np.abs(block).max()) if block.size else 0.0)
+        r = rot[()]
+        out += nonfinite("modes/rotation", r)
+        if not out and h_min > 0:
+            out += exceeds("modes/rotation", r, ROTATION_FACTOR * umax / h_min,
+                           "displacement gradient")
+    return out
+
+
+def _shortest_line(f) -> float:
+    if "mesh/lines" not in f or f["mesh/lines"].shape[0] == 0:
+        return 0.0
+    pts, lines = f["mesh/points"][()], f["mesh/lines"][()]
+    length = np.linalg.norm(pts[lines[:, 1]] - pts[lines[:, 0]], axis=1)
+    length = length[length > 0]
+    return float(length.min()) if length.size else 0.0

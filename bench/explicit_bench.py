@@ -37,6 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
+from railvib_hpc.problem import Problem
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -124,14 +126,15 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
     t0 = time.perf_counter()
     imex = engine == "imex"
     mesh, top = box(n_dofs, strip=imex)
-    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(case),
+    problem = Problem.from_case(case)
+    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(problem),
                           node_sets=face_node_sets(mesh))
-    K, M, _ = assemble(mesh, case, dofmap, comm, mass="diagonal")
+    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal")
     # as the stage does: Rayleigh damping applied around K, the dashpots stored alone
-    C, _ = rayleigh_operator(mesh, case, dofmap, comm, K, lumped_diagonal(M, comm))
+    C, _ = rayleigh_operator(mesh, problem, dofmap, comm, K, lumped_diagonal(M, comm))
     if C is None:
-        C, _ = assemble_damping(mesh, case, dofmap, comm, K, M)
-    partition = assemble_partition(mesh, case, dofmap, comm, ("slab",)) if imex else None
+        C, _ = assemble_damping(mesh, problem, dofmap, comm, K, M)
+    partition = assemble_partition(mesh, problem, dofmap, comm, ("slab",)) if imex else None
     t_assembly = time.perf_counter() - t0
     t0 = time.perf_counter()
     lim = stability_limit(K, lumped_diagonal(M, comm), C, comm, minus=partition)

@@ -40,13 +40,14 @@ from railvib_hpc.mesh.stage import make_mesh
 from railvib_hpc.modal.dofmap import build_dofmap
 from railvib_hpc.modal.petsc import assemble
 from railvib_hpc.petsc_env import init_petsc
+from railvib_hpc.problem import Problem
 from mpi4py import MPI
 init_petsc([])
 case = load_case(sys.argv[1], [f"mesh.refinement={sys.argv[2]}"])
 mesh, _ = make_mesh(case)
 dm = build_dofmap(mesh, 1)
 t0 = time.perf_counter()
-Kp, Mp, _ = assemble(mesh, case, dm, MPI.COMM_SELF)
+Kp, Mp, _ = assemble(mesh, Problem.from_case(case), dm, MPI.COMM_SELF)
 n = dm.n_dofs
 K = sp.csr_matrix(Kp.getValuesCSR()[::-1], shape=(n, n))
 M = sp.csr_matrix(Mp.getValuesCSR()[::-1], shape=(n, n))

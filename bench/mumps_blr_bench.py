@@ -22,6 +22,8 @@ import time
 
 import numpy as np
 
+from railvib_hpc.problem import Problem
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -55,7 +57,7 @@ def main() -> None:
     case = load_case(None, [f"mesh.refinement={args.refinement!r}"])
     mesh = on_root(lambda: generate(build_layout(case))[0], comm)
     dofmap = build_dofmap(mesh, comm.size)
-    K, M, _ = assemble(mesh, case, dofmap, comm)
+    K, M, _ = assemble(mesh, Problem.from_case(case), dofmap, comm)
     r0, r1 = dofmap.owned_dofs(comm.rank)
     B = start_block(dofmap.n_dofs, r0, r1, 32)
     opts = PETSc.Options()

@@ -160,13 +160,14 @@ from railvib_hpc.modal.eigen import PREFIX
 from railvib_hpc.modal.factor import ShiftInvertFactor
 from railvib_hpc.modal.petsc import assemble
 from railvib_hpc.parallel import on_root
+from railvib_hpc.problem import Problem
 comm = MPI.COMM_WORLD
 case = load_case(sys.argv[1], [f"mesh.refinement={sys.argv[2]}"])
 t0 = time.perf_counter()
 mesh = on_root(lambda: make_mesh(case)[0], comm)
 dm = build_dofmap(mesh, comm.size, case["modal.fix_sleeper_rotations"],
                   case["modal.fix_rail_rotations_at_pads"])
-K, M, _ = assemble(mesh, case, dm, comm)
+K, M, _ = assemble(mesh, Problem.from_case(case), dm, comm)
 op = ShiftInvertFactor.__new__(ShiftInvertFactor)      # analysis only: no factorization
 op.A, op.comm, op.inertia = K, comm, False
 gb = op._estimate_factor_memory(PREFIX)

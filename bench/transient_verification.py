@@ -36,6 +36,8 @@ sys.path[:0] = [str(ROOT / "tests" / "transient"), str(ROOT / "tests" / "fem"), 
 from mpi4py import MPI  # noqa: E402
 from wave_cases import C_P, C_S, RHO, Model, box_mesh, column_pulse, soil_case  # noqa: E402
 
+from railvib_hpc.problem import Problem  # noqa: E402
+
 COMM = MPI.COMM_SELF
 
 
@@ -129,7 +131,8 @@ def lamb_run(h: float, extent=(16.0, 16.0, 12.0), radii=(5.0, 8.0)) -> dict:
     duration = 14.0 / c_s            # 14 m / c_S: the same pulse for every mesh
     dt = duration / 40 * h
     t0 = time.perf_counter()
-    model = Model(mesh, case, constraint_rules(case), COMM, dt, node_sets=face_node_sets(mesh))
+    model = Model(mesh, case, constraint_rules(Problem.from_case(case)), COMM, dt,
+                  node_sets=face_node_sets(mesh))
     setup = time.perf_counter() - t0
     src = np.flatnonzero(np.all(np.isclose(mesh.points, 0.0), axis=1))
     sdof = model.dofs(src, 2)

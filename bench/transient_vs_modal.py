@@ -98,8 +98,9 @@ def arrivals(case, hist: dict, names) -> dict:
     """Detected arrivals at probes from the direct solution (first exceedance of 2 % and
     10 % of the peak acceleration magnitude after the entry) and the analytic times."""
     from railvib_hpc.assess.stage import wave_arrival, wave_speeds
+    from railvib_hpc.problem import Problem
 
-    c_p, c_s = wave_speeds(case)
+    c_p, c_s = wave_speeds(Problem.from_case(case))
     x_entry = case["geometry.x1"]
     t_entry = (x_entry - case["vehicle.x_start"]) / case["vehicle.speed"]
     src = np.array([x_entry, -0.5 * case["track.gauge"], case["geometry.z4"]])

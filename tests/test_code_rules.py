@@ -52,3 +52,30 @@ def test_a_module_without_docstring_is_refused(tmp_path):
     (tmp_path / "m.py").write_text("x = 1\n")
     with pytest.raises(ValueError, match="no module docstring"):
         module_summary(tmp_path / "m.py")
+
+
+def test_no_kernel_module_takes_the_case():
+    assert code_rules.case_violations() == []
+
+
+def test_the_case_rule_finds_a_case_parameter_and_a_case_import(tmp_path):
+    modal, fem = tmp_path / "railvib_hpc" / "modal", tmp_path / "railvib_hpc" / "fem"
+    modal.mkdir(parents=True)
+    fem.mkdir()
+    (modal / "kernel.py").write_text("def assemble(mesh, case, dofmap):\n    return 1\n")
+    (modal / "stage.py").write_text("def compute(case):\n    return 1\n")   # a translator
+    (modal / "fine.py").write_text("def assemble(mesh, problem, dofmap):\n    return 1\n")
+    (fem / "typed.py").write_text("from typing import TYPE_CHECKING\n\nif TYPE_CHECKING:\n"
+                                  "    from ..config import Case\n")
+    (fem / "old.py").write_text("x = 1\n")
+    found = code_rules.case_violations(tmp_path, {"modal/stage.py": "a stage"},
+                                       {"fem/old.py": "to go", "fem/gone.py": "to go"})
+    assert [v.split(": ")[:2] for v in found] == [
+        ["railvib_hpc/fem/old.py", "listed in tools/code_rules.py PENDING but it no longer "
+                                   "takes the case"],
+        ["railvib_hpc/fem/typed.py", "line 4"],
+        ["railvib_hpc/modal/kernel.py", "line 1"],
+        ["railvib_hpc/fem/gone.py", "listed in tools/code_rules.py TRANSLATORS or PENDING but "
+                                    "no such module"]]
+    assert "imports Case from the case module" in found[1]
+    assert "assemble() takes a parameter named case" in found[2]

@@ -1,9 +1,17 @@
-"""The function-length rule of ``make lint``: no function over 150 lines unless allowed.
+"""Two rules of ``make lint``: function length, and kernels that never take the case.
 
-A function's length is counted by its syntax tree, from its ``def`` line to its last line,
-docstring and comments included (decorators not). A function that must stay longer is
-listed in :data:`ALLOWED` with the reason; an entry that is no longer needed (the function
-got shorter, or is gone) breaks the rule too, so that the list stays short and true.
+*Function length*: no function over 150 lines unless allowed. A function's length is
+counted by its syntax tree, from its ``def`` line to its last line, docstring and comments
+included (decorators not). A function that must stay longer is listed in :data:`ALLOWED`
+with the reason; an entry that is no longer needed (the function got shorter, or is gone)
+breaks the rule too, so that the list stays short and true.
+
+*The case boundary* (``railvib_hpc/problem.py``): a module of :data:`KERNEL_PACKAGES` is a
+numerical kernel unless it is listed in :data:`TRANSLATORS`; a kernel takes arrays and the
+problem object (:class:`railvib_hpc.problem.Problem`), so it may neither import from
+``railvib_hpc.config`` (``Case``, ``build_case``, ..., under ``TYPE_CHECKING`` too) nor
+have a parameter named ``case``. Modules still to be converted are listed in
+:data:`PENDING` with the reason; an entry that no longer reads the case breaks the rule.
 
 Usage::
 
@@ -16,7 +24,7 @@ from __future__ import annotations
 
 import ast
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,9 +71,87 @@ def violations(root: Path = ROOT) -> list[str]:
     return out
 
 
+#: The packages whose modules are numerical kernels, but for :data:`TRANSLATORS` and
+#: :data:`PENDING` (paths relative to ``railvib_hpc/``).
+KERNEL_PACKAGES = ("fem", "mesh", "modal", "mbs", "transient", "reconstruct", "assess")
+#: Modules of :data:`KERNEL_PACKAGES` that read the case by design, with why.
+TRANSLATORS: dict[str, str] = {
+    **{f"{pkg}/stage.py": "a stage: builds the problem object from the case"
+       for pkg in ("mesh", "modal", "mbs", "transient", "reconstruct", "assess")},
+    "mesh/layout.py": "turns the case's geometry keys into the mesh layout",
+    "mesh/building.py": "turns the case's [building] into the building's plan",
+    "mesh/turn.py": "turns the case's rotation keys into the turned building and soil",
+    "mesh/interfaces.py": "turns the case's elastic interfaces into their planes",
+    "mesh/dispersion_check.py": "checks the case's mesh sizes against its wavelengths",
+    "mbs/case_vehicle.py": "the case -> vehicle and passage translation",
+    "mbs/damping_model.py": "the case's modal.damping and mbs.damping_* overrides",
+    "assess/thesis.py": "the thesis comparison: describes the case's mesh, vehicle and "
+                        "geometry next to the thesis's tables",
+}
+#: Kernel modules not yet converted to the problem object, with why (to go).
+PENDING: dict[str, str] = {}
+
+
+def kernel_modules(root: Path = ROOT, translators: Mapping[str, str] = TRANSLATORS
+                   ) -> list[str]:
+    """The modules of :data:`KERNEL_PACKAGES` (relative to ``railvib_hpc/``) that are not
+    ``translators``: those the case rule covers (:data:`PENDING` among them)."""
+    out = []
+    for pkg in KERNEL_PACKAGES:
+        for path in sorted((root / "railvib_hpc" / pkg).rglob("*.py")):
+            name = path.relative_to(root / "railvib_hpc").as_posix()
+            if name not in translators:
+                out.append(name)
+    return out
+
+
+def case_uses(tree: ast.AST) -> list[str]:
+    """Where a module's syntax tree takes the case: parameters named ``case`` and imports
+    from ``railvib_hpc.config``, one line each."""
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef | ast.Lambda):
+            a = node.args
+            if any(arg.arg == "case" for arg in (*a.posonlyargs, *a.args, *a.kwonlyargs)):
+                name = getattr(node, "name", "<lambda>")
+                out.append(f"line {node.lineno}: {name}() takes a parameter named case")
+        elif isinstance(node, ast.ImportFrom):
+            module = node.module or ""
+            if (module == "railvib_hpc.config" if node.level == 0 else
+                    module.split(".")[-1] == "config"
+                    or (not module and any(a.name == "config" for a in node.names))):
+                names = ", ".join(alias.name for alias in node.names)
+                out.append(f"line {node.lineno}: imports {names} from the case module")
+        elif isinstance(node, ast.Import):
+            out += [f"line {node.lineno}: imports {alias.name}" for alias in node.names
+                    if alias.name == "railvib_hpc.config"]
+    return out
+
+
+def case_violations(root: Path = ROOT, translators: Mapping[str, str] = TRANSLATORS,
+                    pending: Mapping[str, str] = PENDING) -> list[str]:
+    """Every breach of the case rule, one line each (empty: the rule holds)."""
+    out = []
+    for name in kernel_modules(root, translators):
+        path = root / "railvib_hpc" / name
+        uses = case_uses(ast.parse(path.read_text(), str(path)))
+        if name in pending:
+            if not uses:
+                out.append(f"railvib_hpc/{name}: listed in tools/code_rules.py PENDING but "
+                           "it no longer takes the case: remove the entry")
+            continue
+        out += [f"railvib_hpc/{name}: {use} (a kernel takes the problem object, "
+                "railvib_hpc/problem.py, and arrays; or list a translator in "
+                "tools/code_rules.py TRANSLATORS with the reason)" for use in uses]
+    out += [f"railvib_hpc/{name}: listed in tools/code_rules.py TRANSLATORS or PENDING but "
+            "no such module: remove the entry"
+            for name in (*translators, *pending) if not (root / "railvib_hpc" / name).exists()]
+    return out
+
+
 def main() -> int:
-    """Print the breaches of the rule; 1 if there are any."""
-    found = violations()
+    """Print the breaches of the rules; 1 if there are any."""
+    found = violations() + case_violations()
     for line in found:
         print(line, file=sys.stderr)
     return 1 if found else 0

@@ -53,6 +53,7 @@ from ..io.stage_outputs import AssessmentOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
+from ..problem import Problem
 from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..site import line_probes, track_lift
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
@@ -259,7 +260,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
             din4150_3_location=location,
             din4150_2_events=a["din4150_2_events"] or None)
     # wave arrivals relative to the first wheel entering the flexible rail
-    c_p, c_s = wave_speeds(case)
+    c_p, c_s = wave_speeds(Problem.from_case(case))
     x_entry = case["geometry.x1"]
     t_entry = (x_entry - case["vehicle.x_start"]) / case["vehicle.speed"]
     y_rail = -0.5 * case["track.gauge"]

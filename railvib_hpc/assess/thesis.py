@@ -33,6 +33,7 @@ import numpy as np
 
 from ..config import Case
 from ..io.files import MBS_H5, MODES_H5
+from ..problem import Problem
 from ..site import track_lift
 
 #: What the thesis reports, with where (thesis.md / benchmarks.md section 2).
@@ -75,7 +76,7 @@ def weyl_count(case: Case, f_hz: float) -> float:
     from .waves import wave_speeds
 
     x0, x1, y0, y1, z0, z1 = build_layout(case).bounds
-    c_p, c_s = wave_speeds(case)
+    c_p, c_s = wave_speeds(Problem.from_case(case))
     volume = (x1 - x0) * (y1 - y0) * (z1 - z0)
     return 4.0 * math.pi / 3.0 * volume * f_hz**3 * (1.0 / c_p**3 + 2.0 / c_s**3)
 
@@ -324,7 +325,7 @@ def _wave_rows(case: Case, arrival: dict | None) -> list[dict]:
     """The P- and S-wave arrivals at the far end of the basement wall, on the thesis's clock."""
     from .waves import wave_speeds
 
-    c_p, c_s = wave_speeds(case)
+    c_p, c_s = wave_speeds(Problem.from_case(case))
     if arrival is None:
         return []
     rows = []

@@ -7,21 +7,21 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from ..config import Case
+    from ..problem import Problem
 
 __all__ = ["wave_arrival", "wave_speeds"]
 
 
-def wave_speeds(case: Case) -> tuple[float, float]:
+def wave_speeds(problem: Problem) -> tuple[float, float]:
     """P- and S-wave speeds of the subgrade [m/s]; of the top soil layer when the soil is
     layered (``soil.layers``: the path along the surface; a head wave through a stiffer
     layer below can arrive earlier at a distance)."""
     from ..fem.boundary import wave_speeds as material_wave_speeds
-    from ..site import soil_layers, solid_material
+    from ..schema import SOIL_LAYER_PARTS
 
-    layers = soil_layers(case)
-    mat = solid_material(case, layers[0]["part"] if layers else "subgrade")
-    c_p, c_s = material_wave_speeds(mat["E"], mat["nu"], mat["rho"])
+    top = SOIL_LAYER_PARTS[0]
+    mat = problem.material(top if top in problem.materials else "subgrade")
+    c_p, c_s = material_wave_speeds(mat.E, mat.nu, mat.rho)
     return float(c_p), float(c_s)
 
 

@@ -16,6 +16,7 @@ from ..io.files import MODAL_DAMPING_H5, MODES_H5
 from ..io.formats.modal_damping import check_modal_damping
 from ..io.formats.modes import check_modes
 from ..io.provenance import require_inputs
+from ..problem import Problem
 from .case_vehicle import MBSInputError
 
 if TYPE_CHECKING:
@@ -56,16 +57,16 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
             raise MBSInputError(f"modal.damping = 'strain_energy': {modes_path} holds no "
                                 "per-material strain energies (written by an older version); "
                                 "rerun 'railvib modal' to recompute it")
-        zeta = damping_from_energies(energies, case)[:m].copy()
+        zeta = damping_from_energies(energies, Problem.from_case(case))[:m].copy()
     elif kind == "rayleigh":
-        from ..modal.damping import case_rayleigh, rayleigh_ratio
+        from ..modal.damping import problem_rayleigh, rayleigh_ratio
 
-        zeta = rayleigh_ratio(*case_rayleigh(case), omega)
+        zeta = rayleigh_ratio(*problem_rayleigh(Problem.from_case(case)), omega)
     elif kind == "full":
         from ..modal.projection import compose_damping
 
-        return _override_diagonal(case, compose_damping(case, damping_parts(case, modes_path),
-                                                        omega), omega, m)
+        d = compose_damping(Problem.from_case(case), damping_parts(case, modes_path), omega)
+        return _override_diagonal(case, d, omega, m)
     else:
         zeta = np.full(m, case["modal.damping_ratio"])
     for k, r in zip(case["mbs.damping_modes"], case["mbs.damping_ratios"]):
@@ -127,11 +128,12 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
                                 "rerun 'railvib modal' with mbs.static_correction = true") \
                 from exc
         om = np.concatenate([omega, res.omega])
-        return _override_diagonal(case, compose_damping(case, parts, om), om, m)
+        return _override_diagonal(case, compose_damping(Problem.from_case(case), parts, om),
+                                  om, m)
     if kind == "rayleigh":
-        from ..modal.damping import case_rayleigh, rayleigh_ratio
+        from ..modal.damping import problem_rayleigh, rayleigh_ratio
 
-        extra = rayleigh_ratio(*case_rayleigh(case), res.omega)
+        extra = rayleigh_ratio(*problem_rayleigh(Problem.from_case(case)), res.omega)
     else:
         extra = np.full(res.omega.size, case["modal.damping_ratio"])
     return np.concatenate([zeta, extra])

@@ -34,14 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case
 from ..errors import UserError
 from ..fem.boundary import face_impedance, wave_speeds
 from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
+from ..problem import Problem
 from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_LAYER_PARTS, SOIL_PARTS
-from ..site import solid_material
 from .dofmap import COMPONENTS
 from .elements import SOLID_MATERIAL
 
@@ -59,14 +58,14 @@ class BoundaryError(UserError):
     """A boundary condition the mesh cannot carry (e.g. an absorbing face without soil)."""
 
 
-def face_types(case: Case) -> dict[str, str]:
+def face_types(problem: Problem) -> dict[str, str]:
     """``{face: type}`` from ``[boundary]``."""
-    return {f: case[f"boundary.{f}"] for f in BOUNDARY_FACES}
+    return {f: problem.boundary.faces[f] for f in BOUNDARY_FACES}
 
 
-def has_absorbing(case: Case) -> bool:
+def has_absorbing(problem: Problem) -> bool:
     """True when any face is absorbing."""
-    return "absorbing" in face_types(case).values()
+    return "absorbing" in face_types(problem).values()
 
 
 def face_node_sets(mesh: Mesh) -> dict[str, np.ndarray]:
@@ -87,14 +86,14 @@ def face_node_sets(mesh: Mesh) -> dict[str, np.ndarray]:
     return out
 
 
-def constraint_rules(case: Case) -> dict[str, tuple[str, ...]]:
+def constraint_rules(problem: Problem) -> dict[str, tuple[str, ...]]:
     """Constraint rules ``{face: components}`` for :func:`~.dofmap.build_dofmap`.
 
     ``fixed`` fixes every component (as the thesis's ``bottom`` rule), ``roller`` the
     normal displacement; ``free`` and ``absorbing`` nothing.
     """
     rules: dict[str, tuple[str, ...]] = {}
-    for face, kind in face_types(case).items():
+    for face, kind in face_types(problem).items():
         if kind in ("fixed", "caughey"):
             rules[face] = COMPONENTS
         elif kind == "roller":
@@ -138,7 +137,7 @@ def face_elements(mesh: Mesh, nodes: np.ndarray) -> FaceElements:
     return FaceElements(faces, owner, mesh.hex_part[owner])
 
 
-def absorbing_faces(mesh: Mesh, case: Case) -> dict[str, FaceElements]:
+def absorbing_faces(mesh: Mesh, problem: Problem) -> dict[str, FaceElements]:
     """The element faces of every absorbing face, checked.
 
     Raises
@@ -149,7 +148,7 @@ def absorbing_faces(mesh: Mesh, case: Case) -> dict[str, FaceElements]:
     """
     sets = face_node_sets(mesh)
     out = {}
-    for face, kind in face_types(case).items():
+    for face, kind in face_types(problem).items():
         if kind != "absorbing":
             continue
         fe = face_elements(mesh, sets[face])
@@ -168,21 +167,21 @@ def absorbing_faces(mesh: Mesh, case: Case) -> dict[str, FaceElements]:
     return out
 
 
-def _material_arrays(case: Case, part: np.ndarray) -> tuple[np.ndarray, ...]:
+def _material_arrays(problem: Problem, part: np.ndarray) -> tuple[np.ndarray, ...]:
     """Per-face (E, nu, rho) of the solid behind it."""
-    mats = {int(p): solid_material(case, SOLID_MATERIAL[PARTS[int(p) - 1]])
+    mats = {int(p): problem.material(SOLID_MATERIAL[PARTS[int(p) - 1]])
             for p in np.unique(part)}
-    return tuple(np.array([mats[int(p)][k] for p in part], dtype=float)
+    return tuple(np.array([getattr(mats[int(p)], k) for p in part], dtype=float)
                  for k in ("E", "nu", "rho"))
 
 
-def boundary_node_blocks(mesh: Mesh, case: Case, kind: str
+def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
                          ) -> tuple[np.ndarray, np.ndarray]:
     """Lumped 3 x 3 blocks of the absorbing faces, summed per node.
 
     Parameters
     ----------
-    mesh, case
+    mesh, problem
         The model and its ``[boundary]``.
     kind
         ``"dashpot"`` (``rho c_P``, ``rho c_S``: the damping matrix) or ``"spring"``
@@ -198,13 +197,13 @@ def boundary_node_blocks(mesh: Mesh, case: Case, kind: str
     """
     if kind not in ("dashpot", "spring"):
         raise ValueError(f"kind must be 'dashpot' or 'spring', got {kind!r}")
-    t = case["boundary.virtual_thickness"]
-    faces = absorbing_faces(mesh, case)
+    t = problem.boundary.virtual_thickness
+    faces = absorbing_faces(mesh, problem)
     if not faces or (kind == "spring" and t <= 0.0):
         return np.zeros(0, np.int64), np.zeros((0, 3, 3))
     quads, parts = (np.concatenate([getattr(f, a) for f in faces.values()])
                     for a in ("quads", "part"))
-    e, nu, rho = _material_arrays(case, parts)
+    e, nu, rho = _material_arrays(problem, parts)
     if kind == "dashpot":
         cp, cs = wave_speeds(e, nu, rho)
         blocks = face_impedance(mesh.points[quads], rho * cp, rho * cs)
@@ -217,11 +216,11 @@ def boundary_node_blocks(mesh: Mesh, case: Case, kind: str
     return nodes, out
 
 
-def boundary_summary(mesh: Mesh, case: Case) -> dict[str, dict]:
+def boundary_summary(mesh: Mesh, problem: Problem) -> dict[str, dict]:
     """Per face: type, element faces, area and (absorbing) the dashpot constants."""
     sets = face_node_sets(mesh)
     out = {}
-    for face, kind in face_types(case).items():
+    for face, kind in face_types(problem).items():
         fe = face_elements(mesh, sets[face])
         entry: dict = {"type": kind, "element_faces": len(fe.quads)}
         if len(fe.quads):
@@ -230,7 +229,7 @@ def boundary_summary(mesh: Mesh, case: Case) -> dict[str, dict]:
             area, _ = face_integrals(mesh.points[fe.quads])
             entry["area_m2"] = float(area.sum())
             if kind == "absorbing":
-                e, nu, rho = _material_arrays(case, fe.part)
+                e, nu, rho = _material_arrays(problem, fe.part)
                 cp, cs = wave_speeds(e, nu, rho)
                 entry["rho_cP"] = sorted({round(float(v), 1) for v in rho * cp})
                 entry["rho_cS"] = sorted({round(float(v), 1) for v in rho * cs})
@@ -238,8 +237,8 @@ def boundary_summary(mesh: Mesh, case: Case) -> dict[str, dict]:
     return out
 
 
-def case_dofmap(mesh: Mesh, case: Case, size: int = 1):
-    """The DOF map of a case: its ``[boundary]`` constraints and the modal switches.
+def problem_dofmap(mesh: Mesh, problem: Problem, size: int = 1):
+    """The DOF map of a problem: its ``[boundary]`` constraints and the modal switches.
 
     Checks the absorbing faces and the Caughey layers first (:func:`absorbing_faces`,
     :func:`check_layers`), so a face without soil behind it, or a layer without an element,
@@ -247,23 +246,23 @@ def case_dofmap(mesh: Mesh, case: Case, size: int = 1):
     """
     from .dofmap import build_dofmap
 
-    if has_absorbing(case):
-        absorbing_faces(mesh, case)
-    if "caughey" in face_types(case).values():
-        check_layers(mesh, case)
-    return build_dofmap(mesh, size, case["modal.fix_sleeper_rotations"],
-                        case["modal.fix_rail_rotations_at_pads"], rules=constraint_rules(case),
+    if has_absorbing(problem):
+        absorbing_faces(mesh, problem)
+    if "caughey" in face_types(problem).values():
+        check_layers(mesh, problem)
+    return build_dofmap(mesh, size, problem.fix_sleeper_rotations,
+                        problem.fix_rail_rotations_at_pads, rules=constraint_rules(problem),
                         node_sets=face_node_sets(mesh))
 
 
-def _layer_distances(mesh: Mesh, case: Case, centres: np.ndarray | None
+def _layer_distances(mesh: Mesh, problem: Problem, centres: np.ndarray | None
                      ) -> dict[str, np.ndarray]:
     """``{caughey face: distance of each centroid to its plane}`` (default: every hexahedron)."""
     if centres is None:
         centres = mesh.points[mesh.hexes].mean(axis=1)
     sets = face_node_sets(mesh)
     out = {}
-    for face, kind in face_types(case).items():
+    for face, kind in face_types(problem).items():
         if kind != "caughey":
             continue
         nodes = sets[face]
@@ -274,7 +273,7 @@ def _layer_distances(mesh: Mesh, case: Case, centres: np.ndarray | None
     return out
 
 
-def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None,
+def layer_weights(mesh: Mesh, problem: Problem, centres: np.ndarray | None = None,
                   parts: np.ndarray | None = None) -> np.ndarray:
     """Weight of hexahedra in the Caughey layers, in [0, 1].
 
@@ -285,7 +284,7 @@ def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None,
 
     Parameters
     ----------
-    mesh, case
+    mesh, problem
         The model and its ``[boundary]``.
     centres
         (k, 3) centroids to weigh (default: every hexahedron's).
@@ -301,10 +300,10 @@ def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None,
     """
     if centres is None and parts is None:
         parts = mesh.hex_part
-    distances = _layer_distances(mesh, case, centres)
+    distances = _layer_distances(mesh, problem, centres)
     n = len(mesh.hexes) if centres is None else len(centres)
     out = np.zeros(n)
-    thickness = case["boundary.layer_thickness"]
+    thickness = problem.boundary.layer_thickness
     for d in distances.values():
         out = np.maximum(out, np.where(d < thickness, (1.0 - d / thickness) ** 2, 0.0))
     if parts is not None:
@@ -312,7 +311,7 @@ def layer_weights(mesh: Mesh, case: Case, centres: np.ndarray | None = None,
     return out
 
 
-def check_layers(mesh: Mesh, case: Case) -> dict[str, dict]:
+def check_layers(mesh: Mesh, problem: Problem) -> dict[str, dict]:
     """Check the Caughey layers against the mesh and describe them.
 
     Returns
@@ -328,10 +327,10 @@ def check_layers(mesh: Mesh, case: Case) -> dict[str, dict]:
         ``boundary.layer_thickness`` from the face): the face would silently act as a
         fixed one. Names the thickness that reaches the first element layer.
     """
-    thickness = case["boundary.layer_thickness"]
+    thickness = problem.boundary.layer_thickness
     ground = np.isin(mesh.hex_part, [PART_ID[p] for p in LAYER_PARTS])
     out = {}
-    for face, d in _layer_distances(mesh, case, None).items():
+    for face, d in _layer_distances(mesh, problem, None).items():
         inside = d < thickness
         if not (inside & ground).any():
             if not ground.any():
@@ -351,15 +350,15 @@ def check_layers(mesh: Mesh, case: Case) -> dict[str, dict]:
     return out
 
 
-def layer_line(mesh: Mesh, case: Case) -> str:
+def layer_line(mesh: Mesh, problem: Problem) -> str:
     """One line on the Caughey layers (empty without caughey faces), after
     :func:`check_layers`: the ground elements damped, the other parts left undamped."""
-    info = check_layers(mesh, case)
+    info = check_layers(mesh, problem)
     if not info:
         return ""
     parts = sorted({p for v in info.values() for p in v["skipped"]})
     n_skip = sum(c for v in info.values() for c in v["skipped"].values())
-    text = (f"Caughey layers ({case['boundary.layer_thickness']:g} m): "
+    text = (f"Caughey layers ({problem.boundary.layer_thickness:g} m): "
             + ", ".join(f"{face} {v['elements']} ground elements" for face, v in info.items()))
     if parts:
         text += (f"; {n_skip} elements of {', '.join(parts)} within the thickness are not "
@@ -376,7 +375,7 @@ RIGID_MOTIONS = ("translation along x", "translation along y", "translation alon
 SUPPORT_TOL = 1e-6
 
 
-def restrained_components(case: Case) -> dict[str, tuple[int, ...]]:
+def restrained_components(problem: Problem) -> dict[str, tuple[int, ...]]:
     """Displacement components (0, 1, 2 = x, y, z) each face restrains.
 
     ``fixed`` and ``caughey`` all three, ``roller`` its normal one, ``absorbing`` all three
@@ -384,7 +383,7 @@ def restrained_components(case: Case) -> dict[str, tuple[int, ...]]:
     ``free`` none.
     """
     out = {}
-    for face, kind in face_types(case).items():
+    for face, kind in face_types(problem).items():
         if kind in ("fixed", "caughey", "absorbing"):
             out[face] = (0, 1, 2)
         elif kind == "roller":
@@ -394,7 +393,7 @@ def restrained_components(case: Case) -> dict[str, tuple[int, ...]]:
     return out
 
 
-def unsupported_motions(mesh: Mesh, case: Case) -> list[str]:
+def unsupported_motions(mesh: Mesh, problem: Problem) -> list[str]:
     """The rigid-body motions of the soil box that no truncation face restrains.
 
     The restrained DOFs of the faces (:func:`restrained_components`) are tested against
@@ -415,7 +414,7 @@ def unsupported_motions(mesh: Mesh, case: Case) -> list[str]:
     scale = float(np.ptp(pts, axis=0).max()) or 1.0
     sets = face_node_sets(mesh)
     rows = []
-    for face, comps in restrained_components(case).items():
+    for face, comps in restrained_components(problem).items():
         p = (mesh.points[sets[face]] - centre) / scale
         for c in comps:
             r = np.zeros((len(p), 6))
@@ -439,13 +438,13 @@ def unsupported_motions(mesh: Mesh, case: Case) -> list[str]:
     return free
 
 
-def support_warning(mesh: Mesh, case: Case) -> str | None:
+def support_warning(mesh: Mesh, problem: Problem) -> str | None:
     """A one-line warning when the faces leave a rigid-body motion of the box free (else
     None; :func:`unsupported_motions`)."""
-    free = unsupported_motions(mesh, case)
+    free = unsupported_motions(mesh, problem)
     if not free:
         return None
-    faces = ", ".join(f"{f} {k}" for f, k in face_types(case).items())
+    faces = ", ".join(f"{f} {k}" for f, k in face_types(problem).items())
     what = ("rigid-body motions (translations and rotations)" if len(free) == len(RIGID_MOTIONS)
             else ", ".join(free))
     return (f"warning: no truncation face restrains the soil box's {what} "

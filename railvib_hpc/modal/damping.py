@@ -24,7 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..config import Case
+from ..problem import Problem
 from .elements import group_damping_ratio
 
 
@@ -47,16 +47,17 @@ def rayleigh_ratio(alpha: float, beta: float, omega: float | np.ndarray) -> np.n
                         np.inf if alpha > 0 else 0.0)
 
 
-def material_rayleigh(case: Case, groups: Sequence[str]) -> dict[str, tuple[float, float]]:
+def material_rayleigh(problem: Problem, groups: Sequence[str]
+                      ) -> dict[str, tuple[float, float]]:
     """``{group: (alpha_g, beta_g)}`` of ``damping.model = 'per_material'``."""
     out = {}
     for g in groups:
-        zeta = group_damping_ratio(case, g)
-        out[g] = rayleigh_coefficients(zeta, case["damping.f1"], case["damping.f2"])
+        zeta = group_damping_ratio(problem, g)
+        out[g] = rayleigh_coefficients(zeta, problem.damping.f1, problem.damping.f2)
     return out
 
 
-def case_rayleigh(case: Case) -> tuple[float, float]:
+def problem_rayleigh(problem: Problem) -> tuple[float, float]:
     """Global ``(alpha, beta)`` of ``damping.model = 'rayleigh'`` (``modal.damping_ratio``)."""
-    return rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
-                                 case["damping.f2"])
+    return rayleigh_coefficients(problem.damping.ratio, problem.damping.f1,
+                                 problem.damping.f2)

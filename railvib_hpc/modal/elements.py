@@ -1,8 +1,9 @@
 """Element matrices of the model, grouped in batches, with their global DOF numbers.
 
-Pure numpy: materials and sections come from the case, kernels from
-:mod:`railvib_hpc.fem`. Every batch holds ``(nel, nd)`` DOF numbers (-1 for an
-eliminated DOF) and ``(nel, nd, nd)`` stiffness and mass matrices.
+Pure numpy: materials and sections come from the problem object
+(:class:`~railvib_hpc.problem.Problem`), kernels from :mod:`railvib_hpc.fem`. Every batch
+holds ``(nel, nd)`` DOF numbers (-1 for an eliminated DOF) and ``(nel, nd, nd)`` stiffness
+and mass matrices.
 """
 
 from __future__ import annotations
@@ -12,14 +13,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import Case
 from ..fem.beam import beam_mass, beam_stiffness, shear_deformation_factors, shear_modulus
 from ..fem.hex8 import hex8_lumped_mass_diagonal, hex8_mass, hex8_stiffness
 from ..fem.spring import spring_matrices
 from ..mesh.interfaces import tributary_areas
 from ..mesh.model import Mesh
+from ..problem import Problem
 from ..schema import INTERFACE_PARTS, PART_ID, SOLID_MATERIAL
-from ..site import solid_material
 
 BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
 PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
@@ -70,14 +70,14 @@ def beam_up_vectors(x: np.ndarray) -> np.ndarray:
     return up
 
 
-def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
+def element_batches(mesh: Mesh, problem: Problem, hex_mask: np.ndarray | None = None,
                     line_mask: np.ndarray | None = None, chunk: int = 20_000,
                     with_mass: bool = True) -> Iterator[Batch]:
     """Yield element batches of the selected elements (all if masks are None).
 
     Parameters
     ----------
-    mesh, case
+    mesh, problem
         Model and material data.
     hex_mask, line_mask
         Boolean masks selecting the hexahedra / line elements to compute.
@@ -86,7 +86,7 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
     with_mass
         Compute the mass matrices too (``Batch.M`` is None otherwise).
     """
-    lumped = case["modal.lumped_mass"]
+    lumped = problem.lumped_mass
     hex_sel = np.ones(len(mesh.hexes), bool) if hex_mask is None else hex_mask
     line_sel = np.ones(len(mesh.lines), bool) if line_mask is None else line_mask
 
@@ -94,15 +94,14 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
         sel = np.flatnonzero(hex_sel & (mesh.hex_part == PART_ID[part]))
         if not len(sel):
             continue
-        mat = solid_material(case, mat_name)
+        mat = problem.material(mat_name)
         for start in range(0, len(sel), chunk):
             conn = mesh.hexes[sel[start:start + chunk]]
             x = mesh.points[conn]
             first, shape_of = unique_shapes(x)
             xs = x[first]
-            Ks = hex8_stiffness(xs, mat["E"], mat["nu"],
-                                formulation=case["modal.hex_formulation"])
-            Ms = hex8_mass(xs, mat["rho"], lumped=lumped)[shape_of] if with_mass else None
+            Ks = hex8_stiffness(xs, mat.E, mat.nu, formulation=problem.hex_formulation)
+            Ms = hex8_mass(xs, mat.rho, lumped=lumped)[shape_of] if with_mass else None
             yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms)
 
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
@@ -111,17 +110,16 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
             continue
         conn = mesh.lines[sel]
         x = mesh.points[conn]
-        mat, sec = case[f"materials.{mat_name}"], case[f"sections.{sec_name}"]
-        G = shear_modulus(mat["E"], mat["nu"])
+        mat, sec = problem.material(mat_name), problem.sections[sec_name]
+        G = shear_modulus(mat.E, mat.nu)
         up = beam_up_vectors(x)
-        ky, kz = sec["shear_coefficient_y"], sec["shear_coefficient_z"]
-        K = beam_stiffness(x, mat["E"], G, sec["area"], sec["iyy"], sec["izz"], sec["j"], ky, kz,
-                           up)
-        phi_y, phi_z = shear_deformation_factors(x, mat["E"], G, sec["area"], sec["iyy"],
-                                                 sec["izz"], ky, kz)
+        ky, kz = sec.shear_coefficient_y, sec.shear_coefficient_z
+        K = beam_stiffness(x, mat.E, G, sec.area, sec.iyy, sec.izz, sec.j, ky, kz, up)
+        phi_y, phi_z = shear_deformation_factors(x, mat.E, G, sec.area, sec.iyy, sec.izz, ky,
+                                                 kz)
         M = None
         if with_mass:
-            M = beam_mass(x, mat["rho"], sec["area"], sec["iyy"], sec["izz"], up,
+            M = beam_mass(x, mat.rho, sec.area, sec.iyy, sec.izz, up,
                           rotary_inertia=True, phi_y=phi_y, phi_z=phi_z)
             if lumped:
                 M = _lump_beam(M)
@@ -133,24 +131,25 @@ def element_batches(mesh: Mesh, case: Case, hex_mask: np.ndarray | None = None,
             continue
         conn = mesh.lines[sel]
         yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
-                    spring_matrices(case[f"pads.{key}"], np.full(len(conn), direction)), None)
+                    spring_matrices(getattr(problem.pads, key), np.full(len(conn), direction)),
+                    None)
 
     for kind, parts in INTERFACE_PARTS.items():
         sels = [line_sel & (mesh.line_part == PART_ID[part]) for part in parts]
         if not any(sel.any() for sel in sels):
             continue
-        area = tributary_areas(mesh, kind, case["usp.width"] if kind == "usp" else 0.0)
+        area = tributary_areas(mesh, kind, problem.interfaces[kind].width)
         for direction, sel in enumerate(sels):
             if not sel.any():
                 continue
             conn = mesh.lines[sel]
             yield Batch(conn, np.array([0, 1]), np.array([direction, direction]),
-                        spring_matrices(interface_stiffness(case, kind, area[conn[:, 1]],
+                        spring_matrices(interface_stiffness(problem, kind, area[conn[:, 1]],
                                                             direction),
                                         np.full(len(conn), direction)), None)
 
 
-def hex_max_frequencies(mesh: Mesh, case: Case) -> np.ndarray:
+def hex_max_frequencies(mesh: Mesh, problem: Problem) -> np.ndarray:
     """Largest natural frequency [rad/s] of every hexahedron alone, free, with its row-sum
     lumped mass: ``sqrt(lambda_max(m_e^-1/2 K_e m_e^-1/2))`` (once per distinct shape and
     material). By Irons' element eigenvalue theorem the model's largest frequency is at
@@ -161,23 +160,25 @@ def hex_max_frequencies(mesh: Mesh, case: Case) -> np.ndarray:
         sel = np.flatnonzero(mesh.hex_part == PART_ID[part])
         if not len(sel):
             continue
-        mat = solid_material(case, mat_name)
+        mat = problem.material(mat_name)
         x = mesh.points[mesh.hexes[sel]]
         first, shape_of = unique_shapes(x)
         xs = x[first]
-        Ks = hex8_stiffness(xs, mat["E"], mat["nu"], formulation=case["modal.hex_formulation"])
-        d = 1.0 / np.sqrt(hex8_lumped_mass_diagonal(xs, mat["rho"]))
+        Ks = hex8_stiffness(xs, mat.E, mat.nu, formulation=problem.hex_formulation)
+        d = 1.0 / np.sqrt(hex8_lumped_mass_diagonal(xs, mat.rho))
         lam = np.linalg.eigvalsh(d[:, :, None] * Ks * d[:, None, :])[:, -1]
         out[sel] = np.sqrt(np.maximum(lam, 0.0))[shape_of]
     return out
 
 
-def interface_stiffness(case: Case, kind: str, area: np.ndarray, direction: int) -> np.ndarray:
+def interface_stiffness(problem: Problem, kind: str, area: np.ndarray, direction: int
+                        ) -> np.ndarray:
     """Stiffness of an elastic interface's springs along ``direction`` from the tributary
     ``area`` of their upper nodes (:func:`railvib_hpc.mesh.interfaces.tributary_areas`): the
     bedding modulus, times ``shear_ratio`` along x and y, times the area."""
-    ratio = 1.0 if direction == 2 else case[f"{kind}.shear_ratio"]
-    return case[f"{kind}.modulus"] * ratio * area
+    interface = problem.interfaces[kind]
+    ratio = 1.0 if direction == 2 else interface.shear_ratio
+    return interface.modulus * ratio * area
 
 
 def _lump_beam(M: np.ndarray) -> np.ndarray:
@@ -190,7 +191,7 @@ def _lump_beam(M: np.ndarray) -> np.ndarray:
     return out
 
 
-def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
+def nodal_masses(mesh: Mesh, problem: Problem, node_mask: np.ndarray) -> np.ndarray:
     """Lumped (row-sum) translational mass of every node (kg); only ``node_mask`` nodes filled.
 
     Hexahedra contribute their row-sum lumped mass, beams half of ``rho A L`` to each node.
@@ -202,14 +203,14 @@ def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
         if sel.any():
             conn = mesh.hexes[sel]
             diag = hex8_lumped_mass_diagonal(mesh.points[conn],
-                                             solid_material(case, mat_name)["rho"])
+                                             problem.material(mat_name).rho)
             out += np.bincount(conn.ravel(), weights=diag[:, 0::3].ravel(), minlength=len(out))
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
         sel = node_mask[mesh.lines].any(axis=1) & (mesh.line_part == PART_ID[part])
         if sel.any():
             conn = mesh.lines[sel]
             length = np.linalg.norm(np.diff(mesh.points[conn], axis=1)[:, 0], axis=1)
-            m = case[f"materials.{mat_name}.rho"] * case[f"sections.{sec_name}.area"] * length
+            m = problem.material(mat_name).rho * problem.sections[sec_name].area * length
             out += np.bincount(conn.ravel(), weights=np.repeat(m / 2, 2), minlength=len(out))
     out[~node_mask] = 0.0
     return out
@@ -219,14 +220,14 @@ def nodal_masses(mesh: Mesh, case: Case, node_mask: np.ndarray) -> np.ndarray:
 PADS = "pads"
 
 
-def group_damping_ratio(case: Case, group: str) -> float:
+def group_damping_ratio(problem: Problem, group: str) -> float:
     """Damping ratio of a material group: ``modal.damping_ratio`` for the rail pads, half the
     loss factor for an elastic interface, the material's otherwise."""
     if group == PADS:
-        return case["modal.damping_ratio"]
+        return problem.damping.ratio
     if group in INTERFACE_PARTS:
-        return 0.5 * case[f"{group}.loss_factor"]
-    return solid_material(case, group)["damping_ratio"]
+        return 0.5 * problem.interfaces[group].loss_factor
+    return problem.material(group).damping_ratio
 
 
 def material_groups(mesh: Mesh) -> dict[str, tuple[str, ...]]:

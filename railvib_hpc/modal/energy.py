@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
 from ..mesh.model import Mesh
+from ..problem import Problem
 from .dofmap import DofMap
 from .elements import group_damping_ratio, material_groups
 from .petsc import assemble
@@ -33,13 +33,13 @@ if TYPE_CHECKING:
 ENERGY_CHUNK = 64
 
 
-def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
+def group_strain_energies(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MPI.Comm,
                           phi: np.ndarray, chunk: int = ENERGY_CHUNK) -> dict[str, np.ndarray]:
     """``E_ig = phi_i^T K_g phi_i`` for every mode and material group (collective).
 
     Parameters
     ----------
-    mesh, case, dofmap
+    mesh, problem, dofmap
         The model as assembled by :func:`~railvib_hpc.modal.petsc.assemble`.
     comm
         MPI communicator.
@@ -60,7 +60,7 @@ def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm
     energies = {}
     for group, parts in material_groups(mesh).items():
         # the group's own sparsity pattern: the product costs its nonzeros only
-        K, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=False)
+        K, _, _ = assemble(mesh, problem, dofmap, comm, parts=parts, mass=False)
         local = np.empty(m)
         for j in range(0, m, chunk):
             block = phi[:, j:j + chunk]
@@ -71,7 +71,7 @@ def group_strain_energies(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm
     return energies
 
 
-def damping_from_energies(energies: dict[str, np.ndarray], case: Case) -> np.ndarray:
+def damping_from_energies(energies: dict[str, np.ndarray], problem: Problem) -> np.ndarray:
     """Modal damping ratios ``sum_g zeta_g E_ig / sum_g E_ig`` (pure numpy).
 
     ``zeta_g`` is ``materials.<g>.damping_ratio``, ``modal.damping_ratio`` for the pads and
@@ -79,6 +79,6 @@ def damping_from_energies(energies: dict[str, np.ndarray], case: Case) -> np.nda
     """
     names = list(energies)
     e = np.stack([np.asarray(energies[g], dtype=float) for g in names], axis=1)
-    ratios = np.array([group_damping_ratio(case, g) for g in names])
+    ratios = np.array([group_damping_ratio(problem, g) for g in names])
     total = e.sum(axis=1)
     return (e @ ratios) / np.where(total > 0, total, 1.0)

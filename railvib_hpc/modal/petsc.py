@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
 from ..errors import MeshError
 from ..fem.reference import ElementGeometryError
 from ..mesh.model import Mesh
+from ..problem import Problem
 from ..schema import PART_ID
 from .dofmap import DofMap
 from .elements import element_batches
@@ -120,7 +120,7 @@ def _pattern_rows(conns, n0: int, n1: int, n_nodes: int, nfree: np.ndarray,
                               - starts[entry_row]]
 
 
-def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
+def assemble(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MPI.Comm,
              parts: Collection[str] | None = None, mass: bool | str = True,
              extra_hexes: np.ndarray | None = None):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
@@ -144,7 +144,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
     ix = pat.indices.astype(PETSc.IntType, copy=False)
     del pat                      # (only the masks are needed below)
     diagonal = mass == "diagonal"
-    if diagonal and not case["modal.lumped_mass"]:
+    if diagonal and not problem.lumped_mass:
         raise ValueError("mass='diagonal' needs modal.lumped_mass = true")
     mats = []
     for k in range(2 if mass else 1):
@@ -165,7 +165,7 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
     t_k = time.perf_counter()
     geometry_error = None
     try:
-        for batch in element_batches(mesh, case, hex_mask, line_mask, with_mass=mass):
+        for batch in element_batches(mesh, problem, hex_mask, line_mask, with_mass=mass):
             t_b = time.perf_counter()
             t_kernels += t_b - t_k
             cols = batch.dofs(dofmap.index)
@@ -188,7 +188,8 @@ def assemble(mesh: Mesh, case: Case, dofmap: DofMap, comm: MPI.Comm,
     if parts is None:
         from .boundary import boundary_node_blocks
 
-        insert_node_blocks(K, dofmap, comm.rank, *boundary_node_blocks(mesh, case, "spring"))
+        insert_node_blocks(K, dofmap, comm.rank,
+                           *boundary_node_blocks(mesh, problem, "spring"))
     t2 = time.perf_counter()
     for A in mats:
         A.assemble()
@@ -221,7 +222,7 @@ def insert_node_blocks(A, dofmap: DofMap, rank: int, nodes: np.ndarray, blocks: 
                    np.ascontiguousarray(blocks, dtype=float), addv=PETSc.InsertMode.ADD_VALUES)
 
 
-def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
+def assemble_damping(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, M):
     """The damping matrix C of the full-order model (distributed, K's pattern).
 
     ``C = C_material + C_dashpots (+ C_pads)`` from ``[damping]`` and ``[boundary]``
@@ -247,11 +248,11 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
     C.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     subset = PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN
     same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
-    info: dict = {"model": case["damping.model"]}
-    model = case["damping.model"]
+    info: dict = {"model": problem.damping.model}
+    model = problem.damping.model
     if model == "rayleigh":
-        alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
-                                            case["damping.f2"])
+        alpha, beta = rayleigh_coefficients(problem.damping.ratio, problem.damping.f1,
+                                            problem.damping.f2)
         C.axpy(beta, K, structure=same)
         # M in K's pattern, or the lumped M on the diagonal alone (assemble(mass="diagonal"))
         C.axpy(alpha, M, structure=same if M.getInfo()["nz_used"] == K.getInfo()["nz_used"]
@@ -260,22 +261,22 @@ def assemble_damping(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, M):
     elif model == "per_material":
         from .elements import material_groups
 
-        coeffs = material_rayleigh(case, list(material_groups(mesh)))
+        coeffs = material_rayleigh(problem, list(material_groups(mesh)))
         info["groups"] = coeffs
         for group, parts in material_groups(mesh).items():
             alpha, beta = coeffs[group]
-            Kg, Mg, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=alpha != 0.0)
+            Kg, Mg, _ = assemble(mesh, problem, dofmap, comm, parts=parts, mass=alpha != 0.0)
             C.axpy(beta, Kg, structure=subset)
             if Mg is not None:
                 C.axpy(alpha, Mg, structure=subset)
                 Mg.destroy()
             Kg.destroy()
-    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
     insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
     info["dashpot_nodes"] = len(nodes)
-    info["layer_elements"] = insert_layer_damping(C, mesh, case, dofmap, comm.rank)
-    if case["damping.pads"]:
-        insert_pad_dashpots(C, mesh, case, dofmap, comm.rank)
+    info["layer_elements"] = insert_layer_damping(C, mesh, problem, dofmap, comm.rank)
+    if problem.damping.pads:
+        insert_pad_dashpots(C, mesh, problem, dofmap, comm.rank)
     C.assemble()
     C.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     C.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
@@ -330,7 +331,7 @@ def destroy_damping(C) -> None:
     C.destroy()
 
 
-def rayleigh_operator(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, m: np.ndarray):
+def rayleigh_operator(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, m: np.ndarray):
     """The damping of ``damping.model = 'rayleigh'`` as a shell matrix around K (see
     :class:`RayleighOperator`), or None where the model's C is not of that form
     (another damping model, graded absorbing layers) and must be assembled
@@ -342,11 +343,11 @@ def rayleigh_operator(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, m: np.nda
     from .damping import rayleigh_coefficients
     from .elements import PAD_DIRECTION
 
-    if case["damping.model"] != "rayleigh" or layer_weights(mesh, case).any():
+    if problem.damping.model != "rayleigh" or layer_weights(mesh, problem).any():
         return None, None
-    alpha, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
-                                        case["damping.f2"])
-    pads = tuple(PAD_DIRECTION) if case["damping.pads"] else ()
+    alpha, beta = rayleigh_coefficients(problem.damping.ratio, problem.damping.f1,
+                                        problem.damping.f2)
+    pads = tuple(PAD_DIRECTION) if problem.damping.pads else ()
     pat = local_pattern(mesh, dofmap, comm.rank, pads)
     r0, r1 = dofmap.owned_dofs(comm.rank)
     n_local, n_global = r1 - r0, dofmap.n_dofs
@@ -355,10 +356,10 @@ def rayleigh_operator(mesh: Mesh, case: Case, dofmap: DofMap, comm, K, m: np.nda
                                      pat.indices.astype(PETSc.IntType),
                                      np.zeros(len(pat.indices))), comm=comm)
     C_b.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
     insert_node_blocks(C_b, dofmap, comm.rank, nodes, blocks)
     if pads:
-        insert_pad_dashpots(C_b, mesh, case, dofmap, comm.rank)
+        insert_pad_dashpots(C_b, mesh, problem, dofmap, comm.rank)
     C_b.assemble()
     op = RayleighOperator(K, m, alpha, beta, C_b)
     C = PETSc.Mat().createPython(K.getSizes(), op, comm=comm)
@@ -396,7 +397,7 @@ def stiffness_and_damping(K, C, u, v, out, work) -> None:
         out.axpy(ray.alpha, work)
 
 
-def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int,
+def insert_pad_dashpots(C, mesh: Mesh, problem: Problem, dofmap: DofMap, rank: int,
                         parts: Collection[str] | None = None) -> None:
     """Add the rail pads' dashpots ``pads.cx, cy, cz`` to C (owned rows; K's pattern); only
     those of the pad parts in ``parts`` when given."""
@@ -410,7 +411,7 @@ def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int,
         conn = mesh.lines[mesh.line_part == PART_ID[part]]
         if not len(conn) or (parts is not None and part not in parts):
             continue
-        c = case[f"pads.c{key[1]}"]
+        c = getattr(problem.pads, f"c{key[1]}")
         cols = dofmap.index[conn, direction]
         rows = np.where((cols >= r0) & (cols < r1), cols, -1)
         C.setValuesRCV(np.ascontiguousarray(rows, dtype=PETSc.IntType),
@@ -419,8 +420,9 @@ def insert_pad_dashpots(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int,
                        addv=PETSc.InsertMode.ADD_VALUES)
 
 
-def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Collection[str],
-                       extra_hexes: np.ndarray | None = None, boundary: bool = False):
+def assemble_partition(mesh: Mesh, problem: Problem, dofmap: DofMap, comm,
+                       parts: Collection[str], extra_hexes: np.ndarray | None = None,
+                       boundary: bool = False):
     """Stiffness and damping of the elements of ``parts`` alone: ``(K_p, C_p)``, C_p in
     K_p's pattern or None when nothing of them damps (collective).
 
@@ -439,13 +441,13 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
     from .damping import material_rayleigh, rayleigh_coefficients
 
     parts = tuple(parts)
-    K_p, _, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=False,
+    K_p, _, _ = assemble(mesh, problem, dofmap, comm, parts=parts, mass=False,
                          extra_hexes=extra_hexes)
     C_p = None
-    model = case["damping.model"]
+    model = problem.damping.model
     if model == "rayleigh":
-        _, beta = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
-                                        case["damping.f2"])
+        _, beta = rayleigh_coefficients(problem.damping.ratio, problem.damping.f1,
+                                        problem.damping.f2)
         if beta != 0.0:
             C_p = K_p.duplicate(copy=True)
             C_p.scale(beta)
@@ -453,7 +455,7 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
         from .elements import material_groups
 
         groups = material_groups(mesh)
-        coeffs = material_rayleigh(case, list(groups))
+        coeffs = material_rayleigh(problem, list(groups))
         for group, group_parts in groups.items():
             mine = [p for p in group_parts if p in parts]
             extra = None
@@ -464,7 +466,7 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
                 continue
             if C_p is None:
                 C_p = K_p.duplicate(copy=False)
-            K_g, _, _ = assemble(mesh, case, dofmap, comm, parts=mine, mass=False,
+            K_g, _, _ = assemble(mesh, problem, dofmap, comm, parts=mine, mass=False,
                                  extra_hexes=extra)
             C_p.axpy(beta, K_g, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
             K_g.destroy()
@@ -473,20 +475,21 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
 
     if boundary:
         K_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        insert_node_blocks(K_p, dofmap, comm.rank, *boundary_node_blocks(mesh, case, "spring"))
+        insert_node_blocks(K_p, dofmap, comm.rank,
+                           *boundary_node_blocks(mesh, problem, "spring"))
         K_p.assemble()
-        nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+        nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
         if len(nodes):
             if C_p is None:
                 C_p = K_p.duplicate(copy=False)
             C_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
             insert_node_blocks(C_p, dofmap, comm.rank, nodes, blocks)
             C_p.assemble()
-    if case["damping.pads"] and any(p in parts for p in PAD_DIRECTION):
+    if problem.damping.pads and any(p in parts for p in PAD_DIRECTION):
         if C_p is None:
             C_p = K_p.duplicate(copy=False)
         C_p.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
-        insert_pad_dashpots(C_p, mesh, case, dofmap, comm.rank, parts)
+        insert_pad_dashpots(C_p, mesh, problem, dofmap, comm.rank, parts)
         C_p.assemble()
     if C_p is not None:
         C_p.setOption(PETSc.Mat.Option.SYMMETRIC, True)
@@ -494,7 +497,7 @@ def assemble_partition(mesh: Mesh, case: Case, dofmap: DofMap, comm, parts: Coll
     return K_p, C_p
 
 
-def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, which: str):
+def node_block_matrix(K, mesh: Mesh, problem: Problem, dofmap: DofMap, rank: int, which: str):
     """A matrix with K's pattern holding only the absorbing faces' dashpots
     (``which = 'dashpots'``) or the rail pads' dashpots (``'pads'``); assembled."""
     from petsc4py import PETSc
@@ -504,16 +507,16 @@ def node_block_matrix(K, mesh: Mesh, case: Case, dofmap: DofMap, rank: int, whic
     A = K.duplicate(copy=False)
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     if which == "dashpots":
-        insert_node_blocks(A, dofmap, rank, *boundary_node_blocks(mesh, case, "dashpot"))
+        insert_node_blocks(A, dofmap, rank, *boundary_node_blocks(mesh, problem, "dashpot"))
     elif which == "pads":
-        insert_pad_dashpots(A, mesh, case, dofmap, rank)
+        insert_pad_dashpots(A, mesh, problem, dofmap, rank)
     else:
         raise ValueError(f"which must be 'dashpots' or 'pads', got {which!r}")
     A.assemble()
     return A
 
 
-def insert_layer_damping(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -> int:
+def insert_layer_damping(C, mesh: Mesh, problem: Problem, dofmap: DofMap, rank: int) -> int:
     """Add the graded Caughey layers' damping ``sum_e w_e (alpha M_e + beta K_e)`` to C
     (:func:`.boundary.layer_weights`; ``alpha, beta`` from ``boundary.layer_damping`` at
     ``damping.f1``, ``f2``). Returns the number of elements in the layers."""
@@ -522,17 +525,17 @@ def insert_layer_damping(C, mesh: Mesh, case: Case, dofmap: DofMap, rank: int) -
     from .boundary import layer_weights
     from .damping import rayleigh_coefficients
 
-    weights = layer_weights(mesh, case)
+    weights = layer_weights(mesh, problem)
     if not weights.any():
         return 0
-    alpha, beta = rayleigh_coefficients(case["boundary.layer_damping"], case["damping.f1"],
-                                        case["damping.f2"])
+    alpha, beta = rayleigh_coefficients(problem.boundary.layer_damping, problem.damping.f1,
+                                        problem.damping.f2)
     r0, r1 = dofmap.owned_dofs(rank)
     own = np.zeros(mesh.n_nodes, dtype=bool)
     own[dofmap.owned_nodes(rank)] = True
     mask = (weights > 0) & own[mesh.hexes].any(axis=1)
-    for batch in element_batches(mesh, case, mask, np.zeros(len(mesh.lines), bool)):
-        w = layer_weights(mesh, case, mesh.points[batch.conn].mean(axis=1))
+    for batch in element_batches(mesh, problem, mask, np.zeros(len(mesh.lines), bool)):
+        w = layer_weights(mesh, problem, mesh.points[batch.conn].mean(axis=1))
         local = w[:, None, None] * (alpha * batch.M + beta * batch.K)
         cols = batch.dofs(dofmap.index)
         rows = np.where((cols >= r0) & (cols < r1), cols, -1)

@@ -22,7 +22,7 @@ fields of the rail DOFs (:mod:`.static`), so every part is (m + n_r, m + n_r) an
 multibody stage can damp the residual vectors of the static correction consistently
 (:func:`railvib_hpc.mbs.static_correction.residual_damping_parts`).
 
-:func:`compose_damping` builds ``D`` for a case from them (pure numpy): Rayleigh
+:func:`compose_damping` builds ``D`` for a problem from them (pure numpy): Rayleigh
 ``alpha I + beta Lambda`` (exact for mass-normalised modes), or ``sum_g alpha_g
 Phi^T M_g Phi + beta_g Phi^T K_g Phi``, plus the dashpots and, with ``damping.pads``, the
 pads.
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..config import Case
+from ..problem import Problem
 
 #: Datasets of ``modal_damping.h5`` (besides the per-group ``mass/*`` and ``stiffness/*``).
 PARTS = ("dashpots", "pads")
@@ -91,7 +91,7 @@ def project(A, phi: np.ndarray, comm) -> np.ndarray:
     return 0.5 * (out + out.T)
 
 
-def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
+def project_damping_parts(mesh, problem: Problem, dofmap, comm, K, phi: np.ndarray
                           ) -> dict[str, np.ndarray]:
     """The projected parts of C (see the module notes), collective."""
     from .elements import material_groups
@@ -99,11 +99,11 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
 
     out: dict[str, np.ndarray] = {}
     for which in PARTS:
-        A = node_block_matrix(K, mesh, case, dofmap, comm.rank, which)
+        A = node_block_matrix(K, mesh, problem, dofmap, comm.rank, which)
         out[which] = project(A, phi, comm)
         A.destroy()
     for group, parts in material_groups(mesh).items():
-        Kg, Mg, _ = assemble(mesh, case, dofmap, comm, parts=parts, mass=True)
+        Kg, Mg, _ = assemble(mesh, problem, dofmap, comm, parts=parts, mass=True)
         out[f"stiffness/{group}"] = project(Kg, phi, comm)
         out[f"mass/{group}"] = project(Mg, phi, comm)
         Kg.destroy()
@@ -115,25 +115,26 @@ def project_damping_parts(mesh, case: Case, dofmap, comm, K, phi: np.ndarray
 
 
 
-def compose_damping(case: Case, parts: dict[str, np.ndarray], omega: np.ndarray) -> np.ndarray:
-    """``D = Phi^T C Phi`` (m, m) of the case's ``[damping]`` from the projected parts.
+def compose_damping(problem: Problem, parts: dict[str, np.ndarray], omega: np.ndarray
+                    ) -> np.ndarray:
+    """``D = Phi^T C Phi`` (m, m) of the problem's ``[damping]`` from the projected parts.
 
     ``omega`` are the circular frequencies of the modes used (their number ``m`` may be
     smaller than the stored parts).
     """
-    from .damping import case_rayleigh, material_rayleigh
+    from .damping import material_rayleigh, problem_rayleigh
 
     om = np.asarray(omega, dtype=float)
     m = om.size
     d = parts["dashpots"][:m, :m].copy()
-    if case["damping.pads"]:
+    if problem.damping.pads:
         d += parts["pads"][:m, :m]
-    model = case["damping.model"]
+    model = problem.damping.model
     if model == "rayleigh":
-        alpha, beta = case_rayleigh(case)
+        alpha, beta = problem_rayleigh(problem)
         d += np.diag(alpha + beta * om**2)
     elif model == "per_material":
         groups = sorted(k.split("/", 1)[1] for k in parts if k.startswith("stiffness/"))
-        for g, (alpha, beta) in material_rayleigh(case, groups).items():
+        for g, (alpha, beta) in material_rayleigh(problem, groups).items():
             d += alpha * parts[f"mass/{g}"][:m, :m] + beta * parts[f"stiffness/{g}"][:m, :m]
     return 0.5 * (d + d.T)

@@ -30,8 +30,9 @@ from ..io.xdmf import ensure_views
 from ..log import Reporter
 from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
+from ..problem import Problem
 from ..resources import peak_memory_gb
-from .boundary import case_dofmap
+from .boundary import problem_dofmap
 from .dofmap import NODE_ARRAY_CHUNK
 from .eigen import solve_modes
 from .elements import nodal_masses
@@ -186,6 +187,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     returns the summary, the frequencies and the mesh size (nodes, hexahedra; None with
     ``modal.band_only``)."""
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    problem = Problem.from_case(case)
     path = out_dir / MODES_H5
     static_path = out_dir / STATIC_H5
     want_static = bool(case["mbs.static_correction"])
@@ -195,11 +197,11 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
     t0 = time.perf_counter()
     with rep.stage("dofs"):
-        dofmap = case_dofmap(mesh, case, comm.size)
+        dofmap = problem_dofmap(mesh, problem, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s)")
     on_root(lambda: _check_space(case, out_dir, mesh, dofmap, want_static), comm)
     with rep.stage("assembly"):
-        K, M, ainfo = assemble(mesh, case, dofmap, comm)
+        K, M, ainfo = assemble(mesh, problem, dofmap, comm)
     t_assembly = time.perf_counter() - t0
     static_rhs = None
     if want_static:
@@ -215,7 +217,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
             max_basis=_max_basis(case, dofmap.n_dofs), monitor=progress,
             static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
             bands=band_settings(ctx), assemble=lambda sub: assemble(
-                mesh, case, case_dofmap(mesh, case, sub.size), sub)[:2], log=rep.info,
+                mesh, problem, problem_dofmap(mesh, problem, sub.size), sub)[:2], log=rep.info,
             progress=progress.phase)
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
@@ -231,7 +233,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
                  f"{result.stats['factor_memory_gb']:.1f} GB (modal.out_of_core = "
                  f"'{case['modal.out_of_core']}')")
     with rep.stage("strain energies"):
-        energies = group_strain_energies(mesh, case, dofmap, comm, result.phi)
+        energies = group_strain_energies(mesh, problem, dofmap, comm, result.phi)
     x_static = result.static
     x_mass = None
     if want_static:
@@ -243,7 +245,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     if want_damping:
         with rep.stage("projected damping"):
             basis = result.phi if not want_static else np.hstack([result.phi, x_def])
-            parts = project_damping_parts(mesh, case, dofmap, comm, K, basis)
+            parts = project_damping_parts(mesh, problem, dofmap, comm, K, basis)
     if want_static:
         del x_def
     K.destroy()
@@ -254,7 +256,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
         result.phi = None           # the node arrays hold the modes now (n x m doubles freed)
         mask = np.zeros(mesh.n_nodes, dtype=bool)
         mask[nodes] = True
-        masses = nodal_masses(mesh, case, mask)[nodes]
+        masses = nodal_masses(mesh, problem, mask)[nodes]
         _check_modes_before_writing(comm, result.eigenvalues, translation, masses, path)
         stats = dict(result.stats)
         stats["convergence_warnings"] = list(result.warnings)
@@ -363,10 +365,11 @@ def _check_modes_before_writing(comm: MPI.Comm, eigenvalues, translation, masses
 def _static_only(ctx: StageContext, modes_sha: str) -> None:
     """static.h5 for reused modes: assemble K again and factor it once."""
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    problem = Problem.from_case(case)
     with rep.stage("static correction: mesh + assembly"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
-        dofmap = case_dofmap(mesh, case, comm.size)
-        K, M, _ = assemble(mesh, case, dofmap, comm)
+        dofmap = problem_dofmap(mesh, problem, comm.size)
+        K, M, _ = assemble(mesh, problem, dofmap, comm)
     load_dofs, table = rail_load_dofs(mesh, dofmap)
     rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
     with rep.stage("static solves"):
@@ -411,11 +414,12 @@ def _write_damping(ctx: StageContext, parts: dict, mesh_sha: str, modes_sha: str
 def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
     """modal_damping.h5 for reused modes: assemble again, read the modes' rows, project."""
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    problem = Problem.from_case(case)
     with rep.stage("projected damping (reused modes)"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
-        dofmap = case_dofmap(mesh, case, comm.size)
+        dofmap = problem_dofmap(mesh, problem, comm.size)
         want_static = bool(case["mbs.static_correction"])
-        K, M, _ = assemble(mesh, case, dofmap, comm, mass=want_static)
+        K, M, _ = assemble(mesh, problem, dofmap, comm, mass=want_static)
         phi = read_phi_rows(out_dir / MODES_H5, dofmap, comm.rank, m)
         if want_static:           # the residual vectors' rows too (their rotations included)
             load_dofs, _ = rail_load_dofs(mesh, dofmap)
@@ -424,7 +428,7 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
                                   load_dofs.size, comm)[0]
             phi = np.hstack([phi, x_def])
             M.destroy()
-        parts = project_damping_parts(mesh, case, dofmap, comm, K, phi)
+        parts = project_damping_parts(mesh, problem, dofmap, comm, K, phi)
         K.destroy()
     _write_damping(ctx, parts, mesh_sha, modes_sha)
     rep.info(f"wrote {out_dir / MODAL_DAMPING_H5} (modal.damping = 'full')")

@@ -649,13 +649,13 @@ def _fields_summary(path: Path) -> dict:
 def _materials(modes_path: Path) -> dict:
     import h5py
 
-    from .stress import case_from_modes
+    from ..problem import Problem
 
     with h5py.File(modes_path, "r") as f:
         if "case_toml" not in f.attrs:
             raise ReconstructInputError(f"{modes_path} has no case_toml attribute: the "
                                         "materials for the stresses are unknown")
-        return hex_materials(case_from_modes(f))
+        return hex_materials(Problem.from_modes(f))
 
 
 def _probes(modes_path: Path, out_dir: Path, info: dict, user_probes, user_roles,

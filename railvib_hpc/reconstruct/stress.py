@@ -54,7 +54,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..config import Case
 from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
 from ..fem.reference import hex_centre_gradients
@@ -63,7 +62,8 @@ from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
 from ..io.temp_names import final_name
 from ..log import Reporter
 from ..parallel import check_collective, on_root
-from ..schema import MIN_SOIL_LAYER_THICKNESS, PART_ID
+from ..problem import Problem
+from ..schema import PART_ID
 from .fields import node_range
 
 if TYPE_CHECKING:
@@ -73,13 +73,13 @@ if TYPE_CHECKING:
 _BLOCK = 65536
 
 
-def hex_materials(case: Case) -> dict[int, tuple[float, float]]:
-    """Part id -> ``(E, nu)`` of every solid part, from the case's materials.
+def hex_materials(problem: Problem) -> dict[int, tuple[float, float]]:
+    """Part id -> ``(E, nu)`` of every solid part, from the problem's materials.
 
     Parameters
     ----------
-    case
-        The case (``materials.<material>.E`` / ``.nu``).
+    problem
+        The problem (``materials.<material>.E`` / ``.nu``, the soil layers').
 
     Returns
     -------
@@ -87,15 +87,13 @@ def hex_materials(case: Case) -> dict[int, tuple[float, float]]:
         Keys are :data:`railvib_hpc.schema.PART_ID` values of the solid parts.
     """
     from ..modal.elements import SOLID_MATERIAL
-    from ..site import solid_material
 
     out = {}
     for part, mat in SOLID_MATERIAL.items():
-        try:
-            props = solid_material(case, mat)
-        except KeyError:              # a soil layer the case does not have
+        props = problem.materials.get(mat)
+        if props is None:             # a soil layer the case does not have
             continue
-        out[PART_ID[part]] = (float(props["E"]), float(props["nu"]))
+        out[PART_ID[part]] = (float(props.E), float(props.nu))
     return out
 
 
@@ -244,22 +242,22 @@ def _nodal(m_el: np.ndarray) -> np.ndarray:
     return out
 
 
-def rail_section(case: Case) -> dict[str, float]:
-    """Vertical-plane bending data of the flexible rail from the case.
+def rail_section(problem: Problem) -> dict[str, float]:
+    """Vertical-plane bending data of the flexible rail from the problem.
 
     Returns
     -------
     dict
         ``EI`` [N m^2], ``E``, ``G``, ``A``, ``I``, ``k`` (shear coefficient).
     """
-    E, nu = case["materials.rail.E"], case["materials.rail.nu"]
-    sec = case["sections.rail"]
-    return {"E": float(E), "G": float(shear_modulus(E, nu)), "A": float(sec["area"]),
-            "I": float(sec["iyy"]), "k": float(sec["shear_coefficient_y"]),
-            "EI": float(E * sec["iyy"])}
+    E, nu = problem.material("rail").E, problem.material("rail").nu
+    sec = problem.sections["rail"]
+    return {"E": float(E), "G": float(shear_modulus(E, nu)), "A": float(sec.area),
+            "I": float(sec.iyy), "k": float(sec.shear_coefficient_y),
+            "EI": float(E * sec.iyy)}
 
 
-def rail_moment_modes(modes_path: str | os.PathLike, m: int, case: Case | None = None
+def rail_moment_modes(modes_path: str | os.PathLike, m: int, problem: Problem | None = None
                       ) -> dict[str, np.ndarray]:
     """Bending moment of each mode shape at the flexible-rail nodes (rank 0, serial).
 
@@ -272,8 +270,9 @@ def rail_moment_modes(modes_path: str | os.PathLike, m: int, case: Case | None =
         A complete ``modes.h5`` (``/mesh/rail_nodes``, ``/modes/rotation``).
     m
         Number of modes used.
-    case
-        Materials and sections (default: the case stored in ``modes.h5``).
+    problem
+        Materials and sections (default: those of the case stored in ``modes.h5``,
+        :meth:`~railvib_hpc.problem.Problem.from_modes`).
 
     Returns
     -------
@@ -286,14 +285,14 @@ def rail_moment_modes(modes_path: str | os.PathLike, m: int, case: Case | None =
     import h5py
 
     with h5py.File(modes_path, "r") as f:
-        if case is None:
-            case = case_from_modes(f)
+        if problem is None:
+            problem = Problem.from_modes(f)
         rails = f["mesh/rail_nodes"][()]
         if rails.size == 0 or np.any(rails < 0):
             raise ValueError(f"{modes_path}: no rail nodes (or rails of different lengths)")
         pts = f["mesh/points"][()]
         rot_nodes = f["mesh/rotation_nodes"][()]
-        sec = rail_section(case)
+        sec = rail_section(problem)
         xs, moments, ends = [], [], []
         for nodes in rails:
             order = np.argsort(nodes)
@@ -325,38 +324,6 @@ def rail_moment_history(q: np.ndarray, moment: np.ndarray) -> np.ndarray:
     """
     m = moment.shape[0]
     return (np.asarray(q)[:, :m] @ moment.reshape(m, -1)).reshape((len(q),) + moment.shape[1:])
-
-
-def case_from_modes(f) -> Case:
-    """The materials and sections the modes of an open ``modes.h5`` were computed with.
-
-    Only ``[materials]`` and ``[sections]`` of the stored case (attribute
-    ``case_toml``, fully resolved) are used, on top of the defaults, so that a
-    file written by an older version with since-renamed keys elsewhere still reads;
-    with soil layers also ``[soil]`` and the levels they are checked against
-    (``[geometry]``, ``[domain]``, ``mesh.file``).
-    """
-    import tomllib
-
-    from ..config import build_case
-
-    text = f.attrs["case_toml"]
-    raw = tomllib.loads(text.decode() if isinstance(text, bytes) else text)
-    keep = {k: raw[k] for k in ("materials", "sections") if k in raw}
-    layers = raw.get("soil", {}).get("layers")
-    if layers:
-        keep.update({k: raw[k] for k in ("soil", "geometry", "domain") if k in raw})
-        if raw.get("mesh", {}).get("file"):
-            # a user's mesh holds its own layer levels; only the layers' materials are
-            # needed here, so the levels are set to ones that pass the checks
-            n = len(layers)
-            keep["soil"] = {"layers": [{**x, "thickness": 0.0 if k == n - 1 else
-                                        MIN_SOIL_LAYER_THICKNESS}
-                                       for k, x in enumerate(layers)]}
-            # a base below every layer but the last, with room for the last one
-            keep["domain"] = {**keep.get("domain", {}),
-                              "extra_depth": n * MIN_SOIL_LAYER_THICKNESS}
-    return build_case(keep)
 
 
 # --------------------------------------------------------------------------- parallel driver

@@ -35,12 +35,16 @@ small ``K_I + gamma / (beta dt) C_I``, and one solve with the small factor.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..schema import IMPLICIT_GROUPS
 from .explicit import ExplicitSystem
 from .scheme import GeneralizedAlpha
+
+if TYPE_CHECKING:
+    from ..problem import Problem
 
 #: Options prefix of the factor of the implicit partition (``-railvib_imex_st_mat_mumps_...``).
 PREFIX = "railvib_imex_"
@@ -82,7 +86,7 @@ def damped_critical_steps(omega: np.ndarray, alpha: np.ndarray | float,
 AUTO_IMPLICIT_SHARE = 0.05
 
 
-def auto_implicit_hexes(mesh, case, target_dt: float, safety: float,
+def auto_implicit_hexes(mesh, problem: Problem, target_dt: float, safety: float,
                         candidates: np.ndarray | None = None,
                         share: float = AUTO_IMPLICIT_SHARE) -> np.ndarray:
     """Mask of the hexahedra whose own allowed step (``safety`` x their critical step,
@@ -95,17 +99,17 @@ def auto_implicit_hexes(mesh, case, target_dt: float, safety: float,
     from ..modal.elements import hex_max_frequencies, material_groups
     from ..schema import PART_ID
 
-    omega = hex_max_frequencies(mesh, case)
+    omega = hex_max_frequencies(mesh, problem)
     alpha = np.zeros(len(omega))
     beta = np.zeros(len(omega))
-    model = case["damping.model"]
+    model = problem.damping.model
     if model == "rayleigh":
-        a, b = rayleigh_coefficients(case["modal.damping_ratio"], case["damping.f1"],
-                                     case["damping.f2"])
+        a, b = rayleigh_coefficients(problem.damping.ratio, problem.damping.f1,
+                                     problem.damping.f2)
         alpha[:], beta[:] = a, b
     elif model == "per_material":
         groups = material_groups(mesh)
-        coeffs = material_rayleigh(case, list(groups))
+        coeffs = material_rayleigh(problem, list(groups))
         for group, parts in groups.items():
             on = np.isin(mesh.hex_part, [PART_ID[p] for p in parts])
             alpha[on], beta[on] = coeffs[group]

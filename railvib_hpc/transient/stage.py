@@ -84,6 +84,7 @@ from ..io.temp_names import resume_path
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
+from ..problem import Problem
 from ..resources import check_memory, peak_memory_gb
 from ..site import line_probes
 from .integrate import (
@@ -664,21 +665,22 @@ def _setup(ctx: StageContext) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
     from ..mbs.case_vehicle import build_vehicle, passage, passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
-    from ..modal.boundary import boundary_summary, case_dofmap, layer_line, support_warning
+    from ..modal.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
     from .petsc import TransientSystem
 
     case, comm, rep = ctx.case, ctx.comm, ctx.rep
     with rep.stage("transient: mesh"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
     with rep.stage("transient: dofs"):
-        dofmap = case_dofmap(mesh, case, comm.size)
+        problem = Problem.from_case(case)
+        dofmap = problem_dofmap(mesh, problem, comm.size)
         rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "
                  "faces: " + ", ".join(f"{k} {v['type']}" for k, v in
-                                       boundary_summary(mesh, case).items()))
-        layers = layer_line(mesh, case)
+                                       boundary_summary(mesh, problem).items()))
+        layers = layer_line(mesh, problem)
         if layers:
             rep.info(f"  {layers}")
-        unsupported = support_warning(mesh, case)
+        unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)
     try:
@@ -802,18 +804,20 @@ def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
     from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
+    problem = Problem.from_case(case)
     with ctx.rep.stage("transient: assembly"):
         # the explicit engines keep the lumped mass on the diagonal alone
-        K, M, _ = assemble(mesh, case, dofmap, comm,
+        K, M, _ = assemble(mesh, problem, dofmap, comm,
                            mass=True if case["transient.engine"] == "direct" else "diagonal")
         C = None
         if case["transient.engine"] != "direct":
             # Rayleigh damping applied, not stored, where it can be (the explicit engines)
             from .explicit import lumped_diagonal
 
-            C, cinfo = rayleigh_operator(mesh, case, dofmap, comm, K, lumped_diagonal(M, comm))
+            C, cinfo = rayleigh_operator(mesh, problem, dofmap, comm, K,
+                                         lumped_diagonal(M, comm))
         if C is None:
-            C, cinfo = assemble_damping(mesh, case, dofmap, comm, K, M)
+            C, cinfo = assemble_damping(mesh, problem, dofmap, comm, K, M)
         if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
                 and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
             destroy_damping(C)
@@ -905,13 +909,14 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
     from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names
 
     case, comm = ctx.case, ctx.comm
+    problem = Problem.from_case(case)
     parts = implicit_part_names(list(case["transient.implicit_parts"]), present_parts(mesh))
     extra = None
     if case["transient.implicit_elements"] == "auto":
         target = case["transient.dt"] if case["transient.dt"] > 0 else dt_band
-        extra = auto_implicit_hexes(mesh, case, target, STEP_SAFETY,
+        extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY,
                                     ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts]))
-    K_I, C_I = assemble_partition(mesh, case, dofmap, comm, parts, extra, boundary=True)
+    K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True)
     try:
         m = lumped_diagonal(M, comm)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I))
@@ -990,7 +995,7 @@ def _stress_writer(case: Case, comm, rep: Reporter, key: str):
     the stress writer of ``reconstruct`` (``stress.xdmf`` names the final ``fields.h5``)."""
     from ..reconstruct.stress import hex_materials, stress_from_fields
 
-    materials = hex_materials(case)
+    materials = hex_materials(Problem.from_case(case))
 
     def write(path: Path) -> None:
         stats = stress_from_fields(path, comm, case["output.stress_times"], materials, rep=rep,
@@ -1088,7 +1093,7 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
                       "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i],
                       "role": role}
     rails = init["rails"]
-    sec = rail_section(case)
+    sec = rail_section(Problem.from_case(case))
     rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
     moments, ends = [], []
     for r in range(2):

@@ -9,12 +9,13 @@ import pytest
 
 from railvib_hpc.assess.stage import AssessStageError, read_probes, wave_arrival, wave_speeds
 from railvib_hpc.config import load_case
+from railvib_hpc.problem import Problem
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 
 
 def test_subgrade_wave_speeds_match_the_reference():
-    c_p, c_s = wave_speeds(load_case(BASELINE))
+    c_p, c_s = wave_speeds(Problem.from_case(load_case(BASELINE)))
     assert c_p == pytest.approx(346.58, abs=0.005)       # benchmarks.md section 1
     assert c_s == pytest.approx(212.24, abs=0.005)
     # the thesis's basement-wall distance 20.2 m: t_P = 0.058 s, t_S = 0.095 s

@@ -26,6 +26,7 @@ from railvib_hpc.mesh.interfaces import split_interfaces, tributary_areas
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.stage import make_mesh
 from railvib_hpc.modal.elements import element_batches, group_damping_ratio
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import INTERFACE_PARTS, PART_ID
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -106,7 +107,7 @@ def test_block_on_a_mat_bounces_at_the_rigid_mass_frequency():
     n = 3 * mesh.n_nodes
     K, M = sp.csr_matrix((n, n)), sp.csr_matrix((n, n))
     index = np.arange(n).reshape(-1, 3)
-    for b in element_batches(mesh, case):
+    for b in element_batches(mesh, Problem.from_case(case)):
         dofs = b.dofs(index)
         K = K + assemble_matrix(dofs, b.K, n)
         if b.M is not None:
@@ -126,8 +127,9 @@ def test_block_on_a_mat_bounces_at_the_rigid_mass_frequency():
 
 def test_interface_damping_is_half_the_loss_factor():
     case = thesis_case(**{"usp.loss_factor": 0.16})
-    assert group_damping_ratio(case, "usp") == pytest.approx(0.08)
-    assert group_damping_ratio(case, "subgrade") == case["materials.subgrade.damping_ratio"]
+    problem = Problem.from_case(case)
+    assert group_damping_ratio(problem, "usp") == pytest.approx(0.08)
+    assert group_damping_ratio(problem, "subgrade") == case["materials.subgrade.damping_ratio"]
 
 
 @pytest.mark.parametrize("changes, key, words", [

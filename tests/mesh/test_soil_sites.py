@@ -32,6 +32,7 @@ from railvib_hpc.mesh.layout import build_layout
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.stage import predicted_hexes, wavelength_warnings
 from railvib_hpc.modal.elements import element_batches
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 from railvib_hpc.site import soil_layers
 
@@ -79,7 +80,7 @@ def layered_column_frequencies(n_top: int, n_modes: int) -> np.ndarray:
     ndof = 3 * len(pts)
     K = sp.csr_matrix((ndof, ndof))
     M = sp.csr_matrix((ndof, ndof))
-    for batch in element_batches(mesh, column_case()):
+    for batch in element_batches(mesh, Problem.from_case(column_case())):
         dofs = batch.dofs(index)
         K = K + assemble_matrix(dofs, batch.K, ndof)
         M = M + assemble_matrix(dofs, batch.M, ndof)
@@ -270,7 +271,7 @@ def test_stresses_find_the_layer_materials_in_modes_h5(tmp_path, user_mesh):
     """The reconstruct stage rebuilds the materials from the case stored in modes.h5."""
     import h5py
 
-    from railvib_hpc.reconstruct.stress import case_from_modes, hex_materials
+    from railvib_hpc.reconstruct.stress import hex_materials
 
     case = column_case()
     text = case.to_toml()
@@ -279,7 +280,7 @@ def test_stresses_find_the_layer_materials_in_modes_h5(tmp_path, user_mesh):
         assert 'file = "site.msh"' in text
     with h5py.File(tmp_path / "modes.h5", "w") as f:
         f.attrs["case_toml"] = text
-        mats = hex_materials(case_from_modes(f))
+        mats = hex_materials(Problem.from_modes(f))
     for k, (c, rho, nu) in enumerate(((C1, RHO1, NU1), (C2, RHO2, NU2)), start=1):
         assert mats[PART_ID[f"soil_layer_{k}"]] == pytest.approx((2 * rho * c**2 * (1 + nu), nu),
                                                                 rel=1e-12)

@@ -6,6 +6,7 @@ import numpy as np
 
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.model import Mesh
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 
 
@@ -60,7 +61,7 @@ def solve(mesh: Mesh, case, rules, n_modes: int, comm=None, method="block_lanczo
 
     comm = comm or MPI.COMM_SELF
     dofmap = build_dofmap(mesh, comm.size, rules=rules)
-    K, M, _ = assemble(mesh, case, dofmap, comm)
+    K, M, _ = assemble(mesh, Problem.from_case(case), dofmap, comm)
     result = solve_modes(K, M, comm, n_modes=n_modes, f_max=f_max, method=method,
                          block_size=block_size, tol=1e-10, out_of_core=out_of_core)
     return result, K, M, dofmap
@@ -211,10 +212,10 @@ def energy_sum_allowance(mesh, case, dofmap, phi, comm=None):
     comm = comm or MPI.COMM_SELF
     per_group = []
     for parts in material_groups(mesh).values():
-        Kg = assemble(mesh, case, dofmap, comm, parts=parts, mass=False)[0]
+        Kg = assemble(mesh, Problem.from_case(case), dofmap, comm, parts=parts, mass=False)[0]
         per_group.append(np.diag(tolerances.product_error(to_scipy(Kg), phi, computations=1)))
         Kg.destroy()
-    K = assemble(mesh, case, dofmap, comm, mass=False)[0]
+    K = assemble(mesh, Problem.from_case(case), dofmap, comm, mass=False)[0]
     whole = np.diag(tolerances.product_error(to_scipy(K), phi))
     per_group = np.stack(per_group, axis=1)
     return per_group, per_group.sum(axis=1) + whole
@@ -271,10 +272,11 @@ def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, ed
 
     comm = comm or MPI.COMM_SELF
     dofmap = build_dofmap(mesh, comm.size, rules=rules)
-    K, M, _ = assemble(mesh, case, dofmap, comm)
+    problem = Problem.from_case(case)
+    K, M, _ = assemble(mesh, problem, dofmap, comm)
 
     def on(sub):
-        return assemble(mesh, case, build_dofmap(mesh, sub.size, rules=rules), sub)[:2]
+        return assemble(mesh, problem, build_dofmap(mesh, sub.size, rules=rules), sub)[:2]
 
     index, prov = _band_cache(Path(cache_dir), comm)
     s = BandSettings(f_max=f_max, edges=list(edges), band_modes=band_modes, groups=groups,

@@ -31,6 +31,7 @@ from mpi4py import MPI
 from railvib_hpc.cli import run
 from railvib_hpc.modal.bands import check_counts, plan_bands, weyl_edges
 from railvib_hpc.modal.eigen import EigenSolveError
+from railvib_hpc.problem import Problem
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 comm = MPI.COMM_WORLD
@@ -177,7 +178,7 @@ def test_block_operator_destroy_frees_the_factor():
 
     init_petsc([])
     mesh = block_mesh(10)
-    K, M, _ = assemble(mesh, soil_case(), build_dofmap(mesh, comm.size,
+    K, M, _ = assemble(mesh, Problem.from_case(soil_case()), build_dofmap(mesh, comm.size,
                                                        rules={"bottom": ("ux", "uy", "uz")}),
                        comm)
 

@@ -14,6 +14,7 @@ import pytest
 from modal_cases import column_mesh, energy_sum_allowance, soil_case, solve
 
 from railvib_hpc.modal.energy import damping_from_energies, group_strain_energies
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 
 H = 5.8
@@ -29,7 +30,8 @@ def _two_layer(nz: int, **extra):
     res, _, _, dofmap = solve(mesh, case, RULES, 3)
     from mpi4py import MPI
 
-    energies = group_strain_energies(mesh, case, dofmap, MPI.COMM_SELF, res.phi)
+    energies = group_strain_energies(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF,
+                                     res.phi)
     return res, energies, case, (mesh, dofmap)
 
 
@@ -53,7 +55,8 @@ def test_energies_by_mode_chunks_equal_all_modes_at_once():
     res, energies, case, (mesh, dofmap) = _two_layer(32)
     _, allowed = energy_sum_allowance(mesh, case, dofmap, res.phi)
     for chunk in (1, 2):
-        chunked = group_strain_energies(mesh, case, dofmap, MPI.COMM_SELF, res.phi, chunk)
+        chunked = group_strain_energies(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF,
+                                        res.phi, chunk)
         for group, e in energies.items():
             assert np.all(np.abs(chunked[group] - e) <= allowed)
 
@@ -76,11 +79,12 @@ def test_layer_shares_converge_to_the_analytic_ones_at_rate_two():
 def test_strain_energy_damping():
     _, e, case, _ = _two_layer(64, **{"materials.subgrade.damping_ratio": 0.05,
                                    "materials.ballast.damping_ratio": 0.01})
-    zeta = damping_from_energies(e, case)
+    zeta = damping_from_energies(e, Problem.from_case(case))
     share = np.array([_exact_lower_share(n) for n in (1, 2, 3)])
     kh = np.array([(2 * n - 1) * np.pi / (2 * H) * H / 64 for n in (1, 2, 3)])
     assert zeta == pytest.approx(0.05 * share + 0.01 * (1 - share), abs=0.04 * kh.max()**2 / 12)
     # equal ratios everywhere give exactly that ratio for every mode
     same = soil_case(**{"materials.subgrade.damping_ratio": 0.02,
                         "materials.ballast.damping_ratio": 0.02})
-    assert damping_from_energies(e, same) == pytest.approx(np.full(3, 0.02), rel=1e-12)
+    assert damping_from_energies(e, Problem.from_case(same)) == pytest.approx(np.full(3, 0.02),
+                                                                              rel=1e-12)

@@ -24,6 +24,7 @@ from mpi4py import MPI
 from railvib_hpc import tolerances
 from railvib_hpc.config import load_case
 from railvib_hpc.petsc_env import init_petsc
+from railvib_hpc.problem import Problem
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 comm = MPI.COMM_WORLD
@@ -140,9 +141,9 @@ def _assert_equal_serial(case, mesh):
     from railvib_hpc.modal.eigen import solve_modes
     from railvib_hpc.modal.petsc import assemble
 
-    K1, M1, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
+    K1, M1, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1), MPI.COMM_SELF)
     dofmap = build_dofmap(mesh, comm.size)
-    KN, MN, _ = assemble(mesh, case, dofmap, comm)
+    KN, MN, _ = assemble(mesh, Problem.from_case(case), dofmap, comm)
     assert KN.getSize() == K1.getSize()
     from railvib_hpc.schema import PART_ID, SOLID_MATERIAL, SOLID_PARTS
     from railvib_hpc.site import solid_material
@@ -216,7 +217,7 @@ def _compare_with_serial(coarse, shared_tmp, out, freq):
     dofmap = build_dofmap(mesh, 1)
     lam, phi_1, e_1 = modes_from_file(shared_tmp / "serial" / "modes.h5", dofmap)
     lam_n, phi_n, e_n = modes_from_file(out / "modes_parallel.h5", dofmap)
-    K, M, _ = assemble(mesh, case, dofmap, MPI.COMM_SELF)
+    K, M, _ = assemble(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF)
     rtol = eigen_rtol(K, M, lam, solver_tol=case["modal.tol"], phi=phi_1)
     assert np.all(np.abs(lam_n / lam - 1) <= rtol)
     with h5py.File(shared_tmp / "serial" / "modes.h5", "r") as f:
@@ -225,7 +226,7 @@ def _compare_with_serial(coarse, shared_tmp, out, freq):
     assert assert_same_subspaces(K, M, lam, phi_1, phi_n, rtol) >= 15
     # per-material strain energies: the same per mode (their sum is omega^2) and, summed
     # over each cluster, per material
-    groups = [assemble(mesh, case, dofmap, MPI.COMM_SELF, parts=p, mass=False)[0]
+    groups = [assemble(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF, parts=p, mass=False)[0]
               for p in material_groups(mesh).values()]
     assert np.all(np.abs(e_n.sum(axis=1) / e_1.sum(axis=1) - 1) <= rtol + 2 * (
         np.diag(tolerances.product_error(to_scipy(K), phi_1)) / lam))
@@ -249,8 +250,8 @@ def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
 
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.hex_formulation=incompatible"])
-    K1, M1, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
-    KN, MN, _ = assemble(mesh, case, build_dofmap(mesh, comm.size), comm)
+    K1, M1, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1), MPI.COMM_SELF)
+    KN, MN, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, comm.size), comm)
     # each rank condenses the bubbles of its own representative element per shape (a
     # different element on 1 and N ranks): round-off eps * cond(K_aa) (<= 192 on this mesh)
     # per entry, accumulated over a row's 243 entries in the worst case: 2.2e-16 * 192 *

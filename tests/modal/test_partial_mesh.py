@@ -21,6 +21,7 @@ from mpi4py import MPI
 from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.layout import build_layout
+from railvib_hpc.problem import Problem
 
 BASELINE = Path(__file__).resolve().parents[2] / "jobs" / "thesis_baseline.toml"
 H, NZ = 5.8, 32
@@ -69,7 +70,7 @@ def test_soil_column_modal_against_the_analytic_column(column_msh, shared_tmp, c
 
     case = load_case(BASELINE, [f"mesh.file='{column_msh}'"])
     mesh, _ = make_mesh(case)
-    K, M, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
+    K, M, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1), MPI.COMM_SELF)
     assert K.getSize()[0] == 4 * NZ                      # u_z of the 4 x 32 upper nodes
     rtol = frequency_rtol(to_scipy(K), to_scipy(M), freq, solver_tol=case["modal.tol"])
     for n, f in enumerate(freq, start=1):
@@ -95,7 +96,7 @@ def test_soil_column_on_all_rank_counts(column_msh, shared_tmp):
 
     case = load_case(BASELINE, [f"mesh.file='{column_msh}'"])
     mesh, _ = make_mesh(case)
-    K, M, _ = assemble(mesh, case, build_dofmap(mesh, 1), MPI.COMM_SELF)
+    K, M, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1), MPI.COMM_SELF)
     rtol = frequency_rtol(to_scipy(K), to_scipy(M), exact, solver_tol=case["modal.tol"])
     assert np.all(np.abs(freq / exact - 1) <= rtol)
 

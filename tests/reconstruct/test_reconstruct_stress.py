@@ -11,6 +11,7 @@ from test_reconstruct_fields import check_xdmf
 
 from railvib_hpc.fem.beam import beam_stiffness, shear_deformation_factors
 from railvib_hpc.fem.reference import hex_centre_gradients
+from railvib_hpc.problem import Problem, case_from_modes
 from railvib_hpc.reconstruct import (
     element_stress,
     hex_materials,
@@ -20,7 +21,6 @@ from railvib_hpc.reconstruct import (
     reconstruct_fields,
     stress_from_fields,
 )
-from railvib_hpc.reconstruct.stress import case_from_modes
 from railvib_hpc.schema import PART_ID
 
 comm = MPI.COMM_WORLD
@@ -145,7 +145,7 @@ def test_rail_moment_of_modes_equals_beam_end_forces(coarse_modes):
         rot = f["modes/rotation"][:m]
         rot_nodes = f["mesh/rotation_nodes"][()]
         pts = f["mesh/points"][()]
-    sec = rail_section(case)
+    sec = rail_section(Problem.from_case(case))
     k = rail["x"].shape[1]
     assert rail["moment"].shape == (m, 2, k)
     nodes = rail["nodes"][0]
@@ -180,7 +180,7 @@ def test_parallel_stress_equals_serial(coarse_modes, shared_tmp):
     out = shared_tmp / "fields.h5"
     reconstruct_fields(coarse_modes, out, comm, t, q * 1e2, qd, qdd, steps=np.arange(0, 30, 2))
     with h5py.File(coarse_modes, "r") as f:
-        materials = hex_materials(case_from_modes(f))
+        materials = hex_materials(Problem.from_modes(f))
     wanted = [t[4] + 1e-5, t[17], t[28]]                  # -> stored steps 2, 8 (t[16]), 14
     stats = stress_from_fields(out, comm, wanted, materials, attrs={"inputs_sha256": "x"})
     comm.Barrier()

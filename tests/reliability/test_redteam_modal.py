@@ -15,6 +15,7 @@ import pytest
 from faults import BASELINE
 
 from railvib_hpc.cli import run
+from railvib_hpc.problem import Problem
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "modal"))
 from modal_cases import column_mesh, soil_case, solve, to_scipy
@@ -91,7 +92,8 @@ def _column_operator(sigma_between: tuple[int, int] | None):
     init_petsc([])
     comm = MPI.COMM_SELF
     mesh = column_mesh(60)
-    K, M, _ = assemble(mesh, soil_case(), build_dofmap(mesh, 1, rules=RULES), comm)
+    K, M, _ = assemble(mesh, Problem.from_case(soil_case()), build_dofmap(mesh, 1, rules=RULES),
+                       comm)
     lam = eigh(to_scipy(K).toarray(), to_scipy(M).toarray(), eigvals_only=True)
     if sigma_between is None:
         return ShiftInvertFactor(K, M, 0.0, comm, "railvib_eig_"), K, M, lam, None
@@ -164,7 +166,8 @@ def test_every_phase_after_the_expansions_reports_progress(tmp_path):
     init_petsc([])
     comm = MPI.COMM_SELF
     mesh = column_mesh(40)
-    K, M, _ = assemble(mesh, soil_case(), build_dofmap(mesh, 1, rules=RULES), comm)
+    K, M, _ = assemble(mesh, Problem.from_case(soil_case()), build_dofmap(mesh, 1, rules=RULES),
+                       comm)
     calls: list[tuple[str, int, int]] = []
 
     def progress(phase, done, total):

@@ -25,6 +25,7 @@ from mpi4py import MPI
 from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
 from railvib_hpc.errors import UserError
+from railvib_hpc.problem import Problem
 
 ABSORBING = ROOT / "jobs" / "absorbing_boundaries.toml"
 A = str(ABSORBING)
@@ -83,11 +84,11 @@ def test_caughey_layer_damps_the_ground_only(mesh, tally):
 
     case = load_case(ABSORBING, [*COARSE_SETS, "boundary.base=caughey",
                                  "boundary.layer_thickness=100"])
-    w = layer_weights(mesh, case)
+    w = layer_weights(mesh, Problem.from_case(case))
     ground = np.isin(mesh.hex_part, [PART_ID[p] for p in LAYER_PARTS])
     others = {p: float(w[mesh.hex_part == PART_ID[p]].max(initial=0.0))
               for p in ("footing", "column", "slab", "wall", "ballast", "subballast")}
-    line = layer_line(mesh, case)
+    line = layer_line(mesh, Problem.from_case(case))
     ok = all(v == 0.0 for v in others.values()) and bool(np.all(w[ground] > 0))
     tally.add("transient: caughey base layer 100 m over the building and the track bed",
               "correct" if ok else "silent wrong", line)
@@ -96,7 +97,8 @@ def test_caughey_layer_damps_the_ground_only(mesh, tally):
     assert "ballast" in line and "footing" in line and "are not damped" in line
     thin = load_case(ABSORBING, [*COARSE_SETS, "boundary.base=caughey",
                                  "boundary.layer_thickness=3"])
-    assert layer_weights(mesh, thin)[mesh.hex_part == PART_ID["footing"]].max() == 0.0
+    weights = layer_weights(mesh, Problem.from_case(thin))
+    assert weights[mesh.hex_part == PART_ID["footing"]].max() == 0.0
 
 
 # --------------------------------------------------------------------------- item 2
@@ -118,10 +120,10 @@ def test_caughey_layer_without_an_element_is_refused(mesh, meshed, tmp_path, cap
     # just past the first centroids it is accepted
     ok = load_case(ABSORBING, [*COARSE_SETS, "boundary.y_min=caughey",
                                "boundary.layer_thickness=6.5"])
-    assert check_layers(mesh, ok)["y_min"]["elements"] > 0
+    assert check_layers(mesh, Problem.from_case(ok))["y_min"]["elements"] > 0
     with pytest.raises(BoundaryError, match="more than 6 m"):
-        check_layers(mesh, load_case(ABSORBING, [*COARSE_SETS, "boundary.y_min=caughey",
-                                                 "boundary.layer_thickness=5.5"]))
+        check_layers(mesh, Problem.from_case(load_case(ABSORBING, [
+            *COARSE_SETS, "boundary.y_min=caughey", "boundary.layer_thickness=5.5"])))
 
 
 # --------------------------------------------------------------------------- item 5
@@ -150,8 +152,8 @@ def test_unsupported_box_is_warned(mesh, meshed, tmp_path, capsys, tally, monkey
     assert "base free" in warned[0]
 
     def free(**faces):
-        return unsupported_motions(mesh, load_case(ABSORBING, [
-            *COARSE_SETS, *(f"boundary.{f}={faces.get(f, 'roller')}" for f in FACES)]))
+        return unsupported_motions(mesh, Problem.from_case(load_case(ABSORBING, [
+            *COARSE_SETS, *(f"boundary.{f}={faces.get(f, 'roller')}" for f in FACES)])))
 
     assert free(base="fixed") == []                       # the thesis faces
     assert free(base="free") == ["translation along z"]   # rollers hold nothing vertically
@@ -164,7 +166,7 @@ def test_unsupported_box_is_warned(mesh, meshed, tmp_path, capsys, tally, monkey
 def test_supported_box_gives_no_warning(mesh):
     from railvib_hpc.modal.boundary import support_warning
 
-    assert support_warning(mesh, load_case(ABSORBING, COARSE_SETS)) is None
+    assert support_warning(mesh, Problem.from_case(load_case(ABSORBING, COARSE_SETS))) is None
 
 
 # --------------------------------------------------------------------------- item 7

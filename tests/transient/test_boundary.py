@@ -18,12 +18,13 @@ from railvib_hpc.modal.boundary import (
     BoundaryError,
     absorbing_faces,
     boundary_node_blocks,
-    case_dofmap,
     face_node_sets,
+    problem_dofmap,
 )
 from railvib_hpc.modal.damping import rayleigh_coefficients, rayleigh_ratio
 from railvib_hpc.modal.dofmap import build_dofmap
 from railvib_hpc.petsc_env import init_petsc
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import BOUNDARY_FACES, PART_ID
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,7 +46,7 @@ def coarse():
 def test_thesis_boundaries_give_the_thesis_constraints(coarse):
     case, mesh = coarse
     for size in (1, 2, 3):
-        old, new = build_dofmap(mesh, size), case_dofmap(mesh, case, size)
+        old, new = build_dofmap(mesh, size), problem_dofmap(mesh, Problem.from_case(case), size)
         assert np.array_equal(old.index, new.index)
         assert np.array_equal(old.dof_offsets, new.dof_offsets)
 
@@ -63,21 +64,21 @@ def test_face_node_sets_split_the_planes(coarse):
 
 def test_free_and_roller_faces_release_what_they_should(coarse):
     case, mesh = coarse
-    base = case_dofmap(mesh, case).n_dofs
+    base = problem_dofmap(mesh, Problem.from_case(case)).n_dofs
     sets = face_node_sets(mesh)
     free = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.y_min=free"])
     # y_min: the uy of its nodes becomes free (nodes on the fixed base stay fixed)
     on_base = np.isin(sets["y_min"], sets["base"])
-    assert case_dofmap(mesh, free).n_dofs == base + int((~on_base).sum())
+    assert problem_dofmap(mesh, Problem.from_case(free)).n_dofs == base + int((~on_base).sum())
     fixed = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.x_max=fixed"])
-    released = case_dofmap(mesh, fixed).index[sets["x_max"]]
+    released = problem_dofmap(mesh, Problem.from_case(fixed)).index[sets["x_max"]]
     assert (released[:, :3] < 0).all()
 
 
 def test_dashpots_carry_rho_c_times_the_face_area(coarse):
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.base=absorbing"])
-    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    nodes, blocks = boundary_node_blocks(mesh, Problem.from_case(case), "dashpot")
     cp, cs = wave_speeds(200e6, 0.2, 1850.0)
     area = 21.6 * 37.35                                  # soil plan of the thesis model
     assert blocks[:, 2, 2].sum() == pytest.approx(1850.0 * cp * area, rel=1e-12)
@@ -85,7 +86,7 @@ def test_dashpots_carry_rho_c_times_the_face_area(coarse):
     assert np.abs(blocks[:, 0, 1]).max() < 1e-9 * blocks[:, 0, 0].max()
     assert np.allclose(mesh.points[nodes, 2], mesh.points[:, 2].min())
     # no springs unless a virtual thickness is given
-    assert len(boundary_node_blocks(mesh, case, "spring")[0]) == 0
+    assert len(boundary_node_blocks(mesh, Problem.from_case(case), "spring")[0]) == 0
 
 
 def test_inclined_face_impedance_rotates_with_the_normal():
@@ -112,10 +113,10 @@ def _column(part: str = "subgrade", nz: int = 10, height: float = 5.0) -> Mesh:
 def test_absorbing_face_without_soil_is_refused():
     case = load_case(BASELINE, ["boundary.base=absorbing"])
     with pytest.raises(BoundaryError, match=r"boundary.base = 'absorbing'.*part column"):
-        absorbing_faces(_column("column"), case)
+        absorbing_faces(_column("column"), Problem.from_case(case))
     side = load_case(BASELINE, ["boundary.y_min=absorbing"])
     with pytest.raises(BoundaryError, match=r"boundary.y_min = 'absorbing'.*no element face"):
-        absorbing_faces(_column(), side)
+        absorbing_faces(_column(), Problem.from_case(side))
 
 
 def test_absorbing_face_without_soil_exits_2_from_the_cli(tmp_path, capsys):
@@ -155,7 +156,7 @@ def test_virtual_thickness_springs_add_the_layer_behind_the_base():
     t = 3.0
     case = load_case(BASELINE, ["boundary.base=absorbing", f"boundary.virtual_thickness={t}"])
     dofmap = build_dofmap(mesh, 1, rules={"all": ("ux", "uy")})
-    K, _, _ = assemble(mesh, case, dofmap, MPI.COMM_SELF)
+    K, _, _ = assemble(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF)
     ip, ix, v = K.getValuesCSR()
     Ks = sp.csr_matrix((v, ix, ip), shape=K.getSize())
     f = np.zeros(dofmap.n_dofs)
@@ -198,10 +199,10 @@ def test_damping_matrix_equals_serial(coarse, model):
                                 "damping.pads=true", "boundary.virtual_thickness=20",
                                 *ALL_ABSORBING])
     norms, products = [], []
-    for c, dm in ((MPI.COMM_SELF, case_dofmap(mesh, case, 1)),
-                  (comm, case_dofmap(mesh, case, comm.size))):
-        K, M, _ = assemble(mesh, case, dm, c)
-        C, info = assemble_damping(mesh, case, dm, c, K, M)
+    for c, dm in ((MPI.COMM_SELF, problem_dofmap(mesh, Problem.from_case(case), 1)),
+                  (comm, problem_dofmap(mesh, Problem.from_case(case), comm.size))):
+        K, M, _ = assemble(mesh, Problem.from_case(case), dm, c)
+        C, info = assemble_damping(mesh, Problem.from_case(case), dm, c, K, M)
         assert info["dashpot_nodes"] > 0
         assert C.getInfo()["mallocs"] == 0
         norms.append([C.norm(PETSc.NormType.FROBENIUS), C.norm(PETSc.NormType.INFINITY),
@@ -225,9 +226,9 @@ def test_rayleigh_damping_matrix_is_alpha_m_plus_beta_k_plus_dashpots(coarse):
 
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.base=absorbing"])
-    dm = case_dofmap(mesh, case, 1)
-    K, M, _ = assemble(mesh, case, dm, MPI.COMM_SELF)
-    C, info = assemble_damping(mesh, case, dm, MPI.COMM_SELF, K, M)
+    dm = problem_dofmap(mesh, Problem.from_case(case), 1)
+    K, M, _ = assemble(mesh, Problem.from_case(case), dm, MPI.COMM_SELF)
+    C, info = assemble_damping(mesh, Problem.from_case(case), dm, MPI.COMM_SELF, K, M)
     a, b = rayleigh_coefficients(0.03, 8.0, 40.0)
     assert (info["alpha"], info["beta"]) == pytest.approx((a, b), rel=1e-14)
     x = K.createVecRight()
@@ -237,7 +238,7 @@ def test_rayleigh_damping_matrix_is_alpha_m_plus_beta_k_plus_dashpots(coarse):
     K.mult(x, k)
     M.mult(x, m)
     diff = y.getArray() - (b * k.getArray() + a * m.getArray())
-    nodes, blocks = boundary_node_blocks(mesh, case, "dashpot")
+    nodes, blocks = boundary_node_blocks(mesh, Problem.from_case(case), "dashpot")
     expected = np.zeros(dm.n_dofs)
     idx = dm.index[nodes, :3]
     xv = x.getArray()
@@ -260,9 +261,9 @@ def test_caughey_face_needs_a_layer_and_is_fixed(coarse):
     # next (18 m) outside; no centroid at the layer's edge, where round-off decides
     calm = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.y_min=caughey",
                                 "boundary.layer_thickness=9"])
-    fixed = case_dofmap(mesh, calm).index[face_node_sets(mesh)["y_min"]]
+    fixed = problem_dofmap(mesh, Problem.from_case(calm)).index[face_node_sets(mesh)["y_min"]]
     assert (fixed[:, :3] < 0).all()
-    w = layer_weights(mesh, calm)
+    w = layer_weights(mesh, Problem.from_case(calm))
     y = mesh.points[mesh.hexes].mean(axis=1)[:, 1]
     y0 = mesh.points[np.unique(mesh.hexes), 1].min()
     inside = y - y0 < 9.0

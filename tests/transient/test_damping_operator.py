@@ -9,6 +9,8 @@ import pytest
 from mpi4py import MPI
 from wave_cases import box_mesh, soil_case
 
+from railvib_hpc.problem import Problem
+
 comm = MPI.COMM_WORLD
 FACES = [f"boundary.{f}=absorbing" for f in ("x_min", "x_max", "y_min", "y_max", "base")]
 
@@ -21,7 +23,7 @@ def _model():
     init_petsc([])
     mesh = box_mesh((4, 3, 3), (4.0, 3.0, 3.0))
     case = soil_case(*FACES, "modal.lumped_mass=true", "damping.model=rayleigh")
-    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(case),
+    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(Problem.from_case(case)),
                           node_sets=face_node_sets(mesh))
     return mesh, case, dofmap
 
@@ -40,12 +42,12 @@ def test_rayleigh_operator_is_the_assembled_damping():
     from railvib_hpc.transient.explicit import lumped_diagonal
 
     mesh, case, dofmap = _model()
-    K, M, _ = assemble(mesh, case, dofmap, comm)
-    _, M_diag, _ = assemble(mesh, case, dofmap, comm, mass="diagonal")
+    K, M, _ = assemble(mesh, Problem.from_case(case), dofmap, comm)
+    _, M_diag, _ = assemble(mesh, Problem.from_case(case), dofmap, comm, mass="diagonal")
     m = lumped_diagonal(M_diag, comm)
     assert np.array_equal(m, lumped_diagonal(M, comm))
-    C, _ = assemble_damping(mesh, case, dofmap, comm, K, M)
-    C_op, info = rayleigh_operator(mesh, case, dofmap, comm, K, m)
+    C, _ = assemble_damping(mesh, Problem.from_case(case), dofmap, comm, K, M)
+    C_op, info = rayleigh_operator(mesh, Problem.from_case(case), dofmap, comm, K, m)
     assert info["operator"] and info["dashpot_nodes"] > 0
     r0, r1 = K.getOwnershipRange()
     rng = np.random.default_rng(7)

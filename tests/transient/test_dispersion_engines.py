@@ -20,6 +20,7 @@ from mpi4py import MPI
 from wave_cases import C_P, C_S, NU, Model, column_mesh, soil_case
 
 from railvib_hpc.fem import dispersion as D
+from railvib_hpc.problem import Problem
 
 comm = MPI.COMM_WORLD
 
@@ -57,7 +58,7 @@ def _column_run(kind: str, engine: str, rho_inf: float = 1.0) -> dict:
     lumped = engine == "explicit"
     case = soil_case("boundary.base=absorbing", "damping.model=none",
                      f"modal.lumped_mass={'true' if lumped else 'false'}")
-    rules = {**constraint_rules(case), "all": free}
+    rules = {**constraint_rules(Problem.from_case(case)), "all": free}
     sets = face_node_sets(mesh)
     t_end = (depths[-1] + 0.5 * TAIL_WAVELENGTHS * lam) / c + CYCLES / f0
     if engine == "explicit":

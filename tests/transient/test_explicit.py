@@ -9,6 +9,7 @@ import pytest
 from mpi4py import MPI
 from wave_cases import C_P, C_S, RHO, box_mesh, column_mesh, smooth_pulse, soil_case
 
+from railvib_hpc.problem import Problem
 from railvib_hpc.transient.explicit import (
     STEP_SAFETY,
     ExplicitEngineError,
@@ -30,12 +31,13 @@ class ExplicitModel:
         init_petsc([])
         self.mesh = mesh
         self.dofmap = build_dofmap(mesh, comm.size, rules=rules, node_sets=node_sets)
-        self.K, self.M, _ = assemble(mesh, case, self.dofmap, comm)
+        problem = Problem.from_case(case)
+        self.K, self.M, _ = assemble(mesh, problem, self.dofmap, comm)
         self.C = None
         if any(case[f"boundary.{f}"] == "absorbing"
                for f in ("x_min", "x_max", "y_min", "y_max", "base")) \
                 or case["damping.model"] != "none":
-            self.C, _ = assemble_damping(mesh, case, self.dofmap, comm, self.K, self.M)
+            self.C, _ = assemble_damping(mesh, problem, self.dofmap, comm, self.K, self.M)
         self.r0, self.r1 = self.K.getOwnershipRange()
 
     def system(self, dt):
@@ -74,7 +76,7 @@ def _column(kind: str, h: float, courant: float, height: float = 40.0, depth: fl
     free = {"P": ("ux", "uy"), "S": ("uy", "uz")}[kind]
     mesh = column_mesh(int(round(height / h)), height)
     case = soil_case("boundary.base=absorbing", "damping.model=none", "modal.lumped_mass=true")
-    model = ExplicitModel(mesh, case, {**constraint_rules(case), "all": free},
+    model = ExplicitModel(mesh, case, {**constraint_rules(Problem.from_case(case)), "all": free},
                           face_node_sets(mesh))
     probe = model.system(1.0)
     # the Courant number asked for, within the stability limit (the column's 1 m width
@@ -135,7 +137,8 @@ def test_stability_limit_is_the_largest_natural_frequency():
     m = lumped_diagonal(model.M, comm)
     lim = stability_limit(model.K, m, None, comm)
     # the reference: the same model on this rank alone, dense
-    K1, M1, _ = assemble(mesh, case, build_dofmap(mesh, 1, rules=rules), MPI.COMM_SELF)
+    K1, M1, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1, rules=rules),
+                         MPI.COMM_SELF)
     lam = eigh(K1.convert("dense").getDenseArray(), M1.convert("dense").getDenseArray(),
                eigvals_only=True)
     K1.destroy()

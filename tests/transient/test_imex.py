@@ -10,6 +10,7 @@ import pytest
 from mpi4py import MPI
 from wave_cases import box_mesh, smooth_pulse, soil_case
 
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 from railvib_hpc.transient.explicit import critical_step
 from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR, implicit_part_names
@@ -86,10 +87,10 @@ class BoxModel:
         self.dense = {}
         for c, name in ((comm, "dist"), (MPI.COMM_SELF, "dense")):
             dofmap = build_dofmap(mesh, c.size, rules=RULES)
-            K, M, _ = assemble(mesh, self.case, dofmap, c)
-            C = (assemble_damping(mesh, self.case, dofmap, c, K, M)[0]
+            K, M, _ = assemble(mesh, Problem.from_case(self.case), dofmap, c)
+            C = (assemble_damping(mesh, Problem.from_case(self.case), dofmap, c, K, M)[0]
                  if damping != "none" else None)
-            K_I, C_I = assemble_partition(mesh, self.case, dofmap, c, ("slab",))
+            K_I, C_I = assemble_partition(mesh, Problem.from_case(self.case), dofmap, c, ("slab",))
             mats = {"K": K, "M": M, "C": C, "K_I": K_I, "C_I": C_I}
             if name == "dist":
                 self.dofmap, self.mats = dofmap, mats
@@ -223,18 +224,20 @@ def test_auto_partition_takes_the_thin_elements_and_bounds_the_model():
     thin = np.ptp(mesh.points[mesh.hexes][:, :, 2], axis=1) < 0.2
     assert thin.sum() == 16
     case = soil_case("modal.lumped_mass=true", "damping.model=none")
-    w = hex_max_frequencies(mesh, case)
+    problem = Problem.from_case(case)
+    w = hex_max_frequencies(mesh, problem)
     steps = 0.9 * 2.0 / w
     target = np.sqrt(steps[thin].max() * steps[~thin].min())
-    assert np.array_equal(auto_implicit_hexes(mesh, case, target, 0.9, share=0.5), thin)
-    capped = auto_implicit_hexes(mesh, case, target, 0.9, share=0.1)
+    assert np.array_equal(auto_implicit_hexes(mesh, problem, target, 0.9, share=0.5), thin)
+    capped = auto_implicit_hexes(mesh, problem, target, 0.9, share=0.1)
     assert capped.sum() <= 0.1 * len(w) + 1 and not (capped & ~thin).any()
     from scipy.linalg import eigh
 
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.petsc import assemble
 
-    K, M, _ = assemble(mesh, case, build_dofmap(mesh, 1, rules=RULES), MPI.COMM_SELF)
+    K, M, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1, rules=RULES),
+                       MPI.COMM_SELF)
     lam = eigh(K.convert("dense").getDenseArray(), M.convert("dense").getDenseArray(),
                eigvals_only=True).max()
     K.destroy()

@@ -18,6 +18,8 @@ import pytest
 from mpi4py import MPI
 from wave_cases import C_P, C_S, RHO, Model, box_mesh, column_pulse, soil_case
 
+from railvib_hpc.problem import Problem
+
 comm = MPI.COMM_WORLD
 
 
@@ -111,7 +113,8 @@ def lamb():
     c_s = math.sqrt(mu / RHO)
     duration = 14 * h / c_s
     dt = duration / 40
-    model = Model(mesh, case, constraint_rules(case), comm, dt, node_sets=face_node_sets(mesh))
+    model = Model(mesh, case, constraint_rules(Problem.from_case(case)), comm, dt,
+                  node_sets=face_node_sets(mesh))
     source = np.flatnonzero(np.all(np.isclose(mesh.points, 0.0), axis=1))
     force = 1e5
     s_dof = model.dofs(source, 2)

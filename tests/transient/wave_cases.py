@@ -13,6 +13,7 @@ import numpy as np
 
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.model import Mesh
+from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 
 #: Soil of the thesis model (benchmarks.md section 1).
@@ -85,12 +86,13 @@ class Model:
 
         self.mesh, self.comm = mesh, comm
         self.dofmap = build_dofmap(mesh, comm.size, rules=rules, node_sets=node_sets)
-        self.K, self.M, _ = assemble(mesh, case, self.dofmap, comm)
+        problem = Problem.from_case(case)
+        self.K, self.M, _ = assemble(mesh, problem, self.dofmap, comm)
         self.C = None
         if case["damping.model"] != "none" or any(
                 case[f"boundary.{f}"] in ("absorbing", "caughey")
                 for f in ("x_min", "x_max", "y_min", "y_max", "base")):
-            self.C, _ = assemble_damping(mesh, case, self.dofmap, comm, self.K, self.M)
+            self.C, _ = assemble_damping(mesh, problem, self.dofmap, comm, self.K, self.M)
         self.scheme = GeneralizedAlpha.from_radius(dt, rho_inf)
         self.system = TransientSystem(self.K, self.M, self.C, self.scheme, comm)
         self.r0, self.r1 = self.system.r0, self.system.r1
@@ -178,7 +180,7 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
     dt = courant * h / c
     from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
 
-    model = Model(mesh, case, {**constraint_rules(case), "all": free}, comm, dt,
+    model = Model(mesh, case, {**constraint_rules(Problem.from_case(case)), "all": free}, comm, dt,
                   node_sets=face_node_sets(mesh))
     top = np.flatnonzero(np.isclose(mesh.points[:, 2], height))
     top_dofs = model.dofs(top, comp)

@@ -227,7 +227,8 @@ def _check(run: dict, engine: str) -> list[float]:
         misfit = np.linalg.norm(v[early] - ve[early]) / np.linalg.norm(ve[early])
         print(f"{engine} {r / EPW:g} wavelengths: peak velocity {err:+.4f}, displacement "
               f"{err_u:+.4f}; peak {shift:+.0f} steps; lags {lags[0]:+.2f} (P/S), "
-              f"{lags[1]:+.2f} (R) steps; P/S misfit {misfit:.3f}; before P {np.abs(v[t < t_p]).max() / scale:.1e}")
+              f"{lags[1]:+.2f} (R) steps; P/S misfit {misfit:.3f}; before P "
+              f"{np.abs(v[t < t_p]).max() / scale:.1e}")
         assert abs(err) < 0.05, (r, err)
         # causal: nothing before the P front (the exact answer is 0 there)
         assert np.abs(ve[t < t_p]).max() == 0.0

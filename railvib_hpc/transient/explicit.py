@@ -383,6 +383,42 @@ class ExplicitSystem:
         local = 0.5 * float(v @ (self.m * v)) + 0.5 * float(u @ self.times(self.K, u))
         return self.comm.allreduce(local)
 
+    def scheme_energy(self, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> float:
+        """The discrete energy that the central differences conserve, from the state at
+        ``t_n`` (this rank's rows; collective)::
+
+            E_{n+1/2} = 1/2 v_{n+1/2}^T m v_{n+1/2} + 1/2 u_n^T K u_{n+1},
+            v_{n+1/2} = v_n + dt / 2 a_n,   u_{n+1} = u_n + dt v_{n+1/2}.
+
+        The scheme is the leapfrog ``m (v_{n+1/2} - v_{n-1/2}) = dt (f_n - K u_n - D_n)``,
+        ``u_{n+1} - u_n = dt v_{n+1/2}``, with the damping force ``D_n = C v_{n-1/2}``, so
+        ``E_{n+1/2} - E_{n-1/2} = dt (f_n - D_n)^T v_n`` exactly (``v_n`` is the mean of
+        the two half-step velocities): without damping and loads it is constant to
+        round-off, and the damping takes :meth:`step_dissipation`. It is positive below
+        the critical step (``u_n^T K u_{n+1} = ubar^T K ubar - dt^2 / 4 v^T K v``).
+        """
+        dt = self.dt
+        w = v + (0.5 * dt) * a
+        u1 = u + dt * w
+        local = 0.5 * float(w @ (self.m * w)) + 0.5 * float(u @ self.times(self.K, u1))
+        return self.comm.allreduce(local)
+
+    def step_dissipation(self, previous: tuple[np.ndarray, np.ndarray],
+                         current: tuple[np.ndarray, np.ndarray]) -> float:
+        """The energy the damping forces took in the step that led to ``current``
+        (``(v_n, a_n)``; ``previous``: ``(v_{n-1}, a_{n-1})``, unused here): ``dt v_n^T C
+        v_{n-1/2}`` with the half-step velocity ``v_{n-1/2} = v_n - dt / 2 a_n`` the
+        damping took, so that ``E_{n+1/2} = E_{n-1/2} - step_dissipation`` without loads
+        (:meth:`scheme_energy`; collective)."""
+        if self.C is None:
+            return 0.0
+        v, a = current
+        return self._damping_work(v, v - (0.5 * self.dt) * a)
+
+    def _damping_work(self, v: np.ndarray, v_damping: np.ndarray) -> float:
+        """``dt v^T C v_damping`` (collective)."""
+        return self.comm.allreduce(self.dt * float(v @ self.times(self.C, v_damping)))
+
     def destroy(self) -> None:
         for vec in (self._x, self._y, self._v, self._w):
             vec.destroy()

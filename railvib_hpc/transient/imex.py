@@ -284,6 +284,46 @@ class ImexSystem(ExplicitSystem):
         self.n_solves += B.shape[1]
         return out
 
+    # ---------------------------------------------------------------- energy
+    def scheme_energy(self, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> float:
+        """The discrete energy that the step conserves, from the state at ``t_n`` (this
+        rank's rows; collective).
+
+        With ``gamma = 1/2`` the predictors ``p_n = u_n - beta dt^2 a_n`` obey the central
+        differences ``p_{n+1} - 2 p_n + p_{n-1} = dt^2 a_n`` (from the Newmark updates
+        alone), and the step's equation is ``(m + beta dt^2 K_I) a_n + K p_n + D_n = f_n``
+        with the damping force ``D_n = C_I v_n + C_E v*_n`` (:func:`damping_velocity`). So
+        the step is a leapfrog with the mass ``m + beta dt^2 K_I``, and::
+
+            E_{n+1/2} = 1/2 w^T (m + beta dt^2 K_I) w + 1/2 p_n^T K p_{n+1},
+            w = (p_{n+1} - p_n) / dt = v_n + dt / 2 a_n,
+
+        changes by ``dt (f_n - D_n)^T v_n`` in a step (``v_n`` is the mean of the two
+        ``w``): constant without damping and loads, less :meth:`step_dissipation`.
+        """
+        dt, b = self.dt, self.scheme.beta
+        w = v + (0.5 * dt) * a
+        p = u - (b * dt * dt) * a
+        p1 = p + dt * w
+        local = 0.5 * float(w @ (self.m * w + (b * dt * dt) * self.times(self.K_I, w)))
+        local += 0.5 * float(p @ self.times(self.K, p1))
+        return self.comm.allreduce(local)
+
+    def step_dissipation(self, previous: tuple[np.ndarray, np.ndarray],
+                         current: tuple[np.ndarray, np.ndarray]) -> float:
+        """The energy the damping forces took in the step from ``previous = (v_{n-1},
+        a_{n-1})`` to ``current = (v_n, a_n)``: ``dt v_n^T (C v* + C_I (v_n - v*))``, the
+        explicit elements' damping at ``v* = v_{n-1} + dt a_{n-1}`` and the implicit ones'
+        at ``v_n`` (:meth:`scheme_energy`; collective)."""
+        if self.C is None:
+            return 0.0
+        v, _ = current
+        v_star = damping_velocity(previous[0], previous[1], self.dt)
+        work = self._damping_work(v, v_star)
+        if self.C_I is not None:
+            work += self.comm.allreduce(self.dt * float(v @ self.times(self.C_I, v - v_star)))
+        return work
+
     def destroy(self) -> None:
         if self.op is not None:
             self.op.destroy()

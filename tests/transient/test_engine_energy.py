@@ -87,7 +87,9 @@ def _run(engine: str, closed: bool, damping: str = "none"):
                   "damping.f2=80"]
     else:
         extra += ["damping.model=none"]
-    case = soil_case("modal.lumped_mass=true", *extra)
+    from railvib_hpc.problem import Problem
+
+    case = Problem.from_case(soil_case("modal.lumped_mass=true", *extra))
     dofmap = build_dofmap(mesh, comm.size, rules=CLOSED if closed else {},
                           node_sets=face_node_sets(mesh))
     K, M, _ = assemble(mesh, case, dofmap, comm)

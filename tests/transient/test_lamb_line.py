@@ -140,13 +140,16 @@ def _run(engine: str) -> dict:
     c_p, c_r = c_s * math.sqrt(3.0), c_s / rayleigh_slowness(NU)
     duration = F_PEAK_T * lam / c_r
     dt = COURANT * critical_courant(NU) * h / c_p
-    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(case),
+    from railvib_hpc.problem import Problem
+
+    problem = Problem.from_case(case)
+    dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(problem),
                           node_sets=face_node_sets(mesh))
-    K, M, _ = assemble(mesh, case, dofmap, comm)
+    K, M, _ = assemble(mesh, problem, dofmap, comm)
     if engine == "imex":
         centre = mesh.points[mesh.hexes].mean(axis=1)
         near = (centre[:, 0] < lam) & (centre[:, 2] > -lam)
-        K_I, C_I = assemble_partition(mesh, case, dofmap, comm, (), extra_hexes=near)
+        K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, (), extra_hexes=near)
         system = ImexSystem(K, M, None, K_I, C_I, dt, comm)
     else:
         system = ExplicitSystem(K, M, None, dt, comm)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from fem_tools import box_mesh
 
 from railvib_hpc.fem.assemble_serial import assemble_matrix, element_dofs
 from railvib_hpc.fem.hex8 import hex8_stiffness
@@ -11,15 +12,10 @@ from railvib_hpc.fem.matrix_free import MatrixFreeStiffness, compiled_kernel, el
 
 
 def _box(nx=6, ny=5, nz=4, hz=0.5):
-    axes = (np.arange(nx + 1.0), np.arange(ny + 1.0), hz * np.arange(nz + 1.0))
-    points = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
-    nid = np.arange(len(points)).reshape(nx + 1, ny + 1, nz + 1)
-    i, j, k = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz),
-                                              indexing="ij"))
-    conn = np.stack([nid[i, j, k], nid[i + 1, j, k], nid[i + 1, j + 1, k], nid[i, j + 1, k],
-                     nid[i, j, k + 1], nid[i + 1, j, k + 1], nid[i + 1, j + 1, k + 1],
-                     nid[i, j + 1, k + 1]], axis=1)
-    return points, conn, k
+    """The suite's structured box (``fem_tools.box_mesh``) and each hexahedron's layer index."""
+    points, conn = box_mesh(nx, ny, nz, float(nx), float(ny), hz * nz)
+    layer = np.floor(points[conn][:, :, 2].mean(axis=1) / hz).astype(int)
+    return points, conn, layer
 
 
 def _relative(a, b):

@@ -15,9 +15,11 @@ C; one with Rayleigh damping applied as an operator,
 memory is the matrices and a few vectors: both grow linearly with the DOFs, where the
 direct path's factor grows as n^(4/3) (issue 28).
 The scheme is second order, conserves the discrete energy of an undamped system and is
-stable up to the step of :func:`critical_step` (``2 / omega_max`` undamped, less with
-damping), with ``omega_max`` the largest natural frequency of ``K, m``
-(:func:`stability_limit`).
+stable while ``m - dt / 2 C - dt^2 / 4 K`` is positive definite (:func:`stability_limit`):
+``2 / omega_max`` undamped, with ``omega_max`` the largest natural frequency of ``K, m``;
+less with damping. For one mode that is :func:`critical_step`; for damping that is not
+proportional (the absorbing faces' dashpots, whose ratio ``c / m = 2 c_p / h`` at a face
+node is far above that of the stiffest mode) the limit is found on the whole ``K, C, m``.
 
 A vehicle is coupled explicitly too: its linear equations (mass, damping, stiffness
 matrices of :class:`~railvib_hpc.mbs.integrate.VehicleNewmark`) take the same
@@ -50,6 +52,9 @@ PREFIX = "railvib_cd_"
 STEP_SAFETY = 0.9
 #: Relative tolerance of the largest eigenvalue of ``m^-1/2 K m^-1/2`` (Krylov-Schur).
 OMEGA_TOL = 1e-6
+#: Iterations of the damped limit (:func:`damped_limit`) before it gives up: each solves
+#: one largest eigenvalue; the thesis model and the absorbing boxes of the tests take 2-6.
+DAMPED_MAX_IT = 30
 #: Relative size of an off-diagonal mass entry that makes a mass matrix "not lumped".
 LUMPED_TOL = 1e-12
 #: Relative residual of the static start's CG solves (the direct path's factor solves to
@@ -159,11 +164,17 @@ class StableStep:
     xi
         Damping ratio of that mode (``phi^T C phi / (2 omega phi^T m phi)``).
     dt_critical
-        :func:`critical_step` of that mode [s].
+        The critical step [s]: the largest ``dt`` with ``m - f dt / 2 C - dt^2 / 4 K``
+        positive definite (``f``: the ``damping_factor`` of :func:`stability_limit`).
     limiting_dof
-        Global DOF with the largest amplitude in that mode (where the limit sits).
+        Global DOF with the largest amplitude in the mode that sets ``dt_critical``
+        (where the limit sits).
     iterations
-        Krylov-Schur iterations the eigensolve took.
+        Krylov-Schur iterations the eigensolves took.
+    dt_mode
+        :func:`critical_step` of the largest mode alone (its own damping ratio): equal to
+        ``dt_critical`` for damping proportional to that mode, larger where damping that is
+        not (face dashpots, pads) lowers the limit.
     """
 
     omega_max: float
@@ -171,33 +182,124 @@ class StableStep:
     dt_critical: float
     limiting_dof: int
     iterations: int
+    dt_mode: float = float("nan")
 
     @property
     def dt_allowed(self) -> float:
         """The largest step allowed: :data:`STEP_SAFETY` of the critical one."""
         return STEP_SAFETY * self.dt_critical
 
+    @property
+    def damping_limited(self) -> bool:
+        """Whether damping not proportional to the largest mode lowers the limit (by more
+        than the eigensolves' tolerance)."""
+        return bool(self.dt_critical < (1.0 - 10.0 * OMEGA_TOL) * self.dt_mode)
 
-def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None) -> StableStep:
-    """The largest frequency of ``K, m`` (SLEPc Krylov-Schur on ``m^-1/2 K m^-1/2``, to
-    :data:`OMEGA_TOL`), its damping ratio, and the critical step (collective).
 
-    The largest eigenvalue converges in a few dozen products (it is the best separated end
-    of the spectrum of a mesh); the mode localises on the elements that limit the step
-    (the stiffest over the lightest: rail beams, thin slabs).
+def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
+                    damping_factor: float = 1.0) -> StableStep:
+    """The critical step of ``K, C`` on the lumped mass ``m`` (collective).
+
+    The largest frequency of ``K, m`` (SLEPc Krylov-Schur on ``m^-1/2 K m^-1/2``, to
+    :data:`OMEGA_TOL`) converges in a few dozen products (it is the best separated end of
+    the spectrum of a mesh); the mode localises on the elements that limit the step (the
+    stiffest over the lightest: rail beams, thin slabs). With damping, the limit is the
+    largest ``dt`` with ``m - f dt / 2 C - dt^2 / 4 K`` positive definite
+    (:func:`damped_limit`, ``f = damping_factor``): the central differences with the
+    damping at the half-step velocity are the centred scheme on the mass
+    ``m - dt / 2 C``, whose energy ``1/2 w^T (m - dt / 2 C - dt^2 / 4 K) w + 1/2 ubar^T K
+    ubar`` (``w = (u_{n+1} - u_n) / dt``, ``ubar`` their mean) is a norm exactly then. For
+    one mode this is :func:`critical_step`; the damping ratio of the largest mode alone is
+    not enough where damping is not proportional to it: on a box with absorbing faces the
+    face nodes' dashpots made the step of that mode unstable from 0.55 of it.
+    ``damping_factor = 2``: the damping at ``v_n + dt a_n`` (the IMEX engine's explicit
+    part, :data:`~.imex.DAMPING_STABILITY_FACTOR`).
 
     ``minus = (K_p, C_p)``: the limit of ``K - K_p, C - C_p`` (the explicit part of the
     IMEX engine, :mod:`.imex`, whose implicit partition ``K_p, C_p`` is unconditionally
     stable; ``C_p`` may be None). ``K_p``'s pattern must be a subset of ``K``'s.
     """
+    d = K.createVecLeft()
+    d.getArray()[:] = 1.0 / np.sqrt(m)
+    K_p, C_p = (None, None) if minus is None else minus
+    # m^-1/2 (K - K_p) m^-1/2 as a shell: no copy of K (a third of the setup's peak)
+    op = _ScaledCombination(d, [(K, 1.0), (K_p, -1.0)])
+    lam, x, iterations = _largest_eigenpair(op, comm)
+    phi = x.getArray() * d.getArray()        # the mode in displacements (x = m^1/2 phi)
+    omega = float(np.sqrt(max(lam, 0.0)))
+    xi, dt_c, mode = 0.0, critical_step(omega), x
+    if C is not None and omega > 0.0:
+        damping = _ScaledCombination(d, [(C, 1.0), (C_p, -1.0)])
+        xi = max(damping.quadratic(x) / (2.0 * omega), 0.0)
+        dt_c = critical_step(omega, damping_factor * xi)
+        dt_c, mode, more = damped_limit(op, damping, damping_factor, dt_c, x, comm)
+        iterations += more
+        damping.release()
+        phi = mode.getArray() * d.getArray()
+    dt_mode = critical_step(omega, damping_factor * xi)
+    amp = np.abs(phi)
+    r0 = K.getOwnershipRange()[0]
+    local = (float(amp.max(initial=-1.0)), r0 + int(np.argmax(amp)) if amp.size else -1)
+    _, dof = max(comm.allgather(local))
+    op.release()
+    for vec in {id(v): v for v in (d, x, mode)}.values():
+        vec.destroy()
+    return StableStep(omega, xi, min(dt_c, dt_mode), int(dof), int(iterations), dt_mode)
+
+
+def damped_limit(stiffness, damping, factor: float, dt: float, start, comm) -> tuple:
+    """The largest ``dt`` with ``I - factor dt / 2 C^ - dt^2 / 4 K^`` positive definite
+    (``K^, C^``: the scaled shells of :func:`stability_limit`), from ``dt`` at or above it
+    (the largest mode's :func:`critical_step`: its Rayleigh quotient reaches 1 there).
+
+    Each iteration takes the eigenvector ``x`` of the largest eigenvalue of ``factor dt / 2
+    C^ + dt^2 / 4 K^`` and moves ``dt`` to the root of its Rayleigh quotient ``factor dt /
+    2 c + dt^2 / 4 k = 1``, ``c = x^T C^ x``, ``k = x^T K^ x``. That quotient is below the
+    largest eigenvalue at every step (so each root is at or above the limit) and touches
+    it at ``dt`` (so the step is at least Newton's, which the convexity of the largest
+    eigenvalue in ``dt`` makes monotone): the steps fall to the limit from above, to
+    :data:`OMEGA_TOL`. Returns ``(dt, x, iterations)``; the first eigenvalue at or below
+    ``1 + OMEGA_TOL`` ends it at once (damping proportional to the largest mode).
+    """
+    x, iterations = start, 0
+    for _ in range(DAMPED_MAX_IT):
+        combined = _ScaledCombination(stiffness.d, [*((A, w * 0.25 * dt * dt)
+                                                      for A, w in stiffness.terms),
+                                                    *((A, w * 0.5 * factor * dt)
+                                                      for A, w in damping.terms)])
+        lam, y, its = _largest_eigenpair(combined, comm, start=x)
+        combined.release()
+        iterations += its
+        if x is not start:
+            x.destroy()
+        x = y
+        if lam <= 1.0 + OMEGA_TOL:
+            return dt, x, iterations
+        k, c = stiffness.quadratic(x), max(damping.quadratic(x), 0.0)
+        dt = _quadratic_root(0.25 * k, 0.5 * factor * c)
+    raise ExplicitEngineError(
+        f"the damped stability limit did not settle in {DAMPED_MAX_IT} eigensolves "
+        f"(last step {dt:.4g} s, largest eigenvalue {lam:.8g}); -{PREFIX}eps_* options tune "
+        "them")
+
+
+def _quadratic_root(a: float, b: float) -> float:
+    """The positive root of ``a t^2 + b t = 1`` (``a, b >= 0``, not both zero), without
+    cancellation.
+
+    >>> _quadratic_root(0.25, 0.0), _quadratic_root(0.0, 0.5)
+    (2.0, 2.0)
+    """
+    return 2.0 / (b + np.sqrt(b * b + 4.0 * a))
+
+
+def _largest_eigenpair(op: _ScaledCombination, comm, start=None) -> tuple:
+    """The largest eigenvalue of the symmetric shell ``op`` and its unit eigenvector (a new
+    vector), with the Krylov-Schur iterations it took (options prefix :data:`PREFIX`)."""
     from petsc4py import PETSc
     from slepc4py import SLEPc
 
-    d = K.createVecLeft()
-    d.getArray()[:] = 1.0 / np.sqrt(m)
-    # m^-1/2 (K - K_p) m^-1/2 as a shell: no copy of K (a third of the setup's peak)
-    S = PETSc.Mat().createPython(K.getSizes(), _ScaledDifference(
-        K, None if minus is None else minus[0], d), comm=comm)
+    S = PETSc.Mat().createPython(op.sizes, op, comm=comm)
     S.setUp()
     eps = SLEPc.EPS().create(comm)
     eps.setOptionsPrefix(PREFIX)
@@ -206,55 +308,48 @@ def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None) -> St
     eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
     eps.setDimensions(1)
     eps.setTolerances(OMEGA_TOL, 10_000)
+    if start is not None:
+        eps.setInitialSpace([start])
     eps.setFromOptions()
     eps.solve()
     if eps.getConverged() < 1:
         raise ExplicitEngineError("the largest natural frequency of the model did not converge "
                                   f"in {eps.getIterationNumber()} iterations")
     x = S.createVecRight()
-    lam = eps.getEigenpair(0, x).real
+    lam = float(eps.getEigenpair(0, x).real)
+    x.scale(1.0 / x.norm())
     iterations = eps.getIterationNumber()
-    # the mode in displacements (x = m^1/2 phi) and its damping ratio
-    phi = x.getArray() * d.getArray()
-    omega = float(np.sqrt(max(lam, 0.0)))
-    xi = 0.0
-    if C is not None and omega > 0.0:
-        pv, cv = C.createVecRight(), C.createVecLeft()
-        pv.getArray()[:] = phi
-        C.mult(pv, cv)
-        if minus is not None and minus[1] is not None:
-            cp = cv.duplicate()
-            minus[1].mult(pv, cp)
-            cv.axpy(-1.0, cp)
-            cp.destroy()
-        xi = float(pv.dot(cv) / (2.0 * omega * comm.allreduce(float(phi @ (m * phi)))))
-        pv.destroy()
-        cv.destroy()
-    amp = np.abs(phi)
-    r0 = K.getOwnershipRange()[0]
-    local = (float(amp.max(initial=-1.0)), r0 + int(np.argmax(amp)) if amp.size else -1)
-    _, dof = max(comm.allgather(local))
-    S.getPythonContext().release()
-    for obj in (eps, S, d, x):
-        obj.destroy()
-    return StableStep(omega, max(xi, 0.0), critical_step(omega, max(xi, 0.0)), int(dof),
-                      int(iterations))
+    eps.destroy()
+    S.destroy()
+    return lam, x, iterations
 
 
-class _ScaledDifference:
-    """``y = d * ((K - K_p) (d * x))``: the shell operator of :func:`stability_limit`."""
+class _ScaledCombination:
+    """``y = d * (sum_i w_i A_i) (d * x)``: the symmetric shells of :func:`stability_limit`
+    (terms whose matrix is None are left out; ``d = m^-1/2``). No matrix is copied."""
 
-    def __init__(self, K, K_p, d):
-        self.K, self.K_p, self.d = K, K_p, d
-        self.t, self.w = K.createVecRight(), K.createVecLeft()
+    def __init__(self, d, terms):
+        self.d = d
+        self.terms = [(A, float(w)) for A, w in terms if A is not None]
+        A0 = self.terms[0][0]
+        self.sizes = A0.getSizes()
+        self.t, self.w = A0.createVecRight(), A0.createVecLeft()
 
     def mult(self, mat, x, y) -> None:
         self.t.pointwiseMult(x, self.d)
-        self.K.mult(self.t, y)
-        if self.K_p is not None:
-            self.K_p.mult(self.t, self.w)
-            y.axpy(-1.0, self.w)
+        y.zeroEntries()
+        for A, weight in self.terms:
+            A.mult(self.t, self.w)
+            y.axpy(weight, self.w)
         y.pointwiseMult(y, self.d)
+
+    def quadratic(self, x) -> float:
+        """``x^T op x`` (collective)."""
+        y = x.duplicate()
+        self.mult(None, x, y)
+        value = float(x.dot(y))
+        y.destroy()
+        return value
 
     def release(self) -> None:
         """Free the work vectors (called by :func:`stability_limit`; not the shell's
@@ -520,5 +615,5 @@ class ExplicitSolver:
 
 
 __all__ = ["ExplicitEngineError", "ExplicitSolver", "ExplicitSystem", "StableStep",
-           "contact_frequency", "critical_step", "initial_acceleration", "limiting_element",
-           "lumped_diagonal", "spectral_radius", "stability_limit"]
+           "contact_frequency", "critical_step", "damped_limit", "initial_acceleration",
+           "limiting_element", "lumped_diagonal", "spectral_radius", "stability_limit"]

@@ -846,7 +846,7 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
     case, comm = ctx.case, ctx.comm
     system = ExplicitSystem(K, M, C, 0.0, comm)      # (its step is set below)
     lim = stability_limit(K, system.m, C, comm)
-    critical, omega = lim.dt_critical, lim.omega_max
+    critical = lim.dt_critical
     where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
     if vehicle is not None:
         uz = rails.dofs[:, :, 0].ravel()
@@ -855,11 +855,11 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
         w_c = contact_frequency(vehicle.hertz_constant,
                                 float(np.max(vehicle.static_wheel_loads())), rail_mass)
         if w_c > 0 and critical_step(w_c) < critical:
-            critical, omega = critical_step(w_c), w_c
+            critical = critical_step(w_c)
             where = (f"the wheel-rail contact (linearised Hertz spring on a {rail_mass:.3g} kg "
-                     "rail node)")
+                     f"rail node, {w_c / (2 * math.pi):.4g} Hz)")
     try:
-        dt, text = _stable_step(case, critical, omega, where, lim.xi, dt_band, "explicit")
+        dt, text = _stable_step(case, lim, critical, where, dt_band, "explicit")
     except TransientInputError:
         system.destroy()
         raise
@@ -867,18 +867,23 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
     return system, dt, text
 
 
-def _stable_step(case: Case, critical: float, omega: float, where: str, xi: float,
-                 dt_band: float, engine: str) -> tuple[float, str]:
+def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
+                 engine: str) -> tuple[float, str]:
     """The step of a conditionally stable engine and a line on its limit: ``transient.dt``
     (refused above :data:`~.explicit.STEP_SAFETY` of ``critical``, naming ``where`` the
     limit sits) or the automatic one, ``min(dt_band, allowed)`` divided into ``output.dt``.
+    ``lim``: the :class:`~.explicit.StableStep` of the model (its largest mode, and whether
+    damping that is not proportional to it lowers the limit).
     """
     from .explicit import STEP_SAFETY
 
     allowed = STEP_SAFETY * critical
+    omega = lim.omega_max
+    damped = (f"; the damping not proportional to that mode (absorbing faces' dashpots, "
+              f"pads) lowers its step {lim.dt_mode:.4g} s" if lim.damping_limited else "")
     text = (f"stable up to {allowed:.4g} s ({STEP_SAFETY:g} x the critical step "
-            f"{critical:.4g} s; omega_max = {omega:.4g} rad/s = {omega / (2 * math.pi):.4g} Hz, "
-            f"set by {where}; damping ratio there {xi:.3g})")
+            f"{critical:.4g} s, set by {where}; omega_max = {omega:.4g} rad/s = "
+            f"{omega / (2 * math.pi):.4g} Hz, damping ratio of that mode {lim.xi:.3g}{damped})")
     dt = case["transient.dt"]
     if dt > 0 and dt > allowed * (1 + 1e-9):
         raise TransientInputError(
@@ -899,13 +904,7 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
     from ..mesh.stage import present_parts
     from ..modal.petsc import assemble_partition
     from ..schema import PART_ID
-    from .explicit import (
-        STEP_SAFETY,
-        critical_step,
-        limiting_element,
-        lumped_diagonal,
-        stability_limit,
-    )
+    from .explicit import STEP_SAFETY, limiting_element, lumped_diagonal, stability_limit
     from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names
 
     case, comm = ctx.case, ctx.comm
@@ -919,10 +918,10 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
     K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True)
     try:
         m = lumped_diagonal(M, comm)
-        lim = stability_limit(K, m, C, comm, minus=(K_I, C_I))
+        lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
+                              damping_factor=DAMPING_STABILITY_FACTOR)
         where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
-        critical = critical_step(lim.omega_max, DAMPING_STABILITY_FACTOR * lim.xi)
-        dt, text = _stable_step(case, critical, lim.omega_max, where, lim.xi, dt_band, "imex")
+        dt, text = _stable_step(case, lim, lim.dt_critical, where, dt_band, "imex")
     except BaseException:
         for A in (K_I, C_I):
             if A is not None:

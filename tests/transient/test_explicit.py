@@ -219,3 +219,79 @@ def test_undamped_closed_box_keeps_its_energy():
     assert abs(energies[-100:].mean() - energies[:100].mean()) < 2e-3 * e0
     system.destroy()
     model.destroy()
+
+
+def _dense(A) -> np.ndarray:
+    """``A`` (on ``MPI.COMM_SELF``) as a dense array."""
+    return A.convert("dense").getDenseArray().copy()
+
+
+def _central_difference_map(K: np.ndarray, C: np.ndarray, m: np.ndarray, h: float) -> np.ndarray:
+    """The dense one-step map of ``(u, v, a)`` of the module's scheme, the damping at the
+    half-step velocity (written out independently of the engine)."""
+    n = m.size
+    eye, zero = np.eye(n), np.zeros((n, n))
+    u1 = np.hstack([eye, h * eye, 0.5 * h * h * eye])
+    vh = np.hstack([zero, eye, 0.5 * h * eye])
+    a1 = -(K @ u1 + C @ vh) / m[:, None]
+    return np.vstack([u1, vh + 0.5 * h * a1, a1])
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("damping", ["none", "rayleigh"])
+def test_the_limit_with_absorbing_faces_is_that_of_the_whole_damped_map(damping):
+    """A 4 x 4 x 3 box, all faces but the top absorbing (Lysmer-Kuhlemeyer dashpots, whose
+    ratio c / m at a face node is far above that of the stiffest mode). The dense one-step
+    map is stable at the allowed step and unstable 2 % above the critical one, on 1 and 2
+    ranks; the largest mode's own damping ratio would allow a step on which the map grows.
+    """
+    from railvib_hpc.modal.boundary import face_node_sets
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.transient.explicit import lumped_diagonal, stability_limit
+
+    faces = [f"boundary.{f}=absorbing" for f in ("x_min", "x_max", "y_min", "y_max", "base")]
+    extra = (["damping.model=rayleigh", "modal.damping_ratio=0.05", "damping.f1=5",
+              "damping.f2=80"] if damping == "rayleigh" else ["damping.model=none"])
+    case = soil_case("modal.lumped_mass=true", *faces, *extra)
+    mesh = box_mesh((4, 4, 3), (4.0, 4.0, 3.0))
+    model = ExplicitModel(mesh, case, {}, face_node_sets(mesh))
+    lim = stability_limit(model.K, lumped_diagonal(model.M, comm), model.C, comm)
+    problem = Problem.from_case(case)
+    dofmap = build_dofmap(mesh, 1, rules={}, node_sets=face_node_sets(mesh))
+    K1, M1, _ = assemble(mesh, problem, dofmap, MPI.COMM_SELF)
+    C1 = assemble_damping(mesh, problem, dofmap, MPI.COMM_SELF, K1, M1)[0]
+    K, C, m = _dense(K1), _dense(C1), np.diag(_dense(M1)).copy()
+    for A in (K1, M1, C1):
+        A.destroy()
+
+    def rho(h: float) -> float:
+        return float(np.abs(np.linalg.eigvals(_central_difference_map(K, C, m, h))).max())
+
+    print(f"{damping}: critical {lim.dt_critical:.4e} s, largest mode's own {lim.dt_mode:.4e} s"
+          f" (xi {lim.xi:.3g}); rho at the allowed step {rho(lim.dt_allowed):.12f}, 2 % above"
+          f" the critical {rho(1.02 * lim.dt_critical):.6f}, at the mode's allowed "
+          f"{rho(STEP_SAFETY * lim.dt_mode):.6f}")
+    assert lim.damping_limited
+    assert rho(lim.dt_allowed) <= 1.0 + 1e-9
+    assert rho(1.02 * lim.dt_critical) > 1.0 + 1e-6
+    assert rho(STEP_SAFETY * lim.dt_mode) > 1.0 + 1e-6
+    model.destroy()
+
+
+@pytest.mark.mpi
+def test_proportional_damping_keeps_the_largest_modes_limit():
+    """Rayleigh damping alone (fixed faces): the largest mode is an eigenvector of the
+    damping too, so the limit is :func:`critical_step` of that mode and its ratio, found in
+    the first check."""
+    from railvib_hpc.transient.explicit import lumped_diagonal, stability_limit
+
+    case = soil_case("modal.lumped_mass=true", "damping.model=rayleigh",
+                     "modal.damping_ratio=0.05", "damping.f1=5", "damping.f2=80")
+    mesh = box_mesh((3, 3, 3), (3.0, 3.0, 3.0))
+    model = ExplicitModel(mesh, case, {"bottom": ("ux", "uy", "uz")})
+    lim = stability_limit(model.K, lumped_diagonal(model.M, comm), model.C, comm)
+    assert lim.xi > 0.0
+    assert not lim.damping_limited
+    assert lim.dt_critical == pytest.approx(critical_step(lim.omega_max, lim.xi), rel=1e-5)
+    model.destroy()

@@ -31,8 +31,8 @@ gives the same 0.900 on this mesh, in 80 s of Krylov-Schur: not repeated here).
 
 The far faces are rollers and the base fixed, far enough that no reflection reaches a
 receiver before its window closes (``x_max`` 18.2, base 11.5 wavelengths; absorbing faces
-would shorten it, but their explicit dashpots limit the step below the engines' computed
-one, tests/transient/test_engine_energy.py).
+would shorten it, but their explicit dashpots halve the explicit engine's step on a soil
+model: :func:`~railvib_hpc.transient.explicit.stability_limit`, tests/transient/test_explicit.py).
 
 Measured (1 rank; 482,448 DOFs, 663 steps, 11.5 s explicit, 17.4 s IMEX): peak velocity of the
 Rayleigh pulse +1.7, +2.1, -2.1 % (explicit) and +1.8, +2.4, -2.7 % (IMEX, the first

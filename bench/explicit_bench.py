@@ -95,7 +95,7 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
 
     from railvib_hpc.config import load_case
     from railvib_hpc.io.run_record import peak_memory_gb
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.modal.boundary import constraint_rules, dashpot_diagonal, face_node_sets
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.petsc import (
         assemble,
@@ -130,10 +130,13 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
     dofmap = build_dofmap(mesh, comm.size, rules=constraint_rules(problem),
                           node_sets=face_node_sets(mesh))
     K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal")
-    # as the stage does: Rayleigh damping applied around K, the dashpots stored alone
-    C, _ = rayleigh_operator(mesh, problem, dofmap, comm, K, lumped_diagonal(M, comm))
+    # as the stage does: Rayleigh damping applied around K; the dashpots stored alone
+    # (IMEX: implicit in its partition) or, explicit, a diagonal taken at the full step
+    dashpots = None if imex else dashpot_diagonal(mesh, problem, dofmap, comm.rank)
+    C, _ = rayleigh_operator(mesh, problem, dofmap, comm, K, lumped_diagonal(M, comm),
+                             dashpots=dashpots is None)
     if C is None:
-        C, _ = assemble_damping(mesh, problem, dofmap, comm, K, M)
+        C, _ = assemble_damping(mesh, problem, dofmap, comm, K, M, dashpots=dashpots is None)
     partition = assemble_partition(mesh, problem, dofmap, comm, ("slab",)) if imex else None
     t_assembly = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -143,7 +146,7 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
     t_limit = time.perf_counter() - t0
     t0 = time.perf_counter()
     system = (ImexSystem(K, M, C, *partition, dt, comm) if imex
-              else ExplicitSystem(K, M, C, dt, comm))
+              else ExplicitSystem(K, M, C, dt, comm, dashpots=dashpots))
     t_factor = time.perf_counter() - t0
     dof = int(dofmap.index[top, 2])
 

@@ -216,6 +216,36 @@ def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
     return nodes, out
 
 
+#: Relative size of an off-diagonal entry that makes the dashpots' node blocks "not diagonal"
+#: (faces normal to the axes give exactly diagonal blocks; anything else keeps them coupled).
+DIAGONAL_TOL = 1e-12
+
+
+def dashpot_diagonal(mesh: Mesh, problem: Problem, dofmap, rank: int) -> np.ndarray | None:
+    """This rank's rows of the absorbing faces' dashpots as a diagonal, or None.
+
+    The explicit engine takes the dashpots at the full-step velocity (trapezoidal on a
+    diagonal matrix: no factor, unconditionally stable) when their node blocks
+    (:func:`boundary_node_blocks`) are diagonal, which faces normal to the coordinate axes
+    give (edges and corners sum diagonal blocks). Returns None when there are no dashpots
+    or a block couples its directions (more than :data:`DIAGONAL_TOL` of its diagonal off
+    it): then they stay in the damping matrix.
+    """
+    nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
+    if len(nodes) == 0:
+        return None
+    diag = np.einsum("kii->ki", blocks)
+    off = np.abs(blocks - np.einsum("ki,ij->kij", diag, np.eye(3))).max()
+    if off > DIAGONAL_TOL * np.abs(diag).max():
+        return None
+    r0, r1 = dofmap.owned_dofs(rank)
+    out = np.zeros(r1 - r0)
+    dofs = dofmap.index[nodes, :3]
+    own = (dofs >= r0) & (dofs < r1)
+    np.add.at(out, dofs[own] - r0, diag[own])
+    return out
+
+
 def boundary_summary(mesh: Mesh, problem: Problem) -> dict[str, dict]:
     """Per face: type, element faces, area and (absorbing) the dashpot constants."""
     sets = face_node_sets(mesh)

@@ -222,7 +222,8 @@ def insert_node_blocks(A, dofmap: DofMap, rank: int, nodes: np.ndarray, blocks: 
                    np.ascontiguousarray(blocks, dtype=float), addv=PETSc.InsertMode.ADD_VALUES)
 
 
-def assemble_damping(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, M):
+def assemble_damping(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, M,
+                     dashpots: bool = True):
     """The damping matrix C of the full-order model (distributed, K's pattern).
 
     ``C = C_material + C_dashpots (+ C_pads)`` from ``[damping]`` and ``[boundary]``
@@ -237,6 +238,8 @@ def assemble_damping(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, M):
     * ``damping.pads``: the rail pads' dashpots ``pads.cx, cy, cz``.
 
     Entries depend on global DOF numbers only, so C is the same on any number of ranks.
+    ``dashpots = False`` leaves the dashpots out (the explicit engine takes them apart,
+    :func:`.boundary.dashpot_diagonal`; ``info["dashpot_nodes"]`` still counts them).
     Returns ``(C, info)`` with the coefficients used.
     """
     from petsc4py import PETSc
@@ -272,7 +275,8 @@ def assemble_damping(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, M):
                 Mg.destroy()
             Kg.destroy()
     nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
-    insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
+    if dashpots:
+        insert_node_blocks(C, dofmap, comm.rank, nodes, blocks)
     info["dashpot_nodes"] = len(nodes)
     info["layer_elements"] = insert_layer_damping(C, mesh, problem, dofmap, comm.rank)
     if problem.damping.pads:
@@ -331,12 +335,13 @@ def destroy_damping(C) -> None:
     C.destroy()
 
 
-def rayleigh_operator(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, m: np.ndarray):
+def rayleigh_operator(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, m: np.ndarray,
+                      dashpots: bool = True):
     """The damping of ``damping.model = 'rayleigh'`` as a shell matrix around K (see
     :class:`RayleighOperator`), or None where the model's C is not of that form
     (another damping model, graded absorbing layers) and must be assembled
-    (:func:`assemble_damping`). ``m``: this rank's rows of the lumped mass. Returns
-    ``(C, info)`` as :func:`assemble_damping` does."""
+    (:func:`assemble_damping`). ``m``: this rank's rows of the lumped mass; ``dashpots``
+    as there. Returns ``(C, info)`` as :func:`assemble_damping` does."""
     from petsc4py import PETSc
 
     from .boundary import boundary_node_blocks, layer_weights
@@ -357,7 +362,8 @@ def rayleigh_operator(mesh: Mesh, problem: Problem, dofmap: DofMap, comm, K, m: 
                                      np.zeros(len(pat.indices))), comm=comm)
     C_b.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     nodes, blocks = boundary_node_blocks(mesh, problem, "dashpot")
-    insert_node_blocks(C_b, dofmap, comm.rank, nodes, blocks)
+    if dashpots:
+        insert_node_blocks(C_b, dofmap, comm.rank, nodes, blocks)
     if pads:
         insert_pad_dashpots(C_b, mesh, problem, dofmap, comm.rank)
     C_b.assemble()

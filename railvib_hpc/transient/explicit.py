@@ -394,6 +394,15 @@ class ExplicitSystem:
     The counterpart of :class:`~.petsc.TransientSystem` without a factor: products with K
     and C, the mass diagonal, energies. Memory: the matrices and a few vectors, linear in
     the DOFs.
+
+    ``dashpots``: this rank's rows of a diagonal damping taken at the full-step velocity
+    ``v_{n+1}`` instead of the half step (the absorbing faces' dashpots,
+    :func:`~railvib_hpc.modal.boundary.dashpot_diagonal`; not in C then): the step solves
+    ``(m + dt / 2 d) a_{n+1} = f - K u_{n+1} - C v_{n+1/2} - d v_{n+1/2}``, a diagonal, and
+    the dashpots no longer limit it (trapezoidal on them: the leapfrog's damping force
+    ``d v_n`` at the mean of the two half-step velocities dissipates at any step). Without
+    it, face nodes with ``c / m = 2 c_p / h`` halve the stable step of a soil model
+    (:func:`stability_limit`).
     """
 
     #: No factor: what the run statistics report of the direct path's
@@ -401,12 +410,13 @@ class ExplicitSystem:
     factor_memory_gb = 0.0
     out_of_core = False
 
-    def __init__(self, K, M, C, dt: float, comm):
+    def __init__(self, K, M, C, dt: float, comm, dashpots: np.ndarray | None = None):
         self.K, self.M, self.C, self.dt, self.comm = K, M, C, float(dt), comm
         self.n_global = K.getSize()[0]
         self.r0, self.r1 = K.getOwnershipRange()
         self.n_local = self.r1 - self.r0
         self.m = lumped_diagonal(M, comm)
+        self.dashpots = None if dashpots is None else np.asarray(dashpots, dtype=float)
         self._x, self._y = K.createVecRight(), K.createVecLeft()
         self._v, self._w = K.createVecRight(), K.createVecLeft()
         self.time_products = 0.0
@@ -473,6 +483,16 @@ class ExplicitSystem:
         self.n_products += 1
         return out
 
+    def accelerate(self, rhs: np.ndarray, v_half: np.ndarray) -> np.ndarray:
+        """``a_{n+1}`` from ``rhs = f_{n+1} - K u_{n+1} - C v_{n+1/2}`` (changed in place):
+        ``rhs / m``, or with the diagonal dashpots at ``v_{n+1} = v_{n+1/2} + dt / 2
+        a_{n+1}``, ``(rhs - d v_{n+1/2}) / (m + dt / 2 d)``."""
+        d = self.dashpots
+        if d is None:
+            return rhs / self.m
+        rhs -= d * v_half
+        return rhs / (self.m + (0.5 * self.dt) * d)
+
     def energy(self, u: np.ndarray, v: np.ndarray) -> float:
         """Kinetic plus strain energy ``1/2 v^T m v + 1/2 u^T K u`` (collective)."""
         local = 0.5 * float(v @ (self.m * v)) + 0.5 * float(u @ self.times(self.K, u))
@@ -490,7 +510,8 @@ class ExplicitSystem:
         ``E_{n+1/2} - E_{n-1/2} = dt (f_n - D_n)^T v_n`` exactly (``v_n`` is the mean of
         the two half-step velocities): without damping and loads it is constant to
         round-off, and the damping takes :meth:`step_dissipation`. It is positive below
-        the critical step (``u_n^T K u_{n+1} = ubar^T K ubar - dt^2 / 4 v^T K v``).
+        the critical step (``u_n^T K u_{n+1} = ubar^T K ubar - dt^2 / 4 v^T K v``). The
+        diagonal dashpots' force is ``d v_n`` in this leapfrog.
         """
         dt = self.dt
         w = v + (0.5 * dt) * a
@@ -504,11 +525,13 @@ class ExplicitSystem:
         (``(v_n, a_n)``; ``previous``: ``(v_{n-1}, a_{n-1})``, unused here): ``dt v_n^T C
         v_{n-1/2}`` with the half-step velocity ``v_{n-1/2} = v_n - dt / 2 a_n`` the
         damping took, so that ``E_{n+1/2} = E_{n-1/2} - step_dissipation`` without loads
-        (:meth:`scheme_energy`; collective)."""
-        if self.C is None:
-            return 0.0
+        (:meth:`scheme_energy`; collective). The diagonal dashpots add ``dt v_n^T d v_n``.
+        """
         v, a = current
-        return self._damping_work(v, v - (0.5 * self.dt) * a)
+        work = 0.0 if self.C is None else self._damping_work(v, v - (0.5 * self.dt) * a)
+        if self.dashpots is not None:
+            work += self.comm.allreduce(self.dt * float(v @ (self.dashpots * v)))
+        return work
 
     def _damping_work(self, v: np.ndarray, v_damping: np.ndarray) -> float:
         """``dt v^T C v_damping`` (collective)."""
@@ -521,9 +544,12 @@ class ExplicitSystem:
 
 def initial_acceleration(system: ExplicitSystem, state: State,
                          loads: list[SparseLoad]) -> None:
-    """``a_0 = m^-1 (f_0 - C v_0 - K u_0)`` (the counterpart of
-    :func:`~.integrate.initial_acceleration`; the mass is diagonal)."""
+    """``a_0 = m^-1 (f_0 - C v_0 - d v_0 - K u_0)`` (the counterpart of
+    :func:`~.integrate.initial_acceleration`; the mass is diagonal, ``d`` the system's
+    diagonal dashpots)."""
     res = -system.internal_force(state.u, state.v)
+    if system.dashpots is not None:
+        res -= system.dashpots * state.v
     for dofs, values in loads:
         add_sparse(res, system.r0, dofs, values)
     state.a[:] = res / system.m
@@ -559,13 +585,14 @@ class ExplicitSolver:
 
     def acceleration(self, n: int, u: np.ndarray, v_half: np.ndarray,
                      contact: SparseLoad | None) -> np.ndarray:
-        """``m^-1 (f_n - K u - C v_half)`` with the prescribed and contact loads of step n."""
+        """``m^-1 (f_n - K u - C v_half)`` with the prescribed and contact loads of step n
+        (and the diagonal dashpots at the full step, :meth:`ExplicitSystem.accelerate`)."""
         sys_ = self.system
         rhs = -sys_.internal_force(u, v_half)
         for load in ((None if self.prescribed is None else self.prescribed(n)), contact):
             if load is not None:
                 add_sparse(rhs, sys_.r0, load[0], load[1])
-        return rhs / sys_.m
+        return sys_.accelerate(rhs, v_half)
 
     def step(self, st: State) -> StepInfo:
         """Advance ``st`` from ``t_n`` to ``t_{n+1}`` in place; collective."""

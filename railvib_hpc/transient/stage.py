@@ -699,11 +699,11 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
+        K, M, C, cinfo, dashpots = _assemble(ctx, mesh, dofmap)
         with rep.stage("transient: stability limit"):
             if explicit:
-                system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle, K, M,
-                                                     C, dt)
+                system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle,
+                                                     (K, M, C, dashpots), dt)
             else:
                 partition, dt, limit = _imex_partition(ctx, mesh, dofmap, K, M, C, dt)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
@@ -728,7 +728,7 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo = _assemble(ctx, mesh, dofmap)
+            K, M, C, cinfo, _ = _assemble(ctx, mesh, dofmap)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
@@ -800,33 +800,44 @@ def speed_warning(case: Case, speed: float) -> str:
 
 
 def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
-    """K, M, C (None when nothing damps) and the damping summary (collective)."""
+    """K, M, C (None when nothing damps), the damping summary and, for the explicit engine,
+    the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
+    in C) (collective)."""
+    from ..modal.boundary import dashpot_diagonal
     from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
     problem = Problem.from_case(case)
+    engine = case["transient.engine"]
     with ctx.rep.stage("transient: assembly"):
         # the explicit engines keep the lumped mass on the diagonal alone
         K, M, _ = assemble(mesh, problem, dofmap, comm,
-                           mass=True if case["transient.engine"] == "direct" else "diagonal")
+                           mass=True if engine == "direct" else "diagonal")
+        # the explicit engine takes diagonal dashpots at the full step, apart from C
+        dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
+            if engine == "explicit" else None
+        # (every rank must agree: a rank without face nodes has an all-zero diagonal)
+        if engine == "explicit" and comm.allreduce(dashpots is None, op=_MPI_LOR()):
+            dashpots = None
+        stored = dashpots is None
         C = None
-        if case["transient.engine"] != "direct":
+        if engine != "direct":
             # Rayleigh damping applied, not stored, where it can be (the explicit engines)
             from .explicit import lumped_diagonal
 
             C, cinfo = rayleigh_operator(mesh, problem, dofmap, comm, K,
-                                         lumped_diagonal(M, comm))
+                                         lumped_diagonal(M, comm), dashpots=stored)
         if C is None:
-            C, cinfo = assemble_damping(mesh, problem, dofmap, comm, K, M)
-        if case["damping.model"] == "none" and cinfo["dashpot_nodes"] == 0 \
+            C, cinfo = assemble_damping(mesh, problem, dofmap, comm, K, M, dashpots=stored)
+        if case["damping.model"] == "none" and (cinfo["dashpot_nodes"] == 0 or not stored) \
                 and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
             destroy_damping(C)
             C = None
-    return K, M, C, cinfo
+    return K, M, C, cinfo, dashpots
 
 
-def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, K, M, C,
-                     dt_band: float) -> tuple:
+def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle,
+                     matrices: tuple, dt_band: float) -> tuple:
     """The explicit engine's system, its step and a line on its stability limit.
 
     The limit is :data:`~.explicit.STEP_SAFETY` of the critical step of the model's largest
@@ -844,7 +855,9 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle, 
     )
 
     case, comm = ctx.case, ctx.comm
-    system = ExplicitSystem(K, M, C, 0.0, comm)      # (its step is set below)
+    K, M, C, dashpots = matrices
+    # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
+    system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots)
     lim = stability_limit(K, system.m, C, comm)
     critical = lim.dt_critical
     where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
@@ -938,6 +951,12 @@ def _MPI_MIN():
     from mpi4py import MPI
 
     return MPI.MIN
+
+
+def _MPI_LOR():
+    from mpi4py import MPI
+
+    return MPI.LOR
 
 
 def _initial_state(init: dict, comm, rep: Reporter) -> State:

@@ -14,7 +14,8 @@ derived in :meth:`~railvib_hpc.transient.explicit.ExplicitSystem.scheme_energy` 
   lost equals the sum of :meth:`step_dissipation` to round-off, and most of the energy
   leaves. The work differs from ``dt v_n^T C v_n`` (the rate at the full step) by far more
   than round-off wherever the damping is explicit, and equals it where all of it is
-  implicit (the IMEX engine's face dashpots).
+  implicit (the IMEX engine's face dashpots) or at the full step (the explicit engine's,
+  :class:`~railvib_hpc.transient.explicit.ExplicitSystem`'s ``dashpots``).
 
 The round-off bound: each step's energy is a sum of products of the state, accumulated
 once per step; its relative rounding error is a few ``eps`` times the ratio of the
@@ -54,7 +55,7 @@ T_END = 0.3
 def _run(engine: str, closed: bool, damping: str = "none"):
     """Step the box; returns the discrete energies ``e``, the cumulative damping work
     ``work`` (and ``naive``: ``dt v_n^T C v_n``), the physical energies, per step."""
-    from railvib_hpc.modal.boundary import face_node_sets
+    from railvib_hpc.modal.boundary import dashpot_diagonal, face_node_sets
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.petsc import assemble, assemble_damping, assemble_partition
     from railvib_hpc.petsc_env import init_petsc
@@ -86,16 +87,19 @@ def _run(engine: str, closed: bool, damping: str = "none"):
     dofmap = build_dofmap(mesh, comm.size, rules=CLOSED if closed else {},
                           node_sets=face_node_sets(mesh))
     K, M, _ = assemble(mesh, case, dofmap, comm)
-    C = None if closed and damping == "none" else assemble_damping(mesh, case, dofmap, comm,
-                                                                   K, M)[0]
+    # the explicit engine takes the faces' dashpots apart, at the full step (as the stage)
+    apart = engine == "explicit" and not closed
+    dashpots = dashpot_diagonal(mesh, case, dofmap, comm.rank) if apart else None
+    C = None if (closed or apart) and damping == "none" else assemble_damping(
+        mesh, case, dofmap, comm, K, M, dashpots=not apart)[0]
     m = lumped_diagonal(M, comm)
     minus = K_I = C_I = None
     if engine == "imex":
         K_I, C_I = assemble_partition(mesh, case, dofmap, comm, ("slab",),
                                       boundary=True)
         minus = (K_I, C_I)
-    # the allowed step of the engine: with absorbing faces on the explicit engine, the
-    # face dashpots' limit (the whole damped map, not the largest mode's ratio)
+    # the allowed step of the engine (the damping left in C; the dashpots apart do not
+    # limit it)
     lim = stability_limit(K, m, C, comm, minus=minus, damping_factor=(
         DAMPING_STABILITY_FACTOR if engine == "imex" else 1.0))
     dt = lim.dt_allowed
@@ -103,7 +107,7 @@ def _run(engine: str, closed: bool, damping: str = "none"):
         system = ImexSystem(K, M, C, K_I, C_I, dt, comm)
         solver = DirectSolver(system)
     else:
-        system = ExplicitSystem(K, M, C, dt, comm)
+        system = ExplicitSystem(K, M, C, dt, comm, dashpots=dashpots)
         solver = ExplicitSolver(system)
     r0, r1 = system.r0, system.r1
     n = r1 - r0
@@ -127,8 +131,12 @@ def _run(engine: str, closed: bool, damping: str = "none"):
         energy.append(system.scheme_energy(st.u, st.v, st.a))
         physical.append(system.energy(st.u, st.v))
         work.append(work[-1] + system.step_dissipation(previous, (st.v, st.a)))
-        if C is not None:     # the continuous dissipation rate v^T C v at t_n, times dt
-            naive.append(naive[-1] + system._damping_work(st.v, st.v))
+        # the continuous dissipation rate v^T C v at t_n, times dt (dashpots included)
+        if C is not None or dashpots is not None:
+            rate = 0.0 if C is None else system._damping_work(st.v, st.v)
+            if dashpots is not None:
+                rate += comm.allreduce(dt * float(st.v @ (dashpots * st.v)))
+            naive.append(naive[-1] + rate)
     solver.destroy()
     system.destroy()
     for A in (K, M, C):
@@ -172,8 +180,9 @@ def test_energy_leaving_equals_the_damping_work(engine, damping):
           f"{e[-1] / e[0]:.2e} (physical {phys[-1] / phys[0]:.2e}); dt v^T C v misses by {off:.2e}")
     assert residual <= _tolerance(steps)
     assert phys[-1] < 0.02 * phys[0]
-    if engine == "imex" and damping == "none":
-        # all the damping is the implicit faces' dashpots, at v_n: the rate v_n^T C v_n
+    if damping == "none":
+        # all the damping is the faces' dashpots, at v_n (implicit in the IMEX engine, at
+        # the full step in the explicit one): the rate v_n^T C v_n
         assert off <= _tolerance(steps)
     else:
         # explicit damping takes another velocity: the rate at v_n misses by far more

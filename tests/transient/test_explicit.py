@@ -226,14 +226,17 @@ def _dense(A) -> np.ndarray:
     return A.convert("dense").getDenseArray().copy()
 
 
-def _central_difference_map(K: np.ndarray, C: np.ndarray, m: np.ndarray, h: float) -> np.ndarray:
-    """The dense one-step map of ``(u, v, a)`` of the module's scheme, the damping at the
-    half-step velocity (written out independently of the engine)."""
+def _central_difference_map(K: np.ndarray, C: np.ndarray, m: np.ndarray, h: float,
+                            d: np.ndarray | None = None) -> np.ndarray:
+    """The dense one-step map of ``(u, v, a)`` of the module's scheme, the damping C at the
+    half-step velocity and the diagonal ``d`` at the full step (written out independently
+    of the engine)."""
     n = m.size
+    d = np.zeros(n) if d is None else d
     eye, zero = np.eye(n), np.zeros((n, n))
     u1 = np.hstack([eye, h * eye, 0.5 * h * h * eye])
     vh = np.hstack([zero, eye, 0.5 * h * eye])
-    a1 = -(K @ u1 + C @ vh) / m[:, None]
+    a1 = -(K @ u1 + C @ vh + d[:, None] * vh) / (m + 0.5 * h * d)[:, None]
     return np.vstack([u1, vh + 0.5 * h * a1, a1])
 
 
@@ -295,3 +298,92 @@ def test_proportional_damping_keeps_the_largest_modes_limit():
     assert not lim.damping_limited
     assert lim.dt_critical == pytest.approx(critical_step(lim.omega_max, lim.xi), rel=1e-5)
     model.destroy()
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("damping", ["none", "rayleigh"])
+def test_dashpots_at_the_full_step_do_not_limit_it(damping):
+    """The same box, the dashpots taken apart as a diagonal at the full-step velocity (what
+    the stage does, :func:`~railvib_hpc.modal.boundary.dashpot_diagonal`): the limit is that
+    of K and the Rayleigh damping alone, the dense map is stable at its allowed step and
+    unstable 2 % above the critical one, and 200 engine steps of a pulse match the dense
+    recursion to round-off on 1 and 2 ranks."""
+    from railvib_hpc.modal.boundary import dashpot_diagonal, face_node_sets
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.transient.explicit import (
+        ExplicitSolver,
+        ExplicitSystem,
+        lumped_diagonal,
+        stability_limit,
+    )
+    from railvib_hpc.transient.integrate import State, gather_values
+
+    faces = [f"boundary.{f}=absorbing" for f in ("x_min", "x_max", "y_min", "y_max", "base")]
+    extra = (["damping.model=rayleigh", "modal.damping_ratio=0.05", "damping.f1=5",
+              "damping.f2=80"] if damping == "rayleigh" else ["damping.model=none"])
+    case = soil_case("modal.lumped_mass=true", *faces, *extra)
+    problem = Problem.from_case(case)
+    mesh = box_mesh((4, 4, 3), (4.0, 4.0, 3.0))
+    sets = face_node_sets(mesh)
+    dofmap = build_dofmap(mesh, comm.size, rules={}, node_sets=sets)
+    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal")
+    C = (assemble_damping(mesh, problem, dofmap, comm, K, M, dashpots=False)[0]
+         if damping == "rayleigh" else None)
+    d_local = dashpot_diagonal(mesh, problem, dofmap, comm.rank)
+    assert d_local is not None and d_local.max() > 0
+    lim = stability_limit(K, lumped_diagonal(M, comm), C, comm)
+    # the dense reference, on this rank alone
+    dofmap1 = build_dofmap(mesh, 1, rules={}, node_sets=sets)
+    K1, M1, _ = assemble(mesh, problem, dofmap1, MPI.COMM_SELF)
+    Kd, m = _dense(K1), np.diag(_dense(M1)).copy()
+    if C is not None:
+        C1 = assemble_damping(mesh, problem, dofmap1, MPI.COMM_SELF, K1, M1, dashpots=False)[0]
+        Cd = _dense(C1)
+        C1.destroy()
+    else:
+        Cd = np.zeros_like(Kd)
+    d = dashpot_diagonal(mesh, problem, dofmap1, 0)
+    for A in (K1, M1):
+        A.destroy()
+
+    def rho(h: float) -> float:
+        return float(np.abs(np.linalg.eigvals(_central_difference_map(Kd, Cd, m, h, d))).max())
+
+    print(f"{damping}: critical {lim.dt_critical:.4e} s (dashpots apart); rho at the allowed "
+          f"{rho(lim.dt_allowed):.12f}, 2 % above the critical {rho(1.02 * lim.dt_critical):.6f}")
+    assert not lim.damping_limited
+    assert rho(lim.dt_allowed) <= 1.0 + 1e-9
+    assert rho(1.02 * lim.dt_critical) > 1.0 + 1e-6
+    # the engine against the dense recursion: a pulse on the top's middle node
+    dt = lim.dt_allowed
+    system = ExplicitSystem(K, M, C, dt, comm, dashpots=d_local)
+    top = int(np.argmin(np.linalg.norm(mesh.points - [2.0, 2.0, 3.0], axis=1)))
+    dof = int(dofmap.index[top, 2])
+
+    def load(n):
+        return np.array([dof]), np.array([-1e4 * float(smooth_pulse(n * dt, 20 * dt))])
+
+    solver = ExplicitSolver(system, load)
+    nl = system.n_local
+    st = State(0, np.zeros(nl), np.zeros(nl), np.zeros(nl))
+    T = _central_difference_map(Kd, Cd, m, dt, d)
+    n = m.size
+    dof1 = int(dofmap1.index[top, 2])
+    x = np.zeros(3 * n)
+    m_eff = m + 0.5 * dt * d
+    for k in range(200):
+        solver.step(st)
+        a_f = np.zeros(n)
+        a_f[dof1] = load(k + 1)[1][0] / m_eff[dof1]
+        x = T @ x + np.concatenate([np.zeros(n), 0.5 * dt * a_f, a_f])
+    # global DOF numbers differ between the two maps only in their order: compare by node
+    nodes = np.flatnonzero(dofmap.index[:, 2] >= 0)
+    got = gather_values(comm, st.u, system.r0, dofmap.index[nodes, 2])
+    want = x[:n][dofmap1.index[nodes, 2]]
+    assert np.abs(want).max() > 0
+    assert np.abs(got - want).max() <= 1e-10 * np.abs(want).max()
+    system.destroy()
+    for A in (K, M, C):
+        if A is not None:
+            A.destroy()

@@ -14,7 +14,9 @@ counts guaranteeing none is missed.
 from __future__ import annotations
 
 import time
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -77,43 +79,69 @@ def _configure(K, M, comm: MPI.Comm, n_modes: int, f_max: float, shift_hz: float
     return eps
 
 
-def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, shift_hz: float = 0.0,
-                tol: float = 1e-8, max_it: int = 1000, mpd: int = 0,
-                method: str = "block_lanczos", block_size: int = 32, max_basis: int = 0,
-                monitor=None, static_rhs: np.ndarray | None = None,
-                out_of_core: str = "auto", bands=None, assemble=None,
-                log=None, progress=None) -> Eigenpairs | None:
-    """Extract mass-normalised modes.
+@dataclass(frozen=True)
+class ModalProblem:
+    """The eigenproblem ``K phi = lambda M phi``: what is asked, not how it is solved.
 
-    Parameters
+    The problem half of the problem/solver split (:class:`ModalSolver` is the other),
+    as Firedrake's ``LinearEigenproblem`` / ``LinearEigensolver``.
+
+    Attributes
     ----------
     K, M
         Assembled PETSc matrices (symmetric, K positive definite after constraints).
     comm
         Communicator of the matrices.
     n_modes
-        Number of modes (used when ``f_max`` is 0).
+        Number of modes (used when ``f_max`` is 0): the ``n_modes`` closest to the shift.
     f_max
         If > 0, all modes with frequency in [shift_hz, f_max] (spectrum slicing).
     shift_hz
         Shift of the spectral transformation, as a frequency.
-    tol, max_it
-        Relative residual tolerance and maximum restarts.
-    mpd
-        Maximum projected dimension (bounds memory); 0 lets SLEPc decide.
+    static_rhs
+        (n_local_dofs, k) right-hand sides solved with the factorization of K when the
+        block solver factors K itself (shift 0); the solutions are returned in
+        ``Eigenpairs.static`` (None otherwise: factor K separately).
+    assemble
+        ``assemble(subcomm) -> (K, M)``: the matrices on a sub-communicator (band groups).
+
+    Examples
+    --------
+    >>> ModalProblem(K=None, M=None, comm=None, f_max=44.0).sliced
+    True
+    """
+
+    K: Any
+    M: Any
+    comm: Any
+    n_modes: int = 300
+    f_max: float = 0.0
+    shift_hz: float = 0.0
+    static_rhs: np.ndarray | None = None
+    assemble: Callable | None = None
+
+    @property
+    def sliced(self) -> bool:
+        """Whether every mode below ``f_max`` is asked for (else ``n_modes`` of them)."""
+        return self.f_max > 0
+
+
+@dataclass(frozen=True)
+class ModalSolver:
+    """How an eigenproblem is solved: the solver half of the problem/solver split.
+
+    Attributes
+    ----------
     method
         ``"block_lanczos"`` (block shift-invert Lanczos, :mod:`.block_lanczos`; with
         ``f_max``: band-sliced, :mod:`.band_solve`) or ``"krylovschur"`` (SLEPc; with
         ``f_max``: SLEPc spectrum slicing).
+    tol, max_it
+        Relative residual tolerance and maximum restarts.
+    mpd
+        Maximum projected dimension (bounds memory); 0 lets SLEPc decide.
     block_size, max_basis
         Block Lanczos: right-hand sides per solve and restart size (0: automatic).
-    monitor
-        Progress callback ``monitor(n_converged, n_wanted, basis_size)`` (band-sliced:
-        ``monitor(done, total, basis_size, label=...)`` over all bands).
-    static_rhs
-        (n_local_dofs, k) right-hand sides solved with the factorization of K
-        when the block solver factors K itself (shift 0); the solutions are
-        returned in ``Eigenpairs.static`` (None otherwise: factor K separately).
     out_of_core
         MUMPS out-of-core factorization: ``"auto"`` (block Lanczos: when the in-core
         factor would not fit in memory but the out-of-core one does), ``"always"`` or
@@ -122,8 +150,9 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         :class:`~railvib_hpc.modal.band_solve.BandSettings` of a band-sliced solve
         (``f_max`` with block Lanczos); None: one band plan with the defaults and a
         temporary cache folder.
-    assemble
-        ``assemble(subcomm) -> (K, M)``: the matrices on a sub-communicator (band groups).
+    monitor
+        Progress callback ``monitor(n_converged, n_wanted, basis_size)`` (band-sliced:
+        ``monitor(done, total, basis_size, label=...)`` over all bands).
     log
         Band-sliced: ``log(line)`` gets one line per solved band (modes, time, memory).
     progress
@@ -132,44 +161,92 @@ def solve_modes(K, M, comm: MPI.Comm, n_modes: int = 300, f_max: float = 0.0, sh
         purification, Rayleigh-Ritz, residual checks, round-off floors, the band merge
         (:data:`~railvib_hpc.modal.block_lanczos.Progress`).
 
+    Examples
+    --------
+    >>> ModalSolver(method="krylovschur", tol=1e-10).block_size
+    32
+    """
+
+    method: str = "block_lanczos"
+    tol: float = 1e-8
+    max_it: int = 1000
+    mpd: int = 0
+    block_size: int = 32
+    max_basis: int = 0
+    out_of_core: str = "auto"
+    bands: Any = None
+    monitor: Callable | None = None
+    log: Callable | None = None
+    progress: Callable | None = None
+
+    def solve(self, problem: ModalProblem) -> Eigenpairs | None:
+        """Extract the mass-normalised modes of ``problem`` (collective on its comm).
+
+        Returns None for a band-only run (``bands.band_only``: one band cached).
+
+        Raises
+        ------
+        EigenSolveError
+            When fewer than the requested modes converged, or when a mode's true relative
+            residual is above ``tol`` (and above its round-off floor, or above
+            ``sqrt(tol)``): see :func:`convergence_verdict`. Round-off-limited modes come
+            back with ``Eigenpairs.warnings``.
+        """
+        from petsc4py import PETSc
+
+        K, M, comm = problem.K, problem.M, problem.comm
+        n_modes, f_max, tol = problem.n_modes, problem.f_max, self.tol
+        n_global = K.getSize()[0]
+        if f_max <= 0 and n_modes >= n_global:
+            raise EigenSolveError(f"modal.n_modes = {n_modes}: must be smaller than the number "
+                                  f"of free DOFs ({n_global})")
+        if self.method == "block_lanczos" and f_max <= 0:
+            from .block_lanczos import effective_block
+
+            b = effective_block(PETSc.Options(PREFIX).getInt("bl_block_size", self.block_size),
+                                n_global)
+            if n_modes + 3 * b > n_global:      # block Lanczos: nev + 2 b <= basis <= n - b
+                raise EigenSolveError(
+                    f"modal.n_modes = {n_modes}: block Lanczos with blocks of {b} finds at most "
+                    f"{max(n_global - 3 * b, 0)} modes of {n_global} free DOFs (n_modes + 3 x "
+                    "block size <= DOFs); use fewer modes or modal.method = 'krylovschur'")
+            return _solve_block(K, M, comm, n_modes, problem.shift_hz, tol, self.max_it,
+                                self.block_size, self.max_basis, self.monitor,
+                                problem.static_rhs, self.out_of_core, self.progress)
+        if self.method == "block_lanczos":
+            return _solve_bands(K, M, comm, f_max, tol, self.max_it, self.block_size,
+                                self.monitor, problem.static_rhs, self.out_of_core, self.bands,
+                                problem.assemble, self.log, self.progress)
+        ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
+        set_ooc = self.out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
+        if set_ooc:
+            PETSc.Options().setValue(ooc_name, 1)
+        try:
+            return _solve_slepc(K, M, comm, n_modes, f_max, problem.shift_hz, tol, self.max_it,
+                                self.mpd, self.monitor, self.progress)
+        finally:
+            if set_ooc:
+                PETSc.Options().delValue(ooc_name)
+
+
+#: The keywords of :func:`solve_modes` that belong to the problem (the rest: the solver).
+_PROBLEM_KEYS = ("n_modes", "f_max", "shift_hz", "static_rhs", "assemble")
+
+
+def solve_modes(K, M, comm: MPI.Comm, **options) -> Eigenpairs | None:
+    """Extract mass-normalised modes: ``ModalSolver(...).solve(ModalProblem(K, M, comm,
+    ...))`` in one call, the keywords of each going to it (see :class:`ModalProblem` and
+    :class:`ModalSolver` for them).
+
     Raises
     ------
+    TypeError
+        For a keyword neither takes.
     EigenSolveError
-        When fewer than the requested modes converged, or when a mode's true relative
-        residual is above ``tol`` (and above its round-off floor, or above ``sqrt(tol)``):
-        see :func:`convergence_verdict`. Round-off-limited modes come back with
-        ``Eigenpairs.warnings``.
+        As :meth:`ModalSolver.solve`.
     """
-    from petsc4py import PETSc
-
-    n_global = K.getSize()[0]
-    if f_max <= 0 and n_modes >= n_global:
-        raise EigenSolveError(f"modal.n_modes = {n_modes}: must be smaller than the number of "
-                              f"free DOFs ({n_global})")
-    if method == "block_lanczos" and f_max <= 0:
-        from .block_lanczos import effective_block
-
-        b = effective_block(PETSc.Options(PREFIX).getInt("bl_block_size", block_size), n_global)
-        if n_modes + 3 * b > n_global:      # block Lanczos: nev + 2 b <= basis <= n - b
-            raise EigenSolveError(
-                f"modal.n_modes = {n_modes}: block Lanczos with blocks of {b} finds at most "
-                f"{max(n_global - 3 * b, 0)} modes of {n_global} free DOFs (n_modes + 3 x "
-                "block size <= DOFs); use fewer modes or modal.method = 'krylovschur'")
-        return _solve_block(K, M, comm, n_modes, shift_hz, tol, max_it, block_size, max_basis,
-                            monitor, static_rhs, out_of_core, progress)
-    if method == "block_lanczos":
-        return _solve_bands(K, M, comm, f_max, tol, max_it, block_size, monitor, static_rhs,
-                            out_of_core, bands, assemble, log, progress)
-    ooc_name = f"{PREFIX}st_mat_mumps_icntl_22"
-    set_ooc = out_of_core == "always" and not PETSc.Options().hasName(ooc_name)
-    if set_ooc:
-        PETSc.Options().setValue(ooc_name, 1)
-    try:
-        return _solve_slepc(K, M, comm, n_modes, f_max, shift_hz, tol, max_it, mpd, monitor,
-                            progress)
-    finally:
-        if set_ooc:
-            PETSc.Options().delValue(ooc_name)
+    problem = {k: options.pop(k) for k in _PROBLEM_KEYS if k in options}
+    return ModalSolver(**options).solve(ModalProblem(K, M, comm, **problem))
 
 
 def _solve_bands(K, M, comm: MPI.Comm, f_max: float, tol: float, max_it: int, block_size: int,

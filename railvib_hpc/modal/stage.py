@@ -34,7 +34,7 @@ from ..problem import Problem
 from ..resources import peak_memory_gb
 from .boundary import problem_dofmap
 from .dofmap import NODE_ARRAY_CHUNK
-from .eigen import solve_modes
+from .eigen import ModalProblem, ModalSolver
 from .elements import nodal_masses
 from .energy import group_strain_energies
 from .petsc import assemble
@@ -209,16 +209,17 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
         static_rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
     with rep.stage("eigensolve"):
         progress = EigenProgress(rep)
-        result = solve_modes(
+        eigenproblem = ModalProblem(
             K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
-            shift_hz=case["modal.shift_hz"], tol=case["modal.tol"],
-            max_it=case["modal.max_restarts"], method=case["modal.method"],
-            block_size=case["modal.block_size"],
-            max_basis=_max_basis(case, dofmap.n_dofs), monitor=progress,
-            static_rhs=static_rhs, out_of_core=case["modal.out_of_core"],
-            bands=band_settings(ctx), assemble=lambda sub: assemble(
-                mesh, problem, problem_dofmap(mesh, problem, sub.size), sub)[:2], log=rep.info,
-            progress=progress.phase)
+            shift_hz=case["modal.shift_hz"], static_rhs=static_rhs,
+            assemble=lambda sub: assemble(
+                mesh, problem, problem_dofmap(mesh, problem, sub.size), sub)[:2])
+        solver = ModalSolver(
+            method=case["modal.method"], tol=case["modal.tol"],
+            max_it=case["modal.max_restarts"], block_size=case["modal.block_size"],
+            max_basis=_max_basis(case, dofmap.n_dofs), out_of_core=case["modal.out_of_core"],
+            bands=band_settings(ctx), monitor=progress, log=rep.info, progress=progress.phase)
+        result = solver.solve(eigenproblem)
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
         M.destroy()

@@ -29,7 +29,7 @@ from ..config import Case
 from ..io.locks import output_lock
 from ..log import Reporter
 from ..parallel import on_root
-from . import convergence, mitigation, modes, reflection, speed, thesis
+from . import convergence, mitigation, modes, reflection, speed, thesis, uncertainty
 from .common import (
     FAILED_NAME,
     SHARED_DIR,
@@ -52,7 +52,8 @@ if TYPE_CHECKING:
 
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
-                 "speed": speed, "thesis": thesis, "mitigation": mitigation}
+                 "speed": speed, "thesis": thesis, "mitigation": mitigation,
+                 "uncertainty": uncertainty}
 
 
 def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
@@ -168,6 +169,8 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     files = write_report(root, kind, {"name": case["case.name"],
                                       "file": str(case.path or "<defaults>")},
                          settings, entries, analysis, figs)
+    if hasattr(mod, "write_results"):                 # e.g. the uncertainty study's HDF5
+        files.update(mod.write_results(analysis, root))
     for t in analysis.get("tables", []):
         if t["rows"]:
             rep.info(f"{t['title']}:\n" + text_table(t["head"], t["rows"]))
@@ -313,6 +316,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                 failed.append(v.name)
             else:
                 computed.append(v.name)
+            if hasattr(STUDY_MODULES[kind], "progress"):        # statistics so far
+                on_root(lambda: rep.info(STUDY_MODULES[kind].progress(
+                    plan, status(plan, case, root, cfg)[1], cfg)), comm)
     merged = None
     if merge_only or not (chosen or prepare):
         with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):

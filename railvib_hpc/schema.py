@@ -1075,7 +1075,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "[m], nu (Matern smoothness, default 1.5)"),
         "realisation": Param(0, "int", "-", "realisation of the random fields the model "
                              "uses: 0 none (the nominal layers), k >= 1 the k-th (seeded by "
-                             "uncertainty.seed + k; the study sets it per sample)", "nonneg"),
+                             "uncertainty.seed and k; the study sets it per sample)", "nonneg"),
     },
     # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
     # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.

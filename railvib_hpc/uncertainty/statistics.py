@@ -67,7 +67,9 @@ def wilson(k: int, n: int, confidence: float = 0.95) -> dict[str, float]:
     den = 1.0 + z * z / n
     mid = (p + z * z / (2 * n)) / den
     half = z / den * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return {"p": p, "low": max(0.0, mid - half), "high": min(1.0, mid + half), "k": k, "n": n}
+    low = 0.0 if k == 0 else max(0.0, mid - half)        # exact ends, not round-off
+    high = 1.0 if k == n else min(1.0, mid + half)
+    return {"p": p, "low": low, "high": high, "k": k, "n": n}
 
 
 def exceedance(values: Sequence[float], limit: float, confidence: float = 0.95

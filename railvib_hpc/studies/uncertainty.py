@@ -97,9 +97,12 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
         variants.append(Variant(name=f"s{k:0{width}d}", overrides=ov,
                                 parameter={"sample": k, **{m.name: float(x)
                                                            for m, x in zip(found, row)}}))
+    from ..assess.standards import BUILDING_USES
+
     return StudyPlan("uncertainty", tuple(variants),
                      info={"method": case["uncertainty.method"], "parameters":
-                           [m.name for m in found]})
+                           [m.name for m in found],
+                           "vc_class": BUILDING_USES[case["assessment.building_use"]]["vc"]})
 
 
 def _names(plan_: StudyPlan) -> list[str]:
@@ -180,9 +183,31 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
     verdict = _verdict(stats_rows, sobol, len(done), conf)
     return {"title": TITLE, "verdict": verdict, "tables": tables, "rows": stats_rows,
             "sobol": sobol, "convergence": conv, "method": method,
+            "bands": _band_percentiles(done, results, probes, rows_idx, plan_),
+            "vc_class": plan_.info.get("vc_class"),
             "parameters": _names(plan_), "samples_finished": len(done),
             "design": [[v.parameter[k] for k in _names(plan_)] for v in plan_.variants],
             "outputs": {p: {q: out[p][q] for q in OUTPUTS} for p in probes}}
+
+
+def _band_percentiles(done: list, results: dict, probes: list[str], rows_idx: np.ndarray,
+                      plan_: StudyPlan) -> dict:
+    """P5, P50, P95 of the one-third-octave RMS total acceleration per band [m/s²] over
+    the independent finished samples, on the bands every one of them resolves."""
+    keep = {plan_.variants[i].name for i in rows_idx} & {v.name for v in done}
+    out = {}
+    for p in probes:
+        specs = [results[n]["spectra"].get(p) for n in sorted(keep)]
+        specs = [sp for sp in specs if sp and sp.get("bands_hz")]
+        if len(specs) < 2:
+            continue
+        common = sorted(set.intersection(*(set(sp["bands_hz"]) for sp in specs)))
+        a = np.array([[dict(zip(sp["bands_hz"], sp["acc_rms"]["total"]))[f] for f in common]
+                      for sp in specs])
+        pc = np.percentile(a, [5.0, 50.0, 95.0], axis=0)
+        out[p] = {"bands_hz": common, "P5": pc[0].tolist(), "P50": pc[1].tolist(),
+                  "P95": pc[2].tolist()}
+    return out
 
 
 def _sobol(plan_: StudyPlan, out: dict, probes: list[str], conf: float, n_done: int) -> dict:
@@ -311,10 +336,43 @@ def write_results(analysis: dict, root: Path) -> dict[str, Path]:
 
 
 def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
-    """The convergence of P95 and of the exceedance probability per probe."""
+    """The convergence of P95 and of the exceedance probability per probe, and the
+    one-third-octave percentile bands against the VC curve."""
     conv = analysis.get("convergence") or {}
     if not conv:
         return []
+    return [_convergence_figure(conv, fig_dir),
+            *([_bands_figure(analysis["bands"], analysis.get("vc_class"), fig_dir)]
+              if analysis.get("bands") else [])]
+
+
+def _bands_figure(bands: dict, vc_class: str | None, fig_dir: Path) -> Path:
+    """P5-P95 of the band spectra per probe, the median, and the building's VC curve as an
+    acceleration at the band centres (2 pi f v_VC)."""
+    from ..assess.standards import vc_curve
+
+    probes = list(bands)[:4]
+    fig = figure(figsize=(11, 7))
+    axes = np.atleast_1d(fig.subplots(2, 2)).ravel()
+    for ax, p in zip(axes, probes):
+        b = bands[p]
+        f = np.asarray(b["bands_hz"])
+        ax.fill_between(f, b["P5"], b["P95"], alpha=0.3, label="P5–P95")
+        ax.loglog(f, b["P50"], "o-", ms=3, label="P50")
+        if vc_class:
+            ax.loglog(f, 2 * np.pi * f * vc_curve(f, vc_class), "k--", lw=1,
+                      label=f"VC {vc_class} (as 2πf v)")
+        ax.set_title(p)
+        ax.set_xlabel("one-third-octave band [Hz]")
+        ax.set_ylabel("RMS acceleration [m/s²]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=7)
+    for ax in axes[len(probes):]:
+        ax.set_visible(False)
+    return save(fig, fig_dir / "uncertainty_bands.png")
+
+
+def _convergence_figure(conv: dict, fig_dir: Path) -> Path:
     fig = figure(figsize=(11, 4.2))
     a1, a2 = fig.subplots(1, 2)
     for p, es in conv.items():
@@ -333,4 +391,4 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
         ax.set_xlabel("samples")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
-    return [save(fig, fig_dir / "uncertainty_convergence.png")]
+    return save(fig, fig_dir / "uncertainty_convergence.png")

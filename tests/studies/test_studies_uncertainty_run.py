@@ -19,7 +19,7 @@ from railvib_hpc.studies.runner import execute_study
 
 comm = MPI.COMM_WORLD
 SHORT = ["--set", "vehicle.x_start=2.7", "--set", "vehicle.x_end=4.2", "--set",
-         "output.dt=0.002"]
+         "vehicle.t_after=0.5", "--set", "output.dt=0.002"]
 LAYERS = ('soil.layers=[{thickness = 1.5, c_s = 150.0, nu = 0.3, rho = 1800.0}, '
           '{thickness = 0.0, c_s = 250.0, nu = 0.3, rho = 1900.0}]')
 PARAMS = ('uncertainty.parameter=[{key="soil.layers[1].c_s", distribution="lognormal", '
@@ -65,6 +65,10 @@ def test_sobol_study_as_array_tasks_then_merge(tmp_path, capsys):
     assert set(sob) == {"soil.layers[1].c_s", "pads.kz"}
     assert all(np.isfinite(v["ST"]) for v in sob.values())
     assert "Sobol' indices of slab1 peak |a|" in (root / "report.md").read_text()
+    bands = a["bands"]["slab1"]                  # the percentile bands of the spectra
+    assert bands["bands_hz"] and np.all(np.diff([bands[q] for q in ("P5", "P50", "P95")],
+                                                axis=0) >= 0)
+    assert (root / "figures" / "uncertainty_bands.png").exists()
     with h5py.File(root / "uncertainty.h5") as f:
         assert f["design"].shape == (8, 2)
         assert np.allclose(f["slab1/peak_abs_a"][()],

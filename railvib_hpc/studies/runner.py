@@ -309,6 +309,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                      "(nothing to prepare)")
         elif prepare or any(v.shared for v in todo):
             prepare_shared(plan, case, root, comm, rep)
+        progress = getattr(STUDY_MODULES[kind], "progress", None)
+        # the finished results, kept up to date for the statistics printed after each one
+        known = on_root(lambda: status(plan, case, root, cfg)[1], comm) if progress else {}
         for v in todo:
             with rep.stage(f"{kind}/{v.name}"):
                 res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait)
@@ -316,9 +319,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                 failed.append(v.name)
             else:
                 computed.append(v.name)
-            if hasattr(STUDY_MODULES[kind], "progress"):        # statistics so far
-                on_root(lambda: rep.info(STUDY_MODULES[kind].progress(
-                    plan, status(plan, case, root, cfg)[1], cfg)), comm)
+                known[v.name] = res
+            if progress is not None:
+                on_root(lambda: rep.info(progress(plan, known, cfg)), comm)
     merged = None
     if merge_only or not (chosen or prepare):
         with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):

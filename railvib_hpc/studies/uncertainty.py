@@ -6,7 +6,9 @@ copula) and random fields of the soil layers (``[[uncertainty.field]]``). The de
 (:mod:`railvib_hpc.uncertainty.sampling`, ``uncertainty.method``: ``lhs``, ``mc`` or
 ``sobol``) is drawn from ``uncertainty.seed``: sample ``k`` is the variant ``s<k>`` with
 the sampled keys as overrides (a layer's entries as one ``soil.layers`` override) and, with
-fields, ``uncertainty.realisation = k + 1``. Every variant builds its own model; the study
+fields, ``uncertainty.realisation = k + 1``; the design itself is taken out of the sample's
+case (:data:`DESIGN_RESET`), so growing an ``mc`` or ``sobol`` design later reuses the
+samples already finished. Every variant builds its own model; the study
 resumes, runs as an array (``--variant``) and merges (``--merge``) like the others.
 
 Analysis, per building probe (``probes``) and per standard of ``[assessment]``:
@@ -42,6 +44,12 @@ from .report import figure, fmt, pct, save
 TITLE = "Uncertainty study"
 #: The outputs of the Sobol' indices and the convergence table, per probe.
 OUTPUTS = ("peak |a|", "max utilisation")
+#: Overrides that take the design out of every sample's case (it is a plain case of the
+#: sampled values; the fields, the seed and the realisation stay): a sample's digest is
+#: that of its own inputs, so a design grown later (``mc``, ``sobol``: the first samples
+#: stay the same) reuses the samples already finished.
+DESIGN_RESET = ("uncertainty.parameter=[]", "uncertainty.correlation=[]",
+                'uncertainty.method="lhs"', "uncertainty.samples=1")
 
 
 def _toml(v: Any) -> str:
@@ -91,7 +99,7 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     width = max(4, len(str(len(values) - 1)))
     variants = []
     for k, row in enumerate(values):
-        ov = sample_overrides(case, keys, row)
+        ov = DESIGN_RESET + sample_overrides(case, keys, row)
         if fields:
             ov = (*ov, f"uncertainty.realisation={k + 1}")
         variants.append(Variant(name=f"s{k:0{width}d}", overrides=ov,

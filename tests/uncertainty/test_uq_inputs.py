@@ -113,3 +113,20 @@ def test_samples_become_variant_overrides():
     assert again.variants == plan.variants                     # seeded: reproducible
     lhs = np.array([[p.parameter[m.name] for m in found] for p in plan.variants])
     assert np.allclose(lhs, values)
+
+
+@pytest.mark.parametrize("method, first, more", [("mc", 3, 5), ("sobol", 2, 4)])
+def test_a_grown_design_keeps_its_first_samples(method, first, more):
+    params = [{"key": "pads.kz", "distribution": "lognormal", "cov": 0.3},
+              {"key": "vehicle.speed", "distribution": "uniform", "low": 20.0, "high": 40.0}]
+
+    def plan_of(n):
+        c = _case(params, **{"uncertainty.method": method, "uncertainty.samples": n})
+        return c, make_plan("uncertainty", c, study_settings("uncertainty", case=c))
+
+    (c1, small), (c2, big) = plan_of(first), plan_of(more)
+    k = len(small.variants)
+    assert [v.overrides for v in big.variants[:k]] == [v.overrides for v in small.variants]
+    one = variant_case(c1, small.variants[0].overrides)
+    assert one["uncertainty.parameter"] == [] and one.digest() == \
+        variant_case(c2, big.variants[0].overrides).digest()

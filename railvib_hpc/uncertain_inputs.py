@@ -182,6 +182,10 @@ def check_uncertainty(case: Case) -> list[tuple[str, Any, str]]:
         out.extend(_check_correlation(corr, len(params), case["uncertainty.method"]))
     if case["uncertainty.method"] == "sobol":
         n = case["uncertainty.samples"]
+        if not params and case["uncertainty.field"]:
+            out.append(("uncertainty.method", "sobol", "Sobol' indices need at least one "
+                        "[[uncertainty.parameter]] (a random field is not an input of the "
+                        "design): use method = 'lhs' or 'mc'"))
         if n & (n - 1):
             out.append(("uncertainty.samples", n, "the sobol method needs a power of 2 "
                         f"(e.g. {1 << max(n - 1, 1).bit_length()})"))

@@ -80,6 +80,14 @@ def test_bad_correlations_and_fields_are_refused(more, text):
     assert text in _refused(params, **more)
 
 
+def test_sobol_needs_a_parameter():
+    field = {"layer": 1, "quantity": "E", "model": "gaussian", "cov": 0.2, "len_h": 5.0,
+             "len_v": 1.0}
+    assert "Sobol' indices need at least one [[uncertainty.parameter]]" in _refused(
+        **{"uncertainty.method": "sobol", "uncertainty.samples": 4,
+           "uncertainty.field": [field]})
+
+
 def test_the_command_line_exits_2_with_one_line(capsys, tmp_path):
     args = ["study", "uncertainty", "jobs/thesis_baseline.toml", "--list", "--out",
             str(tmp_path), "--set", 'uncertainty.parameter=[{key="pads.kzz",'

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from ..assess.standards import BUILDING_USES
 from ..config import Case
 from ..uncertain_inputs import LAYER_KEY, marginals
 from ..uncertainty.sampling import saltelli_base_rows, sample_values
@@ -105,8 +106,6 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
         variants.append(Variant(name=f"s{k:0{width}d}", overrides=ov,
                                 parameter={"sample": k, **{m.name: float(x)
                                                            for m, x in zip(found, row)}}))
-    from ..assess.standards import BUILDING_USES
-
     return StudyPlan("uncertainty", tuple(variants),
                      info={"method": case["uncertainty.method"], "parameters":
                            [m.name for m in found],

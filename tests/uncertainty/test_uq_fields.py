@@ -92,3 +92,19 @@ def test_problem_carries_the_fields_into_the_element_kernels():
     assert np.allclose(b1.K, b0.K * fe[:, None, None])
     assert np.allclose(b1.M, b0.M * fr[:, None, None])
     assert np.ptp(fe) > 0.05
+
+
+def test_a_field_realisation_is_an_input_of_the_modes_not_of_a_run_without_fields():
+    from railvib_hpc.io.products import inputs_hash
+
+    base = Case.defaults().replace({"soil.layers": LAYERS})
+    assert inputs_hash(base, "modes.h5") == inputs_hash(Case.defaults().replace(
+        {"soil.layers": LAYERS, "uncertainty.samples": 64}), "modes.h5")
+    field = [{"layer": 1, "quantity": "E", "model": "gaussian", "cov": 0.3, "len_h": 2.0,
+              "len_v": 1.0}]
+    one = base.replace({"uncertainty.field": field, "uncertainty.realisation": 1})
+    two = base.replace({"uncertainty.field": field, "uncertainty.realisation": 2})
+    digests = {inputs_hash(c, name) for c in (one, two) for name in ("modes.h5",)}
+    assert len(digests) == 2 and inputs_hash(base, "modes.h5") not in digests
+    assert inputs_hash(one, "mbs.h5") != inputs_hash(two, "mbs.h5")
+    assert inputs_hash(one, "transient.h5") != inputs_hash(two, "transient.h5")

@@ -244,11 +244,14 @@ def _tables(stats_rows, sobol, conv, conf, method, n_done, n_all) -> list[dict]:
         "rows": [[r["probe"], r["standard"], r["metric"], r["unit"], _interval(r["P5"]),
                   _interval(r["P50"]), _interval(r["P95"]),
                   fmt(r["limit"]) if not isinstance(r["limit"], list) else
-                  "per band" if r["limit"] else "–"] for r in stats_rows],
+                  "varies" if r["limit"] else "–"] for r in stats_rows],
         "note": f"Governing direction of each standard; [{c} percentile-bootstrap interval]. "
                 f"{n_done} of {n_all} samples finished (method {method}"
                 + ("; percentiles from the A and B rows of the Saltelli design" if
-                   method == "sobol" else "") + ")."},
+                   method == "sobol" else "") + "). limit 'varies': the governing "
+                "limit differs between samples (a frequency-dependent limit, e.g. DIN "
+                "4150-3's PPV line or a VC curve, at each sample's dominant frequency); "
+                "the exceedance uses each sample's own utilisation."},
         {"title": "Probability of exceeding each limit",
          "head": ["probe", "standard", "P(utilisation > 1)", f"{c} Wilson interval",
                   "exceeding / samples"],

@@ -1067,8 +1067,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         choices=SAMPLING_METHODS),
         "samples": Param(32, "int", "-", "number of samples (sobol: base points, a power "
                          "of 2)", "pos"),
-        "seed": Param(2026, "int", "-", "seed of the design, the bootstrap and the random "
-                      "fields (every sample is reproducible)", "nonneg"),
+        "seed": Param(2026, "int", "-", "seed of the design and the random fields (every "
+                      "sample is reproducible; the bootstrap has a fixed seed of its own)", "nonneg"),
         "field": Param([], "random_fields", "-",
                        "[[uncertainty.field]] tables: layer (1-based soil layer), quantity "
                        "(E or rho), model (gaussian, exponential, matern), cov, len_h, len_v "

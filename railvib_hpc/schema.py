@@ -1068,7 +1068,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "samples": Param(32, "int", "-", "number of samples (sobol: base points, a power "
                          "of 2)", "pos"),
         "seed": Param(2026, "int", "-", "seed of the design and the random fields (every "
-                      "sample is reproducible; the bootstrap has a fixed seed of its own)", "nonneg"),
+                      "sample is reproducible; the bootstrap has a fixed seed of its own)",
+                      "nonneg"),
         "field": Param([], "random_fields", "-",
                        "[[uncertainty.field]] tables: layer (1-based soil layer), quantity "
                        "(E or rho), model (gaussian, exponential, matern), cov, len_h, len_v "

@@ -38,7 +38,8 @@ from .pipeline import PIPELINES, single_stage_commands
 
 #: Exit code when the output's reader goes away (a closed pipe): the shell's 128 + SIGPIPE.
 BROKEN_PIPE_EXIT = 141
-STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation")
+STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation",
+           "uncertainty")
 
 
 #: The help lines of the commands that run a pipeline of stages (:data:`PIPELINES`).

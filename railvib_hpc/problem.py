@@ -51,6 +51,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 from .schema import BOUNDARY_FACES, INTERFACE_PARTS, MIN_SOIL_LAYER_THICKNESS, SOIL_LAYER_PARTS
+from .uncertainty.fields import RandomField
 
 if TYPE_CHECKING:
     from .config import Case
@@ -143,6 +144,11 @@ class Problem:
         :class:`Boundary`, :class:`Damping`.
     lumped_mass, hex_formulation, fix_sleeper_rotations, fix_rail_rotations_at_pads
         The ``modal.*`` switches of the elements and the constraints.
+    fields
+        The random fields of the soil layers' E and rho (``[[uncertainty.field]]`` at
+        ``uncertainty.realisation`` >= 1; empty otherwise): the element kernels scale each
+        hexahedron's matrices by the factors at its centre
+        (:class:`~railvib_hpc.uncertainty.fields.RandomField`).
     """
 
     materials: Mapping[str, Material]
@@ -155,6 +161,7 @@ class Problem:
     hex_formulation: str
     fix_sleeper_rotations: bool
     fix_rail_rotations_at_pads: bool
+    fields: tuple[RandomField, ...] = ()
 
     def material(self, name: str) -> Material:
         """The material ``name`` (a ``materials.<name>`` or a soil layer ``soil_layer_<k>``).
@@ -197,13 +204,33 @@ class Problem:
                    Pads(**{k: pads[k] for k in Pads.__dataclass_fields__}),
                    MappingProxyType(interfaces), boundary, damping,
                    case["modal.lumped_mass"], case["modal.hex_formulation"],
-                   case["modal.fix_sleeper_rotations"], case["modal.fix_rail_rotations_at_pads"])
+                   case["modal.fix_sleeper_rotations"], case["modal.fix_rail_rotations_at_pads"],
+                   _fields(case))
 
     @classmethod
     def from_modes(cls, f) -> Problem:
         """The problem of the materials and sections an open ``modes.h5`` was computed with
         (:func:`case_from_modes`; its other fields are the defaults')."""
         return cls.from_case(case_from_modes(f))
+
+
+#: Seeds of the fields of one realisation: ``uncertainty.seed + realisation * this + k``
+#: for its k-th field (distinct for up to this many fields).
+FIELD_SEED_STRIDE = 1000
+
+
+def _fields(case: Case) -> tuple[RandomField, ...]:
+    """The random fields of realisation ``uncertainty.realisation`` (none at 0)."""
+    from .uncertain_inputs import DEFAULT_MATERN_NU
+
+    real = case["uncertainty.realisation"]
+    if real <= 0:
+        return ()
+    base = case["uncertainty.seed"] + real * FIELD_SEED_STRIDE
+    return tuple(RandomField(SOIL_LAYER_PARTS[f["layer"] - 1], f["quantity"], f["model"],
+                             float(f["cov"]), float(f["len_h"]), float(f["len_v"]),
+                             float(f.get("nu", DEFAULT_MATERN_NU)), base + k)
+                 for k, f in enumerate(case["uncertainty.field"]))
 
 
 def _material(values: Mapping[str, Any]) -> Material:

@@ -24,6 +24,7 @@ from typing import Any, NamedTuple
 
 from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
 from .sections import APDL_RAIL, APDL_SLEEPER, SectionProperties
+from .uncertainty.sampling import METHODS as SAMPLING_METHODS
 
 
 @dataclass(frozen=True)
@@ -1048,6 +1049,35 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                 "wave arrival: first time the acceleration magnitude exceeds "
                                 "this fraction of its peak", "fraction"),
     },
+    # Uncertain inputs (issue 30, docs/uncertainty.md): `railvib study uncertainty CASE`
+    # samples them; `railvib run` uses the nominal values (and field realisation 0: none).
+    "uncertainty": {
+        "parameter": Param([], "uncertain_parameters", "-",
+                           "[[uncertainty.parameter]] tables: key (a numeric case key, or "
+                           "soil.layers[k].<name>), distribution (normal, lognormal, uniform, "
+                           "truncated_normal), mean (default: the case's value), std or cov, "
+                           "low, high, name (label)"),
+        "correlation": Param([], "matrix", "-",
+                             "correlation matrix of the parameters' normal scores (Gaussian "
+                             "copula), one row per [[uncertainty.parameter]] in their order; "
+                             "[] = independent; symmetric, unit diagonal, positive definite"),
+        "method": Param("lhs", "str", "-",
+                        "sampling: lhs (Latin hypercube), mc (Monte Carlo) or sobol (Saltelli "
+                        "design for Sobol' indices: samples * (parameters + 2) runs)",
+                        choices=SAMPLING_METHODS),
+        "samples": Param(32, "int", "-", "number of samples (sobol: base points, a power "
+                         "of 2)", "pos"),
+        "seed": Param(2026, "int", "-", "seed of the design and the random fields (every "
+                      "sample is reproducible; the bootstrap has a fixed seed of its own)",
+                      "nonneg"),
+        "field": Param([], "random_fields", "-",
+                       "[[uncertainty.field]] tables: layer (1-based soil layer), quantity "
+                       "(E or rho), model (gaussian, exponential, matern), cov, len_h, len_v "
+                       "[m], nu (Matern smoothness, default 1.5)"),
+        "realisation": Param(0, "int", "-", "realisation of the random fields the model "
+                             "uses: 0 none (the nominal layers), k >= 1 the k-th (seeded by "
+                             "uncertainty.seed and k; the study sets it per sample)", "nonneg"),
+    },
     # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
     # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.
     "study": {
@@ -1133,6 +1163,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                "measure) instead of the baseline: the insertion loss is then "
                                "the measure's, not the mesh's"),
             "solver": _study_solver("every variant, the references included"),
+            "probes": _study_probes(),
+        },
+        "uncertainty": {
+            "confidence": Param(0.95, "float", "-", "confidence level of the intervals "
+                                "(percentile bootstrap, Wilson, Sobol' bootstrap)", "fraction"),
+            "solver": _study_solver("every sample is then a full-order run"),
             "probes": _study_probes(),
         },
         "thesis": {

@@ -42,6 +42,7 @@ from .site import (
     track_lift,
     train2_vehicle,
 )
+from .uncertain_inputs import check_uncertainty, check_uncertainty_tables
 
 if TYPE_CHECKING:
     from .config import Case
@@ -320,6 +321,8 @@ def check_value(key: str, param: Param, value: Any, problems: list) -> Any:
         return _check_probe_lines(key, value, problems)
     if kind == "vehicle":
         return _check_vehicle_table(key, param, value, problems)
+    if kind in ("uncertain_parameters", "random_fields", "matrix"):
+        return check_uncertainty_tables(key, kind, value, problems)
     if kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             problems.append((key, value, f"expected a number{unit} ({param.doc})"))
@@ -482,6 +485,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_soil(case))
     out.extend(_check_measures(case))
     out.extend(_check_line_points(case))
+    out.extend(check_uncertainty(case))
     return out
 
 

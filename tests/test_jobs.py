@@ -13,7 +13,7 @@ CASE_FILES = sorted(JOBS.glob("*.toml"))
 #: The study each study case file is written for (jobs/README.md).
 STUDY_OF = {"mesh_convergence.toml": "convergence", "modal_truncation.toml": "modes",
             "boundary_reflection.toml": "reflection", "speed_sweep.toml": "speed",
-            "mitigation_study.toml": "mitigation"}
+            "mitigation_study.toml": "mitigation", "uncertainty_study.toml": "uncertainty"}
 
 
 def test_the_job_files_are_all_found():

@@ -158,9 +158,24 @@ if [ -n "$PETSC_DIR_USE" ] || [ -n "$SLEPC_DIR_USE" ]; then
 else
   rm -f "$SITE/00_railvib_petsc.pth"
 fi
-echo "[setup] installing railvib-hpc (editable) and gmsh wheel into $VENV"
-"$VENV/bin/python" -m pip install -q --upgrade pip >/dev/null
-"$VENV/bin/python" -m pip install -q -e ".[test]" ruff
+# Every pip install keeps the interpreter's own numpy and scipy: a dependency (SALib,
+# gstools, ...) may otherwise pull newer wheels into the venv, and a numpy 2.x there breaks
+# the system's h5py/petsc4py (built against its numpy). The pins are read from the
+# interpreter each run (rewritten, so a system upgrade moves them too).
+CONSTRAINTS="$VENV/railvib-constraints.txt"
+"$PYTHON" - > "$CONSTRAINTS" <<'PY'
+import importlib
+
+for name in ("numpy", "scipy"):
+    try:
+        print(f"{name}=={importlib.import_module(name).__version__}")
+    except ImportError:      # not in the system: pip chooses (bring your own, e.g. conda)
+        pass
+PY
+echo "[setup] installing railvib-hpc (editable) and gmsh wheel into $VENV" \
+     "(keeping $(tr '\n' ' ' < "$CONSTRAINTS"| sed 's/ $//'))"
+"$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" --upgrade pip >/dev/null
+"$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e ".[test]" ruff
 "$VENV/bin/python" - <<'PY'
 import os
 os.environ["H5PY_ALWAYS_USE_MPI"] = "1"   # Debian's h5py: its MPI build, if installed

@@ -13,7 +13,9 @@ mesh.h5          mesh         geometry, track, building, mesh, domain,    --
                               the content of ``mesh.file``
 modes.h5         modal        + materials, sections, pads, modal (without  mesh.h5
                               damping settings, ``modal.out_of_core``
-                              and the band split), boundary
+                              and the band split), boundary, the
+                              random fields (uncertainty.field,
+                              realisation, seed)
 static.h5        modal        as modes.h5                                 mesh.h5, modes.h5
 modal_damping.h5 modal        + pads, [damping]                           mesh.h5, modes.h5
 bands/index.json modal        as modes.h5, without f_max, n_modes,        --
@@ -67,7 +69,8 @@ transient_checkpoint.h5   transient    the union of the three above (it        m
                                        resumes all of them)
 ========================  ===========  ======================================  =============
 
-The keys of :data:`DIGEST_NEUTRAL_SECTIONS` (``[site]``, ``[probes]``) enter an inputs
+The keys of :data:`DIGEST_NEUTRAL_SECTIONS` (``[site]``, ``[probes]``, ``[uncertainty]``: the
+random fields enter the modes, the passage and the full-order solution) enter an inputs
 digest only where they differ from their defaults; those of :data:`CHECK_ONLY_KEYS`
 (``mesh.max_dispersion_error``, ``vehicle.supercritical``) never.
 
@@ -120,7 +123,7 @@ from .files import (
 #: default stays out of every inputs digest, so a case that does not use them keeps the
 #: digests, and the results, it had (the golden record, ``tests/data/golden_run.json``,
 #: stands). A given site key's effect is in the geometry keys it sets (hashed anyway).
-DIGEST_NEUTRAL_SECTIONS = ("site", "probes")
+DIGEST_NEUTRAL_SECTIONS = ("site", "probes", "uncertainty")
 #: Keys that only decide whether a stage accepts what it computed (a check's limit), never
 #: what a file holds: they enter no inputs digest, and the stage checks a reused file again.
 CHECK_ONLY_KEYS = ("mesh.max_dispersion_error", "vehicle.supercritical")
@@ -136,6 +139,10 @@ _MESH = (("geometry", ()), ("track", ()), ("building", ()), ("mesh", ()), ("doma
          ("soil", ()), ("trench", ()), ("wib", ()), ("usp", ()), ("ballast_mat", ()),
          ("isolation", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
          ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
+#: The random fields of the soil layers (the element matrices: ``Problem.fields``); at
+#: their defaults (realisation 0: no field) they enter no digest.
+_RANDOM_FIELDS = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
+                  ("uncertainty.seed", ()))
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).
 MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")
@@ -150,10 +157,11 @@ MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
 BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
-                  ("boundary", ()))
+                  ("boundary", ())) + _RANDOM_FIELDS
 _BANDS = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED),
-                  ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ()))
+                  ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ())
+                  ) + _RANDOM_FIELDS
 #: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
 #: dashpots and [damping] (the ratios only enter when composed, but the whole section is
 #: kept for safety). Whether the static fields are projected too is in the file's shape:
@@ -161,7 +169,8 @@ _BANDS = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
 _MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
                 ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
-                ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ()))
+                ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ())
+                ) + _RANDOM_FIELDS
 _FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
                   ("output.static_correction_rates", ()))
 _PROBES = _MBS + (("output.window", ()), ("output.probes", ()),
@@ -215,7 +224,7 @@ _TRANSIENT = _MESH + (("materials", ()), ("sections", ()), ("pads", ()), ("bound
                       ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
                       ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
                       ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
-                      ("output.dt", ()))
+                      ("output.dt", ())) + _RANDOM_FIELDS
 _TRANSIENT_FIELD_KEYS = _TRANSIENT + (("output.window", ()), ("output.float32", ()))
 _TRANSIENT_PROBE_KEYS = _TRANSIENT + (("output.probes", ()), ("output.probe_roles", ()),
                                       ("probes", ()))

@@ -20,6 +20,7 @@ from ..mesh.interfaces import tributary_areas
 from ..mesh.model import Mesh
 from ..problem import Problem
 from ..schema import INTERFACE_PARTS, PART_ID, SOLID_MATERIAL
+from ..uncertainty.fields import element_factors
 
 BEAM_MATERIAL = {"rail": ("rail", "rail"), "sleeper": ("sleeper", "sleeper")}
 PAD_DIRECTION = {"pad_x": ("kx", 0), "pad_y": ("ky", 1), "pad_z": ("kz", 2)}
@@ -102,7 +103,16 @@ def element_batches(mesh: Mesh, problem: Problem, hex_mask: np.ndarray | None = 
             xs = x[first]
             Ks = hex8_stiffness(xs, mat.E, mat.nu, formulation=problem.hex_formulation)
             Ms = hex8_mass(xs, mat.rho, lumped=lumped)[shape_of] if with_mass else None
-            yield Batch(conn, _HEX_SLOT, _HEX_COMP, Ks[shape_of], Ms)
+            K = Ks[shape_of]
+            if any(f.part == mat_name for f in problem.fields):
+                # K is linear in E and M in rho: each element's matrices scaled by its
+                # random-field factors at its centre
+                centres = x.mean(axis=1)
+                K = K * element_factors(problem.fields, mat_name, "E", centres)[:, None, None]
+                if Ms is not None:
+                    Ms = Ms * element_factors(problem.fields, mat_name, "rho",
+                                              centres)[:, None, None]
+            yield Batch(conn, _HEX_SLOT, _HEX_COMP, K, Ms)
 
     for part, (mat_name, sec_name) in BEAM_MATERIAL.items():
         sel = line_sel & (mesh.line_part == PART_ID[part])
@@ -168,6 +178,10 @@ def hex_max_frequencies(mesh: Mesh, problem: Problem) -> np.ndarray:
         d = 1.0 / np.sqrt(hex8_lumped_mass_diagonal(xs, mat.rho))
         lam = np.linalg.eigvalsh(d[:, :, None] * Ks * d[:, None, :])[:, -1]
         out[sel] = np.sqrt(np.maximum(lam, 0.0))[shape_of]
+        if any(f.part == mat_name for f in problem.fields):       # omega ~ sqrt(E / rho)
+            centres = x.mean(axis=1)
+            out[sel] *= np.sqrt(element_factors(problem.fields, mat_name, "E", centres)
+                                / element_factors(problem.fields, mat_name, "rho", centres))
     return out
 
 

@@ -32,6 +32,7 @@ from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
 from ..problem import Problem
 from ..resources import peak_memory_gb
+from ..uncertainty.fields import resolution_warnings
 from .boundary import problem_dofmap
 from .dofmap import NODE_ARRAY_CHUNK
 from .eigen import ModalProblem, ModalSolver
@@ -182,6 +183,20 @@ def _reused_modes(ctx: StageContext) -> ModesOutput | None:
     return ModesOutput.of_summary(summary, f, out_dir, want_static, mesh_size)
 
 
+def _element_sizes(mesh, problem: Problem) -> dict[str, tuple[float, float]]:
+    """The largest horizontal and vertical extent of the hexahedra of every soil part with
+    a random field [m]."""
+    from ..schema import PART_ID
+
+    out = {}
+    for part in {f.part for f in problem.fields}:
+        x = mesh.points[mesh.hexes[mesh.hex_part == PART_ID[part]]]
+        if len(x):
+            ext = x.max(axis=1) - x.min(axis=1)
+            out[part] = (float(ext[:, :2].max()), float(ext[:, 2].max()))
+    return out
+
+
 def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]:
     """Mesh, DOFs, K and M, the eigensolve and the files written from it (collective);
     returns the summary, the frequencies and the mesh size (nodes, hexahedra; None with
@@ -195,6 +210,9 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     damping_path = out_dir / MODAL_DAMPING_H5
     with rep.stage("mesh (load/build + broadcast)"):
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+    if problem.fields:
+        for warning in resolution_warnings(problem.fields, _element_sizes(mesh, problem)):
+            rep.info(f"WARNING: {warning}")
     t0 = time.perf_counter()
     with rep.stage("dofs"):
         dofmap = problem_dofmap(mesh, problem, comm.size)

@@ -133,6 +133,9 @@ class StudyPlan:
     kind: str
     variants: tuple[Variant, ...]
     shared_overrides: tuple[str, ...] | None = None
+    #: What the study's analysis needs to know of the plan (e.g. the uncertainty study's
+    #: sampling method and parameter names).
+    info: dict[str, Any] = field(default_factory=dict)
 
 
 def variant_case(case: Case, overrides: Sequence[str]) -> Case:
@@ -336,7 +339,9 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
         binding = [u for s, u in utils.items()
                    if u is not None and not res["standards"][s]["comparison_only"]]
         assessment[name] = {"passed": res["passed"], "utilisation": utils,
-                            "max_utilisation": max(binding) if binding else None}
+                            "max_utilisation": max(binding) if binding else None,
+                            "metrics": {s: governing_metric(b)
+                                        for s, b in res["standards"].items()}}
         spec = third_octave_rms(a, fs, fmin=ASSESSMENT_BAND_HZ[0],
                                 fmax=ASSESSMENT_BAND_HZ[1], axis=0)
         ok = spec.n_bins > 0
@@ -347,6 +352,27 @@ def response_metrics(hist: dict, case: Case, probes: Sequence[str]) -> dict:
                                      "total": np.sqrt((rms**2).sum(axis=1)).tolist()}}
     return {"probes": peaks, "assessment": assessment, "spectra": spectra,
             "n_steps": int(t.size), "duration": float(t[-1] - t[0]) if t.size else 0.0}
+
+
+def governing_metric(block: dict) -> dict:
+    """A standard's metric in its governing direction (the largest utilisation, or the
+    largest value where no direction has a limit): ``metric``, ``unit``, ``direction``,
+    ``value``, ``limit``, ``utilisation``, ``comparison_only``."""
+    dirs = {d: e for d, e in (block.get("directions") or {}).items()
+            if e.get("value") is not None}
+    if not dirs:
+        gov, entry = None, {}
+    elif any(e.get("utilisation") is not None for e in dirs.values()):
+        gov = max((d for d in dirs if dirs[d].get("utilisation") is not None),
+                  key=lambda d: dirs[d]["utilisation"])
+        entry = dirs[gov]
+    else:
+        gov = max(dirs, key=lambda d: dirs[d]["value"])
+        entry = dirs[gov]
+    return {"metric": block.get("metric"), "unit": block.get("unit"), "direction": gov,
+            "value": entry.get("value"), "limit": entry.get("limit"),
+            "utilisation": entry.get("utilisation"),
+            "comparison_only": bool(block.get("comparison_only"))}
 
 
 def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep: Reporter):

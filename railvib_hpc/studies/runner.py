@@ -29,7 +29,7 @@ from ..config import Case
 from ..io.locks import output_lock
 from ..log import Reporter
 from ..parallel import on_root
-from . import convergence, mitigation, modes, reflection, speed, thesis
+from . import convergence, mitigation, modes, reflection, speed, thesis, uncertainty
 from .common import (
     FAILED_NAME,
     SHARED_DIR,
@@ -52,7 +52,8 @@ if TYPE_CHECKING:
 
 #: The study modules by command name.
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
-                 "speed": speed, "thesis": thesis, "mitigation": mitigation}
+                 "speed": speed, "thesis": thesis, "mitigation": mitigation,
+                 "uncertainty": uncertainty}
 
 
 def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
@@ -168,6 +169,8 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     files = write_report(root, kind, {"name": case["case.name"],
                                       "file": str(case.path or "<defaults>")},
                          settings, entries, analysis, figs)
+    if hasattr(mod, "write_results"):                 # e.g. the uncertainty study's HDF5
+        files.update(mod.write_results(analysis, root))
     for t in analysis.get("tables", []):
         if t["rows"]:
             rep.info(f"{t['title']}:\n" + text_table(t["head"], t["rows"]))
@@ -306,6 +309,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                      "(nothing to prepare)")
         elif prepare or any(v.shared for v in todo):
             prepare_shared(plan, case, root, comm, rep)
+        progress = getattr(STUDY_MODULES[kind], "progress", None)
+        # the finished results, kept up to date for the statistics printed after each one
+        known = on_root(lambda: status(plan, case, root, cfg)[1], comm) if progress else {}
         for v in todo:
             with rep.stage(f"{kind}/{v.name}"):
                 res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait)
@@ -313,6 +319,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                 failed.append(v.name)
             else:
                 computed.append(v.name)
+                known[v.name] = res
+            if progress is not None:
+                on_root(lambda: rep.info(progress(plan, known, cfg)), comm)
     merged = None
     if merge_only or not (chosen or prepare):
         with output_lock(root, comm, f"study {kind} --merge", wait=True, rep=rep):

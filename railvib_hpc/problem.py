@@ -125,6 +125,29 @@ class Damping:
 
 
 @dataclass(frozen=True)
+class TrackEnds:
+    """``track.ends`` and its supported sections (:mod:`railvib_hpc.modal.track_ends`).
+
+    ``kind`` is ``"rigid"`` or ``"supported"``; the supported rail lies on ``[box_start -
+    length, box_start]`` and ``[box_end, box_end + length]`` with a support at every
+    ``spacing`` from the box's ends; ``stiffness`` is the vertical spring per rail and
+    support (0: not fitted yet), ``damping`` the far ends' ratio of critical damping.
+    """
+
+    kind: str = "rigid"
+    box_start: float = 0.0
+    box_end: float = 0.0
+    length: float = 0.0
+    spacing: float = 1.0
+    stiffness: float = 0.0
+    damping: float = 0.0
+
+    @property
+    def supported(self) -> bool:
+        return self.kind == "supported"
+
+
+@dataclass(frozen=True)
 class Problem:
     """The physics of the model the kernels need, read from a case once.
 
@@ -143,6 +166,8 @@ class Problem:
         :class:`Boundary`, :class:`Damping`.
     lumped_mass, hex_formulation, fix_sleeper_rotations, fix_rail_rotations_at_pads
         The ``modal.*`` switches of the elements and the constraints.
+    track_ends
+        ``track.ends``: the rail beyond the soil box (:class:`TrackEnds`).
     """
 
     materials: Mapping[str, Material]
@@ -155,6 +180,7 @@ class Problem:
     hex_formulation: str
     fix_sleeper_rotations: bool
     fix_rail_rotations_at_pads: bool
+    track_ends: TrackEnds = TrackEnds()
 
     def material(self, name: str) -> Material:
         """The material ``name`` (a ``materials.<name>`` or a soil layer ``soil_layer_<k>``).
@@ -197,13 +223,22 @@ class Problem:
                    Pads(**{k: pads[k] for k in Pads.__dataclass_fields__}),
                    MappingProxyType(interfaces), boundary, damping,
                    case["modal.lumped_mass"], case["modal.hex_formulation"],
-                   case["modal.fix_sleeper_rotations"], case["modal.fix_rail_rotations_at_pads"])
+                   case["modal.fix_sleeper_rotations"], case["modal.fix_rail_rotations_at_pads"],
+                   _track_ends(case))
 
     @classmethod
     def from_modes(cls, f) -> Problem:
         """The problem of the materials and sections an open ``modes.h5`` was computed with
         (:func:`case_from_modes`; its other fields are the defaults')."""
         return cls.from_case(case_from_modes(f))
+
+
+def _track_ends(case: Case) -> TrackEnds:
+    """The :class:`TrackEnds` of ``track.*`` (duck-typed like :meth:`Problem.from_case`)."""
+    return TrackEnds(case["track.ends"], case["geometry.x1"], case["geometry.x4"],
+                     case["track.rigid_length"],
+                     case["track.sleeper_spacing"], case["track.end_stiffness"],
+                     case["track.end_damping"])
 
 
 def _material(values: Mapping[str, Any]) -> Material:

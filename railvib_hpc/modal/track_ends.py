@@ -7,10 +7,12 @@ at every sleeper position, on three springs and dashpots to fixed ground (3 x 3 
 blocks added to K and C like the absorbing faces' ones, :func:`~.boundary.boundary_node_blocks`):
 
 * the vertical spring ``k_s`` per rail and support is ``track.end_stiffness``, or fitted
-  (:func:`winkler_modulus`) so that a beam of the rail's ``EI`` on the Winkler
-  foundation ``k = k_s / s`` (``s`` the sleeper spacing) has the modelled track's static
-  point receptance at its middle: the wheel meets the same stiffness on both sides of the
-  box's end, so no impulse enters the box. The longitudinal and lateral springs follow
+  (:func:`fit_stiffness`) so that the supported rail as modelled (its Timoshenko
+  elements on springs at every sleeper spacing ``s``) has the modelled track's static
+  point receptance at the box's middle: the wheel meets the same stiffness on both
+  sides of the box's end, so no impulse enters the box. The fit starts from the Winkler
+  equivalent ``k = k_s / s`` of the beam-on-elastic-foundation formula
+  (:func:`winkler_modulus`). The longitudinal and lateral springs follow
   the pads' proportions (``pads.kx / pads.kz``, ``pads.ky / pads.kz``);
 * the dashpots grow with the square of the distance ``d`` from the box, from zero at the
   box to ``track.end_damping`` times the critical damping ``2 sqrt(k_i m)`` of a bay's
@@ -73,6 +75,68 @@ def winkler_modulus(receptance: float, ei: float) -> float:
     return (2.0 * receptance * (4.0 * ei) ** 0.25) ** (-4.0 / 3.0)
 
 
+#: Sleeper bays on each side of the load in :func:`supported_rail_receptance`: the
+#: deflection of a beam on an elastic foundation decays as ``exp(-beta x)``, and 40 bays
+#: of 0.6 m are more than 20 / beta for any foundation stiffer than 2e5 N/m^2.
+RECEPTANCE_BAYS = 40
+#: Relative tolerance and most iterations of the stiffness fit (:func:`fit_stiffness`).
+FIT_RTOL, FIT_MAX_ITER = 1e-10, 50
+
+
+def supported_rail_receptance(problem: Problem, stiffness: float, spacing: float,
+                              per_bay: int, bays: int = RECEPTANCE_BAYS) -> float:
+    """Static vertical deflection under a unit load of the supported rail as modelled.
+
+    The rail's Timoshenko beam elements (:func:`~railvib_hpc.fem.beam.beam_stiffness`,
+    vertical plane), ``per_bay`` per sleeper bay, on vertical springs ``stiffness`` at
+    every ``spacing``, ``bays`` bays on each side of the load, which sits on a support.
+
+    Returns
+    -------
+    float
+        The deflection at the load [m/N].
+    """
+    from ..fem.beam import beam_stiffness, shear_modulus
+
+    n = 2 * bays * per_bay
+    x = np.linspace(-bays * spacing, bays * spacing, n + 1)
+    pts = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    conn = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    sec, mat = problem.sections["rail"], problem.material("rail")
+    ke = beam_stiffness(pts[conn], mat.E, shear_modulus(mat.E, mat.nu), sec.area, sec.iyy,
+                        sec.izz, sec.j, sec.shear_coefficient_y, sec.shear_coefficient_z,
+                        [0.0, 0.0, 1.0])
+    plane = np.array([2, 4, 8, 10])                    # uz, ry of both nodes
+    ke = ke[:, plane][:, :, plane]
+    dofs = (2 * conn[:, :, None] + np.arange(2)).reshape(n, 4)
+    K = np.zeros((2 * (n + 1), 2 * (n + 1)))
+    np.add.at(K, (dofs[:, :, None], dofs[:, None, :]), ke)
+    supports = 2 * np.arange(0, n + 1, per_bay)
+    K[supports, supports] += stiffness
+    f = np.zeros(2 * (n + 1))
+    f[n] = 1.0                                         # uz of the middle node (n / 2)
+    return float(np.linalg.solve(K, f)[n])
+
+
+def fit_stiffness(receptance: float, problem: Problem, spacing: float, per_bay: int) -> float:
+    """The support stiffness whose :func:`supported_rail_receptance` is ``receptance``.
+
+    Starts from the Winkler equivalent (:func:`winkler_modulus` times ``spacing``) and
+    iterates ``k <- k (w(k) / w)^(4/3)`` (the Winkler beam's ``w ~ k^(-3/4)``) to
+    :data:`FIT_RTOL`: the fit holds for the rail's shear deformation and the discrete
+    supports too.
+    """
+    ei = problem.material("rail").E * problem.sections["rail"].iyy
+    k = winkler_modulus(receptance, ei) * spacing
+    for _ in range(FIT_MAX_ITER):
+        w = supported_rail_receptance(problem, k, spacing, per_bay)
+        if abs(w / receptance - 1.0) < FIT_RTOL:
+            return k
+        k *= (w / receptance) ** (4.0 / 3.0)
+    raise ValueError(f"the support stiffness fit to the receptance {receptance:.4g} m/N did "
+                     f"not converge in {FIT_MAX_ITER} iterations (last k = {k:.4g} N/m)")
+
+
 def support_nodes(mesh: Mesh, ends: TrackEnds) -> tuple[np.ndarray, np.ndarray]:
     """The rail nodes of the supported ends that rest on a support.
 
@@ -132,5 +196,5 @@ def support_blocks(mesh: Mesh, problem: Problem, kind: str
     return nodes, np.einsum("ki,ij->kij", values, np.eye(3))
 
 
-__all__ = ["POSITION_TOL", "point_deflection", "support_blocks", "support_nodes",
-           "winkler_modulus"]
+__all__ = ["POSITION_TOL", "fit_stiffness", "point_deflection", "support_blocks",
+           "support_nodes", "supported_rail_receptance", "winkler_modulus"]

@@ -843,7 +843,7 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
                     M) -> Problem:
     """The problem with the supported track ends' springs, added to the assembled K.
 
-    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.winkler_modulus`)
+    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.fit_stiffness`)
     to the static receptance of the modelled track at the rail node nearest its middle
     (one static solve of K, whose end sections then hang free from the box's rail);
     a given stiffness is in K already (:func:`~railvib_hpc.modal.boundary.boundary_node_blocks`).
@@ -852,7 +852,12 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
     import dataclasses
 
     from ..modal.petsc import insert_node_blocks
-    from ..modal.track_ends import support_blocks, support_nodes, winkler_modulus
+    from ..modal.track_ends import (
+        fit_stiffness,
+        support_blocks,
+        support_nodes,
+        winkler_modulus,
+    )
     from .petsc import static_deflection
 
     ends = problem.track_ends
@@ -879,15 +884,16 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
             f"track.end_stiffness = 0: the modelled track's static receptance at x = "
             f"{rails.x[0, node]:g} m is {receptance:.4g} m/N (not > 0); give "
             "track.end_stiffness > 0")
-    stiffness = winkler_modulus(receptance, ei) * ends.spacing
+    per_bay = max(1, int(round(ends.spacing / float(np.diff(rails.x[0]).min()))))
+    stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
     problem = dataclasses.replace(problem, track_ends=dataclasses.replace(
         ends, stiffness=stiffness))
     insert_node_blocks(K, dofmap, ctx.comm.rank, *support_blocks(mesh, problem, "spring"))
     K.assemble()
     ctx.rep.info(f"  track ends: supported, {n_supports} supports, k = {stiffness:.4g} N/m per "
                  f"rail fitted to the static receptance {receptance:.4g} m/N at x = "
-                 f"{rails.x[0, node]:g} m (Winkler modulus {stiffness / ends.spacing:.4g} "
-                 f"N/m^2, EI = {ei:.4g} N m^2)")
+                 f"{rails.x[0, node]:g} m (the Winkler beam's modulus "
+                 f"{winkler_modulus(receptance, ei):.4g} N/m^2, EI = {ei:.4g} N m^2)")
     return problem
 
 

@@ -133,8 +133,9 @@ def test_supports_sit_on_the_sleeper_grid_with_graded_dashpots():
     mesh, pr = _supported_rail(problem, 3.0, 0.6, 5, 2e8, damping=1.0)
     nodes, d = support_nodes(mesh, pr.track_ends)
     assert np.allclose(np.sort(d), [0.6, 1.2, 1.8, 2.4, 3.0])
-    _, k = support_blocks(mesh, pr, "spring")
+    nodes_k, k = support_blocks(mesh, pr, "spring")
     _, c = support_blocks(mesh, pr, "dashpot")
+    assert np.array_equal(nodes, nodes_k) and np.allclose(mesh.points[nodes, 0], -d)
     far = np.argmax(d)
     assert k[far, 2, 2] == pytest.approx(1e8) and np.allclose(np.delete(k[:, 2, 2], far), 2e8)
     rail_mass = pr.material("rail").rho * pr.sections["rail"].area * 0.6

@@ -293,9 +293,14 @@ def problem_dofmap(mesh: Mesh, problem: Problem, size: int = 1):
         absorbing_faces(mesh, problem)
     if "caughey" in face_types(problem).values():
         check_layers(mesh, problem)
+    from .track_ends import FAR_ENDS, far_end_nodes
+
+    rules, sets = constraint_rules(problem), face_node_sets(mesh)
+    if problem.track_ends.supported:             # the supported rail's far ends: clamped
+        rules[FAR_ENDS] = COMPONENTS
+        sets[FAR_ENDS] = far_end_nodes(mesh, problem.track_ends)
     return build_dofmap(mesh, size, problem.fix_sleeper_rotations,
-                        problem.fix_rail_rotations_at_pads, rules=constraint_rules(problem),
-                        node_sets=face_node_sets(mesh))
+                        problem.fix_rail_rotations_at_pads, rules=rules, node_sets=sets)
 
 
 def _layer_distances(mesh: Mesh, problem: Problem, centres: np.ndarray | None

@@ -19,7 +19,13 @@ blocks added to K and C like the absorbing faces' ones, :func:`~.boundary.bounda
   rail mass ``m = rho A s`` at the far end: a graded absorber, so a bending wave along
   the rail is damped out instead of reflected from the end (and the rigid-to-flexible
   jump of a wheel entering at the far end is damped before it reaches the box);
-* the support at the far end carries half a bay (its tributary length).
+* the rail's node at each far end is clamped (all six DOFs fixed, :data:`FAR_ENDS`):
+  a wheel rolling on or off the modelled rail there meets a deflection that starts from
+  zero continuously (the wheels beyond the modelled rail ride on rigid ground at the
+  rail's height), as at today's rigid joints, but a section's length away from the box
+  and where the dashpots are strongest. A free end would be 2-4 times softer than the
+  track (a semi-infinite beam's end), and a wheel leaving it onto the rigid ground would
+  climb the rail's whole deflection: measured, 10 times the static wheel load.
 
 The beam-on-elastic-foundation reference (Hetenyi 1946): a point load ``F`` on an infinite
 beam on a Winkler foundation ``k`` deflects it by ``w0 = F beta / (2 k)``, ``beta = (k /
@@ -137,6 +143,19 @@ def fit_stiffness(receptance: float, problem: Problem, spacing: float, per_bay: 
                      f"not converge in {FIT_MAX_ITER} iterations (last k = {k:.4g} N/m)")
 
 
+#: Name of the node set of the clamped far ends in the DOF map's rules
+#: (:func:`~.boundary.problem_dofmap`).
+FAR_ENDS = "track_far_ends"
+
+
+def far_end_nodes(mesh: Mesh, ends: TrackEnds) -> np.ndarray:
+    """The rail nodes at the far ends of the supported sections (none with rigid ends)."""
+    if not ends.supported:
+        return np.zeros(0, np.int64)
+    nodes, d = support_nodes(mesh, ends)
+    return nodes[np.abs(d - ends.length) < POSITION_TOL]
+
+
 def support_nodes(mesh: Mesh, ends: TrackEnds) -> tuple[np.ndarray, np.ndarray]:
     """The rail nodes of the supported ends that rest on a support.
 
@@ -185,7 +204,7 @@ def support_blocks(mesh: Mesh, problem: Problem, kind: str
     if len(nodes) == 0 or ends.stiffness <= 0.0:
         return np.zeros(0, np.int64), np.zeros((0, 3, 3))
     k = ends.stiffness * np.array([pads.kx / pads.kz, pads.ky / pads.kz, 1.0])
-    tributary = np.where(np.abs(d - ends.length) < POSITION_TOL, 0.5, 1.0)
+    tributary = np.where(np.abs(d - ends.length) < POSITION_TOL, 0.5, 1.0)  # (clamped)
     if kind == "spring":
         values = tributary[:, None] * k[None, :]
     else:
@@ -196,5 +215,5 @@ def support_blocks(mesh: Mesh, problem: Problem, kind: str
     return nodes, np.einsum("ki,ij->kij", values, np.eye(3))
 
 
-__all__ = ["POSITION_TOL", "fit_stiffness", "point_deflection", "support_blocks",
-           "support_nodes", "supported_rail_receptance", "winkler_modulus"]
+__all__ = ["FAR_ENDS", "POSITION_TOL", "far_end_nodes", "fit_stiffness", "point_deflection",
+           "support_blocks", "support_nodes", "supported_rail_receptance", "winkler_modulus"]

@@ -337,8 +337,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "fixed) or 'supported' (the flexible rail continues for "
                       "track.rigid_length on springs and graded dashpots to fixed ground at "
                       "every sleeper position, fitted to the modelled track's static "
-                      "receptance: no rigid-to-flexible impulse at the box; railvib "
-                      "transient only)", choices=("rigid", "supported"),
+                      "receptance, its far ends clamped: no rigid-to-flexible drop at the "
+                      "box, trains of any length pass; railvib transient only)",
+                      choices=("rigid", "supported"),
                       source=f"{_APDL}: rigid rail sections (Rigid=3)"),
         "end_stiffness": Param(0.0, "float", "N/m",
                                "track.ends = 'supported': vertical spring per rail at each "

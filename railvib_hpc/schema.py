@@ -346,13 +346,18 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                "support (the longitudinal and lateral ones in the pads' "
                                "proportions); 0: fitted so that a beam on the equivalent "
                                "elastic foundation has the modelled track's static point "
-                               "receptance at its middle (one static solve)", "nonneg"),
+                               "receptance at its middle (one static solve)", "nonneg",
+                               source="not in the thesis (rigid ends): the model's own static "
+                                      "receptance, beam on an elastic foundation (Hetenyi "
+                                      "1946)"),
         "end_damping": Param(1.0, "float", "-",
                              "track.ends = 'supported': damping ratio of the supports at the far "
                              "ends, relative to critical (2 sqrt(k m) with the rail mass of a "
                              "bay), graded with the square of the distance from the soil box "
                              "(zero at the box): an absorbing track end; 0: no dashpots",
-                             "nonneg"),
+                             "nonneg",
+                             source="not in the thesis (rigid ends): critical damping at the "
+                                    "far end, graded as a quadratic sponge layer"),
         "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos",
                              source=f"{_APDL}: Rail_length=21.6; {_T1}"),
         "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos",

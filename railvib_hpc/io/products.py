@@ -9,7 +9,8 @@ digest of those keys (and of the external files they name), which each file reco
 ===============  ===========  ==========================================  ===================
 file             written by   case keys (inputs)                          upstream files
 ===============  ===========  ==========================================  ===================
-mesh.h5          mesh         geometry, track, building, mesh, domain,    --
+mesh.h5          mesh         geometry, track (without end_stiffness,     --
+                              end_damping), building, mesh, domain,
                               the content of ``mesh.file``
 modes.h5         modal        + materials, sections, pads, modal (without  mesh.h5
                               damping settings, ``modal.out_of_core``
@@ -57,7 +58,8 @@ transient.h5              transient    mesh keys (as mesh.h5), materials,      m
                                        fix_sleeper_rotations,
                                        fix_rail_rotations_at_pads,
                                        damping_ratio, output.dt (the
-                                       automatic step divides it)
+                                       automatic step divides it),
+                                       track.end_stiffness, end_damping
 transient:fields.h5       transient    + output.window, float32                mesh.h5
 (fields.h5)                            (``/stress`` records its own hash with
                                        output.stress_times)
@@ -272,7 +274,7 @@ def whole_sections(name: str) -> tuple[str, ...]:
     Examples
     --------
     >>> whole_sections("mesh.h5")[:4]
-    ('geometry', 'track', 'building', 'mesh')
+    ('geometry', 'building', 'mesh', 'domain')
     """
     return tuple(k for k, left_out in spec(name).inputs if k and "." not in k and not left_out)
 

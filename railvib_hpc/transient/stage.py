@@ -853,6 +853,7 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
 
     from ..modal.petsc import insert_node_blocks
     from ..modal.track_ends import (
+        far_end_nodes,
         fit_stiffness,
         support_blocks,
         support_nodes,
@@ -863,12 +864,13 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
     ends = problem.track_ends
     if not ends.supported:
         return problem
-    n_supports = len(support_nodes(mesh, ends)[0])
+    n_far = len(far_end_nodes(mesh, ends))
+    where = f"{len(support_nodes(mesh, ends)[0]) - n_far} supports and {n_far} clamped far ends"
     rail = problem.sections["rail"]
     ei = problem.material("rail").E * rail.iyy
     if ends.stiffness > 0:
-        ctx.rep.info(f"  track ends: supported, {n_supports} supports, k = {ends.stiffness:.4g} "
-                     "N/m per rail (track.end_stiffness)")
+        ctx.rep.info(f"  track ends: supported, {where}, k = {ends.stiffness:.4g} N/m per "
+                     "rail (track.end_stiffness)")
         return problem
     middle = 0.5 * (ends.box_start + ends.box_end)
     node = int(np.argmin(np.abs(rails.x[0] - middle)))
@@ -885,12 +887,16 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
             f"{rails.x[0, node]:g} m is {receptance:.4g} m/N (not > 0); give "
             "track.end_stiffness > 0")
     per_bay = max(1, int(round(ends.spacing / float(np.diff(rails.x[0]).min()))))
-    stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
+    try:
+        stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
+    except ValueError as exc:
+        raise TransientInputError(f"track.end_stiffness = 0: {exc}; give "
+                                  "track.end_stiffness > 0") from None
     problem = dataclasses.replace(problem, track_ends=dataclasses.replace(
         ends, stiffness=stiffness))
     insert_node_blocks(K, dofmap, ctx.comm.rank, *support_blocks(mesh, problem, "spring"))
     K.assemble()
-    ctx.rep.info(f"  track ends: supported, {n_supports} supports, k = {stiffness:.4g} N/m per "
+    ctx.rep.info(f"  track ends: supported, {where}, k = {stiffness:.4g} N/m per "
                  f"rail fitted to the static receptance {receptance:.4g} m/N at x = "
                  f"{rails.x[0, node]:g} m (the Winkler beam's modulus "
                  f"{winkler_modulus(receptance, ei):.4g} N/m^2, EI = {ei:.4g} N m^2)")

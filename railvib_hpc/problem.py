@@ -126,6 +126,29 @@ class Damping:
 
 
 @dataclass(frozen=True)
+class TrackEnds:
+    """``track.ends`` and its supported sections (:mod:`railvib_hpc.modal.track_ends`).
+
+    ``kind`` is ``"rigid"`` or ``"supported"``; the supported rail lies on ``[box_start -
+    length, box_start]`` and ``[box_end, box_end + length]`` with a support at every
+    ``spacing`` from the box's ends; ``stiffness`` is the vertical spring per rail and
+    support (0: not fitted yet), ``damping`` the far ends' ratio of critical damping.
+    """
+
+    kind: str = "rigid"
+    box_start: float = 0.0
+    box_end: float = 0.0
+    length: float = 0.0
+    spacing: float = 1.0
+    stiffness: float = 0.0
+    damping: float = 0.0
+
+    @property
+    def supported(self) -> bool:
+        return self.kind == "supported"
+
+
+@dataclass(frozen=True)
 class Problem:
     """The physics of the model the kernels need, read from a case once.
 
@@ -149,6 +172,8 @@ class Problem:
         ``uncertainty.realisation`` >= 1; empty otherwise): the element kernels scale each
         hexahedron's matrices by the factors at its centre
         (:class:`~railvib_hpc.uncertainty.fields.RandomField`).
+    track_ends
+        ``track.ends``: the rail beyond the soil box (:class:`TrackEnds`).
     """
 
     materials: Mapping[str, Material]
@@ -162,6 +187,7 @@ class Problem:
     fix_sleeper_rotations: bool
     fix_rail_rotations_at_pads: bool
     fields: tuple[RandomField, ...] = ()
+    track_ends: TrackEnds = TrackEnds()
 
     def material(self, name: str) -> Material:
         """The material ``name`` (a ``materials.<name>`` or a soil layer ``soil_layer_<k>``).
@@ -205,7 +231,7 @@ class Problem:
                    MappingProxyType(interfaces), boundary, damping,
                    case["modal.lumped_mass"], case["modal.hex_formulation"],
                    case["modal.fix_sleeper_rotations"], case["modal.fix_rail_rotations_at_pads"],
-                   _fields(case))
+                   _fields(case), _track_ends(case))
 
     @classmethod
     def from_modes(cls, f) -> Problem:
@@ -231,6 +257,12 @@ def _fields(case: Case) -> tuple[RandomField, ...]:
                              float(f["cov"]), float(f["len_h"]), float(f["len_v"]),
                              float(f.get("nu", DEFAULT_MATERN_NU)), base + k)
                  for k, f in enumerate(case["uncertainty.field"]))
+def _track_ends(case: Case) -> TrackEnds:
+    """The :class:`TrackEnds` of ``track.*`` (duck-typed like :meth:`Problem.from_case`)."""
+    return TrackEnds(case["track.ends"], case["geometry.x1"], case["geometry.x4"],
+                     case["track.rigid_length"],
+                     case["track.sleeper_spacing"], case["track.end_stiffness"],
+                     case["track.end_damping"])
 
 
 def _material(values: Mapping[str, Any]) -> Material:

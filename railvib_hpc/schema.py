@@ -328,8 +328,37 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                            "pos", source=f"{_APDL}: K,KP_SLP_END+10,X1,3.75,Z2"),
     },
     "track": {
-        "rigid_length": Param(3.0, "float", "m", "length of each rigid rail section", "pos",
+        "rigid_length": Param(3.0, "float", "m",
+                              "length of each end section of the rail beyond the soil box: "
+                              "rigid rail, or with track.ends = 'supported' the supported rail "
+                              "(then a whole number of sleeper bays)", "pos",
                               source=f"{_APDL}: Rigid=3; {_T1}"),
+        "ends": Param("rigid", "str", "-",
+                      "the rail beyond the soil box: 'rigid' (the thesis's rigid rail, DOFs "
+                      "fixed) or 'supported' (the flexible rail continues for "
+                      "track.rigid_length on springs and graded dashpots to fixed ground at "
+                      "every sleeper position, fitted to the modelled track's static "
+                      "receptance, its far ends clamped: no rigid-to-flexible drop at the "
+                      "box, trains of any length pass; railvib transient only)",
+                      choices=("rigid", "supported"),
+                      source=f"{_APDL}: rigid rail sections (Rigid=3)"),
+        "end_stiffness": Param(0.0, "float", "N/m",
+                               "track.ends = 'supported': vertical spring per rail at each "
+                               "support (the longitudinal and lateral ones in the pads' "
+                               "proportions); 0: fitted so that a beam on the equivalent "
+                               "elastic foundation has the modelled track's static point "
+                               "receptance at its middle (one static solve)", "nonneg",
+                               source="not in the thesis (rigid ends): the model's own static "
+                                      "receptance, beam on an elastic foundation (Hetenyi "
+                                      "1946)"),
+        "end_damping": Param(1.0, "float", "-",
+                             "track.ends = 'supported': damping ratio of the supports at the far "
+                             "ends, relative to critical (2 sqrt(k m) with the rail mass of a "
+                             "bay), graded with the square of the distance from the soil box "
+                             "(zero at the box): an absorbing track end; 0: no dashpots",
+                             "nonneg",
+                             source="not in the thesis (rigid ends): critical damping at the "
+                                    "far end, graded as a quadratic sponge layer"),
         "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos",
                              source=f"{_APDL}: Rail_length=21.6; {_T1}"),
         "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos",

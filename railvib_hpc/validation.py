@@ -416,6 +416,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must lie between ballast_top_half_width = {g['ballast_top_half_width']:g} "
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
+    out.extend(_check_track_ends(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
     out.extend(_check_rotation(case))
@@ -879,6 +880,39 @@ def _speed_problems(case: Case) -> list[tuple[str, Any, str]]:
              f"Mach cone; allowed: < {c_r:.1f} m/s, or set vehicle.supercritical = true "
              "to run it")
             for key, v in trains if v >= c_r]
+
+
+def _check_track_ends(case: Case) -> list[tuple[str, Any, str]]:
+    """``track.ends = 'supported'``: whole bays, a rail whose torsion something holds, the
+    generated mesh, and wheels that start and end on the modelled rail."""
+    t, g, v = case["track"], case["geometry"], case["vehicle"]
+    if t["ends"] != "supported":
+        return []
+    out: list[tuple[str, Any, str]] = []
+    bays = t["rigid_length"] / t["sleeper_spacing"]
+    if abs(bays - round(bays)) > 1e-6:
+        out.append(("track.rigid_length", t["rigid_length"],
+                    "with track.ends = 'supported' it must be a whole number of sleeper bays "
+                    f"(track.sleeper_spacing = {t['sleeper_spacing']:g} m): the supports "
+                    "continue the sleeper grid"))
+    if not case["modal.fix_rail_rotations_at_pads"]:
+        out.append(("modal.fix_rail_rotations_at_pads", False,
+                    "track.ends = 'supported' needs true: without rigid rail ends nothing "
+                    "holds the rail's torsion (a singular stiffness matrix)"))
+    if case["mesh.file"]:
+        out.append(("track.ends", "supported",
+                    f"needs the generated mesh (mesh.file = {case['mesh.file']!r} brings its "
+                    "own rails); allowed with mesh.file: 'rigid'"))
+    lo, hi = g["x0"], g["x4"] + t["rigid_length"]
+    if not lo <= v["x_start"] < hi:
+        out.append(("vehicle.x_start", v["x_start"],
+                    f"must lie on the modelled rail [{lo:g}, {hi:g}) m with track.ends = "
+                    "'supported' (the train's other wheels may trail behind it)"))
+    if v["x_end"] and v["x_end"] > hi:
+        out.append(("vehicle.x_end", v["x_end"],
+                    f"must lie on the modelled rail (<= {hi:g} m, the end of the supported "
+                    "exit rail) with track.ends = 'supported', or 0 (that end)"))
+    return out
 
 
 def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:

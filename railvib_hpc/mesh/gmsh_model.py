@@ -117,9 +117,11 @@ def build_geometry(gmsh, lay: Layout) -> None:
         rail_pts.append(geo.addPoint(lay.rigid_ends[1], y, lay.rail_z))
         for k in range(len(rail_pts) - 1):
             c = geo.addLine(rail_pts[k], rail_pts[k + 1])
-            rigid = k == 0 or k == len(rail_pts) - 2
-            geo.mesh.setTransfiniteCurve(c, 2 if rigid else lay.rail_div + 1)
-            (rigid_curves if rigid else rail_curves).append(c)
+            end = k == 0 or k == len(rail_pts) - 2
+            # the end sections: one rigid element, or the supported rail (track.ends)
+            geo.mesh.setTransfiniteCurve(c, (lay.end_div or 1) + 1 if end
+                                         else lay.rail_div + 1)
+            (rigid_curves if end and not lay.end_div else rail_curves).append(c)
         jy = iy[round(y, 9)]
         for k, x in enumerate(lay.sleeper_x):
             c = geo.addLine(rail_pts[k + 1], point((ix[round(float(x), 9)], jy, zs)))
@@ -138,7 +140,8 @@ def build_geometry(gmsh, lay: Layout) -> None:
             gmsh.model.addPhysicalGroup(3, vols, PART_ID[part], name=part)
     for part, curves in (("rail", rail_curves), ("rigid_rail", rigid_curves),
                          ("sleeper", sleeper_curves)):
-        gmsh.model.addPhysicalGroup(1, curves, PART_ID[part], name=part)
+        if curves:                    # (no rigid rail with track.ends = 'supported')
+            gmsh.model.addPhysicalGroup(1, curves, PART_ID[part], name=part)
     for part in PAD_PARTS:
         gmsh.model.addPhysicalGroup(1, pad_curves, PART_ID[part], name=part)
     for k, (name, faces) in enumerate(boundary.items()):

@@ -88,6 +88,9 @@ class Layout:
         x of the rail nodes that bound a rail *curve* (rigid ends and sleepers).
     rail_div
         Rail elements per sleeper bay.
+    end_div
+        Rail elements of each end section beyond the soil box (``track.ends =
+        'supported'``: ``rail_div`` per bay; 0: the rigid rail, one element).
     rail_y
         y of every rail, increasing (track 1's two, then track 2's).
     sleeper_y
@@ -107,6 +110,7 @@ class Layout:
     rigid_ends: tuple[float, float]
     sleeper_y: np.ndarray
     sleeper_z: float
+    end_div: int = 0
     deform: dict = field(default_factory=dict)
     bounds: tuple[float, float, float, float, float, float] = (0, 0, 0, 0, 0, 0)
     probes: dict[str, tuple[float, float, float]] = field(default_factory=dict)
@@ -241,13 +245,15 @@ def build_layout(case: Case) -> Layout:
     blocks = _blocks(case, bldg, plan, xb, yb, levels, cross, layers)
     probes, probe_roles = _named_probes(case, bldg, plan, cross, bounds[2])
     centres, hs, hg, lift = cross.centres, cross.half_sleeper, cross.half_gauge, cross.lift
+    rail_div = max(1, round(m["rail_elements_per_bay"] * r))
+    end_div = (rail_div * max(1, round(t["rigid_length"] / sp))
+               if t["ends"] == "supported" else 0)
     return Layout(
         xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
         rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
-        rail_div=max(1, round(m["rail_elements_per_bay"] * r)),
-        rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
+        rail_div=rail_div, rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
         sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
-        sleeper_z=g["z3"] + lift, deform=_shoulder_slopes(g, yb, cross),
+        sleeper_z=g["z3"] + lift, end_div=end_div, deform=_shoulder_slopes(g, yb, cross),
         bounds=bounds, probes=probes, probe_roles=probe_roles)
 
 

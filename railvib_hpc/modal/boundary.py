@@ -177,7 +177,8 @@ def _material_arrays(problem: Problem, part: np.ndarray) -> tuple[np.ndarray, ..
 
 def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
                          ) -> tuple[np.ndarray, np.ndarray]:
-    """Lumped 3 x 3 blocks of the absorbing faces, summed per node.
+    """Lumped 3 x 3 blocks of the absorbing faces and of the supported track ends
+    (:func:`.track_ends.support_blocks`), summed per node.
 
     Parameters
     ----------
@@ -195,6 +196,18 @@ def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
     blocks : ndarray (k, 3, 3)
         Their blocks on ``(ux, uy, uz)``.
     """
+    from .track_ends import support_blocks
+
+    ends = support_blocks(mesh, problem, kind)
+    faces = _face_blocks(mesh, problem, kind)
+    nodes, inverse = np.unique(np.concatenate([faces[0], ends[0]]), return_inverse=True)
+    out = np.zeros((len(nodes), 3, 3))
+    np.add.at(out, inverse, np.concatenate([faces[1], ends[1]]))
+    return nodes, out
+
+
+def _face_blocks(mesh: Mesh, problem: Problem, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """The absorbing faces' part of :func:`boundary_node_blocks`."""
     if kind not in ("dashpot", "spring"):
         raise ValueError(f"kind must be 'dashpot' or 'spring', got {kind!r}")
     t = problem.boundary.virtual_thickness
@@ -280,9 +293,14 @@ def problem_dofmap(mesh: Mesh, problem: Problem, size: int = 1):
         absorbing_faces(mesh, problem)
     if "caughey" in face_types(problem).values():
         check_layers(mesh, problem)
+    from .track_ends import FAR_ENDS, far_end_nodes
+
+    rules, sets = constraint_rules(problem), face_node_sets(mesh)
+    if problem.track_ends.supported:             # the supported rail's far ends: clamped
+        rules[FAR_ENDS] = COMPONENTS
+        sets[FAR_ENDS] = far_end_nodes(mesh, problem.track_ends)
     return build_dofmap(mesh, size, problem.fix_sleeper_rotations,
-                        problem.fix_rail_rotations_at_pads, rules=constraint_rules(problem),
-                        node_sets=face_node_sets(mesh))
+                        problem.fix_rail_rotations_at_pads, rules=rules, node_sets=sets)
 
 
 def _layer_distances(mesh: Mesh, problem: Problem, centres: np.ndarray | None

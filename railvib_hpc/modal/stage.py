@@ -113,6 +113,13 @@ def compute(ctx: StageContext) -> ModesOutput:
     Builds or reuses ``mesh.h5`` when the modes are recomputed. The summary holds
     ``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics.
     """
+    if ctx.case["track.ends"] != "rigid":
+        from ..errors import CaseError
+
+        raise CaseError([("track.ends", ctx.case["track.ends"],
+                          "the modal path (modal, mbs, run and the modal studies) models "
+                          "the thesis's rigid rail ends; 'supported' is for railvib "
+                          "transient")])
     old = _reused_modes(ctx)
     if old is not None:
         return old

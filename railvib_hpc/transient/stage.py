@@ -699,13 +699,14 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots = _assemble(ctx, mesh, dofmap)
+        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails)
         with rep.stage("transient: stability limit"):
             if explicit:
                 system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle,
                                                      (K, M, C, dashpots), dt)
             else:
-                partition, dt, limit = _imex_partition(ctx, mesh, dofmap, K, M, C, dt)
+                partition, dt, limit = _imex_partition(ctx, mesh, dofmap, problem, K, M, C,
+                                                       dt)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
     # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
@@ -728,7 +729,7 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo, _ = _assemble(ctx, mesh, dofmap)
+            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
@@ -799,10 +800,11 @@ def speed_warning(case: Case, speed: float) -> str:
             "there (the track's critical speed)")
 
 
-def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
-    """K, M, C (None when nothing damps), the damping summary and, for the explicit engine,
+def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs) -> tuple:
+    """K, M, C (None when nothing damps), the damping summary, for the explicit engine
     the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
-    in C) (collective)."""
+    in C), and the problem (with the supported track ends' fitted stiffness,
+    :func:`_fit_track_ends`) (collective)."""
     from ..modal.boundary import dashpot_diagonal
     from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
@@ -813,6 +815,7 @@ def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
         # the explicit engines keep the lumped mass on the diagonal alone
         K, M, _ = assemble(mesh, problem, dofmap, comm,
                            mass=True if engine == "direct" else "diagonal")
+        problem = _fit_track_ends(ctx, mesh, dofmap, rails, problem, K, M)
         # the explicit engine takes diagonal dashpots at the full step, apart from C
         dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
             if engine == "explicit" else None
@@ -833,7 +836,71 @@ def _assemble(ctx: StageContext, mesh, dofmap) -> tuple:
                 and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
             destroy_damping(C)
             C = None
-    return K, M, C, cinfo, dashpots
+    return K, M, C, cinfo, dashpots, problem
+
+
+def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem, K,
+                    M) -> Problem:
+    """The problem with the supported track ends' springs, added to the assembled K.
+
+    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.fit_stiffness`)
+    to the static receptance of the modelled track at the rail node nearest its middle
+    (one static solve of K, whose end sections then hang free from the box's rail);
+    a given stiffness is in K already (:func:`~railvib_hpc.modal.boundary.boundary_node_blocks`).
+    Rigid ends: ``problem`` unchanged.
+    """
+    import dataclasses
+
+    from ..modal.petsc import insert_node_blocks
+    from ..modal.track_ends import (
+        far_end_nodes,
+        fit_stiffness,
+        support_blocks,
+        support_nodes,
+        winkler_modulus,
+    )
+    from .petsc import static_deflection
+
+    ends = problem.track_ends
+    if not ends.supported:
+        return problem
+    n_far = len(far_end_nodes(mesh, ends))
+    where = f"{len(support_nodes(mesh, ends)[0]) - n_far} supports and {n_far} clamped far ends"
+    rail = problem.sections["rail"]
+    ei = problem.material("rail").E * rail.iyy
+    if ends.stiffness > 0:
+        ctx.rep.info(f"  track ends: supported, {where}, k = {ends.stiffness:.4g} N/m per "
+                     "rail (track.end_stiffness)")
+        return problem
+    middle = 0.5 * (ends.box_start + ends.box_end)
+    node = int(np.argmin(np.abs(rails.x[0] - middle)))
+    dof = int(rails.dofs[0, node, 0])
+    if dof < 0:
+        raise TransientInputError(
+            "track.end_stiffness = 0: the rail's vertical DOF at the middle of the box "
+            f"(x = {rails.x[0, node]:g} m) is constrained, so the receptance to fit the "
+            "supported ends to cannot be measured; give track.end_stiffness > 0")
+    receptance = static_deflection(K, M, ctx.comm, dof)
+    if not receptance > 0:
+        raise TransientInputError(
+            f"track.end_stiffness = 0: the modelled track's static receptance at x = "
+            f"{rails.x[0, node]:g} m is {receptance:.4g} m/N (not > 0); give "
+            "track.end_stiffness > 0")
+    per_bay = max(1, int(round(ends.spacing / float(np.diff(rails.x[0]).min()))))
+    try:
+        stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
+    except ValueError as exc:
+        raise TransientInputError(f"track.end_stiffness = 0: {exc}; give "
+                                  "track.end_stiffness > 0") from None
+    problem = dataclasses.replace(problem, track_ends=dataclasses.replace(
+        ends, stiffness=stiffness))
+    insert_node_blocks(K, dofmap, ctx.comm.rank, *support_blocks(mesh, problem, "spring"))
+    K.assemble()
+    ctx.rep.info(f"  track ends: supported, {where}, k = {stiffness:.4g} N/m per "
+                 f"rail fitted to the static receptance {receptance:.4g} m/N at x = "
+                 f"{rails.x[0, node]:g} m (the Winkler beam's modulus "
+                 f"{winkler_modulus(receptance, ei):.4g} N/m^2, EI = {ei:.4g} N m^2)")
+    return problem
 
 
 def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle,
@@ -910,7 +977,8 @@ def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
     return float(dt), text
 
 
-def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) -> tuple:
+def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
+                    dt_band: float) -> tuple:
     """The IMEX engine's implicit partition ``(K_I, C_I)``, its step and a line on the
     explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
     C - C_I``; the implicit elements do not limit the step, :mod:`.imex`)."""
@@ -921,7 +989,6 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, K, M, C, dt_band: float) ->
     from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names
 
     case, comm = ctx.case, ctx.comm
-    problem = Problem.from_case(case)
     parts = implicit_part_names(list(case["transient.implicit_parts"]), present_parts(mesh))
     extra = None
     if case["transient.implicit_elements"] == "auto":

@@ -91,7 +91,8 @@ def _fft_field(speed: float, eta: float, n: int = 1024, length: float = 200.0):
 @pytest.mark.parametrize("eta", [0.0, 0.05])
 def test_against_the_double_fourier_integral(eta):
     """The one-dimensional (direction) form against the two-dimensional integral evaluated
-    by FFT (1024^2 points, 200 m period): the slope dw/dxi beside the path within 0.5 % (elastic and hysteretic)."""
+    by FFT (1024^2 points, 200 m period): the slope dw/dxi beside the path within 0.5 %
+    (elastic and hysteretic)."""
     speed = 0.5
     x, w = _fft_field(speed, eta)
     dx = x[1] - x[0]

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from mpi4py import MPI
 from moving_load_cases import run_moving_load
+from mpi4py import MPI
 from wave_cases import box_mesh
 
 from railvib_hpc.transient.surface_load import (
@@ -65,7 +65,7 @@ def test_ramp_and_spreading():
 
 
 def test_a_load_leaving_the_soil_is_off_and_one_never_on_it_is_refused():
-    _, path, load = _load(0.0, x_start=6.0, nt=40, offsets=(0.0,))   # at x = 8: t = 0.4
+    _, _, load = _load(0.0, x_start=6.0, nt=40, offsets=(0.0,))   # at x = 8: t = 0.4
     x = load.x[:, 0]
     for n in range(41):
         total = load(n)[1].sum()

@@ -23,8 +23,9 @@ with ``k^2 = k_x^2 + k_y^2``, ``k_S = omega / c_S``, ``alpha = sqrt(k^2 - (omega
     A(theta) = -q M_S^2 sqrt(1 - q M_P^2) / ((2 - q M_S^2)^2
                - 4 sqrt(1 - q M_P^2) sqrt(1 - q M_S^2)) * mu / mu*,   q = cos^2 theta,
 
-(``M = c / c`` of the wave, ``mu* = mu (1 - i eta sgn(omega))`` for the time factor
-``exp(-i omega t)``; ``A`` of the opposite direction is the complex conjugate). The radial
+(``M_S^2 = rho c^2 / mu*``, ``M_P^2 = rho c^2 / (lambda* + 2 mu*)``, the moduli
+``mu* = mu (1 - i eta sgn(omega))`` for the time factor ``exp(-i omega t)``, real without
+damping; ``A`` of the opposite direction is the complex conjugate). The radial
 integral is the distribution ``int_0^inf exp(i k s) dk = pi delta(s) + i PV 1/s``, which
 reduces the double integral to one over the direction::
 

@@ -42,7 +42,7 @@ SPEED = 0.5 * 191.19
 RAMP_TIME, T_END = 40.0 / SPEED, (92.0 - 6.0) / SPEED
 #: Measured approach-peak errors at 4 and 8 m (module notes) and the bounds they must stay
 #: within (a regression guard; the issue's 5 % is met at 4 m only).
-MEASURED = (0.0665, 0.1299)
+MEASURED = (0.0678, 0.1361)
 BOUNDS = (0.08, 0.15)
 
 

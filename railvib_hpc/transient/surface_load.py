@@ -4,11 +4,12 @@ The load of the moving-load verification (:mod:`railvib_hpc.fem.halfspace`, STEM
 "moving load on soil"): ``n`` vertical forces ``P_j`` (downwards) at ``x_j(t) = x_start +
 offset_j + c t`` on the line ``y = y_load`` of the ground surface, each switched on by a
 smooth ramp ``s(t) = sin^2(pi t / (2 T_ramp))`` over ``T_ramp`` (then 1), so that the start
-radiates little. A point force is the consistent nodal load of the element under it: the
-trilinear shape functions at its reference coordinates in that hexahedron (the four nodes
-of the element face it stands on), located once for every step of the run
-(:func:`railvib_hpc.mesh.search.locate`). A load that has left the surface (past the end
-of the soil) is off.
+radiates little, and optionally spread along x (:func:`spreading`). A point force is the
+consistent nodal load of the element under it: the trilinear shape functions at its
+reference coordinates in that hexahedron (the four nodes of the element face it stands
+on), located once for every step of the run (:func:`railvib_hpc.mesh.search.locate`); a
+spread load is a sum of such points. A load that has left the surface (past the end of the
+soil) is off.
 
 The loads are :data:`~railvib_hpc.transient.integrate.SparseLoad` pairs, the ``prescribed``
 load of both engines (:class:`~.integrate.DirectSolver`, :class:`~.explicit.ExplicitSolver`).
@@ -54,7 +55,7 @@ def spreading(half_width: float, spacing: float) -> tuple[np.ndarray, np.ndarray
     nodal shares change slope at every node) and radiates grid waves; the spreading's
     spectrum at the grid's wavenumbers is small for ``a >= 2 h`` (``cos^2``: it falls as
     ``k^-3``), and the field of the spread load is the point load's convolved with it
-    (:func:`railvib_hpc.fem.halfspace` at distances ``>> a`` differs by ``O((a / d)^2)``).
+    (:mod:`railvib_hpc.fem.halfspace`; at distances ``>> a`` differs by ``O((a / d)^2)``).
     """
     if half_width <= 0:
         return np.zeros(1), np.ones(1)

@@ -128,10 +128,3 @@ def run_moving_load(comm, h: float, n: tuple[int, int, int], receivers: tuple[fl
     return {"t": t, "v": v, "v_exact": v_exact, "speed": speed, "c_r": c_r, "c_s": c_s,
             "dt": dt, "dofs": dofmap.n_dofs, "seconds": time.perf_counter() - t0,
             "xi": xi, "receivers": receivers}
-
-
-def peak_errors(run: dict) -> list[float]:
-    """Relative error of the largest downward and upward velocity... of the largest
-    ``|v|`` at each receiver against the steady state's."""
-    return [float(np.abs(run["v"][:, j]).max() / np.abs(run["v_exact"][:, j]).max() - 1.0)
-            for j in range(len(run["receivers"]))]

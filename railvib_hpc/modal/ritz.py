@@ -88,9 +88,10 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     are (:func:`~railvib_hpc.modal.block_lanczos.purify_and_project` with ``purify=False``:
     K and M products, no solve) and checks every mode with its true residual
     (:func:`normalise_and_check`; its ``K Phi`` is the projection's K products rotated with
-    the modes, ``M Phi`` is formed afresh). The pairs that pass need no purification (a
-    pair is accepted by its measured residual, whatever it went through); the others go to
-    a purification pass that **locks** the converged modes (those within ``tol``, or
+    the modes, ``M Phi`` is formed afresh). The pairs within ``tol`` need no purification
+    (a pair is accepted by its measured residual, whatever it went through); the others
+    (those at their round-off floor included: purification still improves them) go to a
+    purification pass that **locks** the converged modes (those within ``tol``, or
     outside ``window``): it purifies only the others and the guards (whose components of
     the next modes, damped by purification only by lambda_i / lambda_j ~ 1 near the top of
     the set, the Rayleigh-Ritz step removes), M-orthogonalises them against the locked
@@ -145,7 +146,10 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     bounds = solve_res * checks.scale                      # (of the scaled modes)
     stats["extra_purifications"] = stats["purified_modes"] = 0
     for attempt in range(PURIFICATIONS + EXTRA_PURIFICATIONS):
-        redo = unconverged(result, tol) & in_window(result, window)
+        # the first purification takes every pair above tol, even one at its round-off
+        # floor (as when every pair was purified); the extra passes only those above both
+        above = result.residuals > tol if attempt < PURIFICATIONS else unconverged(result, tol)
+        redo = above & in_window(result, window)
         if not redo.any():
             break
         if attempt < PURIFICATIONS:

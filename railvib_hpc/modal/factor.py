@@ -32,32 +32,22 @@ if TYPE_CHECKING:
 
 
 def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
-    """A PETSc dense matrix on this rank's rows ``arr`` (n_local, b) of a block.
-
-    PETSc's dense matrices are column-major: a Fortran-contiguous ``arr`` (a column slice
-    of a Fortran-ordered block) is wrapped, not copied, and the matrix writes through to it
-    (the caller keeps ``arr`` alive while the matrix lives); any other is copied once to
-    Fortran order.
-    """
+    """A PETSc dense matrix holding this rank's rows ``arr`` (n_local, b) of a block."""
     from petsc4py import PETSc
 
-    data = np.asfortranarray(arr, dtype=float)
-    return PETSc.Mat().createDense(size=((data.shape[0], n_global), (None, data.shape[1])),
-                                   array=data, comm=comm)
+    D = PETSc.Mat().createDense(size=((arr.shape[0], n_global), (None, arr.shape[1])),
+                                comm=comm)
+    D.setUp()
+    D.getDenseArray()[:] = arr
+    D.assemble()
+    return D
 
 
 def sparse_times_block(A, X: np.ndarray, comm: MPI.Comm) -> np.ndarray:
-    """This rank's rows of ``A X`` for a distributed block X (n_local, b), Fortran-ordered.
-
-    One PETSc MatMatMult with X wrapped as a dense matrix (:func:`dense_block`: no copy of a
-    Fortran-contiguous X) and one plain copy of the product out of PETSc's memory. Before,
-    X was copied into a new dense matrix and the product out of it into C order (a
-    transposing copy): measured on the issue-26 case (69k rows per rank, 2 ranks) 191 ms
-    for 64 columns of K, 124 ms now; 55 and 52 ms for 32.
-    """
-    D = dense_block(X, A.getSize()[1], comm)
+    """This rank's rows of ``A X`` for a distributed block X (n_local, b)."""
+    D = dense_block(X, A.getSize()[0], comm)
     R = A.matMult(D)
-    out = np.array(R.getDenseArray(), order="F")
+    out = R.getDenseArray().copy()
     D.destroy()
     R.destroy()
     return out
@@ -375,19 +365,22 @@ class ShiftInvertFactor:
     def solve(self, B: np.ndarray, chunk: int = 64, progress: Progress | None = None,
               phase: str = "solves") -> np.ndarray:
         """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time
-        (``progress``: :data:`~railvib_hpc.modal.block_lanczos.Progress` after each chunk).
+        (``progress``: :data:`~railvib_hpc.modal.block_lanczos.Progress` after each chunk)."""
+        from petsc4py import PETSc
 
-        Each chunk is solved straight into the Fortran-ordered result (a dense matrix on its
-        columns, :func:`dense_block`), the right-hand sides wrapped without a copy when
-        they are Fortran-contiguous."""
-        out = np.empty(B.shape, order="F")     # each chunk's solution written in place
+        out = np.empty(B.shape)
         for c0 in range(0, B.shape[1], chunk):
-            Bd = self._dense(B[:, c0:c0 + chunk])
-            Y = self._dense(out[:, c0:c0 + chunk])
+            Bc = np.ascontiguousarray(B[:, c0:c0 + chunk])
+            Bd = self._dense(Bc)
+            Y = PETSc.Mat().createDense(size=((self.n_local, self.n_global),
+                                              (None, Bc.shape[1])), comm=self.comm)
+            Y.setUp()
+            Y.assemble()
             t0 = time.perf_counter()
             self.factor.matSolve(Bd, Y)
             self.time_solves += time.perf_counter() - t0
-            self.n_solves += Bd.getSize()[1]
+            self.n_solves += Bc.shape[1]
+            out[:, c0:c0 + chunk] = Y.getDenseArray()
             Bd.destroy()
             Y.destroy()
             if progress is not None:

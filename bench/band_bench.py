@@ -26,8 +26,11 @@ restarts, Ritz vectors), Lanczos's Rayleigh-Ritz convergence tests (and how many
 purification's K and M products and solve residuals, the final Rayleigh-Ritz step
 (projection, dense eigenproblem, rotation), the checks (``normalise_and_check``: K Phi and
 M Phi afresh, orthonormality, residuals, round-off floors) and the share of the last four
-in the eigensolve. The load average (``/proc/loadavg``) before and after each run goes
-with it: other processes on the cores slow every phase.
+in the eigensolve; then the purification's solves (inside "solves") and the whole time
+after the Lanczos phase (``time_purify_project``: purification with its solves, Rayleigh-
+Ritz, checks; bands summed, the merge added) and its share of the eigensolve. The load
+average (``/proc/loadavg``) before and after each run goes with it: other processes on the
+cores slow every phase.
 """
 
 from __future__ import annotations
@@ -88,8 +91,15 @@ def phase_row(name: str, r: dict) -> str:
     tests = int(total(("lanczos_ritz_steps",)))
     eig = st.get("time_solve", 0.0)
     share = sum(cols[2:]) / eig if eig else float("nan")
+    # everything after the Lanczos phase (purification's solves included; with bands the
+    # merge's Rayleigh-Ritz step and checks)
+    after = total(("time_purify_project",))
+    if st.get("bands"):
+        after += st.get("time_merge_rayleigh_ritz", 0.0) + st.get("time_checks", 0.0)
+    purify_solves = total(("time_purify_solves",))
     body = " | ".join(f"{c:.1f}" for c in cols)
     return (f"| {name} | {eig:.1f} | {body} | {tests} | {100 * share:.1f} % | "
+            f"{purify_solves:.1f} | {after:.1f} ({100 * after / eig if eig else 0:.1f} %) | "
             f"{r.get('silence_s', float('nan')):.1f} | {r.get('load', '?')} |")
 
 
@@ -190,6 +200,9 @@ def main() -> None:
                     help="reference solvers on the same matrix; eigsh = scipy's ARPACK with "
                          "SuperLU shift-invert, serial (bench/modal_bench.py's worker), for the "
                          "mode count of the first run")
+    ap.add_argument("--n-modes", type=int, default=0,
+                    help="the mode count of the reference solvers when no band run gives it "
+                         "(with --bands and no value: only the references run)")
     ap.add_argument("--set", action="append", default=[], dest="extra")
     ap.add_argument("--petsc", nargs="*", default=[])
     ap.add_argument("--timeout", type=float, default=3600)
@@ -210,7 +223,7 @@ def main() -> None:
             edges = weyl_edges(0.0, args.f_max, nb)
             sets.append(f"modal.bands={json.dumps(edges)}")
         configs.append((f"bands {'auto' if nb == 0 else nb}, groups {args.groups}", sets))
-    ref_counts = None
+    ref_counts = args.n_modes or None
     for ref in args.reference:
         if ref == "eigsh":
             continue                      # run after the PETSc configurations, below
@@ -267,9 +280,9 @@ def main() -> None:
                       f"{st.get('rss_after_free_gb', float('nan')):.2f} GB, peak so far "
                       f"{st.get('peak_rss_gb', 0):.2f} GB -->", flush=True)
     print("\n| run | eigensolve [s] | " + " | ".join(h for h, _ in PHASES) +
-          " | RR tests | purification + RR + checks | longest silence [s] | "
-          "load (1 min, before / after) |")
-    print("|---" * (len(PHASES) + 6) + "|")
+          " | RR tests | purification + RR + checks | of which purification solves [s] | "
+          "after Lanczos [s] (share) | longest silence [s] | load (1 min, before / after) |")
+    print("|---" * (len(PHASES) + 8) + "|")
     for line in phase_rows:
         print(line, flush=True)
     if "eigsh" in args.reference:

@@ -495,9 +495,13 @@ def permute_columns(A: np.ndarray, order: np.ndarray) -> None:
 def purify_and_project(op: ShiftInvertFactor, X: np.ndarray, block: int, refine: bool = False,
                        select: Callable[[np.ndarray], np.ndarray] | None = None,
                        progress: Progress | None = None, timings: dict | None = None,
-                       kx: np.ndarray | None = None
+                       kx: np.ndarray | None = None, purify: bool = True
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One more operator application (purification), then Rayleigh-Ritz with K and M.
+
+    ``purify=False``: Rayleigh-Ritz with K and M on the vectors as they are (no solve; the
+    returned solve-residual bounds are 0): :func:`~railvib_hpc.modal.ritz.purified_modes`
+    checks the true residuals of these pairs and purifies only those that fail.
 
     Applying ``(K - sigma M)^-1 M`` once more damps the high-frequency error left in the
     Ritz vectors (what SLEPc calls purification); the final Rayleigh-Ritz step makes the
@@ -545,15 +549,18 @@ def purify_and_project(op: ShiftInvertFactor, X: np.ndarray, block: int, refine:
     for j in range(0, k, block):
         c = slice(j, min(j + block, k))
         t0, s0 = time.perf_counter(), op.time_solves
-        B = op.mass(X[:, c])
-        Y = op.solve(B, chunk=max(B.shape[1], 1))
-        KY, MY = op.stiffness(Y), op.mass(Y)
-        if refine:
-            Y += op.solve(B - (KY - op.sigma * MY), chunk=max(B.shape[1], 1))
+        if purify:
+            B = op.mass(X[:, c])
+            Y = op.solve(B, chunk=max(B.shape[1], 1))
             KY, MY = op.stiffness(Y), op.mass(Y)
-        S = B - (KY - op.sigma * MY)
-        sres[c] = np.sum(S**2, axis=0)
-        X[:, c] = Y
+            if refine:
+                Y += op.solve(B - (KY - op.sigma * MY), chunk=max(B.shape[1], 1))
+                KY, MY = op.stiffness(Y), op.mass(Y)
+            S = B - (KY - op.sigma * MY)
+            sres[c] = np.sum(S**2, axis=0)
+            X[:, c] = Y
+        else:
+            KY, MY = op.stiffness(X[:, c]), op.mass(X[:, c])
         if kx is not None:
             kx[:, c] = KY
         t1 = time.perf_counter()
@@ -562,7 +569,7 @@ def purify_and_project(op: ShiftInvertFactor, X: np.ndarray, block: int, refine:
         kp[:c.stop, c] = X[:, :c.stop].T @ KY
         mp[:c.stop, c] = X[:, :c.stop].T @ MY
         clock["rayleigh_ritz"] += time.perf_counter() - t1
-        progress("purification", c.stop, k)
+        progress("purification" if purify else "Rayleigh-Ritz products", c.stop, k)
     t0 = time.perf_counter()
     for a in (sres, kp, mp):
         op.comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)

@@ -127,3 +127,45 @@ def test_unconverged_stage_exits_2_with_one_line(tmp_path, capsys, monkeypatch):
     assert "of 6 modes did not converge: worst relative residual" in err
     assert "Traceback" not in err
     assert not (tmp_path / "modes.h5").exists()
+
+
+def _rough_ritz_vector(monkeypatch, column: int, size: float) -> None:
+    """Add a rough error (a random vector, ``size`` x the largest entry) to one Ritz vector
+    block Lanczos returns: its Lanczos estimate says converged, its true residual does not."""
+    from mpi4py import MPI
+
+    real = block_lanczos.block_lanczos
+
+    def rough(op, nev, r0, **kw):
+        theta, X, st = real(op, nev, r0, **kw)
+        scale = op.comm.allreduce(float(np.abs(X[:, column]).max()), op=MPI.MAX)
+        noise = block_lanczos.start_block(op.n_global, r0, r0 + op.n_local, 1, seed=99)
+        X[:, column] += size * scale * noise[:, 0]
+        return theta, X, st
+
+    monkeypatch.setattr(block_lanczos, "block_lanczos", rough)
+
+
+def _rough_vector_is_caught(monkeypatch, comm=None) -> None:
+    """The first Rayleigh-Ritz step accepts a Ritz pair by its true residual only: a pair
+    whose vector is rough is purified, the result is the clean run's."""
+    rules = {"bottom": ("ux", "uy", "uz"), "all": ("uy", "uz")}
+    clean, *_ = solve(column_mesh(16), soil_case(), rules, 3, comm=comm)
+    _rough_ritz_vector(monkeypatch, 0, 1e-6)
+    res, *_ = solve(column_mesh(16), soil_case(), rules, 3, comm=comm)
+    assert res.stats["purified_modes"] > clean.stats["purified_modes"]
+    assert np.all(res.residuals <= 1e-10)
+    np.testing.assert_allclose(res.eigenvalues, clean.eigenvalues, rtol=1e-10, atol=0)
+
+
+def test_a_ritz_pair_above_the_tolerance_is_purified_not_accepted(monkeypatch):
+    """Before (issue 26), every Ritz vector was purified; now only those whose true residual
+    fails after the first Rayleigh-Ritz step: a rough one must be among them."""
+    _rough_vector_is_caught(monkeypatch)
+
+
+@pytest.mark.mpi
+def test_a_ritz_pair_above_the_tolerance_is_purified_on_every_rank_count(monkeypatch):
+    from mpi4py import MPI
+
+    _rough_vector_is_caught(monkeypatch, MPI.COMM_WORLD)

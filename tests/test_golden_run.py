@@ -10,6 +10,12 @@ issue 27's final code differed from the first one in exactly five inputs digests
 the products whose inputs include ``[transient]`` or the whole case (``transient.h5``, the
 transient ``fields.h5`` and ``probes.h5``, and both ``assessment.json``), on 1 and 2 ranks;
 every other digest, every probe peak and every reuse verdict was unchanged.
+
+Re-recorded again for the case keys of issues 28 and 30 (``track.ends``, ``track.end_*``,
+``[uncertainty]``): exactly the two ``assessment.json`` inputs digests changed (their inputs
+are the whole case), on 1 and 2 ranks; every other digest and every reuse verdict was
+unchanged, and the probe peaks within 1e-9 relative (the purification of issue 26 now
+leaves the Ritz pairs already within tolerance as they are: eigenvalues within 6.7e-13).
 """
 
 from __future__ import annotations

@@ -699,7 +699,7 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails)
+        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails, problem)
         with rep.stage("transient: stability limit"):
             if explicit:
                 system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle,
@@ -729,7 +729,7 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails)
+            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails, problem)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
@@ -766,7 +766,8 @@ def _setup(ctx: StageContext) -> dict:
     else:
         solver = DirectSolver(system, prescribed, driver, columns)
     names, coords = probe_points(mesh, case)
-    return {"mesh": mesh, "mesh_sha": mesh_sha, "dofmap": dofmap, "rails": rails,
+    return {"mesh": mesh, "mesh_sha": mesh_sha, "problem": problem, "dofmap": dofmap,
+            "rails": rails,
             "vehicle": vehicle, "run": run,
             "dt": dt, "nt": nt, "times": times, "x": x, "steps_out": steps_out, "K": K, "M": M,
             "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
@@ -800,16 +801,16 @@ def speed_warning(case: Case, speed: float) -> str:
             "there (the track's critical speed)")
 
 
-def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs) -> tuple:
+def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem) -> tuple:
     """K, M, C (None when nothing damps), the damping summary, for the explicit engine
     the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
     in C), and the problem (with the supported track ends' fitted stiffness,
-    :func:`_fit_track_ends`) (collective)."""
+    :func:`_fit_track_ends`) (collective). ``problem``: the run's, built once from the
+    case by :func:`_setup`."""
     from ..modal.boundary import dashpot_diagonal
     from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
-    problem = Problem.from_case(case)
     engine = case["transient.engine"]
     with ctx.rep.stage("transient: assembly"):
         # the explicit engines keep the lumped mass on the diagonal alone
@@ -1178,7 +1179,7 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
                       "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i],
                       "role": role}
     rails = init["rails"]
-    sec = rail_section(Problem.from_case(case))
+    sec = rail_section(init["problem"])
     rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
     moments, ends = [], []
     for r in range(2):

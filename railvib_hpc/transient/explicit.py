@@ -227,16 +227,16 @@ def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
     lam, x, iterations = _largest_eigenpair(op, comm)
     phi = x.getArray() * d.getArray()        # the mode in displacements (x = m^1/2 phi)
     omega = float(np.sqrt(max(lam, 0.0)))
-    xi, dt_c, mode = 0.0, critical_step(omega), x
+    xi, mode = 0.0, x
+    dt_mode = dt_c = critical_step(omega)
     if C is not None and omega > 0.0:
         damping = _ScaledCombination(d, [(C, 1.0), (C_p, -1.0)])
         xi = max(damping.quadratic(x) / (2.0 * omega), 0.0)
-        dt_c = critical_step(omega, damping_factor * xi)
-        dt_c, mode, more = damped_limit(op, damping, damping_factor, dt_c, x, comm)
+        dt_mode = critical_step(omega, damping_factor * xi)
+        dt_c, mode, more = damped_limit(op, damping, damping_factor, dt_mode, x, comm)
         iterations += more
         damping.release()
         phi = mode.getArray() * d.getArray()
-    dt_mode = critical_step(omega, damping_factor * xi)
     amp = np.abs(phi)
     r0 = K.getOwnershipRange()[0]
     local = (float(amp.max(initial=-1.0)), r0 + int(np.argmax(amp)) if amp.size else -1)

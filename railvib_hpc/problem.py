@@ -111,6 +111,8 @@ class Boundary:
     virtual_thickness: float
     layer_thickness: float
     layer_damping: float
+    pml_reflection: float = 1e-4
+    pml_power: float = 2.0
 
 
 @dataclass(frozen=True)
@@ -223,7 +225,8 @@ class Problem:
                       for kind in INTERFACE_PARTS}
         boundary = Boundary(MappingProxyType({f: case[f"boundary.{f}"] for f in BOUNDARY_FACES}),
                             case["boundary.virtual_thickness"], case["boundary.layer_thickness"],
-                            case["boundary.layer_damping"])
+                            case["boundary.layer_damping"], case["boundary.pml_reflection"],
+                            case["boundary.pml_power"])
         damping = Damping(case["damping.model"], case["damping.f1"], case["damping.f2"],
                           case["damping.pads"], case["modal.damping_ratio"])
         return cls(MappingProxyType(materials), MappingProxyType(sections),

@@ -244,7 +244,7 @@ PROBE_ROLES = ("floor", "wall", "foundation", "ground", "free_field")
 #: Role of a user probe without one.
 DEFAULT_PROBE_ROLE = "ground"
 #: Conditions of a truncation face of the soil box (``[boundary]``).
-BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey")
+BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey", "pml")
 #: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
 BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
 
@@ -253,8 +253,11 @@ def _face(default: str, where: str) -> Param:
     return Param(default, "str", "-",
                  f"{where}: fixed (all displacements 0), roller (normal displacement 0), free, "
                  "absorbing (Lysmer-Kuhlemeyer dashpots rho c_P normal, rho c_S tangential "
-                 "per unit area, from the soil behind the face) or caughey (fixed, with a "
-                 "graded Caughey absorbing layer inside the mesh, boundary.layer_*)",
+                 "per unit area, from the soil behind the face), caughey (fixed, with a "
+                 "graded Caughey absorbing layer inside the mesh, boundary.layer_*) or pml "
+                 "(fixed, with a perfectly matched layer of boundary.layer_thickness inside "
+                 "the mesh, boundary.pml_*; railvib transient with transient.engine = "
+                 "'explicit' only)",
                  choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {
@@ -679,13 +682,23 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "static support (0: dashpots only, the model may drift under "
                                    "a static load)", "nonneg"),
         "layer_thickness": Param(0.0, "float", "m",
-                                 "caughey faces: thickness of the absorbing layer, measured "
+                                 "caughey and pml faces: thickness of the absorbing layer, "
+                                 "measured "
                                  "into the mesh from the face (part of the model: enlarge the "
                                  "domain by it, [domain])", "nonneg"),
         "layer_damping": Param(0.3, "float", "-",
                                "caughey faces: Rayleigh damping ratio at the face (at "
                                "damping.f1 and f2), decreasing quadratically to 0 at the inner "
                                "edge of the layer", "fraction"),
+        "pml_reflection": Param(1e-4, "float", "-",
+                                "pml faces: target reflection coefficient R of the continuous "
+                                "layer for a P wave at normal incidence; sets the profile's "
+                                "largest damping d_max = (p + 1) c_P ln(1 / R) / (2 L) "
+                                "(Collino & Tsogka 2001)", "fraction"),
+        "pml_power": Param(2.0, "float", "-",
+                           "pml faces: exponent p of the damping profile d = d_max (xi / L)^p "
+                           "over the depth xi into the layer (2 to 3: Collino & Tsogka 2001)",
+                           "pos"),
     },
     "damping": {
         "model": Param("rayleigh", "str", "-",

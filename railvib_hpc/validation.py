@@ -819,6 +819,19 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
     if faces and not case["boundary.layer_thickness"] > 0:
         out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
                     f"must be > 0 m for the caughey face(s) {', '.join(faces)}"))
+    pml = [f for f in ("x_min", "x_max", "y_min", "y_max", "base")
+           if case[f"boundary.{f}"] == "pml"]
+    if pml and not case["boundary.layer_thickness"] > 0:
+        out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
+                    f"must be > 0 m for the pml face(s) {', '.join(pml)}"))
+    if pml and tr["engine"] != "explicit":
+        out.append((f"boundary.{pml[0]}", "pml",
+                    f"needs transient.engine = 'explicit' (is '{tr['engine']}'): the layer's "
+                    "memory terms are integrated with the explicit engine's step; allowed "
+                    "with the other engines: fixed, roller, free, absorbing, caughey"))
+    if pml and not 0.0 < case["boundary.pml_reflection"] < 1.0:
+        out.append(("boundary.pml_reflection", case["boundary.pml_reflection"],
+                    "must lie in (0, 1): the target reflection of the layer"))
     if not d["f1"] < d["f2"]:
         out.append(("damping.f2", d["f2"], f"must be greater than damping.f1 = {d['f1']:g} Hz "
                     "(the two frequencies of the Rayleigh damping)"))

@@ -89,12 +89,13 @@ def face_node_sets(mesh: Mesh) -> dict[str, np.ndarray]:
 def constraint_rules(problem: Problem) -> dict[str, tuple[str, ...]]:
     """Constraint rules ``{face: components}`` for :func:`~.dofmap.build_dofmap`.
 
-    ``fixed`` fixes every component (as the thesis's ``bottom`` rule), ``roller`` the
+    ``fixed`` (and ``caughey``, ``pml``, whose layers end at a fixed face) fixes every
+    component (as the thesis's ``bottom`` rule), ``roller`` the
     normal displacement; ``free`` and ``absorbing`` nothing.
     """
     rules: dict[str, tuple[str, ...]] = {}
     for face, kind in face_types(problem).items():
-        if kind in ("fixed", "caughey"):
+        if kind in ("fixed", "caughey", "pml"):
             rules[face] = COMPONENTS
         elif kind == "roller":
             rules[face] = (_NORMAL[face],)
@@ -426,13 +427,13 @@ SUPPORT_TOL = 1e-6
 def restrained_components(problem: Problem) -> dict[str, tuple[int, ...]]:
     """Displacement components (0, 1, 2 = x, y, z) each face restrains.
 
-    ``fixed`` and ``caughey`` all three, ``roller`` its normal one, ``absorbing`` all three
+    ``fixed``, ``caughey`` and ``pml`` all three, ``roller`` its normal one, ``absorbing`` all three
     (dashpots normal and tangential, springs too when ``boundary.virtual_thickness > 0``),
     ``free`` none.
     """
     out = {}
     for face, kind in face_types(problem).items():
-        if kind in ("fixed", "caughey", "absorbing"):
+        if kind in ("fixed", "caughey", "pml", "absorbing"):
             out[face] = (0, 1, 2)
         elif kind == "roller":
             out[face] = (COMPONENTS.index(_NORMAL[face]),)

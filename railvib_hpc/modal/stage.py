@@ -32,6 +32,7 @@ from ..mesh.stage import build_or_reuse_mesh
 from ..parallel import on_root
 from ..problem import Problem
 from ..resources import peak_memory_gb
+from ..schema import BOUNDARY_FACES
 from ..uncertainty.fields import resolution_warnings
 from .boundary import problem_dofmap
 from .dofmap import NODE_ARRAY_CHUNK
@@ -120,6 +121,16 @@ def compute(ctx: StageContext) -> ModesOutput:
                           "the modal path (modal, mbs, run and the modal studies) models "
                           "the thesis's rigid rail ends; 'supported' is for railvib "
                           "transient")])
+    pml = [f for f in BOUNDARY_FACES if ctx.case[f"boundary.{f}"] == "pml"]
+    if pml:
+        from ..errors import CaseError
+
+        raise CaseError([(f"boundary.{pml[0]}", "pml",
+                          "a perfectly matched layer is frequency dependent (its stretching "
+                          "1 + d / (i omega)), so the modal path (modal, mbs, run and the "
+                          "modal studies) has no modes of it; it is for railvib transient "
+                          "with transient.engine = 'explicit'; allowed here: fixed, roller, "
+                          "free, absorbing, caughey")])
     old = _reused_modes(ctx)
     if old is not None:
         return old

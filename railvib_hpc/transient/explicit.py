@@ -197,7 +197,7 @@ class StableStep:
 
 
 def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
-                    damping_factor: float = 1.0) -> StableStep:
+                    damping_factor: float = 1.0, plus=None) -> StableStep:
     """The critical step of ``K, C`` on the lumped mass ``m`` (collective).
 
     The largest frequency of ``K, m`` (SLEPc Krylov-Schur on ``m^-1/2 K m^-1/2``, to
@@ -218,12 +218,14 @@ def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
     ``minus = (K_p, C_p)``: the limit of ``K - K_p, C - C_p`` (the explicit part of the
     IMEX engine, :mod:`.imex`, whose implicit partition ``K_p, C_p`` is unconditionally
     stable; ``C_p`` may be None). ``K_p``'s pattern must be a subset of ``K``'s.
+    ``plus``: a matrix added to K (the perfectly matched layers' diagonal ``M_e2``,
+    :class:`~.pml.PmlLayer`).
     """
     d = K.createVecLeft()
     d.getArray()[:] = 1.0 / np.sqrt(m)
     K_p, C_p = (None, None) if minus is None else minus
     # m^-1/2 (K - K_p) m^-1/2 as a shell: no copy of K (a third of the setup's peak)
-    op = _ScaledCombination(d, [(K, 1.0), (K_p, -1.0)])
+    op = _ScaledCombination(d, [(K, 1.0), (K_p, -1.0), (plus, 1.0)])
     lam, x, iterations = _largest_eigenpair(op, comm)
     phi = x.getArray() * d.getArray()        # the mode in displacements (x = m^1/2 phi)
     omega = float(np.sqrt(max(lam, 0.0)))
@@ -403,6 +405,11 @@ class ExplicitSystem:
     ``d v_n`` at the mean of the two half-step velocities dissipates at any step). Without
     it, face nodes with ``c / m = 2 c_p / h`` halve the stable step of a soil model
     (:func:`stability_limit`).
+
+    ``pml``: the perfectly matched layers (:class:`~.pml.PmlLayer`, or None): their
+    ``M_e1`` joins the full-step diagonal, and :meth:`ExplicitSolver.acceleration` adds
+    their force. The energies here are those of K and m alone (a layer's energy is not
+    conserved: it absorbs).
     """
 
     #: No factor: what the run statistics report of the direct path's
@@ -410,13 +417,18 @@ class ExplicitSystem:
     factor_memory_gb = 0.0
     out_of_core = False
 
-    def __init__(self, K, M, C, dt: float, comm, dashpots: np.ndarray | None = None):
+    def __init__(self, K, M, C, dt: float, comm, dashpots: np.ndarray | None = None,
+                 pml=None):
         self.K, self.M, self.C, self.dt, self.comm = K, M, C, float(dt), comm
         self.n_global = K.getSize()[0]
         self.r0, self.r1 = K.getOwnershipRange()
         self.n_local = self.r1 - self.r0
         self.m = lumped_diagonal(M, comm)
         self.dashpots = None if dashpots is None else np.asarray(dashpots, dtype=float)
+        self.pml = pml
+        if pml is not None:           # the layers' M_e1 at the full step, like the dashpots
+            base = np.zeros(self.n_local) if self.dashpots is None else self.dashpots
+            self.dashpots = base + pml.damping_diagonal
         self._x, self._y = K.createVecRight(), K.createVecLeft()
         self._v, self._w = K.createVecRight(), K.createVecLeft()
         self.time_products = 0.0
@@ -540,6 +552,8 @@ class ExplicitSystem:
     def destroy(self) -> None:
         for vec in (self._x, self._y, self._v, self._w):
             vec.destroy()
+        if self.pml is not None:
+            self.pml.destroy()
 
 
 def initial_acceleration(system: ExplicitSystem, state: State,
@@ -548,6 +562,8 @@ def initial_acceleration(system: ExplicitSystem, state: State,
     :func:`~.integrate.initial_acceleration`; the mass is diagonal, ``d`` the system's
     diagonal dashpots)."""
     res = -system.internal_force(state.u, state.v)
+    if system.pml is not None:
+        res -= system.pml.start(state.u)
     if system.dashpots is not None:
         res -= system.dashpots * state.v
     for dofs, values in loads:
@@ -576,6 +592,7 @@ class ExplicitSolver:
         self.prescribed = prescribed
         self.driver = driver
         self.time_contact = 0.0
+        self.time_pml = 0.0
         if driver is not None:
             nm = driver.newmark
             self._mv_inv = np.linalg.inv(nm.mv)
@@ -589,6 +606,10 @@ class ExplicitSolver:
         (and the diagonal dashpots at the full step, :meth:`ExplicitSystem.accelerate`)."""
         sys_ = self.system
         rhs = -sys_.internal_force(u, v_half)
+        if sys_.pml is not None:
+            t0 = time.perf_counter()
+            rhs -= sys_.pml.force(u, sys_.dt)
+            self.time_pml += time.perf_counter() - t0
         for load in ((None if self.prescribed is None else self.prescribed(n)), contact):
             if load is not None:
                 add_sparse(rhs, sys_.r0, load[0], load[1])

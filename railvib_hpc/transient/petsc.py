@@ -190,3 +190,65 @@ def static_deflection(K, M, comm, dof: int) -> float:
         op.destroy()
     return float(comm.allreduce(float(x[dof - r0, 0]) if own else 0.0))
 
+
+
+class GhostGather:
+    """Values of a distributed vector at given global DOFs, on this rank (a PETSc
+    scatter from the global vector into a sequential one; collective construction and
+    call). The perfectly matched layers' elements need their nodes' displacements from
+    the ranks that own them (:class:`~.pml.PmlLayer`).
+
+    Parameters
+    ----------
+    comm
+        MPI communicator of the rows.
+    rows
+        ``(r0, r1)``: this rank's rows.
+    n_global
+        Global size.
+    dofs
+        Global DOFs whose values this rank needs (sorted, unique; may be empty).
+    """
+
+    def __init__(self, comm, rows: tuple[int, int], n_global: int, dofs: np.ndarray):
+        from petsc4py import PETSc
+
+        r0, r1 = rows
+        self._vec = PETSc.Vec().createMPI((r1 - r0, n_global), comm=comm)
+        self._seq = PETSc.Vec().createSeq(len(dofs), comm=PETSc.COMM_SELF)
+        index = PETSc.IS().createGeneral(np.asarray(dofs, dtype=PETSc.IntType),
+                                         comm=PETSc.COMM_SELF)
+        self._scatter = PETSc.Scatter().create(self._vec, index, self._seq, None)
+        index.destroy()
+        self.time = 0.0
+
+    def __call__(self, u: np.ndarray) -> np.ndarray:
+        """The values at the DOFs from this rank's rows ``u`` (a new array)."""
+        from petsc4py import PETSc
+
+        t0 = time.perf_counter()
+        self._vec.getArray()[:] = u
+        self._scatter.scatter(self._vec, self._seq, PETSc.InsertMode.INSERT_VALUES,
+                              PETSc.ScatterMode.FORWARD)
+        out = self._seq.getArray().copy()
+        self.time += time.perf_counter() - t0
+        return out
+
+    def destroy(self) -> None:
+        for obj in (self._scatter, self._vec, self._seq):
+            obj.destroy()
+
+
+def diagonal_matrix(comm, rows: tuple[int, int], n_global: int, values: np.ndarray):
+    """A distributed AIJ matrix with this rank's rows ``values`` on its diagonal (the
+    perfectly matched layers' ``M_e2`` in the explicit engine's stability limit)."""
+    from petsc4py import PETSc
+
+    r0, r1 = rows
+    n = r1 - r0
+    A = PETSc.Mat().createAIJ(size=((n, n_global), (n, n_global)),
+                              csr=(np.arange(n + 1, dtype=PETSc.IntType),
+                                   np.arange(r0, r1, dtype=PETSc.IntType),
+                                   np.asarray(values, dtype=float)), comm=comm)
+    A.assemble()
+    return A

@@ -535,8 +535,10 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     ckpt_path = out_dir / CHECKPOINT
 
     # ---- initial state or resume
-    run_id = on_root(lambda: _resumable(ctx, init["mesh_sha"],
-                                        (steps_out.size, mesh.n_nodes, 3), nt), comm)
+    # the perfectly matched layers' memory is not checkpointed: such a run starts at t = 0
+    layers = getattr(system, "pml", None) is not None
+    run_id = None if layers else on_root(lambda: _resumable(
+        ctx, init["mesh_sha"], (steps_out.size, mesh.n_nodes, 3), nt), comm)
     resume_ok = run_id is not None
     if resume_ok:
         ck = read_checkpoint(ckpt_path, dofmap, comm.rank)
@@ -614,7 +616,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
             want = (interval > 0 and now - last_ckpt >= interval) or \
                 (checkpoint_steps is not None and state.step % checkpoint_steps == 0)
             want = comm.bcast(want, root=0) if comm.size > 1 else want
-            if want and state.step < nt:
+            if want and state.step < nt and not layers:
                 writer.sync()          # the fields on disk up to this step, then the state
                 fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
                 write_checkpoint(ckpt_path, comm,
@@ -702,8 +704,8 @@ def _setup(ctx: StageContext) -> dict:
         K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails, problem)
         with rep.stage("transient: stability limit"):
             if explicit:
-                system, dt, limit = _explicit_system(ctx, mesh, dofmap, rails, vehicle,
-                                                     (K, M, C, dashpots), dt)
+                system, dt, limit = _explicit_system(ctx, mesh, dofmap, problem, rails,
+                                                     vehicle, (K, M, C, dashpots), dt)
             else:
                 partition, dt, limit = _imex_partition(ctx, mesh, dofmap, problem, K, M, C,
                                                        dt)
@@ -904,7 +906,8 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
     return problem
 
 
-def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle,
+def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: RailDofs,
+                     vehicle,
                      matrices: tuple, dt_band: float) -> tuple:
     """The explicit engine's system, its step and a line on its stability limit.
 
@@ -924,9 +927,18 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle,
 
     case, comm = ctx.case, ctx.comm
     K, M, C, dashpots = matrices
+    layer = _pml_layer(ctx, mesh, dofmap, problem, K)
     # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
-    system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots)
-    lim = stability_limit(K, system.m, C, comm)
+    system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots, pml=layer)
+    plus = None
+    if layer is not None:          # the layers' M_e2 stiffens their nodes
+        from .petsc import diagonal_matrix
+
+        plus = diagonal_matrix(comm, (system.r0, system.r1), system.n_global,
+                               layer.stiffness_diagonal)
+    lim = stability_limit(K, system.m, C, comm, plus=plus)
+    if plus is not None:
+        plus.destroy()
     critical = lim.dt_critical
     where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
     if vehicle is not None:
@@ -946,6 +958,26 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, rails: RailDofs, vehicle,
         raise
     system.dt = float(dt)
     return system, dt, text
+
+
+def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K):
+    """The perfectly matched layers of the ``pml`` faces (None without), with their log
+    lines (collective)."""
+    from .petsc import GhostGather
+    from .pml import PmlLayer, pml_faces, pml_line, pml_warnings
+
+    if not pml_faces(problem):
+        return None
+    comm = ctx.comm
+    rows, n_global = K.getOwnershipRange(), K.getSize()[0]
+    layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
+                     lambda dofs: GhostGather(comm, rows, n_global, dofs))
+    n_el = comm.allreduce(layer.n_elements)
+    ctx.rep.info(f"  {pml_line(layer.faces, problem)}; {n_el} element computations on "
+                 f"{comm.size} rank(s), {comm.allreduce(layer.nbytes) / 1e6:.3g} MB")
+    for line in pml_warnings(layer.faces, problem):
+        ctx.rep.info(line)
+    return layer
 
 
 def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
@@ -1106,6 +1138,9 @@ def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, c
              "time_factorization": system.time_factorization,
              "time_solves": system.time_solves, "time_products": system.time_products,
              "time_contact": solver.time_contact, "solves": system.n_solves,
+             "time_pml": getattr(solver, "time_pml", 0.0),
+             "pml_elements": (0 if getattr(system, "pml", None) is None
+                              else comm.allreduce(system.pml.n_elements)),
              "factor_memory_gb": system.factor_memory_gb, "out_of_core": system.out_of_core,
              "peak_rss_gb_per_rank": rss, "peak_rss_gb_total": float(sum(rss))}
     if init["columns"] is not None:

@@ -1,0 +1,267 @@
+"""The perfectly matched layers of ``pml`` faces for the explicit engine (issue 29).
+
+A face ``boundary.<face> = "pml"`` is fixed, and the hexahedra whose centroids lie within
+``boundary.layer_thickness`` of it form its layer: their coordinate normal to the face is
+stretched by ``1 + d(xi) / (i omega)`` (:mod:`railvib_hpc.fem.pml`: formulation, profile,
+kernel), with ``xi`` the depth into the layer. Edges and corners, where two or three
+layers overlap, stretch two or three coordinates; the soil's layers and parts continue
+through it (each element keeps its material). The layer's strength ``d_max`` follows
+from the largest P-wave speed in it and ``boundary.pml_reflection``,
+``boundary.pml_power``.
+
+What may lie in a layer: soil, the track bed and the mitigation measures (continua,
+stretched like the soil). The building may not (it is the model, not its truncation:
+refused). The track's beams and springs that run into an ``x`` layer are not stretched
+(1-D elements; the rail's own truncation is ``track.ends``), so they reflect what they
+carry, as at any fixed face.
+
+Each rank computes the layer's elements that touch its nodes (as the assembly does, so
+no force is summed across ranks), with the displacements of their nodes gathered from
+their owners (:func:`~.petsc.ghost_gather`). Cost per layer element: ~4.4 kB and ~6
+kflop per step (the gradients and forces at 8 Gauss points); the rest of the model is
+untouched.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import UserError
+from ..fem.hex8 import hex8_lumped_mass_diagonal
+from ..fem.material import lame_parameters
+from ..fem.pml import MIN_ELEMENTS, PmlElements, mass_coefficients, profile, profile_strength
+from ..fem.reference import GAUSS_VALUES
+from ..mesh.model import Mesh
+from ..modal.boundary import FACE_AXIS, face_node_sets, face_types
+from ..problem import Problem
+from ..schema import BUILDING_PARTS, PART_ID, SOLID_MATERIAL
+
+
+class PmlError(UserError):
+    """A perfectly matched layer the mesh cannot carry."""
+
+
+@dataclass(frozen=True)
+class PmlFace:
+    """One ``pml`` face: its coordinate axis, the plane's coordinate, the layer's
+    strength ``d_max`` [1/s], the largest P-wave speed in it [m/s], its elements and the
+    element layers across it."""
+
+    face: str
+    axis: int
+    plane: float
+    d_max: float
+    c_p: float
+    elements: int
+    across: float
+
+
+def pml_faces(problem: Problem) -> list[str]:
+    """The faces whose type is ``pml``."""
+    return [face for face, kind in face_types(problem).items() if kind == "pml"]
+
+
+def _element_materials(mesh: Mesh, problem: Problem, sel: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lame parameters and densities of the hexahedra ``sel`` (their random fields'
+    factors applied at the centroids, as the assembly does)."""
+    from ..modal.elements import element_factors
+
+    lam, mu, rho = np.zeros(len(sel)), np.zeros(len(sel)), np.zeros(len(sel))
+    parts = mesh.hex_part[sel]
+    centres = mesh.points[mesh.hexes[sel]].mean(axis=1)
+    for part, name in SOLID_MATERIAL.items():
+        here = parts == PART_ID[part]
+        if not here.any():
+            continue
+        mat = problem.material(name)
+        E, density = np.full(here.sum(), mat.E), np.full(here.sum(), mat.rho)
+        if any(f.part == name for f in problem.fields):
+            E = E * element_factors(problem.fields, name, "E", centres[here])
+            density = density * element_factors(problem.fields, name, "rho", centres[here])
+        lam[here], mu[here] = lame_parameters(E, mat.nu)
+        rho[here] = density
+    return lam, mu, rho
+
+
+def pml_geometry(mesh: Mesh, problem: Problem) -> tuple[list[PmlFace], np.ndarray]:
+    """The ``pml`` faces and the mask of the hexahedra in their layers (checked).
+
+    Raises
+    ------
+    PmlError
+        A face without nodes, a layer that holds no element, or a building element in a
+        layer.
+    """
+    thickness = problem.boundary.layer_thickness
+    sets = face_node_sets(mesh)
+    centres = mesh.points[mesh.hexes].mean(axis=1)
+    inside = np.zeros(len(mesh.hexes), dtype=bool)
+    faces = []
+    building = np.isin(mesh.hex_part, [PART_ID[p] for p in BUILDING_PARTS])
+    for face in pml_faces(problem):
+        nodes = sets[face]
+        if nodes.size == 0:
+            raise PmlError(f"boundary.{face} = 'pml': the mesh has no nodes on that face")
+        axis = FACE_AXIS[face]
+        plane = float(mesh.points[nodes, axis].mean())
+        layer = np.abs(centres[:, axis] - plane) < thickness
+        if not layer.any():
+            raise PmlError(
+                f"boundary.layer_thickness = {thickness:g}: the pml layer of boundary.{face} "
+                "holds no element (no centroid lies that close to the face); allowed: "
+                f"at least {MIN_ELEMENTS} element layers")
+        if (layer & building).any():
+            k = int(np.flatnonzero(layer & building)[0])
+            raise PmlError(
+                f"boundary.layer_thickness = {thickness:g}: the pml layer of boundary.{face} "
+                f"reaches the building (element {k} at {np.round(centres[k], 3).tolist()} "
+                "m); a layer stands in for the ground beyond the model: make it thinner or "
+                "the domain larger ([domain], case.extra_*)")
+        lam, mu, rho = _element_materials(mesh, problem, np.flatnonzero(layer))
+        c_p = float(np.sqrt((lam + 2.0 * mu) / rho).max())
+        d_max = profile_strength(c_p, thickness, problem.boundary.pml_power,
+                                 problem.boundary.pml_reflection)
+        ext = mesh.points[mesh.hexes[layer]][:, :, axis]
+        h = float(np.median(ext.max(axis=1) - ext.min(axis=1)))
+        faces.append(PmlFace(face, axis, plane, d_max, c_p, int(layer.sum()), thickness / h))
+        inside |= layer
+    return faces, inside
+
+
+def pml_warnings(faces: list[PmlFace], problem: Problem) -> list[str]:
+    """Lines on layers with fewer than :data:`~railvib_hpc.fem.pml.MIN_ELEMENTS` element
+    layers across: the discrete layer's reflection grows with ``d_max h / c_P = (p + 1)
+    ln(1 / R) / (2 n)`` far above the target ``R`` (Collino & Tsogka 2001)."""
+    b = problem.boundary
+    out = []
+    for f in faces:
+        if f.across >= MIN_ELEMENTS:
+            continue
+        h = b.layer_thickness / f.across
+        out.append(f"warning: boundary.layer_thickness = {b.layer_thickness:g} m gives the pml "
+                   f"layer of boundary.{f.face} {f.across:.3g} element layers of {h:.3g} m; "
+                   f"below {MIN_ELEMENTS} its discrete reflection lies far above "
+                   f"boundary.pml_reflection = {b.pml_reflection:g}: make it at least "
+                   f"{MIN_ELEMENTS * h:.3g} m")
+    return out
+
+
+def damping_at(points: np.ndarray, faces: list[PmlFace], problem: Problem) -> np.ndarray:
+    """``d_0, d_1, d_2`` [1/s] at ``points`` (..., 3): each face's profile over the depth
+    into its layer, along its axis (the largest where two faces share an axis)."""
+    thickness, power = problem.boundary.layer_thickness, problem.boundary.pml_power
+    d = np.zeros(points.shape)
+    for f in faces:
+        depth = thickness - np.abs(points[..., f.axis] - f.plane)
+        d[..., f.axis] = np.maximum(d[..., f.axis], profile(depth, thickness, f.d_max, power))
+    return d
+
+
+def pml_line(faces: list[PmlFace], problem: Problem) -> str:
+    """One line on the layers for the run's log."""
+    b = problem.boundary
+    return (f"perfectly matched layers ({b.layer_thickness:g} m, R = {b.pml_reflection:g}, "
+            f"p = {b.pml_power:g}): " + ", ".join(
+                f"{f.face} {f.elements} elements, {f.across:.3g} across, d_max "
+                f"{f.d_max:.4g} 1/s" for f in faces))
+
+
+class PmlLayer:
+    """This rank's share of the layers: the memory kernel of their elements touching its
+    nodes and the mass-side diagonals of its rows (collective construction).
+
+    The equations of its rows gain (module :mod:`railvib_hpc.fem.pml`)::
+
+        M_e1 u' + M_e2 u + M_e3 int u + f_memory(u history)
+
+    :attr:`damping_diagonal` (``M_e1``) is taken at the full-step velocity by the engine,
+    like the face dashpots; :meth:`force` returns the rest at ``u_{n+1}``.
+
+    Parameters
+    ----------
+    mesh, problem, dofmap
+        The model.
+    rank, r0, r1
+        This rank and its DOF rows ``[r0, r1)``.
+    gather
+        ``gather(dofs) -> callable``: a collective factory of a function that returns, from
+        this rank's rows of a vector, its values at the global ``dofs``
+        (:func:`~.petsc.ghost_gather`).
+    """
+
+    def __init__(self, mesh: Mesh, problem: Problem, dofmap, rank: int, r0: int, r1: int,
+                 gather: Callable):
+        self.faces, inside = pml_geometry(mesh, problem)
+        own = np.zeros(mesh.n_nodes, dtype=bool)
+        own[dofmap.owned_nodes(rank)] = True
+        sel = np.flatnonzero(inside & own[mesh.hexes].any(axis=1))
+        conn = mesh.hexes[sel]
+        x = mesh.points[conn]
+        lam, mu, rho = _element_materials(mesh, problem, sel)
+        gauss = np.einsum("qa,eak->eqk", GAUSS_VALUES, x)
+        self.kernel = PmlElements(x, lam, mu, damping_at(gauss, self.faces, problem))
+        self.dofs = dofmap.index[conn][:, :, :3]                    # (nel, 8, 3), -1 fixed
+        free = self.dofs >= 0
+        needed = np.unique(self.dofs[free])
+        self._slots = np.where(free, np.searchsorted(needed, self.dofs), -1)
+        self._gather = gather(needed)
+        self.r0, self.n_local = r0, r1 - r0
+        rows = np.where((self.dofs >= r0) & (self.dofs < r1), self.dofs - r0, -1)
+        self._rows = rows
+        # the layer elements' lumped masses weighted by e1, e2, e3 at their nodes
+        mass = hex8_lumped_mass_diagonal(x, rho).reshape(-1, 8, 3)
+        coef = mass_coefficients(damping_at(x, self.faces, problem))
+        self.damping_diagonal, self.stiffness_diagonal, self.integral_diagonal = (
+            self._to_rows(mass * c[:, :, None]) for c in coef)
+        self.n_elements = len(sel)
+        self._u, self._ubar = np.zeros(self.n_local), np.zeros(self.n_local)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory of this rank's layer [bytes] (kernel, maps, diagonals)."""
+        return self.kernel.nbytes + self.dofs.nbytes + self._slots.nbytes + \
+            self._rows.nbytes + 5 * 8 * self.n_local
+
+    def destroy(self) -> None:
+        """Free the gather's PETSc objects (if it has any)."""
+        release = getattr(self._gather, "destroy", None)
+        if release is not None:
+            release()
+
+    def _to_rows(self, values: np.ndarray) -> np.ndarray:
+        """Sum element values (nel, 8, 3) into this rank's rows."""
+        ok = self._rows >= 0
+        return np.bincount(self._rows[ok], values[ok], self.n_local)
+
+    def _element_values(self, u: np.ndarray) -> np.ndarray:
+        """The layer elements' displacements (nel, 8, 3) from this rank's rows ``u``
+        (collective)."""
+        values = self._gather(u)
+        out = np.zeros(self._slots.shape)
+        ok = self._slots >= 0
+        out[ok] = values[self._slots[ok]]
+        return out
+
+    def start(self, u: np.ndarray) -> np.ndarray:
+        """Set the memory at rest with the initial displacements ``u`` (this rank's
+        rows); returns the layer's force on them, ``M_e2 u`` (collective)."""
+        self.kernel.start(self._element_values(u))
+        self._u, self._ubar = u.copy(), np.zeros(self.n_local)
+        return self.stiffness_diagonal * u
+
+    def force(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """Advance to the next step's displacements ``u`` and return the layer's force on
+        this rank's rows there, ``f_memory + M_e2 u + M_e3 int u`` (collective; once per
+        step)."""
+        self._ubar += (0.5 * dt) * (self._u + u)
+        self._u = u.copy()
+        extra = self._to_rows(self.kernel.advance(self._element_values(u), dt))
+        return extra + self.stiffness_diagonal * u + self.integral_diagonal * self._ubar
+
+
+__all__ = ["PmlError", "PmlFace", "PmlLayer", "damping_at", "pml_faces", "pml_geometry",
+           "pml_line", "pml_warnings"]

@@ -1,0 +1,172 @@
+"""Soil boxes with perfectly matched layers, stepped by the explicit engine (issue 29).
+
+Everything runs through the package's path: the case keys (``boundary.<face> = "pml"``),
+the distributed assembly, :class:`~railvib_hpc.transient.pml.PmlLayer` with its PETSc
+gather, the stability limit and :class:`~railvib_hpc.transient.explicit.ExplicitSolver`.
+A slab one element thick with ``u_y = 0`` everywhere is a plane-strain model (cheap
+references for the oblique-incidence checks); a box is the 3-D case.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from wave_cases import box_mesh, soil_case
+
+from railvib_hpc.schema import PART_ID
+
+#: The subgrade of :func:`wave_cases.soil_case` (benchmarks.md section 1).
+E, NU, RHO = 200e6, 0.2, 1850.0
+C_P = math.sqrt(E * (1 - NU) / (RHO * (1 + NU) * (1 - 2 * NU)))
+C_S = math.sqrt(E / (2 * (1 + NU)) / RHO)
+#: All five truncation faces.
+FACES = ("x_min", "x_max", "y_min", "y_max", "base")
+
+
+def ricker(t, f0: float):
+    """Ricker wavelet of peak frequency ``f0`` centred at ``1.2 / f0`` (zero mean)."""
+    a = (np.pi * f0 * (np.asarray(t, dtype=float) - 1.2 / f0)) ** 2
+    return (1.0 - 2.0 * a) * np.exp(-a)
+
+
+def slab_mesh(nx: int, nz: int, h: float, origin=(0.0, 0.0, 0.0), layers=None):
+    """A plane-strain slab ``nx x 1 x nz`` of hexes of size ``h``; ``layers``: optional
+    ``[(z_top_of_layer_from_base, part)]`` to give parts by depth."""
+    mesh = box_mesh((nx, 1, nz), (nx * h, h, nz * h), origin)
+    _set_layers(mesh, layers)
+    return mesh
+
+
+def _set_layers(mesh, layers) -> None:
+    if not layers:
+        return
+    zc = mesh.points[mesh.hexes].mean(axis=1)[:, 2]
+    lo = mesh.points[:, 2].min()
+    for z_top, part in sorted(layers, reverse=True):
+        mesh.hex_part[zc - lo < z_top] = PART_ID[part]
+
+
+def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receivers,
+            t_end: float, f0: float, comm, plane_strain: bool = False,
+            extra: tuple = (), courant: float | None = None, record_energy: bool = False):
+    """Step ``mesh`` with the given face types and a Ricker point force.
+
+    Parameters
+    ----------
+    mesh
+        The soil model (its ``x_faces``, ``y_faces`` and ``bottom`` node sets).
+    faces
+        ``{face: type}`` (faces not given: ``fixed``).
+    thickness
+        ``boundary.layer_thickness`` [m].
+    source
+        ``(point, component, amplitude)``: a force on the node nearest ``point`` (on
+        every node of that x, z in a plane-strain slab).
+    receivers
+        (k, 3) points; the nearest nodes are recorded.
+    t_end, f0
+        Duration [s] and Ricker peak frequency [Hz].
+    comm
+        Communicator.
+    plane_strain
+        ``u_y = 0`` at every node.
+    extra
+        More case overrides (layers' materials, pml parameters).
+    courant
+        Fixed step as ``courant * h_min / c_P`` (default: the engine's allowed step).
+    record_energy
+        Also return ``1/2 v^T m v + 1/2 u^T K u`` per step.
+
+    Returns
+    -------
+    dict
+        ``t``, ``u`` and ``v`` (steps + 1, k, 3) at the receivers (every rank), ``dt``,
+        ``dofs`` (global count), ``pml_elements``, ``time_per_step`` [s] and ``energy``.
+    """
+    import time
+
+    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.problem import Problem
+    from railvib_hpc.transient.explicit import (
+        ExplicitSolver,
+        ExplicitSystem,
+        initial_acceleration,
+        stability_limit,
+    )
+    from railvib_hpc.transient.integrate import State
+    from railvib_hpc.transient.petsc import GhostGather, diagonal_matrix
+    from railvib_hpc.transient.pml import PmlLayer, pml_faces
+
+    types = {f: faces.get(f, "fixed") for f in FACES}
+    case = soil_case("modal.lumped_mass=true", "damping.model=none",
+                     "transient.engine=explicit", f"boundary.layer_thickness={thickness}",
+                     *(f"boundary.{f}={k}" for f, k in types.items()), *extra)
+    problem = Problem.from_case(case)
+    rules, sets = constraint_rules(problem), face_node_sets(mesh)
+    if plane_strain:
+        rules["all"] = ("uy",)             # (the node set of every node)
+    dofmap = build_dofmap(mesh, comm.size, rules=rules, node_sets=sets)
+    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal")
+    rows, n_global = K.getOwnershipRange(), K.getSize()[0]
+    layer = None
+    if pml_faces(problem):
+        layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
+                         lambda dofs: GhostGather(comm, rows, n_global, dofs))
+    system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
+    plus = None if layer is None else diagonal_matrix(comm, rows, n_global,
+                                                      layer.stiffness_diagonal)
+    lim = stability_limit(K, system.m, None, comm, plus=plus)
+    if plus is not None:
+        plus.destroy()
+    ext = mesh.points[mesh.hexes]
+    h_min = float((ext.max(axis=1) - ext.min(axis=1)).min())
+    dt = lim.dt_allowed if courant is None else courant * h_min / C_P
+    system.dt = dt
+    r0, r1 = rows
+    point, comp, amp = source
+    d2 = ((mesh.points - np.asarray(point)) ** 2).sum(axis=1)
+    if plane_strain:
+        near = mesh.points[np.argmin(d2)]
+        src = np.flatnonzero(np.isclose(mesh.points[:, 0], near[0])
+                             & np.isclose(mesh.points[:, 2], near[2]))
+    else:
+        src = np.array([int(np.argmin(d2))])
+    src_dofs = dofmap.index[src, comp]
+    src_dofs = src_dofs[src_dofs >= 0]
+    own_src = src_dofs[(src_dofs >= r0) & (src_dofs < r1)]
+    rec = np.array([int(np.argmin(((mesh.points - p) ** 2).sum(axis=1))) for p in receivers])
+    rdofs = dofmap.index[rec, :3]
+
+    def prescribed(n):
+        return own_src, np.full(own_src.size, amp * float(ricker(n * dt, f0)))
+
+    def sample(x):
+        out = np.zeros(rdofs.shape)
+        ok = (rdofs >= r0) & (rdofs < r1)
+        out[ok] = x[rdofs[ok] - r0]
+        return comm.allreduce(out)
+
+    n = r1 - r0
+    st = State(0, np.zeros(n), np.zeros(n), np.zeros(n))
+    solver = ExplicitSolver(system, prescribed=lambda k: (own_src, prescribed(k)[1]))
+    initial_acceleration(system, st, [prescribed(0)])
+    steps = int(math.ceil(t_end / dt))
+    u, v, energy = [sample(st.u)], [sample(st.v)], []
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        solver.step(st)
+        u.append(sample(st.u))
+        v.append(sample(st.v))
+        if record_energy:
+            energy.append(system.energy(st.u, st.v))
+    elapsed = time.perf_counter() - t0
+    out = {"t": np.arange(steps + 1) * dt, "u": np.array(u), "v": np.array(v), "dt": dt,
+           "dofs": n_global, "time_per_step": elapsed / steps, "energy": np.array(energy),
+           "pml_elements": 0 if layer is None else comm.allreduce(layer.n_elements)}
+    system.destroy()
+    K.destroy()
+    M.destroy()
+    return out

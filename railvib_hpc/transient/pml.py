@@ -110,10 +110,12 @@ def pml_geometry(mesh: Mesh, problem: Problem) -> tuple[list[PmlFace], np.ndarra
         plane = float(mesh.points[nodes, axis].mean())
         layer = np.abs(centres[:, axis] - plane) < thickness
         if not layer.any():
+            nearest = float(np.abs(centres[:, axis] - plane).min())
             raise PmlError(
                 f"boundary.layer_thickness = {thickness:g}: the pml layer of boundary.{face} "
-                "holds no element (no centroid lies that close to the face); allowed: "
-                f"at least {MIN_ELEMENTS} element layers")
+                f"holds no element (the nearest centroid lies {nearest:.4g} m from the "
+                f"face); allowed: more than {nearest:.4g} m, better {MIN_ELEMENTS} element "
+                f"layers (about {2 * MIN_ELEMENTS * nearest:.3g} m on this mesh)")
         if (layer & building).any():
             k = int(np.flatnonzero(layer & building)[0])
             raise PmlError(
@@ -205,13 +207,16 @@ class PmlLayer:
         gauss = np.einsum("qa,eak->eqk", GAUSS_VALUES, x)
         self.kernel = PmlElements(x, lam, mu, damping_at(gauss, self.faces, problem))
         self.dofs = dofmap.index[conn][:, :, :3]                    # (nel, 8, 3), -1 fixed
-        free = self.dofs >= 0
-        needed = np.unique(self.dofs[free])
-        self._slots = np.where(free, np.searchsorted(needed, self.dofs), -1)
+        flat = self.dofs.ravel()
+        needed = np.unique(flat[flat >= 0])
+        # element slots with a free DOF and where their value sits in the gathered vector
+        self._free = np.flatnonzero(flat >= 0)
+        self._slots = np.searchsorted(needed, flat[self._free])
         self._gather = gather(needed)
         self.r0, self.n_local = r0, r1 - r0
-        rows = np.where((self.dofs >= r0) & (self.dofs < r1), self.dofs - r0, -1)
-        self._rows = rows
+        # element slots of this rank's rows, and those rows
+        self._owned = np.flatnonzero((flat >= r0) & (flat < r1))
+        self._rows = flat[self._owned] - r0
         # the layer elements' lumped masses weighted by e1, e2, e3 at their nodes
         mass = hex8_lumped_mass_diagonal(x, rho).reshape(-1, 8, 3)
         coef = mass_coefficients(damping_at(x, self.faces, problem))
@@ -223,8 +228,9 @@ class PmlLayer:
     @property
     def nbytes(self) -> int:
         """Memory of this rank's layer [bytes] (kernel, maps, diagonals)."""
-        return self.kernel.nbytes + self.dofs.nbytes + self._slots.nbytes + \
-            self._rows.nbytes + 5 * 8 * self.n_local
+        return self.kernel.nbytes + self.dofs.nbytes + sum(
+            a.nbytes for a in (self._free, self._slots, self._owned, self._rows)) + \
+            5 * 8 * self.n_local
 
     def destroy(self) -> None:
         """Free the gather's PETSc objects (if it has any)."""
@@ -234,16 +240,14 @@ class PmlLayer:
 
     def _to_rows(self, values: np.ndarray) -> np.ndarray:
         """Sum element values (nel, 8, 3) into this rank's rows."""
-        ok = self._rows >= 0
-        return np.bincount(self._rows[ok], values[ok], self.n_local)
+        return np.bincount(self._rows, values.reshape(-1)[self._owned], self.n_local)
 
     def _element_values(self, u: np.ndarray) -> np.ndarray:
         """The layer elements' displacements (nel, 8, 3) from this rank's rows ``u``
         (collective)."""
         values = self._gather(u)
-        out = np.zeros(self._slots.shape)
-        ok = self._slots >= 0
-        out[ok] = values[self._slots[ok]]
+        out = np.zeros(self.dofs.shape)
+        out.reshape(-1)[self._free] = values[self._slots]
         return out
 
     def start(self, u: np.ndarray) -> np.ndarray:

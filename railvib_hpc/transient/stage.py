@@ -682,6 +682,10 @@ def _setup(ctx: StageContext) -> dict:
         layers = layer_line(mesh, problem)
         if layers:
             rep.info(f"  {layers}")
+        from .pml import pml_faces, pml_geometry
+
+        if pml_faces(problem):           # a layer the mesh cannot carry: before assembly
+            pml_geometry(mesh, problem)
         unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)

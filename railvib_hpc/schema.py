@@ -257,7 +257,7 @@ def _face(default: str, where: str) -> Param:
                  "graded Caughey absorbing layer inside the mesh, boundary.layer_*) or pml "
                  "(fixed, with a perfectly matched layer of boundary.layer_thickness inside "
                  "the mesh, boundary.pml_*; railvib transient with transient.engine = "
-                 "'explicit' only)",
+                 "'explicit' or 'imex')",
                  choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {
@@ -1170,8 +1170,15 @@ SCHEMA: dict[str, dict[str, Any]] = {
             "boundaries": Param(["case"], "strs", "-",
                                 "boundary conditions of the truncation faces, each run on every "
                                 "domain: case (the case file's [boundary]), thesis (rollers, "
-                                "fixed base), absorbing (all five faces absorbing)",
-                                choices=("case", "thesis", "absorbing"), unique=True),
+                                "fixed base), absorbing (all five faces absorbing), pml (all "
+                                "five faces perfectly matched layers of pml_thickness, added "
+                                "outside each domain; solver = direct)",
+                                choices=("case", "thesis", "absorbing", "pml"), unique=True),
+            "pml_thickness": Param(4.0, "float", "m",
+                                   "boundaries = pml: thickness of the layers (about 5 "
+                                   "element layers of the coarse mesh's soil near the "
+                                   "building, Collino & Tsogka 2001's smallest good layer)",
+                                   "pos"),
             "solver": Param("modal", "str", "-",
                             "modal (modes + mbs, the thesis's method) or direct (railvib "
                             "transient: the full model in the time domain, causal; band_hz "

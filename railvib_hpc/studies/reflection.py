@@ -13,8 +13,9 @@ change) raises the base; a positive one deepens the subgrade (``domain.extra_dep
 
 ``boundaries`` adds the condition of the truncation faces as a dimension: every domain is run
 with each setting (``case``: the case file's ``[boundary]``; ``thesis``: rollers and a fixed
-base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces) and compared with the
-largest domain of the same setting. ``solver = direct`` runs every variant with the
+base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces; ``pml``: perfectly
+matched layers of ``pml_thickness`` on all five faces, outside the domain, with the
+explicit engine) and compared with the largest domain of the same setting. ``solver = direct`` runs every variant with the
 full-order time integration (``railvib transient``) instead of modes + multibody.
 
 Compared: the building peak accelerations (vertical and total) and their one-third-octave
@@ -81,7 +82,23 @@ BOUNDARY_OVERRIDES = {
                "boundary.y_max=roller", "boundary.base=fixed"),
     "absorbing": tuple(f"boundary.{f}=absorbing" for f in
                        ("x_min", "x_max", "y_min", "y_max", "base")),
+    # the layers need the explicit engine (and its lumped mass); their thickness is added
+    # outside each domain (:func:`pml_overrides`)
+    "pml": (*(f"boundary.{f}=pml" for f in ("x_min", "x_max", "y_min", "y_max", "base")),
+            "transient.engine=explicit", "modal.lumped_mass=true"),
 }
+
+
+def pml_overrides(case: Case, change: tuple[float, float, float], thickness: float
+                  ) -> list[str]:
+    """The overrides of a domain with perfectly matched layers of ``thickness`` on its five
+    faces: the layers lie outside the domain ``change`` (it keeps its size), so the soil
+    grows by ``thickness`` at the base, at both ends, beyond the building and on the far
+    side of the track (``geometry.ys0``)."""
+    d, ln, w = change
+    return [*domain_overrides(case, (d + thickness, ln + thickness, w + thickness)),
+            f"geometry.ys0={case['geometry.ys0'] + thickness!r}",
+            f"boundary.layer_thickness={float(thickness)!r}"]
 
 
 def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
@@ -102,9 +119,15 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
             f"the building base (z = {case['geometry.zbb']:g} m): a depth change must be "
             f"> {lowest:g} m")])
     boundaries = settings.get("boundaries", ["case"])
+    if "pml" in boundaries and not direct:
+        raise StudySettingsError("reflection", [(
+            "study.reflection.boundaries", boundaries,
+            "'pml' needs study.reflection.solver = 'direct' (the layers are time-domain "
+            "only: railvib transient with the explicit engine)")])
     for b in boundaries:
         for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
-            ov = [*domain_overrides(case, (d, ln, w)), *BOUNDARY_OVERRIDES[b]]
+            ov = [*(pml_overrides(case, (d, ln, w), settings["pml_thickness"]) if b == "pml"
+                    else domain_overrides(case, (d, ln, w))), *BOUNDARY_OVERRIDES[b]]
             if band > 0:
                 # every mode below the band, proved by the inertia counts of the band solve
                 ov += [f"modal.f_max={float(band)!r}"]

@@ -50,7 +50,13 @@ from dataclasses import dataclass
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
-from .schema import BOUNDARY_FACES, INTERFACE_PARTS, MIN_SOIL_LAYER_THICKNESS, SOIL_LAYER_PARTS
+from .schema import (
+    BOUNDARY_FACES,
+    INTERFACE_PARTS,
+    MIN_SOIL_LAYER_THICKNESS,
+    PML_ALPHA,
+    SOIL_LAYER_PARTS,
+)
 from .uncertainty.fields import RandomField
 
 if TYPE_CHECKING:
@@ -113,6 +119,7 @@ class Boundary:
     layer_damping: float
     pml_reflection: float = 1e-4
     pml_power: float = 2.0
+    pml_alpha: float = PML_ALPHA
 
 
 @dataclass(frozen=True)
@@ -226,7 +233,7 @@ class Problem:
         boundary = Boundary(MappingProxyType({f: case[f"boundary.{f}"] for f in BOUNDARY_FACES}),
                             case["boundary.virtual_thickness"], case["boundary.layer_thickness"],
                             case["boundary.layer_damping"], case["boundary.pml_reflection"],
-                            case["boundary.pml_power"])
+                            case["boundary.pml_power"], case["boundary.pml_alpha"])
         damping = Damping(case["damping.model"], case["damping.f1"], case["damping.f2"],
                           case["damping.pads"], case["modal.damping_ratio"])
         return cls(MappingProxyType(materials), MappingProxyType(sections),

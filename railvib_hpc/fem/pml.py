@@ -2,38 +2,42 @@
 batched memory kernel of the stretched hexahedra (pure numpy).
 
 Formulation: the unsplit, displacement-based PML with complex coordinate stretching
-``x_j -> x~_j``, ``dx~_j / dx_j = lambda_j(x_j) = 1 + d_j(x_j) / s`` (``s = i omega``;
-Basu & Chopra 2003, 2004; Basu 2009 for explicit 3-D FE), written here with memory
-variables at the Gauss points. Multiplying the stretched momentum balance by ``J =
-lambda_0 lambda_1 lambda_2`` gives the weak form
+``x_j -> x~_j``, ``dx~_j / dx_j = lambda_j(x_j) = 1 + d_j(x_j) r``, ``r = 1 / (s +
+alpha)`` (``s = i omega``; the frequency-shifted stretching of Kuzuoglu & Mittra 1996;
+``alpha = 0`` is the classical one of Basu & Chopra 2003, 2004 and Basu 2009 for explicit
+3-D FE), written with memory variables at the Gauss points. Multiplying the stretched
+momentum balance by ``J = lambda_0 lambda_1 lambda_2`` gives the weak form
 
     int rho J s^2 u . w dV + sum_ij int (J / lambda_j) sigma_ij dw_i/dx_j dV = 0,
     sigma = C : sym(G~),   G~_kl = (1 / lambda_l) du_k / dx_l.
 
-In time, with ``e1 = sum d``, ``e2 = d0 d1 + d1 d2 + d0 d2``, ``e3 = d0 d1 d2`` and, per
-column ``j``, ``p_j = sum_{a != j} d_a``, ``q_j = prod_{a != j} d_a``::
+With ``e1 = sum d``, ``e2 = d0 d1 + d1 d2 + d0 d2``, ``e3 = d0 d1 d2`` and, per column
+``j``, ``p_j = sum_{a != j} d_a``, ``q_j = prod_{a != j} d_a``::
 
-    mass side:    M u'' + M_e1 u' + M_e2 u + M_e3 int u          (lumped: diagonals)
-    stiffness:    T_ij = sigma_ij + p_j S1_ij + q_j S2_ij,  S1 = int sigma, S2 = int S1
-    strain:       G~_kl = g_kl - d_l psi_kl,   psi_kl' + d_l psi_kl = g_kl,  g = grad u.
+    mass side:  s^2 J = s^2 + e1 (s - alpha + alpha^2 r) + e2 (1 - 2 alpha r + alpha^2 r^2)
+                        + e3 (r - 2 alpha r^2 + alpha^2 r^3)      (lumped diagonals, chains
+                                                                   chi_k = r^k u at the nodes)
+    stiffness:  T_ij = sigma_ij + p_j S1_ij + q_j S2_ij,  S1 = r sigma, S2 = r S1
+    strain:     G~_kl = g_kl - d_l psi_kl,   psi_kl' + (d_l + alpha) psi_kl = g_kl.
 
 Outside the layer ``d = 0`` and every extra term vanishes, so the layer needs no interface
 condition and the soil's layering continues through it. Why this form (issue 29): it is
 displacement-only (no stress DOFs, so the explicit engine's lumped diagonal mass and its
 O(N) step stay), it is unsplit (the memory lives at the Gauss points of the layer's
-elements only, 21 numbers each), and the classical stretching ``1 + d / s`` is stable for
-isotropic solids, layered or not (Becache, Fauqueux & Joly 2003 show the instability of
-PMLs for some anisotropic media, not isotropic ones); its attenuation is frequency
-independent, so it also absorbs the Rayleigh waves that run into the side layers
-(they are stretched like any other field; no incidence angle enters the derivation).
-Surface waves at grazing incidence and evanescent waves are where a classical PML is
-weakest; the verification report measures them.
+elements only), the stretching is stable for isotropic solids, layered or not (Becache,
+Fauqueux & Joly 2003 find PML instabilities for some anisotropic media only), and its
+attenuation does not depend on the incidence angle, so it also absorbs the Rayleigh waves
+that run into the side layers. The frequency shift keeps every memory variable bounded
+under a static or slowly varying stress (with ``alpha = 0``, ``S1`` of a constant stress
+grows linearly; measured: energy trapped between roller faces grew after ~7 s). The
+layer's elements must use the plain full-integration stiffness in K (the gradients the
+memory terms use): with B-bar in K the layer is unstable (measured, module
+:mod:`railvib_hpc.transient.pml`).
 
 Time discretisation (central differences of the explicit engine; the step ``t_n ->
-t_{n+1}`` has ``u_{n+1}`` before any force is needed): the memory ODE by the trapezoidal
-rule (unconditionally stable), the integrals ``S1, S2, int u`` by the trapezoidal rule,
-``M_e1`` at the full-step velocity (a diagonal, like the face dashpots), so nothing is
-factored and the step is not limited by the layer's damping.
+t_{n+1}`` has ``u_{n+1}`` before any force is needed): every memory ODE by the trapezoidal
+rule (unconditionally stable), ``M_e1`` at the full-step velocity (a diagonal, like the
+face dashpots), so nothing is factored and the step is not limited by the layer's damping.
 
 Profile (Collino & Tsogka 2001): ``d(xi) = d_max (xi / L)^p`` with ``xi`` the depth into a
 layer of thickness ``L`` and ``d_max = (p + 1) c_P ln(1 / R) / (2 L)`` for a target
@@ -138,9 +142,13 @@ class PmlElements:
         Lame parameters [Pa], per element or scalar.
     damping
         ``d_0, d_1, d_2`` at the 2x2x2 Gauss points, (nel, 8, 3) [1/s].
+    alpha
+        The frequency shift ``alpha`` [1/s] of the stretching ``1 + d / (s + alpha)``
+        (0: the classical ``1 + d / s``).
     """
 
-    def __init__(self, x: ArrayLike, lam: ArrayLike, mu: ArrayLike, damping: ArrayLike):
+    def __init__(self, x: ArrayLike, lam: ArrayLike, mu: ArrayLike, damping: ArrayLike,
+                 alpha: float = 0.0):
         x = np.asarray(x, dtype=float)
         nel = x.shape[0]
         grad, wdet = hex8_jacobians(x)                  # (nel, q, a, l), (nel, q)
@@ -155,6 +163,7 @@ class PmlElements:
         self.p = (d.sum(axis=-1, keepdims=True) - d)[:, None, :, :]
         self.q = np.stack([d[..., 1] * d[..., 2], d[..., 0] * d[..., 2],
                            d[..., 0] * d[..., 1]], axis=-1)[:, None, :, :]
+        self.alpha = float(alpha)
         shape = (nel, 3, 8, 3)
         self.psi, self.g = np.zeros(shape), np.zeros(shape)
         self.sigma, self.s1, self.s2 = np.zeros(shape), np.zeros(shape), np.zeros(shape)
@@ -190,17 +199,22 @@ class PmlElements:
         return the extra internal force there, (nel, 8, 3). Call once per step."""
         g1 = self.gradients(ue)
         half = 0.5 * dt
-        hd = half * self.d
+        hd = half * (self.d + self.alpha)
         psi = self.psi
         psi *= 1.0 - hd
         psi += half * (self.g + g1)
-        psi /= 1.0 + hd                                   # trapezoidal memory ODE
+        psi /= 1.0 + hd                  # trapezoidal: psi' + (d_l + alpha) psi = g
         memory = _stress(-self.d * psi, self.lam, self.mu)   # C : sym(-d_l psi_kl)
         sigma = _stress(g1, self.lam, self.mu)
         sigma += memory
         s1_old = self.s1.copy()
+        a = half * self.alpha
+        self.s1 *= 1.0 - a
         self.s1 += half * (self.sigma + sigma)
+        self.s1 /= 1.0 + a               # S1' + alpha S1 = sigma, S2' + alpha S2 = S1
+        self.s2 *= 1.0 - a
         self.s2 += half * (s1_old + self.s1)
+        self.s2 /= 1.0 + a
         memory += self.p * self.s1
         memory += self.q * self.s2
         self.g, self.sigma = g1, sigma

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import product
 
 import numpy as np
 
@@ -73,7 +74,8 @@ def beam_up_vectors(x: np.ndarray) -> np.ndarray:
 
 def element_batches(mesh: Mesh, problem: Problem, hex_mask: np.ndarray | None = None,
                     line_mask: np.ndarray | None = None, chunk: int = 20_000,
-                    with_mass: bool = True) -> Iterator[Batch]:
+                    with_mass: bool = True, full_hexes: np.ndarray | None = None
+                    ) -> Iterator[Batch]:
     """Yield element batches of the selected elements (all if masks are None).
 
     Parameters
@@ -86,13 +88,22 @@ def element_batches(mesh: Mesh, problem: Problem, hex_mask: np.ndarray | None = 
         Maximum number of hexahedra per batch (bounds memory).
     with_mass
         Compute the mass matrices too (``Batch.M`` is None otherwise).
+    full_hexes
+        Hexahedra integrated with the plain ``"full"`` formulation whatever
+        ``modal.hex_formulation`` says (the perfectly matched layers, whose memory terms
+        use the plain gradients: the same formulation on both sides keeps the layer stable,
+        :mod:`railvib_hpc.transient.pml`).
     """
     lumped = problem.lumped_mass
     hex_sel = np.ones(len(mesh.hexes), bool) if hex_mask is None else hex_mask
     line_sel = np.ones(len(mesh.lines), bool) if line_mask is None else line_mask
 
-    for part, mat_name in SOLID_MATERIAL.items():
-        sel = np.flatnonzero(hex_sel & (mesh.hex_part == PART_ID[part]))
+    full = np.zeros(len(mesh.hexes), bool) if full_hexes is None else full_hexes
+    groups = [(problem.hex_formulation, ~full)]
+    if full.any() and problem.hex_formulation != "full":
+        groups.append(("full", full))
+    for (part, mat_name), (formulation, which) in product(SOLID_MATERIAL.items(), groups):
+        sel = np.flatnonzero(hex_sel & which & (mesh.hex_part == PART_ID[part]))
         if not len(sel):
             continue
         mat = problem.material(mat_name)
@@ -101,7 +112,7 @@ def element_batches(mesh: Mesh, problem: Problem, hex_mask: np.ndarray | None = 
             x = mesh.points[conn]
             first, shape_of = unique_shapes(x)
             xs = x[first]
-            Ks = hex8_stiffness(xs, mat.E, mat.nu, formulation=problem.hex_formulation)
+            Ks = hex8_stiffness(xs, mat.E, mat.nu, formulation=formulation)
             Ms = hex8_mass(xs, mat.rho, lumped=lumped)[shape_of] if with_mass else None
             K = Ks[shape_of]
             if any(f.part == mat_name for f in problem.fields):

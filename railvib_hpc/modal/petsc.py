@@ -122,7 +122,7 @@ def _pattern_rows(conns, n0: int, n1: int, n_nodes: int, nfree: np.ndarray,
 
 def assemble(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MPI.Comm,
              parts: Collection[str] | None = None, mass: bool | str = True,
-             extra_hexes: np.ndarray | None = None):
+             extra_hexes: np.ndarray | None = None, full_hexes: np.ndarray | None = None):
     """Assemble distributed K and M. Returns ``(K, M, info)`` with timings and counts.
 
     ``parts`` restricts the elements (and the sparsity pattern) to those parts, e.g. for
@@ -130,6 +130,8 @@ def assemble(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MPI.Comm,
     ``mass=False`` assembles K only (M is returned as None);
     ``mass="diagonal"`` (with ``modal.lumped_mass``) stores the lumped M on the diagonal
     alone, not in K's pattern (the explicit engines: 1 kB less per DOF).
+    ``full_hexes``: hexahedra integrated with the plain full formulation (the perfectly
+    matched layers', :func:`~.elements.element_batches`).
     The whole model's K (``parts=None``) includes the springs of absorbing faces with
     ``boundary.virtual_thickness > 0`` (:mod:`.boundary`).
     """
@@ -165,7 +167,8 @@ def assemble(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MPI.Comm,
     t_k = time.perf_counter()
     geometry_error = None
     try:
-        for batch in element_batches(mesh, problem, hex_mask, line_mask, with_mass=mass):
+        for batch in element_batches(mesh, problem, hex_mask, line_mask, with_mass=mass,
+                                     full_hexes=full_hexes):
             t_b = time.perf_counter()
             t_kernels += t_b - t_k
             cols = batch.dofs(dofmap.index)

@@ -15,8 +15,8 @@ change) raises the base; a positive one deepens the subgrade (``domain.extra_dep
 with each setting (``case``: the case file's ``[boundary]``; ``thesis``: rollers and a fixed
 base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces; ``pml``: perfectly
 matched layers of ``pml_thickness`` on all five faces, outside the domain, with the
-explicit engine) and compared with the largest domain of the same setting. ``solver = direct`` runs every variant with the
-full-order time integration (``railvib transient``) instead of modes + multibody.
+explicit engine) and compared with the largest domain of the same setting.
+``solver = direct`` runs every variant with the full-order time integration (``railvib transient``) instead of modes + multibody.
 
 Compared: the building peak accelerations (vertical and total) and their one-third-octave
 spectra (1–80 Hz, total acceleration). Verdict: boundary reflections matter when the case's
@@ -82,10 +82,10 @@ BOUNDARY_OVERRIDES = {
                "boundary.y_max=roller", "boundary.base=fixed"),
     "absorbing": tuple(f"boundary.{f}=absorbing" for f in
                        ("x_min", "x_max", "y_min", "y_max", "base")),
-    # the layers need the explicit engine (and its lumped mass); their thickness is added
-    # outside each domain (:func:`pml_overrides`)
+    # the layers need the explicit engine (plan) and its lumped mass; their thickness is
+    # added outside each domain (:func:`pml_overrides`)
     "pml": (*(f"boundary.{f}=pml" for f in ("x_min", "x_max", "y_min", "y_max", "base")),
-            "transient.engine=explicit", "modal.lumped_mass=true"),
+            "modal.lumped_mass=true"),
 }
 
 
@@ -128,6 +128,8 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
         for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
             ov = [*(pml_overrides(case, (d, ln, w), settings["pml_thickness"]) if b == "pml"
                     else domain_overrides(case, (d, ln, w))), *BOUNDARY_OVERRIDES[b]]
+            if b == "pml":
+                ov.append("transient.engine=explicit")
             if band > 0:
                 # every mode below the band, proved by the inertia counts of the band solve
                 ov += [f"modal.f_max={float(band)!r}"]

@@ -197,20 +197,14 @@ class ImexSystem(ExplicitSystem):
         MPI communicator.
     extra_gb
         Memory the caller needs besides the factor (the rail columns).
-    pml
-        The perfectly matched layers (:class:`~.pml.PmlLayer`, or None): their memory force
-        and ``M_e2``, ``M_e3`` terms at the predictor ``u~`` (explicit, as the soil's
-        elements), their ``M_e1`` damping diagonal trapezoidal (implicit: it joins the
-        diagonal of ``K_eff``, so it does not limit the step).
     """
 
-    def __init__(self, K, M, C, K_I, C_I, dt: float, comm, extra_gb: float = 0.0,
-                 pml=None):
+    def __init__(self, K, M, C, K_I, C_I, dt: float, comm, extra_gb: float = 0.0):
         from petsc4py import PETSc
 
         from ..modal.factor import ShiftInvertFactor
 
-        super().__init__(K, M, C, dt, comm, pml=pml)
+        super().__init__(K, M, C, dt, comm)
         self.K_I, self.C_I = K_I, C_I
         self.scheme = scheme = GeneralizedAlpha.newmark(dt)
         b, g = scheme.beta, scheme.gamma
@@ -225,9 +219,6 @@ class ImexSystem(ExplicitSystem):
         self.implicit = implicit_rows(self.h_implicit)
         self.implicit_rows = comm.allreduce(int(self.implicit.sum()))
         self._diagonal = self._c_mass * self.m
-        self._pml_started = False
-        if pml is not None:          # M_e1 at v_{n+1} = v~ + gamma dt a_{n+1}
-            self._diagonal = self._diagonal + (g / (b * dt)) * pml.damping_diagonal
         self.op = self.k_implicit = None
         if self.implicit_rows:
             full = with_diagonal(self.h_implicit, self._diagonal, comm)
@@ -271,25 +262,10 @@ class ImexSystem(ExplicitSystem):
         res = self._diagonal * u_pred              # (c_mass m, formed once)
         res -= self.internal_force(u_pred, damping_velocity(v_, a_, dt))
         res += self.times(self.h_implicit, u_pred)
-        if self.pml is not None:
-            res -= self._layer_force(u_, v_, a_, u_pred)
         if self.C_I is not None:
             # the implicit elements' damping at v~ (trapezoidal), not at v*
             res += self.times(self.C_I, (dt * g) * a_)
         self.local(out)[:] = res
-
-    def _layer_force(self, u, v, a, u_pred) -> np.ndarray:
-        """The layers' part of the right-hand side: their force at ``u~`` and their
-        damping diagonal ``d`` moved to ``K_eff`` (``d v_{n+1} = d (v~ + gamma / (beta
-        dt) (u_{n+1} - u~))``): ``f(u~) + d v~ - gamma / (beta dt) d u~``. The first call
-        sets the layers' memory at rest with ``u_0``."""
-        dt, b, g = self.dt, self.scheme.beta, self.scheme.gamma
-        if not self._pml_started:
-            self.pml.start(u)
-            self._pml_started = True
-        d = self.pml.damping_diagonal
-        v_pred = v + (dt * (1.0 - g)) * a
-        return self.pml.force(u_pred, dt) + d * v_pred - (g / (b * dt)) * d * u_pred
 
     def solve(self, rhs, out) -> None:
         """``out = K_eff^-1 rhs``: the implicit rows with the factor, the rest diagonal."""

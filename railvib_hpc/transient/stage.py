@@ -744,8 +744,7 @@ def _setup(ctx: StageContext) -> dict:
             else:
                 from .imex import ImexSystem
 
-                system = ImexSystem(K, M, C, *partition[:2], dt, comm, extra_gb=col_gb,
-                                    pml=partition[2])
+                system = ImexSystem(K, M, C, *partition, dt, comm, extra_gb=col_gb)
                 scheme = system.scheme
             rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
                      f"~{system.factor_memory_gb:.2f} GB"
@@ -822,7 +821,8 @@ def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem
     with ctx.rep.stage("transient: assembly"):
         # the explicit engines keep the lumped mass on the diagonal alone
         K, M, _ = assemble(mesh, problem, dofmap, comm,
-                           mass=True if engine == "direct" else "diagonal")
+                           mass=True if engine == "direct" else "diagonal",
+                           full_hexes=_pml_hexes(mesh, problem))
         problem = _fit_track_ends(ctx, mesh, dofmap, rails, problem, K, M)
         # the explicit engine takes diagonal dashpots at the full step, apart from C
         dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
@@ -965,6 +965,14 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: R
     return system, dt, text
 
 
+def _pml_hexes(mesh, problem: Problem):
+    """The hexahedra of the perfectly matched layers (None without ``pml`` faces): their
+    stiffness takes the plain full formulation, the one their memory terms use."""
+    from .pml import pml_faces, pml_geometry
+
+    return pml_geometry(mesh, problem)[1] if pml_faces(problem) else None
+
+
 def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K):
     """The perfectly matched layers of the ``pml`` faces (None without), with their log
     lines (collective)."""
@@ -1017,8 +1025,7 @@ def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
 
 def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
                     dt_band: float) -> tuple:
-    """The IMEX engine's implicit partition ``(K_I, C_I)`` with the perfectly matched layers
-    (:class:`~.pml.PmlLayer` or None), its step and a line on the
+    """The IMEX engine's implicit partition ``(K_I, C_I)``, its step and a line on the
     explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
     C - C_I``; the implicit elements do not limit the step, :mod:`.imex`)."""
     from ..mesh.stage import present_parts
@@ -1035,34 +1042,22 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
         extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY,
                                     ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts]))
     K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True)
-    layer = plus = None
     try:
         m = lumped_diagonal(M, comm)
-        layer = _pml_layer(ctx, mesh, dofmap, problem, K)
-        if layer is not None:          # the layers' M_e2 stiffens their nodes (explicit)
-            from .petsc import diagonal_matrix
-
-            plus = diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
-                                   layer.stiffness_diagonal)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
-                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
+                              damping_factor=DAMPING_STABILITY_FACTOR)
         where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
         dt, text = _stable_step(case, lim, lim.dt_critical, where, dt_band, "imex")
     except BaseException:
         for A in (K_I, C_I):
             if A is not None:
                 A.destroy()
-        if layer is not None:
-            layer.destroy()
         raise
-    finally:
-        if plus is not None:
-            plus.destroy()
     auto = (f" and {int(extra.sum()):,} elements below the target step" if extra is not None
             else "")
     text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
             f"dashpots; explicit part {text}")
-    return (K_I, C_I, layer), dt, text
+    return (K_I, C_I), dt, text
 
 
 def _MPI_MIN():

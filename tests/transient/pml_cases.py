@@ -98,7 +98,7 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     )
     from railvib_hpc.transient.integrate import State
     from railvib_hpc.transient.petsc import GhostGather, diagonal_matrix
-    from railvib_hpc.transient.pml import PmlLayer, pml_faces
+    from railvib_hpc.transient.pml import PmlLayer, pml_faces, pml_geometry
 
     types = {f: faces.get(f, "fixed") for f in FACES}
     case = soil_case("modal.lumped_mass=true", "damping.model=none",
@@ -107,9 +107,10 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     problem = Problem.from_case(case)
     rules, sets = constraint_rules(problem), face_node_sets(mesh)
     if plane_strain:
-        rules["all"] = ("uy",)             # (the node set of every node)
+        rules["all"] = ("uy",) if plane_strain is True else tuple(plane_strain)
     dofmap = build_dofmap(mesh, comm.size, rules=rules, node_sets=sets)
-    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal")
+    full = pml_geometry(mesh, problem)[1] if pml_faces(problem) else None
+    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal", full_hexes=full)
     rows, n_global = K.getOwnershipRange(), K.getSize()[0]
     layer = None
     if pml_faces(problem):

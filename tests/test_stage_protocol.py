@@ -119,3 +119,21 @@ def test_the_stage_rule_finds_a_direct_import(tmp_path):
     found = stage_rules.violations(tmp_path)
     assert len(found) == 3 and "imports examine" in found[0]
     assert all(line.startswith("railvib_hpc/newstage/stage.py") for line in found)
+
+
+def test_the_stage_rule_covers_the_helpers_of_a_stage_package(tmp_path):
+    """A helper split out of a stage (here ``newstage/helper.py``, like
+    ``mbs/damping_model.py``) may not reach the provenance layer either; a package without a
+    ``stage.py`` is not a stage's."""
+    pkg = tmp_path / "railvib_hpc" / "newstage"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "stage.py").write_text("from ..io.stage_protocol import Stage\n")
+    (pkg / "helper.py").write_text("from ..io.provenance import require_inputs\n")
+    (pkg / "sub" / "deep.py").write_text("from ...io.digests import forget\n")
+    other = tmp_path / "railvib_hpc" / "studies"
+    other.mkdir()
+    (other / "common.py").write_text("from ..io.provenance import examine\n")
+    found = stage_rules.violations(tmp_path)
+    assert len(found) == 2
+    assert found[0].startswith("railvib_hpc/newstage/helper.py: line 1: imports require_inputs")
+    assert found[1].startswith("railvib_hpc/newstage/sub/deep.py: line 1: imports forget")

@@ -5,6 +5,9 @@ A stage module (``railvib_hpc/<package>/stage.py``) declares its ``STAGE``
 ``compute`` gets: the reuse verdict and its message, provenance, the lock and ``run.json``
 belong to :mod:`railvib_hpc.io.stage_protocol` and its runner. This rule fails when a stage
 module imports one of :data:`FORBIDDEN` itself, or the modules that hold them as a whole.
+The rule covers every module of a stage's package, not only its ``stage.py``: a helper
+split out of a stage (``mbs/damping_model.py``, ``mbs/case_vehicle.py``, ...) goes
+through a :class:`~railvib_hpc.io.stage_protocol.StageContext` too.
 
 Usage::
 
@@ -30,8 +33,10 @@ LAYER_MODULES = frozenset({"digests", "provenance", "locks", "run_record"})
 
 
 def stage_modules(root: Path = ROOT) -> list[Path]:
-    """Every stage module of the package: ``railvib_hpc/<package>/stage.py``."""
-    return sorted((root / "railvib_hpc").glob("*/stage.py"))
+    """Every module of a stage's package: the ``railvib_hpc/<package>/`` that holds a
+    ``stage.py``, its subfolders included."""
+    return sorted(path for stage in (root / "railvib_hpc").glob("*/stage.py")
+                  for path in stage.parent.rglob("*.py"))
 
 
 def _offences(tree: ast.AST) -> list[str]:

@@ -15,7 +15,7 @@ import numpy as np
 from ..io.files import MODAL_DAMPING_H5, MODES_H5
 from ..io.formats.modal_damping import check_modal_damping
 from ..io.formats.modes import check_modes
-from ..io.provenance import require_inputs
+from ..io.stage_protocol import StageContext
 from ..problem import Problem
 from .case_vehicle import MBSInputError
 
@@ -78,10 +78,17 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
 def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     """The projected damping parts of ``modal_damping.h5`` next to ``modes_path`` (rank 0).
 
+    Both files are verified for the case through the stage context
+    (:meth:`~railvib_hpc.io.stage_protocol.StageContext.require`), as a stage verifies
+    what it reads.
+
     Raises
     ------
     MBSInputError
-        Without a ``modal_damping.h5`` of these modes and settings.
+        Without a ``modal_damping.h5``.
+    StaleInputError
+        For a ``modes.h5`` or ``modal_damping.h5`` that is not current for the case or not
+        sound.
     """
     from ..io.formats.modal_damping import read_damping_parts
 
@@ -89,8 +96,9 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     if not (out_dir / MODAL_DAMPING_H5).exists():
         raise MBSInputError(f"modal.damping = 'full' needs {out_dir / MODAL_DAMPING_H5}: "
                             "run 'railvib modal' with modal.damping = 'full' first")
-    require_inputs(out_dir, (MODES_H5, MODAL_DAMPING_H5), case,
-                   {MODES_H5: check_modes, MODAL_DAMPING_H5: check_modal_damping})
+    StageContext(case, out_dir).require(
+        (MODES_H5, MODAL_DAMPING_H5),
+        {MODES_H5: check_modes, MODAL_DAMPING_H5: check_modal_damping})
     return read_damping_parts(out_dir / MODAL_DAMPING_H5)
 
 

@@ -5,17 +5,17 @@ before the stages were restructured: the provenance of every product (format ver
 stage, inputs digest, upstream files), every probe's peak velocity and acceleration, and
 which files a rerun (and a rerun after ``output.dt`` changed) reuses or recomputes.
 
-Re-recorded once since, for issue 28's new case key ``transient.engine``: the record of
-issue 27's final code differed from the first one in exactly five inputs digests, those of
-the products whose inputs include ``[transient]`` or the whole case (``transient.h5``, the
-transient ``fields.h5`` and ``probes.h5``, and both ``assessment.json``), on 1 and 2 ranks;
-every other digest, every probe peak and every reuse verdict was unchanged.
-
-Re-recorded again for the case keys of issues 28 and 30 (``track.ends``, ``track.end_*``,
-``[uncertainty]``): exactly the two ``assessment.json`` inputs digests changed (their inputs
-are the whole case), on 1 and 2 ranks; every other digest and every reuse verdict was
-unchanged, and the probe peaks within 1e-9 relative (the purification of issue 26 now
-leaves the Ritz pairs already within tolerance as they are: eigenvalues within 6.7e-13).
+Re-recorded since only for new case keys of issues 28 and 30 (``transient.engine`` and
+the other engine keys, ``track.ends``, ``track.end_*``, ``[uncertainty]``), in five commits
+(3089d63, 5b469b6, eff6b3b, ed2b99b, 0e45d61; some re-recorded one rank count at a time).
+Against the first record (commit 100b185, before any change of issue 27) the current one
+differs, on 1 and on 2 ranks, in exactly five inputs digests: those of the products whose
+inputs include ``[transient]`` or the whole case (``transient.h5``, the transient
+``fields.h5`` and ``probes.h5``, and both ``assessment.json``). Every other digest (mesh.h5,
+modes.h5, static.h5, mbs.h5, fields.h5, probes.h5 of ``run``), every reuse verdict and
+every format version is unchanged, and the probe peaks agree within 1.8e-9 relative
+(``run``; ``transient`` within 3.6e-12): the purification of issue 26 leaves the Ritz pairs
+already within tolerance as they are (eigenvalues within 6.7e-13).
 """
 
 from __future__ import annotations

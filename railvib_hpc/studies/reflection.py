@@ -16,7 +16,8 @@ with each setting (``case``: the case file's ``[boundary]``; ``thesis``: rollers
 base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces; ``pml``: perfectly
 matched layers of ``pml_thickness`` on all five faces, outside the domain, with the
 explicit engine) and compared with the largest domain of the same setting.
-``solver = direct`` runs every variant with the full-order time integration (``railvib transient``) instead of modes + multibody.
+``solver = direct`` runs every variant with the full-order time integration
+(``railvib transient``) instead of modes + multibody.
 
 Compared: the building peak accelerations (vertical and total) and their one-third-octave
 spectra (1–80 Hz, total acceleration). Verdict: boundary reflections matter when the case's

@@ -5,9 +5,11 @@ before the stages were restructured: the provenance of every product (format ver
 stage, inputs digest, upstream files), every probe's peak velocity and acceleration, and
 which files a rerun (and a rerun after ``output.dt`` changed) reuses or recomputes.
 
-Re-recorded since only for new case keys of issues 28 and 30 (``transient.engine`` and
-the other engine keys, ``track.ends``, ``track.end_*``, ``[uncertainty]``), in five commits
-(3089d63, 5b469b6, eff6b3b, ed2b99b, 0e45d61; some re-recorded one rank count at a time).
+Re-recorded since only for new case keys of issues 28, 29 and 30 (``transient.engine`` and
+the other engine keys, ``track.ends``, ``track.end_*``, ``[uncertainty]``,
+``boundary.pml_*``), in six commits (3089d63, 5b469b6, eff6b3b, ed2b99b, 0e45d61, and the
+issue-29 one, which moved only the two whole-case ``assessment.json`` digests: peaks within
+6e-12; some re-recorded one rank count at a time).
 Against the first record (commit 100b185, before any change of issue 27) the current one
 differs, on 1 and on 2 ranks, in exactly five inputs digests: those of the products whose
 inputs include ``[transient]`` or the whole case (``transient.h5``, the transient

@@ -79,13 +79,16 @@ def test_an_undamped_slab_with_layers_loses_its_energy_and_stays_quiet():
 @pytest.mark.slow
 def test_a_20_s_undamped_run_shows_no_growth():
     """20 s, over 8,000 steps (the issue: 10 s, 20,000 steps; here at the slab's allowed
-    step 2.47e-3 s): no second of the run after the first holds more energy than the one
-    before it by more than round-off, and the end is below 1e-10 of the peak (measured
-    1.0e-12)."""
+    step 2.47e-3 s): no second after the first holds more energy than 1.05 x the largest
+    of the seconds before it (the trapped remainder beats by ~1 % from second to second
+    while it decays: measured 6.9e-7, 3.5e-8, 2.6e-8, 7.5e-9, 2.31e-9, 2.33e-9, ... of the
+    peak), the last second holds less than 1e-3 of the second one, and the end is below
+    1e-10 of the peak (measured 1.0e-12). A growing layer fails all three."""
     e, dt = _stability(20.0)
-    per_second = [e[int(k / dt):int((k + 1) / dt)].max() for k in range(1, 19)]
-    floor = 1e-14 * e.max()
-    assert all(b <= a * 1.01 + floor for a, b in zip(per_second, per_second[1:])), per_second
+    per_second = [e[int(k / dt):int((k + 1) / dt)].max() for k in range(1, 20)]
+    assert all(per_second[k] <= 1.05 * max(per_second[:k])
+               for k in range(1, len(per_second))), per_second
+    assert per_second[-1] < 1e-3 * per_second[0], per_second
     assert e[-1] < 1e-10 * e.max()
 
 

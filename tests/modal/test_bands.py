@@ -10,6 +10,7 @@ measured residuals. Orthonormality: the issue's target, max |Phi^T M Phi - I| <=
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import h5py
@@ -543,8 +544,25 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
         rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
         assert np.all(np.abs(runs[name].eigenvalues / lam - 1) <= rtol)
         # the same verdicts (the residuals at the round-off floor differ by rounding)
-        assert [w.split(":")[0] for w in runs[name].warnings] == \
-            [w.split(":")[0] for w in runs["solved"].warnings]
+        _same_verdicts(runs[name].warnings, runs["solved"].warnings)
+
+
+def _same_verdicts(warnings: list[str], reference: list[str]) -> None:
+    """The same kinds of warning, with counts within one mode: a mode whose residual sits
+    at its round-off floor may count as "limited by round-off" in one merge and not in the
+    other (measured: 7 against 6 of 31 modes in a fresh-clone CI run, the residuals equal
+    to rounding)."""
+    def parts(ws):
+        heads = [w.split(":")[0] for w in ws]
+        return ([re.sub(r"\d+", "#", h) for h in heads],
+                [[int(x) for x in re.findall(r"\d+", h)] for h in heads])
+
+    kinds, counts = parts(warnings)
+    ref_kinds, ref_counts = parts(reference)
+    assert kinds == ref_kinds, (warnings, reference)
+    for c, r in zip(counts, ref_counts):
+        assert len(c) == len(r) and all(abs(a - b) <= 1 for a, b in zip(c, r)), \
+            (warnings, reference)
 
 
 def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
@@ -568,8 +586,7 @@ def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
     rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
     assert np.all(np.abs(runs["cached"].eigenvalues / lam - 1) <= rtol)
     assert runs["solved"].stats["max_orthonormality_error"] <= 1e-12
-    assert [w.split(":")[0] for w in runs["cached"].warnings] == \
-        [w.split(":")[0] for w in runs["solved"].warnings]
+    _same_verdicts(runs["cached"].warnings, runs["solved"].warnings)
 
 
 def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():

@@ -44,6 +44,10 @@ if TYPE_CHECKING:
 
     from ..problem import Problem
 
+#: Neumann terms per sensitivity vector (:func:`build_basis`): the static vector
+#: ``K0^-1 K_g phi`` misses the inertia of the mode's change, ``K0^-1 M0 K0^-1 K_g phi``
+#: adds its first term (measured on the coarse thesis model: docs/uncertainty.md).
+SENSITIVITY_DEPTH = 2
 #: The reduced model's file in the study's nominal model folder (``tag``: a digest of its
 #: inputs, so that another basis gives its samples other digests).
 BASIS_H5 = "reduced_basis_{tag}.h5"
@@ -75,8 +79,18 @@ def part_values(problem: Problem, names: list[str]) -> tuple[np.ndarray, np.ndar
     return k, r
 
 
+def _gram(v: np.ndarray, mv: np.ndarray, comm: MPI.Comm) -> np.ndarray:
+    """``V^T (M V)`` summed over the ranks."""
+    from mpi4py import MPI
+
+    out = v.T @ mv
+    comm.Allreduce(MPI.IN_PLACE, out, op=MPI.SUM)
+    return out
+
+
 def build_basis(mesh, problem: Problem, dofmap, comm: MPI.Comm, K, M, phi: np.ndarray,
-                varied: dict[str, tuple[str, ...]]) -> dict:
+                varied: dict[str, tuple[str, ...]], depth: int = SENSITIVITY_DEPTH,
+                second_order: bool = True, lowest: int | None = None) -> dict:
     """The augmented, M-orthonormal basis and the projected parts (collective).
 
     Parameters
@@ -87,6 +101,14 @@ def build_basis(mesh, problem: Problem, dofmap, comm: MPI.Comm, K, M, phi: np.nd
         This rank's rows of the nominal modes (n_local, m).
     varied
         Part name -> ``("K",)``, ``("K", "M")``: the sensitivity vectors to add.
+    depth
+        Degree of the sensitivity vectors: 1 ``X1 = K0^-1 K_g Phi``; 2 adds
+        ``K0^-1 M0 X1`` (a Neumann term of ``(K0 - lambda M0)^-1``) and, with
+        ``second_order``, ``K0^-1 K_h X1``; and so on.
+    second_order
+        Whether the higher degrees hold the parts' products too (else only ``M0``'s).
+    lowest
+        The higher degrees only from the vectors of the ``lowest`` modes (None: all).
 
     Returns
     -------
@@ -97,7 +119,8 @@ def build_basis(mesh, problem: Problem, dofmap, comm: MPI.Comm, K, M, phi: np.nd
     """
     from mpi4py import MPI
 
-    from .static import solve_static
+    from .eigen import PREFIX
+    from .factor import ShiftInvertFactor
 
     t0 = time.perf_counter()
     parts = rom_parts(mesh, problem)
@@ -107,12 +130,30 @@ def build_basis(mesh, problem: Problem, dofmap, comm: MPI.Comm, K, M, phi: np.nd
     rhs = [sparse_times_block(mats[n][i], phi, comm) for n, which in varied.items()
            if n in mats for i, w in enumerate(("K", "M"))
            if w in which and mats[n][i] is not None]
-    extra = solve_static(K, M, comm, np.hstack(rhs)) if rhs else np.zeros((phi.shape[0], 0))
-    v = np.hstack([phi, extra])
-    mv = sparse_times_block(M, v, comm)
-    gram = v.T @ mv
-    comm.Allreduce(MPI.IN_PLACE, gram, op=MPI.SUM)
-    v = v @ orthonormalising_map(gram)
+    blocks = [phi]
+    if rhs:
+        op = ShiftInvertFactor(K, M, 0.0, comm, PREFIX)
+        try:
+            x = op.solve(np.hstack(rhs))
+            blocks.append(x)
+            if lowest is not None:    # the higher degrees from the lowest modes' vectors
+                m = phi.shape[1]
+                x = x[:, [j for j in range(x.shape[1]) if j % m < lowest]]
+            ops = [M] + [mats[n][0] for n in varied if n in mats and "K" in varied[n]]
+            for _ in range(1, depth):
+                # the next terms: K0^-1 M0 x (the inertia of the change, a Neumann term of
+                # (K0 - lambda M0)^-1) and K0^-1 K_h x (second order in the factors)
+                x = op.solve(np.hstack([sparse_times_block(A, x, comm)
+                                        for A in ops[:1 + second_order * len(ops)]]))
+                blocks.append(x)
+        finally:
+            op.destroy()
+    extra = np.hstack(blocks[1:]) if rhs else np.zeros((phi.shape[0], 0))
+    v = np.hstack(blocks)
+    v = v @ orthonormalising_map(_gram(v, sparse_times_block(M, v, comm), comm))
+    # a second pass: one Gram-Schmidt step is not enough in floating point ("twice is
+    # enough", Giraud et al., Numer. Math. 101, 2005)
+    v = v @ orthonormalising_map(_gram(v, sparse_times_block(M, v, comm), comm))
 
     def project(A) -> np.ndarray:
         out = v.T @ sparse_times_block(A, v, comm)
@@ -210,20 +251,20 @@ def reduced_modes(rom: dict, problem: Problem, comm: MPI.Comm, K, M, n_modes: in
     lam, y = reduced_eigenpairs(kr, mr, n_modes)
     phi = v @ y
     kp, mp = sparse_times_block(K, phi, comm), sparse_times_block(M, phi, comm)
-    sums = np.stack([np.einsum("ij,ij->j", kp, kp), np.einsum("ij,ij->j", mp, mp),
-                     np.einsum("ij,ij->j", kp, mp)])
+    r = kp - lam * mp                  # formed, not expanded: no cancellation
+    sums = np.stack([np.einsum("ij,ij->j", r, r), np.einsum("ij,ij->j", kp, kp)])
     comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
-    res = relative_residuals(sums[0], sums[1], sums[2], lam)
+    res = relative_residuals(sums[0], sums[1])
     return {"eigenvalues": lam, "phi": phi, "residuals": res, "projection": projection,
             "factors": {n: [float(a), float(b)] for n, a, b in zip(rom["names"], s, t)},
             "size": int(v.shape[1]), "seconds": time.perf_counter() - t0}
 
 
 def prepare_basis(problem: Problem, path: Path, comm: MPI.Comm, rep,
-                  varied: dict[str, tuple[str, ...]]) -> Path:
+                  varied: dict[str, tuple[str, ...]], lowest: int | None = None) -> Path:
     """The basis file ``path`` from the nominal ``mesh.h5`` and ``modes.h5`` beside it,
     reused while it was built from the same ``modes.h5`` for the same varied parts
-    (collective); returns its path."""
+    (collective); returns its path. ``lowest``: see :func:`build_basis`."""
     import json
 
     import h5py
@@ -237,7 +278,8 @@ def prepare_basis(problem: Problem, path: Path, comm: MPI.Comm, rep,
 
     folder = path.parent
     modes = folder / MODES_H5
-    key = json.dumps({k: list(v) for k, v in sorted(varied.items())})
+    key = json.dumps({"parts": {k: list(v) for k, v in sorted(varied.items())},
+                      "depth": SENSITIVITY_DEPTH, "lowest": lowest})
 
     def current() -> tuple[bool, str, str]:
         sha = str(file_digest(modes).sha256)
@@ -259,7 +301,8 @@ def prepare_basis(problem: Problem, path: Path, comm: MPI.Comm, rep,
         K, M, _ = assemble(mesh, problem, dofmap, comm)
         try:
             phi = read_phi_rows(modes, dofmap, comm.rank, None)
-            rom = build_basis(mesh, problem, dofmap, comm, K, M, phi, varied)
+            rom = build_basis(mesh, problem, dofmap, comm, K, M, phi, varied,
+                              lowest=lowest)
         finally:
             K.destroy()
             M.destroy()

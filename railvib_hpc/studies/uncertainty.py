@@ -143,7 +143,8 @@ def prepare(plan_: StudyPlan, case: Case, root: Path, comm, rep) -> None:
     prepare_shared(plan_, case, root, comm, rep)
     mcase = on_root(lambda: variant_case(case, plan_.shared_overrides), comm)
     prepare_basis(Problem.from_case(mcase), Path(info["basis"]), comm, rep,
-                  {k: tuple(v) for k, v in info["varied"].items()})
+                  {k: tuple(v) for k, v in info["varied"].items()},
+                  lowest=case["modal.n_modes"])
 
 
 def _samples(plan_: StudyPlan) -> list[Variant]:
@@ -154,7 +155,7 @@ def _samples(plan_: StudyPlan) -> list[Variant]:
 def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """One variant per sample of the design (own model each; with the reduced model, the
     nominal model's basis, and the reference samples ``r<k>`` after them)."""
-    from ..modal.reduced import BASIS_H5
+    from ..modal.reduced import BASIS_H5, SENSITIVITY_DEPTH
     from .common import SHARED_DIR
     from .settings import StudySettingsError
 
@@ -170,7 +171,8 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
     extra: tuple[str, ...] = ()
     shared = (*DESIGN_RESET, f"modal.n_modes={NOMINAL_MODES_FACTOR * case['modal.n_modes']}")
     if reduced:          # the basis's name holds its inputs: another basis, other digests
-        tag = digest({"shared": shared, "varied": varied_parts(case)})[:12]
+        tag = digest({"shared": shared, "varied": varied_parts(case),
+                      "depth": SENSITIVITY_DEPTH, "lowest": case["modal.n_modes"]})[:12]
         basis = (Path(root or ".") / SHARED_DIR / BASIS_H5.format(tag=tag)).resolve()
         extra = (f"uncertainty.basis={json.dumps(str(basis))}",)
     variants, refs = [], []

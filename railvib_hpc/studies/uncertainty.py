@@ -165,6 +165,10 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
         raise StudySettingsError("uncertainty", [(
             "uncertainty.parameter", [], "the case has no [[uncertainty.parameter]] nor "
             "[[uncertainty.field]]: nothing is uncertain (see docs/uncertainty.md)")])
+    if case["uncertainty.model"] == "reduced" and settings.get("solver") == "direct":
+        raise StudySettingsError("uncertainty", [(
+            "study.uncertainty.solver", "direct", "the reduced model (uncertainty.model = "
+            "'reduced') reduces the modal solve: use solver = 'modal', or model = 'full'")])
     keys = [m.key for m in found]
     width = max(4, len(str(len(values) - 1)))
     reduced = case["uncertainty.model"] == "reduced"

@@ -96,21 +96,22 @@ def test_reference_samples_and_varied_parts():
                                   "soil_layer_2": ("K", "M")}
 
 
-@pytest.mark.parametrize("sets, expect", [
-    (['uncertainty.model="fast"'], "uncertainty.model"),
-    (['uncertainty.model="reduced"', 'uncertainty.parameter=[{key="soil.layers[1].thickness"'
-      ', distribution="uniform", low=1.0, high=2.0}]'], "changes the mesh"),
+@pytest.mark.parametrize("more, expect", [
+    (["--set", 'uncertainty.model="fast"'], "uncertainty.model"),
+    (["--set", 'uncertainty.model="reduced"', "--set", 'uncertainty.parameter=[{key='
+      '"soil.layers[1].thickness", distribution="uniform", low=1.0, high=2.0}]'],
+     "changes the mesh"),
+    (["--set", 'uncertainty.model="reduced"', "--set", 'uncertainty.parameter=[{key='
+      '"pads.kz", distribution="lognormal", cov=0.2}]', "--study-set", "solver=direct"],
+     "reduces the modal solve"),
 ])
-def test_bad_reduced_input_is_one_line_with_exit_code_2(tmp_path, capsys, sets, expect):
+def test_bad_reduced_input_is_one_line_with_exit_code_2(tmp_path, capsys, more, expect):
     from railvib_hpc.cli import run
 
     layers = ('soil.layers=[{thickness = 1.5, c_s = 150.0, nu = 0.3, rho = 1800.0}, '
               '{thickness = 0.0, c_s = 250.0, nu = 0.3, rho = 1900.0}]')
-    args = ["study", "uncertainty", "jobs/thesis_baseline.toml", "--list", "--out",
-            str(tmp_path), "--set", layers]
-    for s in sets:
-        args += ["--set", s]
-    assert run(args) == 2
+    assert run(["study", "uncertainty", "jobs/thesis_baseline.toml", "--list", "--out",
+                str(tmp_path), "--set", layers, *more]) == 2
     err = capsys.readouterr()
     lines = [x for x in (err.out + err.err).splitlines() if expect in x]
     assert len(lines) == 1 and "Traceback" not in err.err

@@ -156,6 +156,7 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
     """One variant per sample of the design (own model each; with the reduced model, the
     nominal model's basis, and the reference samples ``r<k>`` after them)."""
     from ..modal.reduced import BASIS_H5, SENSITIVITY_DEPTH
+    from ..uncertainty.reduced import REDUCED_TOL
     from .common import SHARED_DIR
     from .settings import StudySettingsError
 
@@ -173,7 +174,10 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
     width = max(4, len(str(len(values) - 1)))
     reduced = case["uncertainty.model"] == "reduced"
     extra: tuple[str, ...] = ()
-    shared = (*DESIGN_RESET, f"modal.n_modes={NOMINAL_MODES_FACTOR * case['modal.n_modes']}")
+    # the nominal model: without the design and the reduced model's own keys (a changed
+    # tolerance keeps the nominal modes and the basis)
+    shared = (*DESIGN_RESET, f"modal.n_modes={NOMINAL_MODES_FACTOR * case['modal.n_modes']}",
+              f"uncertainty.reduced_tol={REDUCED_TOL!r}", "uncertainty.reduced_checks=0")
     if reduced:          # the basis's name holds its inputs: another basis, other digests
         tag = digest({"shared": shared, "varied": varied_parts(case),
                       "depth": SENSITIVITY_DEPTH, "lowest": case["modal.n_modes"]})[:12]

@@ -24,6 +24,8 @@ from typing import Any, NamedTuple
 
 from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
 from .sections import APDL_RAIL, APDL_SLEEPER, SectionProperties
+from .uncertainty.reduced import MODELS as UQ_MODELS
+from .uncertainty.reduced import REDUCED_TOL
 from .uncertainty.sampling import METHODS as SAMPLING_METHODS
 
 
@@ -1129,6 +1131,27 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "realisation": Param(0, "int", "-", "realisation of the random fields the model "
                              "uses: 0 none (the nominal layers), k >= 1 the k-th (seeded by "
                              "uncertainty.seed and k; the study sets it per sample)", "nonneg"),
+        "model": Param("full", "str", "-",
+                       "how each sample is solved: full (its own mesh and eigensolve) or "
+                       "reduced (the parametric reduced model on the nominal mesh, with "
+                       "residual checks, fallback to full solves and reference samples; "
+                       "docs/uncertainty.md)", choices=UQ_MODELS),
+        "reduced_tol": Param(REDUCED_TOL, "float", "-",
+                             "largest relative residual ||K phi - lambda M phi|| / ||K phi|| "
+                             "of a reduced mode; a sample above it gets the full eigensolve "
+                             "(on the nominal mesh)", "pos",
+                             source="docs/uncertainty.md, 'The reduced model' (measured on "
+                                    "the coarse thesis model)"),
+        "reduced_checks": Param(2, "int", "-",
+                                "reference samples of the reduced model: drawn at random "
+                                "(uncertainty.seed), each also solved in full and compared",
+                                "nonneg"),
+        "basis": Param("", "str", "-",
+                       "the reduced basis a sample's modes come from (set by railvib study "
+                       "uncertainty with model = 'reduced'; empty: a plain model)"),
+        "reference": Param(False, "bool", "-",
+                           "with uncertainty.basis: solve in full too and record the reduced "
+                           "model's error (set by the study on its reference samples)"),
     },
     # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
     # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.

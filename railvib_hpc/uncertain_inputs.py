@@ -62,6 +62,8 @@ _RANGES = {"pos": (0.0, None), "nonneg": (0.0, None), "poisson": (0.0, 0.5),
            "angle": (-MAX_ROTATION_DEG, MAX_ROTATION_DEG)}
 _LAYER_RANGES = {"thickness": (MIN_SOIL_LAYER_THICKNESS, None), "nu": (0.0, 0.5),
                  "damping_ratio": (0.0, 1.0)}
+#: Sections whose keys change the mesh (a reduced model keeps the nominal mesh).
+MESH_SECTIONS = ("geometry", "track", "building", "mesh", "domain", "site", "trench", "wib")
 _FLOAT_KEYS = {k: p for k, p in iter_params() if p.kind == "float"}
 
 
@@ -189,6 +191,13 @@ def check_uncertainty(case: Case) -> list[tuple[str, Any, str]]:
         if n & (n - 1):
             out.append(("uncertainty.samples", n, "the sobol method needs a power of 2 "
                         f"(e.g. {1 << max(n - 1, 1).bit_length()})"))
+    if case["uncertainty.model"] == "reduced":
+        for k, key in enumerate(keys):
+            if isinstance(key, str) and (key.endswith(".thickness")
+                                         or key.split(".")[0] in MESH_SECTIONS):
+                out.append((f"uncertainty.parameter[{k + 1}].key", key,
+                            "changes the mesh, which the reduced model (uncertainty.model = "
+                            "'reduced') keeps at the nominal one: use model = 'full'"))
     n_layers = len(case["soil.layers"])
     for k, f in enumerate(case["uncertainty.field"]):
         out.extend(_check_field(f"uncertainty.field[{k + 1}]", f, n_layers))

@@ -147,6 +147,11 @@ _MESH = (("geometry", ()), ("track", ("end_stiffness", "end_damping")), ("buildi
 #: their defaults (realisation 0: no field) they enter no digest.
 _RANDOM_FIELDS = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
                   ("uncertainty.seed", ()))
+#: A sample of the reduced model (``uncertainty.basis``: its modes are the reduced model's
+#: on the basis's nominal mesh, or a full solve on that mesh; at their defaults, a plain
+#: model, they enter no digest).
+_REDUCED = (("uncertainty.basis", ()), ("uncertainty.reduced_tol", ()),
+            ("uncertainty.reference", ()))
 #: How the modes are computed, not what they are: the out-of-core switch and the band
 #: split with its parallel layout (they change the modes by round-off only).
 MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")
@@ -161,7 +166,7 @@ MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
 BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
 _MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
-                  ("boundary", ())) + _RANDOM_FIELDS
+                  ("boundary", ())) + _RANDOM_FIELDS + _REDUCED
 _BANDS = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
                   ("pads", MODAL_ONLY_EXCLUDED),
                   ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ())
@@ -174,7 +179,7 @@ _MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()))
 _MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
                 ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
                 ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ())
-                ) + _RANDOM_FIELDS
+                ) + _RANDOM_FIELDS + _REDUCED
 _FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
                   ("output.static_correction_rates", ()))
 _PROBES = _MBS + (("output.window", ()), ("output.probes", ()),

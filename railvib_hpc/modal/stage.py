@@ -39,6 +39,7 @@ from .dofmap import NODE_ARRAY_CHUNK
 from .eigen import ModalProblem, ModalSolver
 from .elements import nodal_masses
 from .energy import group_strain_energies
+from .factor import sparse_times_block
 from .petsc import assemble
 from .projection import project_damping_parts, read_phi_rows
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
@@ -226,8 +227,12 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     want_static = bool(case["mbs.static_correction"])
     want_damping = case["modal.damping"] == "full"
     damping_path = out_dir / MODAL_DAMPING_H5
+    rom_path = case.resolve(case["uncertainty.basis"]) if case["uncertainty.basis"] else None
     with rep.stage("mesh (load/build + broadcast)"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+        if rom_path is None:
+            mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+        else:                 # a reduced-model sample: the nominal mesh the basis lives on
+            mesh, mesh_sha = on_root(lambda: _basis_mesh(rom_path), comm)
     if problem.fields:
         for warning in resolution_warnings(problem.fields, _element_sizes(mesh, problem)):
             rep.info(f"WARNING: {warning}")
@@ -243,19 +248,17 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     if want_static:
         load_dofs, table = rail_load_dofs(mesh, dofmap)
         static_rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
-    with rep.stage("eigensolve"):
-        progress = EigenProgress(rep)
-        eigenproblem = ModalProblem(
-            K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
-            shift_hz=case["modal.shift_hz"], static_rhs=static_rhs,
-            assemble=lambda sub: assemble(
-                mesh, problem, problem_dofmap(mesh, problem, sub.size), sub)[:2])
-        solver = ModalSolver(
-            method=case["modal.method"], tol=case["modal.tol"],
-            max_it=case["modal.max_restarts"], block_size=case["modal.block_size"],
-            max_basis=_max_basis(case, dofmap.n_dofs), out_of_core=case["modal.out_of_core"],
-            bands=band_settings(ctx), monitor=progress, log=rep.info, progress=progress.phase)
-        result = solver.solve(eigenproblem)
+    reduced = None
+    if rom_path is not None:
+        with rep.stage("reduced model"):
+            reduced = _reduced_sample(case, problem, rom_path, dofmap, comm, K, M, rep)
+    if reduced is not None and reduced.get("eigenpairs") is not None:
+        result = reduced.pop("eigenpairs")
+    else:
+        result = _full_eigensolve(ctx, mesh, problem, dofmap, K, M, static_rhs)
+    if reduced is not None and result is not None:
+        reduced.pop("eigenpairs", None)
+        result.stats["reduced"] = _compare(reduced, result)
     if result is None:                                   # modal.band_only: one band cached
         K.destroy()
         M.destroy()
@@ -334,6 +337,94 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary, f, (int(mesh.n_nodes), len(mesh.hexes))
+
+
+def _full_eigensolve(ctx: StageContext, mesh, problem: Problem, dofmap, K, M, static_rhs):
+    """The full eigensolve of K, M (SLEPc or block Lanczos, ``[modal]``), collective."""
+    case, comm, rep = ctx.case, ctx.comm, ctx.rep
+    with rep.stage("eigensolve"):
+        progress = EigenProgress(rep)
+        eigenproblem = ModalProblem(
+            K, M, comm, n_modes=case["modal.n_modes"], f_max=case["modal.f_max"],
+            shift_hz=case["modal.shift_hz"], static_rhs=static_rhs,
+            assemble=lambda sub: assemble(
+                mesh, problem, problem_dofmap(mesh, problem, sub.size), sub)[:2])
+        solver = ModalSolver(
+            method=case["modal.method"], tol=case["modal.tol"],
+            max_it=case["modal.max_restarts"], block_size=case["modal.block_size"],
+            max_basis=_max_basis(case, dofmap.n_dofs), out_of_core=case["modal.out_of_core"],
+            bands=band_settings(ctx), monitor=progress, log=rep.info, progress=progress.phase)
+        return solver.solve(eigenproblem)
+
+
+def _basis_mesh(rom_path: Path):
+    """The nominal mesh a reduced basis lives on and its content digest (rank 0)."""
+    import h5py
+
+    from ..errors import CaseError
+    from ..mesh.mesh_io import read_mesh_h5
+
+    if not rom_path.exists():
+        raise CaseError([("uncertainty.basis", str(rom_path), "no such reduced basis (it "
+                          "is written by railvib study uncertainty with uncertainty.model "
+                          "= 'reduced')")])
+    with h5py.File(rom_path, "r") as f:
+        sha = str(f.attrs["mesh_sha256"])
+    return read_mesh_h5(rom_path.parent / MESH_H5)[0], sha
+
+
+def _reduced_sample(case: Case, problem: Problem, rom_path: Path, dofmap, comm, K, M,
+                    rep: Reporter) -> dict:
+    """The reduced eigenpairs of a sample, accepted (``eigenpairs``) when every relative
+    residual is at most ``uncertainty.reduced_tol`` and the case is no reference solve
+    (``uncertainty.reference``); else the reason for the full solve (collective)."""
+    from .reduced import read_basis, reduced_modes
+    from .ritz import Eigenpairs
+
+    rom = read_basis(rom_path, dofmap, comm.rank)
+    red = reduced_modes(rom, problem, comm, K, M, case["modal.n_modes"])
+    tol = case["uncertainty.reduced_tol"]
+    worst = float(red["residuals"].max())
+    info = {"projection": red["projection"], "size": red["size"],
+            "seconds": red["seconds"], "tol": tol, "max_residual": worst,
+            "residuals": red["residuals"].tolist(), "factors": red["factors"],
+            "frequencies_hz": (np.sqrt(np.maximum(red["eigenvalues"], 0.0))
+                               / (2 * np.pi)).tolist()}
+    rep.info(f"  reduced model: {red['size']} basis vectors ({red['projection']}), "
+             f"max relative residual {worst:.2e} (tolerance {tol:g}), {red['seconds']:.2f} s")
+    if case["uncertainty.reference"]:
+        info.update(used=False, reason="reference sample: full eigensolve to compare")
+    elif worst > tol:
+        why = (f"max relative residual {worst:.3g} > uncertainty.reduced_tol = {tol:g}"
+               + ("; the random field is not represented by the reduced basis"
+                  if problem.fields else ""))
+        rep.info(f"  reduced model rejected ({why}): full eigensolve")
+        info.update(used=False, reason=why)
+    else:
+        mp = sparse_times_block(M, red["phi"], comm)
+        gram = red["phi"].T @ mp
+        gram = comm.allreduce(gram)
+        ortho = float(np.abs(gram - np.eye(len(gram))).max())
+        info.update(used=True, reason="")
+        info["eigenpairs"] = Eigenpairs(
+            eigenvalues=red["eigenvalues"], phi=red["phi"], residuals=red["residuals"],
+            stats={"method": "reduced", "max_orthonormality_error": ortho,
+                   "max_relative_residual": worst, "linear_solves": 0,
+                   "time_solve": red["seconds"], "reduced_basis_size": red["size"]})
+    return info
+
+
+def _compare(reduced: dict, result) -> dict:
+    """The reduced model's record for the modes' stats: with the full eigensolve's
+    frequencies (a fallback or reference sample) the relative error of each frequency."""
+    out = dict(reduced)
+    if not reduced["used"]:
+        f_full = result.frequencies_hz
+        f_red = np.asarray(reduced["frequencies_hz"])
+        n = min(len(f_full), len(f_red))
+        out["full_frequencies_hz"] = f_full.tolist()
+        out["frequency_errors"] = (np.abs(f_red[:n] - f_full[:n]) / f_full[:n]).tolist()
+    return out
 
 
 def band_settings(ctx: StageContext):

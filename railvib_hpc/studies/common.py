@@ -242,7 +242,8 @@ def model_info(modal, modes_used: int | None, n_frequencies: int = 10) -> dict:
     m = int(modes_used or len(freq))
     keep = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
             "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks", "time_assembly_total",
-            "time_block_solves", "time_orthogonalization", "max_relative_residual")
+            "time_block_solves", "time_orthogonalization", "max_relative_residual",
+            "reduced")
     info.update({"modes_in_file": len(freq), "modes_used": m,
                  "frequencies_hz": freq[:n_frequencies].tolist(),
                  "f_max_hz": float(freq[m - 1]),

@@ -56,8 +56,10 @@ STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": refle
                  "uncertainty": uncertainty}
 
 
-def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
-    """The study's variants; every variant case is validated (rank 0)."""
+def make_plan(kind: str, case: Case, settings: dict[str, Any], root: Path | None = None
+              ) -> StudyPlan:
+    """The study's variants; every variant case is validated (rank 0). ``root``: the
+    study's folder (for a study whose variants name files in it, ``PLAN_IN_FOLDER``)."""
     from ..mesh.layout import build_layout
 
     known = list(build_layout(case).probes)
@@ -66,7 +68,9 @@ def make_plan(kind: str, case: Case, settings: dict[str, Any]) -> StudyPlan:
         raise StudySettingsError(kind, [(f"study.{kind}.probes", settings["probes"],
                                          f"unknown probes {bad}; the mesh has: "
                                          + ", ".join(known))])
-    plan = STUDY_MODULES[kind].plan(case, settings)
+    mod = STUDY_MODULES[kind]
+    plan = mod.plan(case, settings, root=root) if getattr(mod, "PLAN_IN_FOLDER", False) \
+        else mod.plan(case, settings)
     for v in plan.variants:
         variant_case(case, v.overrides)
     if plan.shared_overrides is not None:
@@ -282,8 +286,8 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
     """
     t0 = time.perf_counter()
     cfg = on_root(lambda: study_settings(kind, study_set, settings, case), comm)
-    plan = on_root(lambda: make_plan(kind, case, cfg), comm)
     root = Path(out) / kind
+    plan = on_root(lambda: make_plan(kind, case, cfg, root), comm)
     chosen = on_root(lambda: select(plan, variants), comm) if variants else []
     if list_only:
         def show() -> None:
@@ -309,6 +313,9 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                      "(nothing to prepare)")
         elif prepare or any(v.shared for v in todo):
             prepare_shared(plan, case, root, comm, rep)
+        hook = getattr(STUDY_MODULES[kind], "prepare", None)
+        if hook is not None and (todo or prepare):   # the uncertainty study's reduced model
+            hook(plan, case, root, comm, rep)
         progress = getattr(STUDY_MODULES[kind], "progress", None)
         # the finished results, kept up to date for the statistics printed after each one
         known = on_root(lambda: status(plan, case, root, cfg)[1], comm) if progress else {}

@@ -28,6 +28,7 @@ While the samples run, rank 0 prints the statistics of the samples so far after 
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,7 @@ import numpy as np
 
 from ..assess.standards import BUILDING_USES
 from ..config import Case
+from ..io.digests import digest
 from ..uncertain_inputs import LAYER_KEY, marginals
 from ..uncertainty.sampling import saltelli_base_rows, sample_values
 from ..uncertainty.statistics import convergence, exceedance, percentiles, sobol_indices
@@ -86,8 +88,76 @@ def design(case: Case) -> tuple[list, np.ndarray]:
     return found, values
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
-    """One variant per sample of the design (own model each)."""
+#: :func:`plan` takes the study's folder (the reduced model's basis is a file in it).
+PLAN_IN_FOLDER = True
+#: The reduced model's basis holds this many times ``modal.n_modes`` nominal modes (with
+#: their sensitivity vectors): the samples' modes move, and the higher nominal modes hold
+#: what the lower ones move towards (measured: docs/uncertainty.md, 'The reduced model').
+NOMINAL_MODES_FACTOR = 2
+#: Seed offset of the reference samples' draw (independent of the design's stream).
+REFERENCE_SEED_OFFSET = 7919
+
+
+def reference_samples(n: int, count: int, seed: int) -> list[int]:
+    """The samples also solved in full to check the reduced model: ``count`` of the ``n``
+    drawn at random without replacement (seeded), sorted."""
+    rng = np.random.default_rng([seed, REFERENCE_SEED_OFFSET])
+    return sorted(rng.choice(n, size=min(count, n), replace=False).tolist())
+
+
+def varied_parts(case: Case) -> dict[str, tuple[str, ...]]:
+    """The model parts a reduced model needs sensitivity vectors for: ``{part: ("K",) or
+    ("K", "M")}`` from the uncertain keys and fields (layers: ``soil_layer_<k>``; a
+    layer's rho changes its E too when it gives c_s)."""
+    out: dict[str, set] = {}
+    for entry in case["uncertainty.parameter"]:
+        key = entry["key"]
+        m = LAYER_KEY.match(key)
+        if m:
+            name = m.group(2)
+            which = {"c_s": "K", "E": "K", "nu": "K", "rho": "KM"}.get(name, "")
+            if which:
+                out.setdefault(f"soil_layer_{m.group(1)}", set()).update(which)
+        elif key.startswith("pads.k"):
+            out.setdefault(f"pad_{key[-1]}", set()).add("K")
+        elif key.startswith("materials."):
+            _, mat, name = key.split(".")
+            out.setdefault(mat, set()).update({"E": "K", "nu": "K", "rho": "M"}.get(name, ""))
+    for f in case["uncertainty.field"]:
+        out.setdefault(f"soil_layer_{f['layer']}", set()).add(
+            "K" if f["quantity"] == "E" else "M")
+    return {k: tuple(sorted(v)) for k, v in sorted(out.items()) if v}
+
+
+def prepare(plan_: StudyPlan, case: Case, root: Path, comm, rep) -> None:
+    """With the reduced model: the nominal model (``<root>/model``) and its basis
+    (collective)."""
+    info = plan_.info.get("reduced")
+    if not info:
+        return
+    from ..modal.reduced import prepare_basis
+    from ..parallel import on_root
+    from ..problem import Problem
+    from .common import prepare_shared, variant_case
+
+    prepare_shared(plan_, case, root, comm, rep)
+    mcase = on_root(lambda: variant_case(case, plan_.shared_overrides), comm)
+    prepare_basis(Problem.from_case(mcase), Path(info["basis"]), comm, rep,
+                  {k: tuple(v) for k, v in info["varied"].items()},
+                  lowest=case["modal.n_modes"])
+
+
+def _samples(plan_: StudyPlan) -> list[Variant]:
+    """The design's samples (without the reduced model's reference solves)."""
+    return [v for v in plan_.variants if not v.parameter.get("reference")]
+
+
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
+    """One variant per sample of the design (own model each; with the reduced model, the
+    nominal model's basis, and the reference samples ``r<k>`` after them)."""
+    from ..modal.reduced import BASIS_H5, SENSITIVITY_DEPTH
+    from ..uncertainty.reduced import REDUCED_TOL
+    from .common import SHARED_DIR
     from .settings import StudySettingsError
 
     found, values = design(case)
@@ -96,20 +166,44 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
         raise StudySettingsError("uncertainty", [(
             "uncertainty.parameter", [], "the case has no [[uncertainty.parameter]] nor "
             "[[uncertainty.field]]: nothing is uncertain (see docs/uncertainty.md)")])
+    if case["uncertainty.model"] == "reduced" and settings.get("solver") == "direct":
+        raise StudySettingsError("uncertainty", [(
+            "study.uncertainty.solver", "direct", "the reduced model (uncertainty.model = "
+            "'reduced') reduces the modal solve: use solver = 'modal', or model = 'full'")])
     keys = [m.key for m in found]
     width = max(4, len(str(len(values) - 1)))
-    variants = []
+    reduced = case["uncertainty.model"] == "reduced"
+    extra: tuple[str, ...] = ()
+    # the nominal model: without the design and the reduced model's own keys (a changed
+    # tolerance keeps the nominal modes and the basis)
+    shared = (*DESIGN_RESET, f"modal.n_modes={NOMINAL_MODES_FACTOR * case['modal.n_modes']}",
+              f"uncertainty.reduced_tol={REDUCED_TOL!r}", "uncertainty.reduced_checks=0")
+    if reduced:          # the basis's name holds its inputs: another basis, other digests
+        tag = digest({"shared": shared, "varied": varied_parts(case),
+                      "depth": SENSITIVITY_DEPTH, "lowest": case["modal.n_modes"]})[:12]
+        basis = (Path(root or ".") / SHARED_DIR / BASIS_H5.format(tag=tag)).resolve()
+        extra = (f"uncertainty.basis={json.dumps(str(basis))}",)
+    variants, refs = [], []
+    checks = reference_samples(len(values), case["uncertainty.reduced_checks"],
+                               case["uncertainty.seed"]) if reduced else []
     for k, row in enumerate(values):
-        ov = DESIGN_RESET + sample_overrides(case, keys, row)
+        ov = DESIGN_RESET + sample_overrides(case, keys, row) + extra
         if fields:
             ov = (*ov, f"uncertainty.realisation={k + 1}")
-        variants.append(Variant(name=f"s{k:0{width}d}", overrides=ov,
-                                parameter={"sample": k, **{m.name: float(x)
-                                                           for m, x in zip(found, row)}}))
-    return StudyPlan("uncertainty", tuple(variants),
-                     info={"method": case["uncertainty.method"], "parameters":
-                           [m.name for m in found],
-                           "vc_class": BUILDING_USES[case["assessment.building_use"]]["vc"]})
+        par = {"sample": k, **{m.name: float(x) for m, x in zip(found, row)}}
+        variants.append(Variant(name=f"s{k:0{width}d}", overrides=ov, parameter=par))
+        if k in checks:
+            refs.append(Variant(name=f"r{k:0{width}d}", overrides=(
+                *ov, "uncertainty.reference=true"), parameter={**par, "reference": True}))
+    info = {"method": case["uncertainty.method"], "parameters": [m.name for m in found],
+            "vc_class": BUILDING_USES[case["assessment.building_use"]]["vc"]}
+    if reduced:
+        info["reduced"] = {"varied": varied_parts(case), "basis": str(basis),
+                           "tol": case["uncertainty.reduced_tol"],
+                           "references": {r.name: f"s{r.parameter['sample']:0{width}d}"
+                                          for r in refs}}
+    return StudyPlan("uncertainty", tuple(variants + refs), info=info,
+                     shared_overrides=shared if reduced else None)
 
 
 def _names(plan_: StudyPlan) -> list[str]:
@@ -125,11 +219,12 @@ def outputs(plan_: StudyPlan, results: dict[str, dict], probes: list[str]) -> di
         ``{probe: {"peak |a|": array, "max utilisation": array, standard: {"value": array,
         "utilisation": array, "metric", "unit", "limit"}}}`` in plan order.
     """
-    n = len(plan_.variants)
+    samples = _samples(plan_)
+    n = len(samples)
     out: dict[str, dict] = {}
     for p in probes:
         d: dict[str, Any] = {q: np.full(n, np.nan) for q in OUTPUTS}
-        for i, v in enumerate(plan_.variants):
+        for i, v in enumerate(samples):
             r = results.get(v.name)
             if r is None:
                 continue
@@ -163,14 +258,14 @@ def _independent(plan_: StudyPlan, n: int) -> np.ndarray:
 
 def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]) -> dict:
     """Percentiles, exceedance probabilities, Sobol' indices and their convergence."""
-    done = [v for v in plan_.variants if v.name in results]
+    done = [v for v in _samples(plan_) if v.name in results]
     if not done:
         return {"title": TITLE, "verdict": {"text": "no sample finished", "ok": None},
                 "tables": [], "rows": []}
     probes, conf = settings["probes"], settings["confidence"]
     method = plan_.info["method"]
     out = outputs(plan_, results, probes)
-    rows_idx = _independent(plan_, len(plan_.variants))
+    rows_idx = _independent(plan_, len(_samples(plan_)))
     stats_rows = []
     for p in probes:
         for s, e in out[p].items():
@@ -186,22 +281,107 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                "comparison_only": e["comparison_only"]})
     sobol = _sobol(plan_, out, probes, conf, len(done)) if method == "sobol" else {}
     conv = {p: convergence(out[p]["max utilisation"][rows_idx], 1.0, conf) for p in probes}
-    tables = _tables(stats_rows, sobol, conv, conf, method, len(done), len(plan_.variants))
+    tables = _tables(stats_rows, sobol, conv, conf, method, len(done), len(_samples(plan_)))
+    rom = reduced_report(plan_, results, probes) if plan_.info.get("reduced") else None
+    if rom is not None:
+        tables += rom.pop("tables")
     verdict = _verdict(stats_rows, sobol, len(done), conf)
     return {"title": TITLE, "verdict": verdict, "tables": tables, "rows": stats_rows,
             "sobol": sobol, "convergence": conv, "method": method,
             "bands": _band_percentiles(done, results, probes, rows_idx, plan_),
             "vc_class": plan_.info.get("vc_class"),
             "parameters": _names(plan_), "samples_finished": len(done),
-            "design": [[v.parameter[k] for k in _names(plan_)] for v in plan_.variants],
+            "design": [[v.parameter[k] for k in _names(plan_)] for v in _samples(plan_)],
+            "reduced": rom,
             "outputs": {p: {q: out[p][q] for q in OUTPUTS} for p in probes}}
+
+
+def _rel(a: float | None, b: float | None) -> float:
+    """|a - b| / |b| (NaN when either is missing or b is 0)."""
+    if a is None or b is None or not b:
+        return float("nan")
+    return abs(float(a) - float(b)) / abs(float(b))
+
+
+def _reference_errors(res: dict, ref: dict, probes: list[str]) -> dict:
+    """The reduced sample's errors against its full reference solve."""
+    red = ref["model"]["modal"].get("reduced") or {}
+    errs: dict[str, float] = {"frequency": max(red.get("frequency_errors") or [np.nan])}
+    for p in probes:
+        errs[f"{p} peak |a|"] = _rel(res["probes"][p]["acc_total"],
+                                     ref["probes"][p]["acc_total"])
+        a, b = res["assessment"].get(p) or {}, ref["assessment"].get(p) or {}
+        for std, m in (a.get("metrics") or {}).items():
+            mb = (b.get("metrics") or {}).get(std)
+            if mb is not None:
+                errs[f"{p} {std}"] = _rel(m["value"], mb["value"])
+    return errs
+
+
+def reduced_report(plan_: StudyPlan, results: dict[str, dict], probes: list[str]) -> dict:
+    """The reduced model's error control: per sample whether its modes were accepted
+    (residuals at most the tolerance) or solved in full, and the reference samples'
+    errors (frequencies, the probes' peaks and metrics) and times against full solves."""
+    info = plan_.info["reduced"]
+    used, fallback, worst = [], [], 0.0
+    for v in _samples(plan_):
+        r = results.get(v.name)
+        red = (r or {}).get("model", {}).get("modal", {}).get("reduced") if r else None
+        if red is None:
+            continue
+        (used if red["used"] else fallback).append((v.name, red))
+        if red["used"]:
+            worst = max(worst, red["max_residual"])
+    refs = {}
+    for rname, sname in info["references"].items():
+        if rname in results and sname in results:
+            refs[sname] = {"errors": _reference_errors(results[sname], results[rname], probes),
+                           "reduced_used": (results[sname]["model"]["modal"].get("reduced")
+                                            or {}).get("used", False),
+                           "seconds_reduced": results[sname]["timings"]["modal"],
+                           "seconds_full": results[rname]["timings"]["modal"],
+                           "total_reduced": results[sname]["timings"]["total"],
+                           "total_full": results[rname]["timings"]["total"],
+                           "max_residual": results[rname]["model"]["modal"]["reduced"][
+                               "max_residual"]}
+    t_red = [results[n]["timings"]["total"] for n, _ in used]
+    t_full = [e["total_full"] for e in refs.values()]
+    speed = (float(np.mean(t_full)) / float(np.mean(t_red))) if t_red and t_full else None
+    rows = [["accepted (reduced modes)", str(len(used)), fmt(worst, 3) if used else "–"],
+            ["full eigensolve (residual above the tolerance)", str(len(fallback)),
+             "; ".join(f"{n}: {red['reason']}" for n, red in fallback[:4])
+             + (" ..." if len(fallback) > 4 else "") or "–"]]
+    tables = [{"title": "Reduced model: error control", "head": ["samples", "count",
+                                                                "max residual / reason"],
+               "rows": rows,
+               "note": f"Relative residual ||K phi - lambda M phi|| / ||K phi|| of every "
+                       f"reduced mode with the sample's own K and M; tolerance "
+                       f"uncertainty.reduced_tol = {info['tol']:g}. Seconds per sample: "
+                       f"reduced {fmt(float(np.mean(t_red)), 3) if t_red else '–'}, full "
+                       f"(reference solves) {fmt(float(np.mean(t_full)), 3) if t_full else '–'}"
+                       + (f", speed-up {speed:.2f}" if speed else "") + "."}]
+    if refs:
+        keys = sorted({k for e in refs.values() for k in e["errors"]})
+        tables.append({
+            "title": "Reduced model against full solves (reference samples)",
+            "head": ["quantity", *refs], "rows": [[k, *(fmt(e["errors"].get(k, np.nan), 2)
+                                                      for e in refs.values())] for k in keys],
+            "note": "Relative errors of the reduced sample against the same sample solved "
+                    "in full on the nominal mesh (frequency: the largest of its modes', by "
+                    "index). A reference whose reduced sample fell back to the full "
+                    "eigensolve compares full with full."})
+    return {"accepted": len(used), "fallback": [{"sample": n, "reason": r["reason"]}
+                                                for n, r in fallback],
+            "max_residual": worst, "references": refs, "speed_up": speed,
+            "seconds_reduced": float(np.mean(t_red)) if t_red else None,
+            "seconds_full": float(np.mean(t_full)) if t_full else None, "tables": tables}
 
 
 def _band_percentiles(done: list, results: dict, probes: list[str], rows_idx: np.ndarray,
                       plan_: StudyPlan) -> dict:
     """P5, P50, P95 of the one-third-octave RMS total acceleration per band [m/s²] over
     the independent finished samples, on the bands every one of them resolves."""
-    keep = {plan_.variants[i].name for i in rows_idx} & {v.name for v in done}
+    keep = {_samples(plan_)[i].name for i in rows_idx} & {v.name for v in done}
     out = {}
     for p in probes:
         specs = [results[n]["spectra"].get(p) for n in sorted(keep)]
@@ -219,7 +399,7 @@ def _band_percentiles(done: list, results: dict, probes: list[str], rows_idx: np
 
 def _sobol(plan_: StudyPlan, out: dict, probes: list[str], conf: float, n_done: int) -> dict:
     """Sobol' indices per probe and output (only with the whole Saltelli design)."""
-    if n_done < len(plan_.variants):
+    if n_done < len(_samples(plan_)):
         return {}
     names = _names(plan_)
     res = {}
@@ -307,9 +487,9 @@ def _verdict(stats_rows: list[dict], sobol: dict, n_done: int, conf: float) -> d
 
 def progress(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]) -> str:
     """One line of the statistics of the finished samples (printed after each sample)."""
-    n = len(results)
+    n = sum(v.name in results for v in _samples(plan_))
     if n < 2:
-        return f"[uncertainty] {n} of {len(plan_.variants)} samples finished"
+        return f"[uncertainty] {n} of {len(_samples(plan_))} samples finished"
     out = outputs(plan_, results, settings["probes"])
     conf = settings["confidence"]
     parts = []
@@ -321,7 +501,7 @@ def progress(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any
         ex = exceedance(u, 1.0, conf)
         parts.append(f"{p}: P95 utilisation {_interval(p95)}, P(>1) {pct(ex['p'], 1)} "
                      f"[{pct(ex['low'], 1)}, {pct(ex['high'], 1)}]")
-    return (f"[uncertainty] {n} of {len(plan_.variants)} samples: "
+    return (f"[uncertainty] {n} of {len(_samples(plan_))} samples: "
             + ("; ".join(parts) or "no utilisation assessed"))
 
 

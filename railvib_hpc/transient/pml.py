@@ -22,7 +22,7 @@ layer's energy grew ~17 decades per 0.5 s on the plane-strain test slab.
 
 Each rank computes the layer's elements that touch its nodes (as the assembly does, so
 no force is summed across ranks), with the displacements of their nodes gathered from
-their owners (:func:`~.petsc.ghost_gather`). Cost per layer element: ~4.4 kB and ~6
+their owners (:class:`~.petsc.GhostGather`). Cost per layer element: ~4.4 kB and ~6
 kflop per step (the gradients and forces at 8 Gauss points); the rest of the model is
 untouched.
 """
@@ -201,12 +201,15 @@ class PmlLayer:
     gather
         ``gather(dofs) -> callable``: a collective factory of a function that returns, from
         this rank's rows of a vector, its values at the global ``dofs``
-        (:func:`~.petsc.ghost_gather`).
+        (:class:`~.petsc.GhostGather`).
+    geometry
+        :func:`pml_geometry` of the model, when the caller has it already (computed here
+        otherwise).
     """
 
     def __init__(self, mesh: Mesh, problem: Problem, dofmap, rank: int, r0: int, r1: int,
-                 gather: Callable):
-        self.faces, inside = pml_geometry(mesh, problem)
+                 gather: Callable, geometry: tuple | None = None):
+        self.faces, inside = pml_geometry(mesh, problem) if geometry is None else geometry
         own = np.zeros(mesh.n_nodes, dtype=bool)
         own[dofmap.owned_nodes(rank)] = True
         sel = np.flatnonzero(inside & own[mesh.hexes].any(axis=1))

@@ -684,8 +684,9 @@ def _setup(ctx: StageContext) -> dict:
             rep.info(f"  {layers}")
         from .pml import pml_faces, pml_geometry
 
-        if pml_faces(problem):           # a layer the mesh cannot carry: before assembly
-            pml_geometry(mesh, problem)
+        # the layers' faces and elements, checked once (a layer the mesh cannot carry is
+        # refused before assembly); assembly and the layer's kernel take them from here
+        pml = pml_geometry(mesh, problem) if pml_faces(problem) else None
         unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)
@@ -705,11 +706,12 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails, problem)
+        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails, problem,
+                                                      pml)
         with rep.stage("transient: stability limit"):
             if explicit:
                 system, dt, limit = _explicit_system(ctx, mesh, dofmap, problem, rails,
-                                                     vehicle, (K, M, C, dashpots), dt)
+                                                     vehicle, (K, M, C, dashpots), dt, pml)
             else:
                 partition, dt, limit = _imex_partition(ctx, mesh, dofmap, problem, K, M, C,
                                                        dt)
@@ -807,12 +809,15 @@ def speed_warning(case: Case, speed: float) -> str:
             "there (the track's critical speed)")
 
 
-def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem) -> tuple:
+def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem,
+              pml: tuple | None = None) -> tuple:
     """K, M, C (None when nothing damps), the damping summary, for the explicit engine
     the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
     in C), and the problem (with the supported track ends' fitted stiffness,
     :func:`_fit_track_ends`) (collective). ``problem``: the run's, built once from the
-    case by :func:`_setup`."""
+    case by :func:`_setup`; ``pml``: its :func:`~.pml.pml_geometry` (None without ``pml``
+    faces), whose hexahedra take the plain full formulation, the one their memory terms
+    use."""
     from ..modal.boundary import dashpot_diagonal
     from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
@@ -822,7 +827,7 @@ def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem
         # the explicit engines keep the lumped mass on the diagonal alone
         K, M, _ = assemble(mesh, problem, dofmap, comm,
                            mass=True if engine == "direct" else "diagonal",
-                           full_hexes=_pml_hexes(mesh, problem))
+                           full_hexes=None if pml is None else pml[1])
         problem = _fit_track_ends(ctx, mesh, dofmap, rails, problem, K, M)
         # the explicit engine takes diagonal dashpots at the full step, apart from C
         dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
@@ -913,8 +918,9 @@ def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: P
 
 def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: RailDofs,
                      vehicle,
-                     matrices: tuple, dt_band: float) -> tuple:
-    """The explicit engine's system, its step and a line on its stability limit.
+                     matrices: tuple, dt_band: float, pml: tuple | None = None) -> tuple:
+    """The explicit engine's system, its step and a line on its stability limit
+    (``pml``: the setup's :func:`~.pml.pml_geometry`, None without ``pml`` faces).
 
     The limit is :data:`~.explicit.STEP_SAFETY` of the critical step of the model's largest
     natural frequency (:func:`~.explicit.stability_limit`) and, with a vehicle, of the
@@ -932,7 +938,7 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: R
 
     case, comm = ctx.case, ctx.comm
     K, M, C, dashpots = matrices
-    layer = _pml_layer(ctx, mesh, dofmap, problem, K)
+    layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
     # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
     system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots, pml=layer)
     plus = None
@@ -965,26 +971,18 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: R
     return system, dt, text
 
 
-def _pml_hexes(mesh, problem: Problem):
-    """The hexahedra of the perfectly matched layers (None without ``pml`` faces): their
-    stiffness takes the plain full formulation, the one their memory terms use."""
-    from .pml import pml_faces, pml_geometry
-
-    return pml_geometry(mesh, problem)[1] if pml_faces(problem) else None
-
-
-def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K):
+def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K, pml: tuple | None):
     """The perfectly matched layers of the ``pml`` faces (None without), with their log
-    lines (collective)."""
+    lines (collective). ``pml``: the checked :func:`~.pml.pml_geometry` of the setup."""
     from .petsc import GhostGather
-    from .pml import PmlLayer, pml_faces, pml_line, pml_warnings
+    from .pml import PmlLayer, pml_line, pml_warnings
 
-    if not pml_faces(problem):
+    if pml is None:
         return None
     comm = ctx.comm
     rows, n_global = K.getOwnershipRange(), K.getSize()[0]
     layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
-                     lambda dofs: GhostGather(comm, rows, n_global, dofs))
+                     lambda dofs: GhostGather(comm, rows, n_global, dofs), geometry=pml)
     n_el = comm.allreduce(layer.n_elements)
     ctx.rep.info(f"  {pml_line(layer.faces, problem)}; {n_el} element computations on "
                  f"{comm.size} rank(s), {comm.allreduce(layer.nbytes) / 1e6:.3g} MB")

@@ -262,7 +262,7 @@ def _face(default: str, where: str) -> Param:
                  "graded Caughey absorbing layer inside the mesh, boundary.layer_*) or pml "
                  "(fixed, with a perfectly matched layer of boundary.layer_thickness inside "
                  "the mesh, boundary.pml_*; railvib transient with transient.engine = "
-                 "'explicit' only)",
+                 "'explicit' or 'imex' only)",
                  choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {

@@ -431,7 +431,7 @@ def insert_pad_dashpots(C, mesh: Mesh, problem: Problem, dofmap: DofMap, rank: i
 
 def assemble_partition(mesh: Mesh, problem: Problem, dofmap: DofMap, comm,
                        parts: Collection[str], extra_hexes: np.ndarray | None = None,
-                       boundary: bool = False):
+                       boundary: bool = False, full_hexes: np.ndarray | None = None):
     """Stiffness and damping of the elements of ``parts`` alone: ``(K_p, C_p)``, C_p in
     K_p's pattern or None when nothing of them damps (collective).
 
@@ -444,6 +444,7 @@ def assemble_partition(mesh: Mesh, problem: Problem, dofmap: DofMap, comm,
     ``extra_hexes`` (a mask over the hexahedra) adds single elements of other parts;
     ``boundary`` the absorbing faces' springs and dashpots (their lumped node blocks: a
     face node's small mass on a stiff, heavily damped block would set the explicit step).
+    ``full_hexes``: as in :func:`assemble` (the whole model's K must integrate them alike).
     """
     from petsc4py import PETSc
 
@@ -451,7 +452,7 @@ def assemble_partition(mesh: Mesh, problem: Problem, dofmap: DofMap, comm,
 
     parts = tuple(parts)
     K_p, _, _ = assemble(mesh, problem, dofmap, comm, parts=parts, mass=False,
-                         extra_hexes=extra_hexes)
+                         extra_hexes=extra_hexes, full_hexes=full_hexes)
     C_p = None
     model = problem.damping.model
     if model == "rayleigh":

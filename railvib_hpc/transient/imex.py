@@ -197,14 +197,20 @@ class ImexSystem(ExplicitSystem):
         MPI communicator.
     extra_gb
         Memory the caller needs besides the factor (the rail columns).
+    pml
+        The perfectly matched layers (:class:`~.pml.PmlLayer`, or None; the system owns
+        it): see :meth:`history_rhs`.
     """
 
-    def __init__(self, K, M, C, K_I, C_I, dt: float, comm, extra_gb: float = 0.0):
+    def __init__(self, K, M, C, K_I, C_I, dt: float, comm, extra_gb: float = 0.0,
+                 pml=None):
         from petsc4py import PETSc
 
         from ..modal.factor import ShiftInvertFactor
 
         super().__init__(K, M, C, dt, comm)
+        # (not through ExplicitSystem's dashpots: here M_e1 is implicit, in K_eff)
+        self.pml = pml
         self.K_I, self.C_I = K_I, C_I
         self.scheme = scheme = GeneralizedAlpha.newmark(dt)
         b, g = scheme.beta, scheme.gamma
@@ -219,6 +225,8 @@ class ImexSystem(ExplicitSystem):
         self.implicit = implicit_rows(self.h_implicit)
         self.implicit_rows = comm.allreduce(int(self.implicit.sum()))
         self._diagonal = self._c_mass * self.m
+        if pml is not None:        # the layers' M_e1, trapezoidal like C_I: in K_eff
+            self._diagonal = self._diagonal + (g / (b * dt)) * pml.damping_diagonal
         self.op = self.k_implicit = None
         if self.implicit_rows:
             full = with_diagonal(self.h_implicit, self._diagonal, comm)
@@ -229,6 +237,7 @@ class ImexSystem(ExplicitSystem):
             full.destroy()
             rows.destroy()
         self.time_setup = time.perf_counter() - t0
+        self.time_pml = 0.0
         if self.k_implicit is not None:
             self.op = ShiftInvertFactor(self.k_implicit, self.k_implicit, 0.0, comm, PREFIX,
                                         extra_gb=extra_gb)
@@ -255,16 +264,32 @@ class ImexSystem(ExplicitSystem):
     def history_rhs(self, u, v, a, out) -> None:
         """``out = m u~ / (beta dt^2) - K u~ - C v* + (K_I + gamma / (beta dt) C_I) u~
         + C_I (v* - v~)`` from the state ``u, v, a`` (PETSc vectors; see the module
-        notes)."""
+        notes); once per step.
+
+        With perfectly matched layers also ``+ gamma / (beta dt) d u~ - d v~ - f_pml(u~)``:
+        their ``M_e1`` (diagonal ``d``) is implicit like ``C_I`` (in K_eff's diagonal:
+        ``d v_{n+1}``), their memory and ``M_e2`` force explicit, at the predictor ``u~``,
+        the displacement the explicit elements see (with gamma = 1/2 the predictors step
+        as the central differences, :meth:`scheme_energy`: the layer advances along them
+        as in the explicit engine, and ``M_e2`` enters the explicit part's stability
+        limit). The memory starts at rest with the first predictor.
+        """
         dt, b, g = self.dt, self.scheme.beta, self.scheme.gamma
         u_, v_, a_ = (self.local(x) for x in (u, v, a))
         u_pred = u_ + dt * v_ + (dt * dt * (0.5 - b)) * a_
-        res = self._diagonal * u_pred              # (c_mass m, formed once)
+        res = self._diagonal * u_pred              # (c_mass m [+ g/(b dt) d], formed once)
         res -= self.internal_force(u_pred, damping_velocity(v_, a_, dt))
         res += self.times(self.h_implicit, u_pred)
         if self.C_I is not None:
             # the implicit elements' damping at v~ (trapezoidal), not at v*
             res += self.times(self.C_I, (dt * g) * a_)
+        if self.pml is not None:
+            t0 = time.perf_counter()
+            if not self.pml.started:
+                self.pml.start(u_ - (b * dt * dt) * a_)
+            res -= self.pml.damping_diagonal * (v_ + (dt * (1.0 - g)) * a_)
+            res -= self.pml.force(u_pred, dt)
+            self.time_pml += time.perf_counter() - t0
         self.local(out)[:] = res
 
     def solve(self, rhs, out) -> None:

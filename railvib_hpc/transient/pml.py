@@ -243,6 +243,8 @@ class PmlLayer:
         self.n_elements = len(sel)
         self._u = np.zeros(self.n_local)
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
+        #: Whether :meth:`start` has set the memory (else it is at rest at u = 0).
+        self.started = False
 
     @property
     def nbytes(self) -> int:
@@ -258,8 +260,10 @@ class PmlLayer:
             release()
 
     def _to_rows(self, values: np.ndarray) -> np.ndarray:
-        """Sum element values (nel, 8, 3) into this rank's rows."""
-        return np.bincount(self._rows, values.reshape(-1)[self._owned], self.n_local)
+        """Sum element values (nel, 8, 3) into this rank's rows (float64 also on a rank
+        without layer elements, where ``bincount`` of nothing would give integers)."""
+        return np.bincount(self._rows, values.reshape(-1)[self._owned],
+                           self.n_local).astype(float, copy=False)
 
     def _element_values(self, u: np.ndarray) -> np.ndarray:
         """The layer elements' displacements (nel, 8, 3) from this rank's rows ``u``
@@ -275,6 +279,7 @@ class PmlLayer:
         self.kernel.start(self._element_values(u))
         self._u = u.copy()
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
+        self.started = True
         return self.stiffness_diagonal * u
 
     def force(self, u: np.ndarray, dt: float) -> np.ndarray:

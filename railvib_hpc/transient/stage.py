@@ -687,6 +687,8 @@ def _setup(ctx: StageContext) -> dict:
         # the layers' faces and elements, checked once (a layer the mesh cannot carry is
         # refused before assembly); assembly and the layer's kernel take them from here
         pml = pml_geometry(mesh, problem) if pml_faces(problem) else None
+        if pml is not None and case["transient.engine"] == "imex":
+            _check_implicit_outside_layers(case, mesh, pml[1])
         unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)
@@ -713,8 +715,8 @@ def _setup(ctx: StageContext) -> dict:
                 system, dt, limit = _explicit_system(ctx, mesh, dofmap, problem, rails,
                                                      vehicle, (K, M, C, dashpots), dt, pml)
             else:
-                partition, dt, limit = _imex_partition(ctx, mesh, dofmap, problem, K, M, C,
-                                                       dt)
+                partition, dt, limit, layer = _imex_partition(ctx, mesh, dofmap, problem, K,
+                                                              M, C, dt, pml)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
     # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
@@ -746,7 +748,8 @@ def _setup(ctx: StageContext) -> dict:
             else:
                 from .imex import ImexSystem
 
-                system = ImexSystem(K, M, C, *partition, dt, comm, extra_gb=col_gb)
+                system = ImexSystem(K, M, C, *partition, dt, comm, extra_gb=col_gb,
+                                    pml=layer)
                 scheme = system.scheme
             rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
                      f"~{system.factor_memory_gb:.2f} GB"
@@ -1021,11 +1024,36 @@ def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
     return float(dt), text
 
 
+def _check_implicit_outside_layers(case: Case, mesh, inside: np.ndarray) -> None:
+    """Refuse implicit parts (``transient.implicit_parts``) with hexahedra in a perfectly
+    matched layer (``inside``: the layers' mask): the layer's memory forces are explicit,
+    and with its elements implicit the layer grew unstable (measured on the plane-strain
+    slab, an implicit column through the base layer: the energy grew 1000 x in 1.5 s)."""
+    from ..mesh.stage import present_parts
+    from ..schema import PART_ID
+    from .imex import implicit_part_names
+
+    names = list(case["transient.implicit_parts"])
+    parts = implicit_part_names(names, present_parts(mesh))
+    hit = [p for p in parts if np.any(inside & (mesh.hex_part == PART_ID[p]))]
+    if hit:
+        raise TransientInputError(
+            f"transient.implicit_parts = {names}: the part(s) {', '.join(hit)} have "
+            f"hexahedra in a perfectly matched layer (boundary.layer_thickness = "
+            f"{case['boundary.layer_thickness']:g} m); the layer's memory forces are "
+            "explicit and with implicit elements in it the layer grows unstable; allowed: "
+            "implicit parts outside the layers (leave them out of transient.implicit_parts, "
+            "make the layer thinner, or give that face absorbing)")
+
+
 def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
-                    dt_band: float) -> tuple:
-    """The IMEX engine's implicit partition ``(K_I, C_I)``, its step and a line on the
+                    dt_band: float, pml: tuple | None = None) -> tuple:
+    """The IMEX engine's implicit partition ``(K_I, C_I)``, its step, a line on the
     explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
-    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`)."""
+    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`) and the
+    perfectly matched layers (None without ``pml``, the setup's
+    :func:`~.pml.pml_geometry`; their ``M_e2`` is in the limit, their hexahedra take the
+    full formulation in the partition as in K)."""
     from ..mesh.stage import present_parts
     from ..modal.petsc import assemble_partition
     from ..schema import PART_ID
@@ -1037,25 +1065,42 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     extra = None
     if case["transient.implicit_elements"] == "auto":
         target = case["transient.dt"] if case["transient.dt"] > 0 else dt_band
-        extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY,
-                                    ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts]))
-    K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True)
+        # (never a layer's element: its memory forces are explicit,
+        # _check_implicit_outside_layers)
+        outside = ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts])
+        if pml is not None:
+            outside &= ~pml[1]
+        extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY, outside)
+    K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True,
+                                  full_hexes=None if pml is None else pml[1])
+    layer = plus = None
     try:
         m = lumped_diagonal(M, comm)
+        layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
+        if layer is not None:          # the layers' M_e2 stiffens their nodes
+            from .petsc import diagonal_matrix
+
+            plus = diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
+                                   layer.stiffness_diagonal)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
-                              damping_factor=DAMPING_STABILITY_FACTOR)
+                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
         where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
         dt, text = _stable_step(case, lim, lim.dt_critical, where, dt_band, "imex")
     except BaseException:
         for A in (K_I, C_I):
             if A is not None:
                 A.destroy()
+        if layer is not None:
+            layer.destroy()
         raise
+    finally:
+        if plus is not None:
+            plus.destroy()
     auto = (f" and {int(extra.sum()):,} elements below the target step" if extra is not None
             else "")
     text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
-            f"dashpots; explicit part {text}")
-    return (K_I, C_I), dt, text
+            f"dashpots{', the layers M_e1' if layer is not None else ''}; explicit part {text}")
+    return (K_I, C_I), dt, text, layer
 
 
 def _MPI_MIN():
@@ -1149,7 +1194,7 @@ def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, c
              "time_factorization": system.time_factorization,
              "time_solves": system.time_solves, "time_products": system.time_products,
              "time_contact": solver.time_contact, "solves": system.n_solves,
-             "time_pml": getattr(solver, "time_pml", 0.0),
+             "time_pml": getattr(solver, "time_pml", 0.0) + getattr(system, "time_pml", 0.0),
              "pml_elements": (0 if getattr(system, "pml", None) is None
                               else comm.allreduce(system.pml.n_elements)),
              "factor_memory_gb": system.factor_memory_gb, "out_of_core": system.out_of_core,

@@ -47,9 +47,27 @@ def _set_layers(mesh, layers) -> None:
         mesh.hex_part[zc - lo < z_top] = PART_ID[part]
 
 
+def _source_dofs(mesh, dofmap, source, plane_strain) -> tuple[np.ndarray, np.ndarray]:
+    """The free DOFs of ``source``'s forces and their amplitudes (see :func:`run_box`)."""
+    dofs, amps = [], []
+    for point, comp, amp in ([source] if isinstance(source, tuple) else source):
+        d2 = ((mesh.points - np.asarray(point)) ** 2).sum(axis=1)
+        if plane_strain:
+            near = mesh.points[np.argmin(d2)]
+            nodes = np.flatnonzero(np.isclose(mesh.points[:, 0], near[0])
+                                   & np.isclose(mesh.points[:, 2], near[2]))
+        else:
+            nodes = np.array([int(np.argmin(d2))])
+        d = dofmap.index[nodes, comp]
+        dofs.append(d[d >= 0])
+        amps.append(np.full((d >= 0).sum(), float(amp)))
+    return np.concatenate(dofs), np.concatenate(amps)
+
+
 def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receivers,
             t_end: float, f0: float, comm, plane_strain: bool = False,
-            extra: tuple = (), courant: float | None = None, record_energy: bool = False):
+            extra: tuple = (), courant: float | None = None, record_energy: bool = False,
+            implicit: np.ndarray | None = None):
     """Step ``mesh`` with the given face types and a Ricker point force.
 
     Parameters
@@ -62,7 +80,8 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         ``boundary.layer_thickness`` [m].
     source
         ``(point, component, amplitude)``: a force on the node nearest ``point`` (on
-        every node of that x, z in a plane-strain slab).
+        every node of that x, z in a plane-strain slab); or a list of such forces, all
+        with the same Ricker history.
     receivers
         (k, 3) points; the nearest nodes are recorded.
     t_end, f0
@@ -77,6 +96,10 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         Fixed step as ``courant * h_min / c_P`` (default: the engine's allowed step).
     record_energy
         Also return ``1/2 v^T m v + 1/2 u^T K u`` per step.
+    implicit
+        A mask of hexahedra: step with the IMEX engine
+        (:class:`~railvib_hpc.transient.imex.ImexSystem`), these elements implicit
+        (default: the explicit engine).
 
     Returns
     -------
@@ -116,33 +139,40 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     if pml_faces(problem):
         layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
                          lambda dofs: GhostGather(comm, rows, n_global, dofs))
-    system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
     plus = None if layer is None else diagonal_matrix(comm, rows, n_global,
                                                       layer.stiffness_diagonal)
-    lim = stability_limit(K, system.m, None, comm, plus=plus)
+    if implicit is None:
+        system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
+        lim = stability_limit(K, system.m, None, comm, plus=plus)
+    else:
+        from railvib_hpc.modal.petsc import assemble_partition
+        from railvib_hpc.transient.explicit import lumped_diagonal
+        from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR
+
+        partition = assemble_partition(mesh, problem, dofmap, comm, (), extra_hexes=implicit,
+                                       full_hexes=full)
+        lim = stability_limit(K, lumped_diagonal(M, comm), None, comm, minus=partition,
+                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
     if plus is not None:
         plus.destroy()
     ext = mesh.points[mesh.hexes]
     h_min = float((ext.max(axis=1) - ext.min(axis=1)).min())
     dt = lim.dt_allowed if courant is None else courant * h_min / C_P
-    system.dt = dt
-    r0, r1 = rows
-    point, comp, amp = source
-    d2 = ((mesh.points - np.asarray(point)) ** 2).sum(axis=1)
-    if plane_strain:
-        near = mesh.points[np.argmin(d2)]
-        src = np.flatnonzero(np.isclose(mesh.points[:, 0], near[0])
-                             & np.isclose(mesh.points[:, 2], near[2]))
+    if implicit is None:
+        system.dt = dt
     else:
-        src = np.array([int(np.argmin(d2))])
-    src_dofs = dofmap.index[src, comp]
-    src_dofs = src_dofs[src_dofs >= 0]
-    own_src = src_dofs[(src_dofs >= r0) & (src_dofs < r1)]
+        from railvib_hpc.transient.imex import ImexSystem
+
+        system = ImexSystem(K, M, None, *partition, dt, comm, pml=layer)
+    r0, r1 = rows
+    src_dofs, src_amp = _source_dofs(mesh, dofmap, source, plane_strain)
+    mine = (src_dofs >= r0) & (src_dofs < r1)
+    own_src, own_amp = src_dofs[mine], src_amp[mine]
     rec = np.array([int(np.argmin(((mesh.points - p) ** 2).sum(axis=1))) for p in receivers])
     rdofs = dofmap.index[rec, :3]
 
     def prescribed(n):
-        return own_src, np.full(own_src.size, amp * float(ricker(n * dt, f0)))
+        return own_src, own_amp * float(ricker(n * dt, f0))
 
     def sample(x):
         out = np.zeros(rdofs.shape)
@@ -152,8 +182,15 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
 
     n = r1 - r0
     st = State(0, np.zeros(n), np.zeros(n), np.zeros(n))
-    solver = ExplicitSolver(system, prescribed=lambda k: (own_src, prescribed(k)[1]))
-    initial_acceleration(system, st, [prescribed(0)])
+    if implicit is None:
+        solver = ExplicitSolver(system, prescribed=prescribed)
+        initial_acceleration(system, st, [prescribed(0)])
+    else:
+        from railvib_hpc.transient.integrate import DirectSolver
+
+        # at rest with the load's first value zero (the Ricker's start): a_0 = 0
+        solver = DirectSolver(system, prescribed)
+        solver.start(st)
     steps = int(math.ceil(t_end / dt))
     u, v, energy = [sample(st.u)], [sample(st.v)], []
     t0 = time.perf_counter()
@@ -167,6 +204,8 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     out = {"t": np.arange(steps + 1) * dt, "u": np.array(u), "v": np.array(v), "dt": dt,
            "dofs": n_global, "time_per_step": elapsed / steps, "energy": np.array(energy),
            "pml_elements": 0 if layer is None else comm.allreduce(layer.n_elements)}
+    if implicit is not None:
+        solver.destroy()
     system.destroy()
     K.destroy()
     M.destroy()

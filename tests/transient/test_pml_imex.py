@@ -89,8 +89,8 @@ def test_implicit_elements_inside_the_layer_make_it_unstable():
     """Why the stage refuses implicit parts in a layer and keeps the automatic partition
     out of it (``_check_implicit_outside_layers``): with implicit soil reaching into the
     base layer (a column under the source through the whole slab) the energy grows
-    (measured: the second second's peak 1000 x the first's, the source's), where the partition around
-    the source alone decays (the test above)."""
+    (measured: the second second's peak 1000 x the first's, the source's), where the
+    partition around the source alone decays (the test above)."""
     def column(mesh):
         c = mesh.points[mesh.hexes].mean(axis=1)
         return np.abs(c[:, 0] - SOURCE[0][0]) < 2.0

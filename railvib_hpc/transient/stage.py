@@ -1156,6 +1156,9 @@ def _initial_state(init: dict, comm, rep: Reporter) -> State:
     y, force = static_equilibrium(vehicle, flex, r)
     if xcols is not None:
         state.u[:] = -(xcols @ (coef * force[:, None]).ravel())
+    if getattr(system, "pml", None) is not None:
+        # the static deflection is the layers' rest state (PmlLayer.start)
+        system.pml.start(state.u)
     state.y, state.y_dot = y, np.zeros(vehicle.n_dof)
     state.y_ddot = driver.newmark.acceleration(y, state.y_dot, force)
     state.force = force

@@ -245,7 +245,8 @@ class PmlLayer:
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
         #: Whether :meth:`start` has set the rest state (else it is u = 0).
         self.started = False
-        self._offset = np.zeros(self.n_local)
+        #: The rest state of :meth:`start` (None: u = 0, nothing to subtract per step).
+        self._offset = None
 
     @property
     def nbytes(self) -> int:
@@ -286,7 +287,7 @@ class PmlLayer:
         t = 0: measured on the coarse thesis model with layers and a wheel starting on
         the flexible rail, the building's peak accelerations were 1.5-3 x those with
         dashpots before, within 1-12 % of them after; docs/transient.md.)"""
-        self._offset = np.array(u, dtype=float, copy=True)
+        self._offset = np.array(u, dtype=float, copy=True) if np.any(u) else None
         self.kernel.start(np.zeros(self.dofs.shape))
         self._u = np.zeros(self.n_local)
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
@@ -299,7 +300,8 @@ class PmlLayer:
         (``u`` from the rest state of :meth:`start`)
         (the chains ``chi_k' + alpha chi_k = chi_{k-1}``, ``chi_0 = u``, by the trapezoidal
         rule; collective; once per step)."""
-        u = u - self._offset
+        if self._offset is not None:
+            u = u - self._offset
         a = 0.5 * dt * self.alpha
         before, after = self._u, u
         for chi in self._chi:

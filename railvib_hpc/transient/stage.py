@@ -944,12 +944,7 @@ def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: R
     layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
     # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
     system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots, pml=layer)
-    plus = None
-    if layer is not None:          # the layers' M_e2 stiffens their nodes
-        from .petsc import diagonal_matrix
-
-        plus = diagonal_matrix(comm, (system.r0, system.r1), system.n_global,
-                               layer.stiffness_diagonal)
+    plus = _layer_stiffening(comm, K, layer)
     lim = stability_limit(K, system.m, C, comm, plus=plus)
     if plus is not None:
         plus.destroy()
@@ -992,6 +987,17 @@ def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K, pml: tuple 
     for line in pml_warnings(layer.faces, problem):
         ctx.rep.info(line)
     return layer
+
+
+def _layer_stiffening(comm, K, layer):
+    """The layers' ``M_e2`` diagonal as a matrix in K's layout, for the stability limit's
+    ``plus`` (it stiffens their nodes; None without layers; the caller destroys it)."""
+    if layer is None:
+        return None
+    from .petsc import diagonal_matrix
+
+    return diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
+                           layer.stiffness_diagonal)
 
 
 def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
@@ -1077,11 +1083,7 @@ def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     try:
         m = lumped_diagonal(M, comm)
         layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        if layer is not None:          # the layers' M_e2 stiffens their nodes
-            from .petsc import diagonal_matrix
-
-            plus = diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
-                                   layer.stiffness_diagonal)
+        plus = _layer_stiffening(comm, K, layer)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
                               damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
         where = limiting_element(mesh, dofmap.index, lim.limiting_dof)

@@ -261,8 +261,7 @@ def _face(default: str, where: str) -> Param:
                  "per unit area, from the soil behind the face), caughey (fixed, with a "
                  "graded Caughey absorbing layer inside the mesh, boundary.layer_*) or pml "
                  "(fixed, with a perfectly matched layer of boundary.layer_thickness inside "
-                 "the mesh, boundary.pml_*; railvib transient with transient.engine = "
-                 "'explicit' or 'imex' only)",
+                 "the mesh, boundary.pml_*; railvib transient only, any engine)",
                  choices=BOUNDARY_TYPES)
 
 SCHEMA: dict[str, dict[str, Any]] = {

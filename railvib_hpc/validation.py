@@ -824,12 +824,6 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
     if pml and not case["boundary.layer_thickness"] > 0:
         out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
                     f"must be > 0 m for the pml face(s) {', '.join(pml)}"))
-    if pml and tr["engine"] == "direct":
-        out.append((f"boundary.{pml[0]}", "pml",
-                    "needs transient.engine = 'explicit' or 'imex' (is 'direct'): the layer's "
-                    "memory forces are explicit, stable within the explicit engines' step "
-                    "limit, which the direct engine does not keep; allowed with the direct "
-                    "engine: fixed, roller, free, absorbing, caughey"))
     if pml and not 0.0 < case["boundary.pml_reflection"] < 1.0:
         out.append(("boundary.pml_reflection", case["boundary.pml_reflection"],
                     "must lie in (0, 1): the target reflection of the layer"))

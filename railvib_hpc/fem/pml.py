@@ -194,6 +194,69 @@ class PmlElements:
         self.sigma = _stress(self.g, self.lam, self.mu)
         return np.zeros_like(ue)
 
+    def subset(self, sel) -> PmlElements:
+        """The elements ``sel`` (an index or a slice) as a kernel of their own, its memory at
+        rest."""
+        out = object.__new__(PmlElements)
+        out.grad, out.wdet = self.grad[sel], self.wdet[sel]
+        out.lam, out.mu = self.lam[sel], self.mu[sel]
+        out.d, out.p, out.q, out.alpha = self.d[sel], self.p[sel], self.q[sel], self.alpha
+        shape = (len(out.lam), 3, 8, 3)
+        out.psi, out.g = np.zeros(shape), np.zeros(shape)
+        out.sigma, out.s1, out.s2 = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        return out
+
+    def memory(self) -> tuple[np.ndarray, ...]:
+        """A copy of the memory (for :meth:`restore`)."""
+        return tuple(a.copy() for a in (self.psi, self.g, self.sigma, self.s1, self.s2))
+
+    def restore(self, memory: tuple[np.ndarray, ...]) -> None:
+        """Set the memory of :meth:`memory` back."""
+        self.psi, self.g, self.sigma, self.s1, self.s2 = (a.copy() for a in memory)
+
+    def instant_matrices(self, dt: float) -> np.ndarray:
+        """``d f / d u_{n+1}`` of :meth:`advance`, per element (nel, 24, 24), DOFs ordered
+        (node, component): the part of the extra force that the next step's
+        displacements make through the trapezoidal memory updates (the rest depends on
+        the history only, so ``advance(u) = A u + advance(0)``). For an implicit step
+        (the direct engine): ``A`` goes into the effective matrix.
+
+        ``A`` is symmetric: with ``h = dt / 2``, the trapezoidal ``psi`` makes the
+        step's stretched strain ``(1 - c_l d_l) g_kl``, ``c_l = h / (1 + h (d_l +
+        alpha))``, and the chains ``S1, S2`` multiply column ``j`` of the stress by ``1 +
+        w p_j + w^2 q_j = prod_{a != j} (1 + w d_a)``, ``w = h / (1 + h alpha)``, so
+        ``K + A`` has the element form ``f_j C_ijkl f'_l`` with ``f_j / (1 - c_j d_j) =
+        prod_a (1 + h (alpha + d_a)) / (1 + h alpha)^3`` the same for every ``j``
+        (the discrete ``J / (lambda_j lambda_l)``): symmetric, and positive where C is.
+
+        >>> import numpy as np
+        >>> x = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+        ...               [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)[None]
+        >>> layer = PmlElements(x, 1e8, 5e7, np.full((1, 8, 3), 300.0), alpha=20.0)
+        >>> rng = np.random.default_rng(1)
+        >>> A = layer.instant_matrices(1e-4)
+        >>> _ = layer.start(rng.normal(size=(1, 8, 3)))          # some history
+        >>> _ = layer.advance(rng.normal(size=(1, 8, 3)), 1e-4)
+        >>> saved = layer.memory()
+        >>> f0 = layer.advance(np.zeros((1, 8, 3)), 1e-4)      # the history's part
+        >>> layer.restore(saved)
+        >>> u = rng.normal(size=(1, 8, 3))
+        >>> f = layer.advance(u, 1e-4)
+        >>> bool(np.allclose(f.ravel(), A[0] @ u.ravel() + f0.ravel(), rtol=1e-12,
+        ...                  atol=1e-12 * np.abs(f).max()))
+        True
+        >>> bool(np.abs(A[0] - A[0].T).max() < 1e-13 * np.abs(A[0]).max())
+        True
+        """
+        nel = len(self.lam)
+        out = np.empty((nel, 24, 24))
+        for j in range(24):            # the element's 24 unit displacements, all at once
+            probe = self.subset(slice(None))
+            ue = np.zeros((nel, 8, 3))
+            ue[:, j // 3, j % 3] = 1.0
+            out[:, :, j] = probe.advance(ue, dt).reshape(nel, 24)
+        return out
+
     def advance(self, ue: np.ndarray, dt: float) -> np.ndarray:
         """Advance the memory to the next step's displacements ``ue`` (nel, 8, 3) and
         return the extra internal force there, (nel, 8, 3). Call once per step."""

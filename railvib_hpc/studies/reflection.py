@@ -15,7 +15,7 @@ change) raises the base; a positive one deepens the subgrade (``domain.extra_dep
 with each setting (``case``: the case file's ``[boundary]``; ``thesis``: rollers and a fixed
 base; ``absorbing``: Lysmer-Kuhlemeyer dashpots on all five faces; ``pml``: perfectly
 matched layers of ``pml_thickness`` on all five faces, outside the domain, with the
-case's explicit or imex engine, imex where the case has the direct one) and compared
+case's engine) and compared
 with the largest domain of the same setting.
 ``solver = direct`` runs every variant with the full-order time integration
 (``railvib transient``) instead of modes + multibody.
@@ -125,15 +125,11 @@ def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
         raise StudySettingsError("reflection", [(
             "study.reflection.boundaries", boundaries,
             "'pml' needs study.reflection.solver = 'direct' (the layers are time-domain "
-            "only: railvib transient with the explicit or imex engine)")])
+            "only: railvib transient)")])
     for b in boundaries:
         for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
             ov = [*(pml_overrides(case, (d, ln, w), settings["pml_thickness"]) if b == "pml"
                     else domain_overrides(case, (d, ln, w))), *BOUNDARY_OVERRIDES[b]]
-            if b == "pml" and case["transient.engine"] == "direct":
-                # the layers need an explicit engine: imex (the track and the building
-                # implicit) unless the case chose one
-                ov.append("transient.engine=imex")
             if band > 0:
                 # every mode below the band, proved by the inertia counts of the band solve
                 ov += [f"modal.f_max={float(band)!r}"]

@@ -301,6 +301,9 @@ class DirectSolver:
         info = StepInfo()
         if self.driver is not None:
             u_new = self._contact(st, n1, u_new, info)
+        end_step = getattr(sys_, "end_step", None)
+        if end_step is not None:
+            end_step(u_new)                     # the layers' memory (petsc.TransientSystem)
         v_new, a_new = self.scheme.update(u_new, st.u, st.v, st.a)
         st.u[:], st.v[:], st.a[:] = u_new, v_new, a_new
         st.step = n1

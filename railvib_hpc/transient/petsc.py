@@ -41,17 +41,32 @@ class TransientSystem:
     extra_gb
         Memory the caller will need besides the factor (e.g. the rail columns), for the
         memory check.
+    pml
+        The perfectly matched layers (:class:`~.pml.PmlLayer`, or None; the system owns
+        it), implicit: their ``M_e1`` joins C, the part of their force that ``u_{n+1}``
+        makes (:meth:`~.pml.PmlLayer.instant_matrix`, ``A``) joins K_eff as
+        ``(1 - alpha_f) A``, and the history's part is in the right-hand side
+        (:meth:`history_rhs`, :meth:`end_step`). ``A`` is symmetric (to round-off; the
+        identity in :meth:`~railvib_hpc.fem.pml.PmlElements.instant_matrices`), so K_eff
+        keeps its Cholesky factor.
     """
 
-    def __init__(self, K, M, C, scheme: GeneralizedAlpha, comm, extra_gb: float = 0.0):
+    def __init__(self, K, M, C, scheme: GeneralizedAlpha, comm, extra_gb: float = 0.0,
+                 pml=None):
         from petsc4py import PETSc
 
         from ..modal.factor import ShiftInvertFactor
 
-        self.K, self.M, self.C, self.scheme, self.comm = K, M, C, scheme, comm
         self.n_global = K.getSize()[0]
         self.r0, self.r1 = K.getOwnershipRange()
         self.n_local = self.r1 - self.r0
+        self.pml = pml
+        self.time_pml = 0.0
+        self._owned_c = None
+        if pml is not None:
+            C = self._owned_c = _with_diagonal_damping(K, C, pml.damping_diagonal, comm)
+            self._pml_force = np.zeros(self.n_local)
+        self.K, self.M, self.C, self.scheme, self.comm = K, M, C, scheme, comm
         same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
         t0 = time.perf_counter()
         k_eff = K.duplicate(copy=True)
@@ -59,6 +74,11 @@ class TransientSystem:
         k_eff.axpy(scheme.c_mass, M, structure=same)
         if C is not None:
             k_eff.axpy(scheme.c_damping, C, structure=same)
+        if pml is not None:
+            instant = csr_matrix(comm, pml.instant_matrix(scheme.dt))
+            k_eff.axpy(scheme.c_stiffness, instant,
+                       structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+            instant.destroy()
         k_eff.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         k_eff.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
         self.k_eff = k_eff
@@ -117,6 +137,33 @@ class TransientSystem:
             A.mult(state[slot], tmp)
             out.axpy(1.0, tmp)
         self.time_products += time.perf_counter() - t0
+        if self.pml is not None:
+            self.history_rhs_layers(u, out)
+
+    def history_rhs_layers(self, u, out) -> None:
+        """With perfectly matched layers: ``out -= (1 - alpha_f) f_pml(0) + alpha_f
+        f_pml,n``, the history's part of their force at ``t_{n+1-alpha_f}`` (the rest,
+        ``(1 - alpha_f) A u_{n+1}``, is in K_eff). The memory starts at rest with the
+        first step when nothing started it before (a static start does,
+        :meth:`~.pml.PmlLayer.start`)."""
+        t0 = time.perf_counter()
+        layer, af = self.pml, self.scheme.alpha_f
+        if not layer.started:
+            self._pml_force = layer.start(self.local(u))
+        res = self.local(out)
+        res -= (1.0 - af) * layer.peek(np.zeros(self.n_local), self.scheme.dt)
+        if af != 0.0:
+            res -= af * self._pml_force
+        self.time_pml += time.perf_counter() - t0
+
+    def end_step(self, u_new: np.ndarray) -> None:
+        """Advance the layers' memory to the step's final displacements ``u_new`` (this
+        rank's rows; collective; nothing without layers)."""
+        if self.pml is None:
+            return
+        t0 = time.perf_counter()
+        self._pml_force = self.pml.force(u_new, self.scheme.dt)
+        self.time_pml += time.perf_counter() - t0
 
     def solve(self, rhs, out) -> None:
         """``out = K_eff^-1 rhs`` with the stored factor."""
@@ -162,6 +209,10 @@ class TransientSystem:
     def destroy(self) -> None:
         self.op.destroy()
         self.k_eff.destroy()
+        if self._owned_c is not None:
+            self._owned_c.destroy()
+        if self.pml is not None:
+            self.pml.destroy()
         for A, _ in self.history_matrices:
             A.destroy()
         for w in self._work:
@@ -237,6 +288,37 @@ class GhostGather:
     def destroy(self) -> None:
         for obj in (self._scatter, self._vec, self._seq):
             obj.destroy()
+
+
+def csr_matrix(comm, local):
+    """A distributed AIJ matrix from this rank's rows, a scipy CSR matrix (n_local,
+    n_global) with global columns."""
+    from petsc4py import PETSc
+
+    local = local.tocsr()
+    local.sort_indices()
+    n, n_global = local.shape
+    A = PETSc.Mat().createAIJ(size=((n, n_global), (n, n_global)),
+                              csr=(local.indptr.astype(PETSc.IntType),
+                                   local.indices.astype(PETSc.IntType),
+                                   local.data.astype(float)), comm=comm)
+    A.assemble()
+    return A
+
+
+def _with_diagonal_damping(K, C, diagonal: np.ndarray, comm):
+    """``C + diag(diagonal)`` in K's pattern (a new matrix; C may be None)."""
+    from petsc4py import PETSc
+
+    out = K.duplicate(copy=False)
+    out.zeroEntries()
+    if C is not None:
+        out.axpy(1.0, C, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+    d = out.createVecLeft()
+    d.getArray()[:] = diagonal
+    out.setDiagonal(d, addv=PETSc.InsertMode.ADD_VALUES)
+    d.destroy()
+    return out
 
 
 def diagonal_matrix(comm, rows: tuple[int, int], n_global: int, values: np.ndarray):

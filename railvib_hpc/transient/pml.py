@@ -1,4 +1,4 @@
-"""The perfectly matched layers of ``pml`` faces for the explicit engine (issue 29).
+"""The perfectly matched layers of ``pml`` faces for the time-domain engines (issue 29).
 
 A face ``boundary.<face> = "pml"`` is fixed, and the hexahedra whose centroids lie within
 ``boundary.layer_thickness`` of it form its layer: their coordinate normal to the face is
@@ -47,6 +47,9 @@ from ..schema import BUILDING_PARTS, PART_ID, SOLID_MATERIAL
 #: Relative round-off allowed in a layer's element count (thickness / median size) before
 #: it counts as fewer than :data:`~railvib_hpc.fem.pml.MIN_ELEMENTS`.
 ACROSS_TOL = 1e-6
+#: Layer elements per block of :meth:`PmlLayer.instant_matrix` (4096 x 24 x 24 doubles:
+#: 19 MB per block of element matrices).
+INSTANT_CHUNK = 4096
 
 
 class PmlError(UserError):
@@ -190,7 +193,9 @@ class PmlLayer:
         M_e1 u' + M_e2 u + M_e3 int u + f_memory(u history)
 
     :attr:`damping_diagonal` (``M_e1``) is taken at the full-step velocity by the engine,
-    like the face dashpots; :meth:`force` returns the rest at ``u_{n+1}``.
+    like the face dashpots; :meth:`force` returns the rest at ``u_{n+1}``. The direct
+    engine takes the layer implicitly: :meth:`instant_matrix` is the part of
+    :meth:`force` that ``u_{n+1}`` makes, :meth:`peek` the history's part.
 
     Parameters
     ----------
@@ -227,6 +232,7 @@ class PmlLayer:
         self._slots = np.searchsorted(needed, flat[self._free])
         self._gather = gather(needed)
         self.r0, self.n_local = r0, r1 - r0
+        self._n_global = dofmap.n_dofs
         # element slots of this rank's rows, and those rows
         self._owned = np.flatnonzero((flat >= r0) & (flat < r1))
         self._rows = flat[self._owned] - r0
@@ -293,6 +299,52 @@ class PmlLayer:
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
         self.started = True
         return np.zeros(self.n_local)
+
+    def instant_diagonal(self, dt: float) -> np.ndarray:
+        """``d f / d u_{n+1}`` of the mass-side terms of :meth:`force` on this rank's rows:
+        ``M_e2 - alpha M_e1 + sum_k c_k w^k``, ``w = (dt / 2) / (1 + alpha dt / 2)`` (the
+        trapezoidal chains)."""
+        w = 0.5 * dt / (1.0 + 0.5 * dt * self.alpha)
+        out = self.stiffness_diagonal.copy()
+        for k, c in enumerate(self._chi_coef, start=1):
+            out += c * w ** k
+        return out
+
+    def instant_matrix(self, dt: float, chunk: int = INSTANT_CHUNK):
+        """``d f / d u_{n+1}`` of :meth:`force` on this rank's rows, a scipy CSR matrix
+        (n_local, n_global; global columns): what an implicit step (the direct engine)
+        puts into its effective matrix, so that ``force(u) = A (u - u_0) + force at u_0``
+        (symmetric to round-off, :meth:`~railvib_hpc.fem.pml.PmlElements.
+        instant_matrices`; the pattern of the layer elements, a subset of K's). Built
+        ``chunk`` elements at a time (~4.6 kB per element of the chunk)."""
+        import scipy.sparse as sp
+
+        n_global = self._n_global
+        out = sp.diags(self.instant_diagonal(dt), offsets=self.r0,
+                       shape=(self.n_local, n_global), format="csr")
+        nel = self.n_elements
+        for c0 in range(0, nel, chunk):
+            sl = slice(c0, min(c0 + chunk, nel))
+            mats = self.kernel.subset(sl).instant_matrices(dt)           # (n, 24, 24)
+            dofs = self.dofs[sl].reshape(-1, 24)
+            rows = np.broadcast_to(dofs[:, :, None], mats.shape).ravel()
+            cols = np.broadcast_to(dofs[:, None, :], mats.shape).ravel()
+            keep = (rows >= self.r0) & (rows < self.r0 + self.n_local) & (cols >= 0)
+            out = out + sp.csr_matrix((mats.ravel()[keep], (rows[keep] - self.r0, cols[keep])),
+                                      shape=(self.n_local, n_global))
+        out.sum_duplicates()
+        return out
+
+    def peek(self, u: np.ndarray, dt: float) -> np.ndarray:
+        """What :meth:`force` would return at ``u``, the layer left as it was (collective):
+        with ``u = 0``, the part of the next step's force that the history makes,
+        ``force(0) = force(u) - A u`` (:meth:`instant_matrix`)."""
+        saved = (self.kernel.memory(), self._u.copy(), [c.copy() for c in self._chi])
+        try:
+            return self.force(u, dt)
+        finally:
+            memory, self._u, self._chi = saved
+            self.kernel.restore(memory)
 
     def force(self, u: np.ndarray, dt: float) -> np.ndarray:
         """Advance to the next step's displacements ``u`` and return the layer's force on

@@ -739,12 +739,13 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails, problem)
+            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails, problem, pml)
+            layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
                 scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
-                system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb)
+                system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb, pml=layer)
             else:
                 from .imex import ImexSystem
 

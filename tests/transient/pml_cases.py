@@ -64,10 +64,66 @@ def _source_dofs(mesh, dofmap, source, plane_strain) -> tuple[np.ndarray, np.nda
     return np.concatenate(dofs), np.concatenate(amps)
 
 
+def _energy(system, st, direct: bool) -> float:
+    """``1/2 v^T M v + 1/2 u^T K u`` (the direct engine's system takes PETSc vectors)."""
+    if not direct:
+        return system.energy(st.u, st.v)
+    u, v = system.vector(np.ascontiguousarray(st.u)), system.vector(np.ascontiguousarray(st.v))
+    try:
+        return system.energy(u, v)
+    finally:
+        u.destroy()
+        v.destroy()
+
+
+def _system(mesh, problem, dofmap, comm, matrices: tuple, layer, implicit, direct, courant):
+    """The engine's system and its step (:func:`run_box`'s ``implicit``, ``direct``,
+    ``courant``); ``matrices``: K, M and the layers' full-integration mask."""
+    from railvib_hpc.transient.explicit import ExplicitSystem, stability_limit
+    from railvib_hpc.transient.petsc import diagonal_matrix
+
+    K, M, full = matrices
+    rows, n_global = K.getOwnershipRange(), K.getSize()[0]
+    plus = None if layer is None else diagonal_matrix(comm, rows, n_global,
+                                                      layer.stiffness_diagonal)
+    if direct is not None:
+        lim = None
+    elif implicit is None:
+        system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
+        lim = stability_limit(K, system.m, None, comm, plus=plus)
+    else:
+        from railvib_hpc.modal.petsc import assemble_partition
+        from railvib_hpc.transient.explicit import lumped_diagonal
+        from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR
+
+        partition = assemble_partition(mesh, problem, dofmap, comm, (), extra_hexes=implicit,
+                                       full_hexes=full)
+        lim = stability_limit(K, lumped_diagonal(M, comm), None, comm, minus=partition,
+                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
+    if plus is not None:
+        plus.destroy()
+    ext = mesh.points[mesh.hexes]
+    h_min = float((ext.max(axis=1) - ext.min(axis=1)).min())
+    dt = direct if direct is not None else \
+        lim.dt_allowed if courant is None else courant * h_min / C_P
+    if direct is not None:
+        from railvib_hpc.transient.petsc import TransientSystem
+        from railvib_hpc.transient.scheme import GeneralizedAlpha
+
+        system = TransientSystem(K, M, None, GeneralizedAlpha.newmark(dt), comm, pml=layer)
+    elif implicit is None:
+        system.dt = dt
+    else:
+        from railvib_hpc.transient.imex import ImexSystem
+
+        system = ImexSystem(K, M, None, *partition, dt, comm, pml=layer)
+    return system, dt
+
+
 def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receivers,
             t_end: float, f0: float, comm, plane_strain: bool = False,
             extra: tuple = (), courant: float | None = None, record_energy: bool = False,
-            implicit: np.ndarray | None = None):
+            implicit: np.ndarray | None = None, direct: float | None = None):
     """Step ``mesh`` with the given face types and a Ricker point force.
 
     Parameters
@@ -100,6 +156,10 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         A mask of hexahedra: step with the IMEX engine
         (:class:`~railvib_hpc.transient.imex.ImexSystem`), these elements implicit
         (default: the explicit engine).
+    direct
+        A step [s]: step with the direct engine instead
+        (:class:`~railvib_hpc.transient.petsc.TransientSystem`, the trapezoidal rule, one
+        LU factor; the layers implicit).
 
     Returns
     -------
@@ -113,14 +173,9 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.petsc import assemble
     from railvib_hpc.problem import Problem
-    from railvib_hpc.transient.explicit import (
-        ExplicitSolver,
-        ExplicitSystem,
-        initial_acceleration,
-        stability_limit,
-    )
+    from railvib_hpc.transient.explicit import ExplicitSolver, initial_acceleration
     from railvib_hpc.transient.integrate import State
-    from railvib_hpc.transient.petsc import GhostGather, diagonal_matrix
+    from railvib_hpc.transient.petsc import GhostGather
     from railvib_hpc.transient.pml import PmlLayer, pml_faces, pml_geometry
 
     types = {f: faces.get(f, "fixed") for f in FACES}
@@ -133,37 +188,15 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         rules["all"] = ("uy",) if plane_strain is True else tuple(plane_strain)
     dofmap = build_dofmap(mesh, comm.size, rules=rules, node_sets=sets)
     full = pml_geometry(mesh, problem)[1] if pml_faces(problem) else None
-    K, M, _ = assemble(mesh, problem, dofmap, comm, mass="diagonal", full_hexes=full)
+    K, M, _ = assemble(mesh, problem, dofmap, comm,
+                       mass="diagonal" if direct is None else True, full_hexes=full)
     rows, n_global = K.getOwnershipRange(), K.getSize()[0]
     layer = None
     if pml_faces(problem):
         layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
                          lambda dofs: GhostGather(comm, rows, n_global, dofs))
-    plus = None if layer is None else diagonal_matrix(comm, rows, n_global,
-                                                      layer.stiffness_diagonal)
-    if implicit is None:
-        system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
-        lim = stability_limit(K, system.m, None, comm, plus=plus)
-    else:
-        from railvib_hpc.modal.petsc import assemble_partition
-        from railvib_hpc.transient.explicit import lumped_diagonal
-        from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR
-
-        partition = assemble_partition(mesh, problem, dofmap, comm, (), extra_hexes=implicit,
-                                       full_hexes=full)
-        lim = stability_limit(K, lumped_diagonal(M, comm), None, comm, minus=partition,
-                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
-    if plus is not None:
-        plus.destroy()
-    ext = mesh.points[mesh.hexes]
-    h_min = float((ext.max(axis=1) - ext.min(axis=1)).min())
-    dt = lim.dt_allowed if courant is None else courant * h_min / C_P
-    if implicit is None:
-        system.dt = dt
-    else:
-        from railvib_hpc.transient.imex import ImexSystem
-
-        system = ImexSystem(K, M, None, *partition, dt, comm, pml=layer)
+    system, dt = _system(mesh, problem, dofmap, comm, (K, M, full), layer, implicit, direct,
+                         courant)
     r0, r1 = rows
     src_dofs, src_amp = _source_dofs(mesh, dofmap, source, plane_strain)
     mine = (src_dofs >= r0) & (src_dofs < r1)
@@ -182,7 +215,7 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
 
     n = r1 - r0
     st = State(0, np.zeros(n), np.zeros(n), np.zeros(n))
-    if implicit is None:
+    if implicit is None and direct is None:
         solver = ExplicitSolver(system, prescribed=prescribed)
         initial_acceleration(system, st, [prescribed(0)])
     else:
@@ -199,12 +232,12 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         u.append(sample(st.u))
         v.append(sample(st.v))
         if record_energy:
-            energy.append(system.energy(st.u, st.v))
+            energy.append(_energy(system, st, direct is not None))
     elapsed = time.perf_counter() - t0
     out = {"t": np.arange(steps + 1) * dt, "u": np.array(u), "v": np.array(v), "dt": dt,
            "dofs": n_global, "time_per_step": elapsed / steps, "energy": np.array(energy),
            "pml_elements": 0 if layer is None else comm.allreduce(layer.n_elements)}
-    if implicit is not None:
+    if implicit is not None or direct is not None:
         solver.destroy()
     system.destroy()
     K.destroy()

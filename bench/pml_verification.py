@@ -3,7 +3,7 @@
 Usage (a few minutes; on 1 or N ranks; rank 0 prints markdown)::
 
     [mpirun -n 2] .venv/bin/python bench/pml_verification.py [--elements 5 8] [--skip-oblique]
-        [--skip-cost] [--cost-inside 20 20 10]
+        [--skip-cost] [--cost-inside 20 20 10] [--engine explicit|direct]
 
 (a) Oblique incidence: plane-strain P and SV line sources, reflected energy over the
     incident at 0, 31, 45 and 60 degrees for layers of ``--elements`` elements, on the
@@ -12,7 +12,9 @@ Usage (a few minutes; on 1 or N ranks; rank 0 prints markdown)::
 (b) Cost: a 3-D soil box of 1 m hexahedra whose inside is ``--cost-inside`` with a
     5-element PML on its four sides and its base, against the same inside box with
     Lysmer-Kuhlemeyer dashpots on those faces: DOFs, layer elements, allowed step, time per
-    step and time per step per DOF (on the ranks it runs on).
+    step and time per step per DOF (on the ranks it runs on). ``--engine direct``: the
+    direct engine instead (one Cholesky factor, the layer implicit), both boxes at
+    :data:`DIRECT_STEP`.
 """
 
 from __future__ import annotations
@@ -38,6 +40,9 @@ COMM = MPI.COMM_WORLD
 ABSORBING = ("x_min", "x_max", "y_min", "y_max", "base")
 #: Signal time stepped in the cost comparison [s] (about 60-100 steps of 1 m hexahedra).
 COST_TIME = 0.15
+#: The direct engine's step in the cost comparison [s] (83 steps per period of the 12 Hz
+#: Ricker, as in tests/transient/test_pml_direct.py).
+DIRECT_STEP = 1e-3
 
 
 def section_oblique(elements: list[int]) -> list[str]:
@@ -62,28 +67,29 @@ def section_oblique(elements: list[int]) -> list[str]:
     return out
 
 
-def _cost_run(inside, pml: bool) -> dict:
+def _cost_run(inside, pml: bool, engine: str = "explicit") -> dict:
     layer = 5 if pml else 0
     n = (inside[0] + 2 * layer, inside[1] + 2 * layer, inside[2] + layer)
     mesh = box_mesh(n, tuple(float(k) for k in n), (-layer, -layer, -layer))
     centre = np.array([inside[0] / 2, inside[1] / 2, float(inside[2])])
     faces = {f: "pml" if pml else "absorbing" for f in ABSORBING}
     out = run_box(mesh, faces, float(layer), (centre, 2, 1e6), centre[None, :], COST_TIME,
-                  12.0, COMM)
+                  12.0, COMM, direct=DIRECT_STEP if engine == "direct" else None)
     out["elements"] = int(np.prod(n))
     return out
 
 
-def section_cost(inside) -> list[str]:
+def section_cost(inside, engine: str = "explicit") -> list[str]:
     """PML box vs dashpot box with the same inside."""
-    out = ["## (b) Cost: the same inside box with a PML or with dashpots", "",
-           f"Inside {inside[0]} x {inside[1]} x {inside[2]} m of 1 m hexahedra, {COMM.size} "
-           f"rank(s), {COST_TIME} s stepped at each run's allowed step.", "",
+    step = "each run's allowed step" if engine == "explicit" else f"{DIRECT_STEP:g} s"
+    out = [f"## (b) Cost: the same inside box with a PML or with dashpots ({engine} engine)",
+           "", f"Inside {inside[0]} x {inside[1]} x {inside[2]} m of 1 m hexahedra, "
+           f"{COMM.size} rank(s), {COST_TIME} s stepped at {step}.", "",
            "| faces | DOFs | layer elements | dt [s] | time/step [s] | time/step/DOF [s] |",
            "|---|---|---|---|---|---|"]
     runs = {}
     for pml in (False, True):
-        r = _cost_run(inside, pml)
+        r = _cost_run(inside, pml, engine)
         runs[pml] = r
         name = "PML, 5 elements" if pml else "dashpots"
         out.append(f"| {name} | {r['dofs']:,} | {r['pml_elements']:,} | {r['dt']:.3e} | "
@@ -101,12 +107,13 @@ def main(argv=None) -> int:
     p.add_argument("--cost-inside", type=int, nargs=3, default=[20, 20, 10])
     p.add_argument("--skip-oblique", action="store_true")
     p.add_argument("--skip-cost", action="store_true")
+    p.add_argument("--engine", choices=("explicit", "direct"), default="explicit")
     args = p.parse_args(argv)
     lines = ["# Perfectly matched layer: verification and cost", ""]
     if not args.skip_oblique:
         lines += section_oblique(args.elements)
     if not args.skip_cost:
-        lines += section_cost(args.cost_inside)
+        lines += section_cost(args.cost_inside, args.engine)
     if COMM.rank == 0:
         print("\n".join(lines), flush=True)
     return 0

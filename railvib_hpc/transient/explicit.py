@@ -60,8 +60,17 @@ LUMPED_TOL = 1e-12
 #: Relative residual of the static start's CG solves (the direct path's factor solves to
 #: ~1e-12; the static deflection enters the first contact force).
 STATIC_RTOL = 1e-12
-#: Iteration limit of those solves (GAMG on the thesis model converges in ~30-60).
+#: Iteration limit of those solves (measured with the rigid-body near null space: 75 on
+#: the coarse thesis model, 108 on the refined one at 68,625 DOFs).
 STATIC_MAX_IT = 2000
+#: Largest model whose static start takes one MUMPS Cholesky factor of K (freed before the
+#: first step; skipped as well when the memory check says it does not fit) instead of CG +
+#: GAMG. Measured, one wheel's right-hand side on the refined thesis model (68,625 DOFs,
+#: 1 rank): factor and solve 1.6 s; CG + GAMG with the rigid-body near null space 10.1 s
+#: (108 iterations), without it 34.6 s (743); on the coarse one (18,063 DOFs) 1.1 s, 3.2 s
+#: and 10.2 s. Above it the factor's memory (~n^(4/3)) and time (~n^2 in 3-D) outgrow the
+#: O(N) engine's own, and CG's O(N) iterations win (a choice, not a measured crossover).
+STATIC_FACTOR_MAX_DOFS = 500_000
 
 
 class ExplicitEngineError(ValueError):
@@ -435,19 +444,76 @@ class ExplicitSystem:
         self.n_products = 0
         self.time_solves = 0.0
         self.n_solves = 0
+        #: (n_local, k) near null space of K for the static start's GAMG (the rigid-body
+        #: motions, :func:`~railvib_hpc.modal.dofmap.rigid_body_modes`; None: none given)
+        self.near_null: np.ndarray | None = None
+        #: How the static start was solved, with its time (None before).
+        self.static_method: str | None = None
 
     def solve_matrix(self, A, B: np.ndarray) -> np.ndarray:
-        """``A^-1 B`` for a block B of this rank's rows: ``m^-1 B`` for the mass, and for K
-        (the static start of a wheel on the flexible rail) conjugate gradients with an
-        algebraic multigrid preconditioner (PETSc GAMG, relative residual
+        """``A^-1 B`` for a block B of this rank's rows: ``m^-1 B`` for the mass; for K
+        (the static start of a wheel on the flexible rail) one MUMPS Cholesky factor up to
+        :data:`STATIC_FACTOR_MAX_DOFS` where it fits (freed at once; options prefix
+        ``railvib_cd_static_st_``), else conjugate gradients with an algebraic multigrid
+        preconditioner (PETSc GAMG with :attr:`near_null`, relative residual
         :data:`STATIC_RTOL`; options prefix ``railvib_cd_static_``): memory linear in the
-        DOFs, no factor."""
-        from petsc4py import PETSc
-
+        DOFs. :attr:`static_method` says which, with its time."""
         B = np.ascontiguousarray(B, dtype=float)
         if A is self.M:
             return B / self.m[:, None]
         t0 = time.perf_counter()
+        out = self._factor_solve(A, B) if self.n_global <= STATIC_FACTOR_MAX_DOFS else None
+        how = "MUMPS Cholesky of K"
+        if out is None:
+            out, iterations = self._cg_solve(A, B)
+            how = (f"CG + GAMG, {iterations} iterations over {B.shape[1]} right-hand "
+                   f"side(s)")
+        elapsed = time.perf_counter() - t0
+        self.static_method = f"{how}, {elapsed:.2f} s"
+        self.time_solves += elapsed
+        self.n_solves += B.shape[1]
+        return out
+
+    def _factor_solve(self, A, B: np.ndarray) -> np.ndarray | None:
+        """``A^-1 B`` with a MUMPS Cholesky factor of A, None when it does not fit."""
+        from ..modal.factor import InsufficientMemory, ShiftInvertFactor
+
+        try:
+            op = ShiftInvertFactor(A, self.M, 0.0, self.comm, PREFIX + "static_",
+                                   extra_gb=16.0 * B.size / 1e9)
+        except InsufficientMemory:
+            return None
+        try:
+            return op.solve(B)
+        finally:
+            op.destroy()
+
+    def _near_null_space(self):
+        """The orthonormalised :attr:`near_null` as a PETSc null space (None without)."""
+        from petsc4py import PETSc
+
+        if self.near_null is None:
+            return None
+        V = self.near_null
+        gram = self.comm.allreduce(V.T @ V)
+        V = V @ np.linalg.inv(np.linalg.cholesky(gram)).T
+        vectors = []
+        for j in range(V.shape[1]):
+            v = self.K.createVecLeft()
+            v.getArray()[:] = V[:, j]
+            vectors.append(v)
+        space = PETSc.NullSpace().create(vectors=vectors, comm=self.comm)
+        for v in vectors:
+            v.destroy()
+        return space
+
+    def _cg_solve(self, A, B: np.ndarray) -> tuple[np.ndarray, int]:
+        """``A^-1 B`` by CG + GAMG, column by column, and the iterations in all."""
+        from petsc4py import PETSc
+
+        space = self._near_null_space()
+        if space is not None:
+            A.setNearNullSpace(space)
         ksp = PETSc.KSP().create(self.comm)
         ksp.setOptionsPrefix(PREFIX + "static_")
         ksp.setOperators(A)
@@ -456,19 +522,24 @@ class ExplicitSystem:
         ksp.setTolerances(rtol=STATIC_RTOL, max_it=STATIC_MAX_IT)
         ksp.setFromOptions()
         out = np.zeros_like(B)
-        for j in range(B.shape[1]):
-            self._x.getArray()[:] = B[:, j]
-            ksp.solve(self._x, self._y)
-            if ksp.getConvergedReason() <= 0:
-                raise ExplicitEngineError(
-                    f"the static start did not converge: CG + GAMG stopped after "
-                    f"{ksp.getIterationNumber()} iterations (reason "
-                    f"{ksp.getConvergedReason()}); -{PREFIX}static_ksp_* options tune it")
-            out[:, j] = self._y.getArray()
-        ksp.destroy()
-        self.time_solves += time.perf_counter() - t0
-        self.n_solves += B.shape[1]
-        return out
+        iterations = 0
+        try:
+            for j in range(B.shape[1]):
+                self._x.getArray()[:] = B[:, j]
+                ksp.solve(self._x, self._y)
+                iterations += ksp.getIterationNumber()
+                if ksp.getConvergedReason() <= 0:
+                    raise ExplicitEngineError(
+                        f"the static start did not converge: CG + GAMG stopped after "
+                        f"{ksp.getIterationNumber()} iterations (reason "
+                        f"{ksp.getConvergedReason()}); -{PREFIX}static_ksp_* options tune "
+                        "it")
+                out[:, j] = self._y.getArray()
+        finally:
+            ksp.destroy()
+            if space is not None:
+                space.destroy()              # (A keeps its own reference)
+        return out, iterations
 
     def times(self, A, x: np.ndarray) -> np.ndarray:
         """``A x`` for this rank's rows ``x`` (a new array)."""

@@ -64,6 +64,28 @@ def _source_dofs(mesh, dofmap, source, plane_strain) -> tuple[np.ndarray, np.nda
     return np.concatenate(dofs), np.concatenate(amps)
 
 
+def serial_layer(mesh, faces: dict[str, str], *extra: str):
+    """The :class:`~railvib_hpc.transient.pml.PmlLayer` of ``mesh`` with ``faces``
+    (others fixed) on one rank, and its DOF count (the layer's unit tests)."""
+    from mpi4py import MPI
+
+    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.problem import Problem
+    from railvib_hpc.transient.petsc import GhostGather
+    from railvib_hpc.transient.pml import PmlLayer
+
+    case = soil_case("modal.lumped_mass=true", "damping.model=none",
+                     *(f"boundary.{f}={faces.get(f, 'fixed')}" for f in FACES), *extra)
+    problem = Problem.from_case(case)
+    dofmap = build_dofmap(mesh, 1, rules=constraint_rules(problem),
+                          node_sets=face_node_sets(mesh))
+    n = dofmap.n_dofs
+    layer = PmlLayer(mesh, problem, dofmap, 0, 0, n,
+                     lambda dofs: GhostGather(MPI.COMM_SELF, (0, n), n, dofs))
+    return layer, n
+
+
 def _energy(system, st, direct: bool) -> float:
     """``1/2 v^T M v + 1/2 u^T K u`` (the direct engine's system takes PETSc vectors)."""
     if not direct:

@@ -100,26 +100,11 @@ def test_the_layer_force_is_its_instant_matrix_times_u_plus_the_history_part():
     steps), ``force(u) = A u + peek(0)`` for any next ``u`` within round-off, ``peek``
     leaves the layer as it was, and ``A`` is symmetric to round-off (the identity of
     ``PmlElements.instant_matrices``: K_eff keeps its Cholesky factor)."""
-    from pml_cases import FACES
-    from wave_cases import soil_case
+    from pml_cases import serial_layer
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.problem import Problem
-    from railvib_hpc.transient.petsc import GhostGather
-    from railvib_hpc.transient.pml import PmlLayer
-
-    self_comm = MPI.COMM_SELF
-    mesh = slab_mesh(20, 10, 1.0)
-    case = soil_case("modal.lumped_mass=true", "damping.model=none",
-                     "boundary.layer_thickness=5", "boundary.pml_alpha=20",
-                     *(f"boundary.{f}={PML.get(f, 'fixed')}" for f in FACES))
-    problem = Problem.from_case(case)
-    dofmap = build_dofmap(mesh, 1, rules=constraint_rules(problem),
-                          node_sets=face_node_sets(mesh))
-    n, dt = dofmap.n_dofs, 1e-3
-    layer = PmlLayer(mesh, problem, dofmap, 0, 0, n,
-                     lambda dofs: GhostGather(self_comm, (0, n), n, dofs))
+    layer, n = serial_layer(slab_mesh(20, 10, 1.0), PML, "boundary.layer_thickness=5",
+                            "boundary.pml_alpha=20")
+    dt = 1e-3
     rng = np.random.default_rng(3)
     layer.start(rng.normal(size=n) * 1e-4)
     for _ in range(3):

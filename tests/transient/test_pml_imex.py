@@ -119,26 +119,10 @@ def test_a_static_deflection_at_the_start_is_no_load_on_the_layer():
     layer acted on the whole field: on the coarse thesis model with a wheel resting on
     the flexible rail at the start, the building's peak accelerations with layers came
     out 1.5-3 x those with dashpots; after, within 1-12 % of them)."""
-    from pml_cases import FACES
-    from wave_cases import soil_case
+    from pml_cases import serial_layer
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.problem import Problem
-    from railvib_hpc.transient.petsc import GhostGather
-    from railvib_hpc.transient.pml import PmlLayer
-
-    self_comm = MPI.COMM_SELF
-    mesh = slab_mesh(20, 10, 1.0)
-    case = soil_case("modal.lumped_mass=true", "damping.model=none",
-                     "transient.engine=explicit", "boundary.layer_thickness=5",
-                     *(f"boundary.{f}={PML.get(f, 'fixed')}" for f in FACES))
-    problem = Problem.from_case(case)
-    dofmap = build_dofmap(mesh, 1, rules=constraint_rules(problem),
-                          node_sets=face_node_sets(mesh))
-    n = dofmap.n_dofs
-    layer = PmlLayer(mesh, problem, dofmap, 0, 0, n,
-                     lambda dofs: GhostGather(self_comm, (0, n), n, dofs))
+    layer, n = serial_layer(slab_mesh(20, 10, 1.0), PML, "transient.engine=explicit",
+                            "boundary.layer_thickness=5")
     u0 = np.random.default_rng(1).normal(size=n) * 1e-4
     assert np.all(layer.start(u0) == 0.0)
     forces = [np.abs(layer.force(u0, 1e-3)).max() for _ in range(5)]

@@ -30,27 +30,32 @@ thesis: setup
 	$(MPIRUN) $(PY) -m railvib_hpc study thesis jobs/thesis_comparison.toml --out results/studies
 
 # Two tiers. `make test` (the README's test command) is the quick tier: every test not marked
-# `slow`, serially and then the `-m mpi` ones under mpirun -n 2; under 12 min on an idle 2-core
-# machine. `make test-slow` runs the long physics and end-to-end checks (`-m slow`): serially
+# `slow` on one rank each, in NP pytest-xdist worker processes (file by file, so a module's
+# fixtures are built once), and then the `-m mpi` ones under mpirun -n 2; under 12 min on an
+# idle 2-core machine (measured: 456 s for the one-rank pass with the other core busy; 647 s
+# in one process). `make test-slow` runs the long physics and end-to-end checks (`-m slow`): serially
 # the ones not marked `mpi`, and the `mpi` ones under mpirun -n 2 only (most compare N ranks
 # with one, which a serial run cannot). CI (.ci/run) runs both tiers.
 # Hangs are caught per test by pytest-timeout (pyproject.toml: `timeout`, thread method: a
 # hung collective dumps every stack and ends the pass), with a limit far above any test's own
 # time, not by a pass-wide kill near the total. PYTEST_ARGS adds options (e.g. --durations=20).
 PYTEST   = $(PY) -m pytest -q $(PYTEST_ARGS)
+# The one-rank passes in NP worker processes (pytest-xdist; each worker is its own MPI world of
+# one rank); XDIST= runs them in one process.
+XDIST   ?= -n $(NP) --dist loadfile
 # pytest's exit code 5 ("no test collected") is not a failure of a tier that selects none.
 ALLOW_EMPTY = || [ $$? -eq 5 ]
 
 test: setup-test
-	$(PYTEST) -m "not slow"
+	$(PYTEST) $(XDIST) -m "not slow"
 	$(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
 
 test-slow: setup-test
-	$(PYTEST) -m "slow and not mpi" $(ALLOW_EMPTY)
+	$(PYTEST) $(XDIST) -m "slow and not mpi" $(ALLOW_EMPTY)
 	$(MPIRUN) $(PYTEST) -m "mpi and slow" -p no:cacheprovider $(ALLOW_EMPTY)
 
 test-serial: setup-test
-	$(PYTEST) -m "not slow"
+	$(PYTEST) $(XDIST) -m "not slow"
 
 test-mpi: setup
 	$(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider

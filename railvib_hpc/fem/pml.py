@@ -211,8 +211,8 @@ class PmlElements:
         return tuple(a.copy() for a in (self.psi, self.g, self.sigma, self.s1, self.s2))
 
     def restore(self, memory: tuple[np.ndarray, ...]) -> None:
-        """Set the memory of :meth:`memory` back."""
-        self.psi, self.g, self.sigma, self.s1, self.s2 = (a.copy() for a in memory)
+        """Set the memory of :meth:`memory` back (takes its arrays: use it once)."""
+        self.psi, self.g, self.sigma, self.s1, self.s2 = memory
 
     def instant_matrices(self, dt: float) -> np.ndarray:
         """``d f / d u_{n+1}`` of :meth:`advance`, per element (nel, 24, 24), DOFs ordered

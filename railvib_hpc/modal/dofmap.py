@@ -197,14 +197,11 @@ def rigid_body_modes(points: np.ndarray, dofmap: DofMap, rank: int) -> np.ndarra
     index = dofmap.index[own]
     x = points[own] - points.mean(axis=0)
     modes = np.zeros((r1 - r0, 6))
-    for k in range(3):
-        axis = np.zeros(3)
-        axis[k] = 1.0
-        spin = np.cross(axis, x)                       # (nodes, 3)
-        for c in range(3):
-            free = index[:, c] >= 0
-            modes[index[free, c] - r0, c] = 1.0
-            modes[index[free, c] - r0, 3 + k] = spin[free, c]
-        free = index[:, 3 + k] >= 0
-        modes[index[free, 3 + k] - r0, 3 + k] = 1.0
+    spin = np.cross(np.eye(3)[:, None, :], x[None, :, :])     # (axis k, nodes, 3)
+    for c in range(3):
+        free = index[:, c] >= 0
+        modes[index[free, c] - r0, c] = 1.0
+        modes[index[free, c] - r0, 3:] = spin[:, free, c].T
+        free = index[:, 3 + c] >= 0
+        modes[index[free, 3 + c] - r0, 3 + c] = 1.0
     return modes

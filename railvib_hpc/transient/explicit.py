@@ -444,9 +444,11 @@ class ExplicitSystem:
         self.n_products = 0
         self.time_solves = 0.0
         self.n_solves = 0
-        #: (n_local, k) near null space of K for the static start's GAMG (the rigid-body
-        #: motions, :func:`~railvib_hpc.modal.dofmap.rigid_body_modes`; None: none given)
-        self.near_null: np.ndarray | None = None
+        #: ``near_null() -> (n_local, k)``: the near null space of K for the static
+        #: start's GAMG (the rigid-body motions,
+        #: :func:`~railvib_hpc.modal.dofmap.rigid_body_modes`), built only when CG runs,
+        #: not held through the run (48 bytes per DOF); None: none given
+        self.near_null: Callable[[], np.ndarray] | None = None
         #: How the static start was solved, with its time (None before).
         self.static_method: str | None = None
 
@@ -476,17 +478,13 @@ class ExplicitSystem:
 
     def _factor_solve(self, A, B: np.ndarray) -> np.ndarray | None:
         """``A^-1 B`` with a MUMPS Cholesky factor of A, None when it does not fit."""
-        from ..modal.factor import InsufficientMemory, ShiftInvertFactor
+        from ..modal.factor import InsufficientMemory
+        from .petsc import factor_solve
 
         try:
-            op = ShiftInvertFactor(A, self.M, 0.0, self.comm, PREFIX + "static_",
-                                   extra_gb=16.0 * B.size / 1e9)
+            return factor_solve(A, self.M, B, self.comm, PREFIX + "static_")
         except InsufficientMemory:
             return None
-        try:
-            return op.solve(B)
-        finally:
-            op.destroy()
 
     def _near_null_space(self):
         """The orthonormalised :attr:`near_null` as a PETSc null space (None without)."""
@@ -494,7 +492,7 @@ class ExplicitSystem:
 
         if self.near_null is None:
             return None
-        V = self.near_null
+        V = self.near_null()
         gram = self.comm.allreduce(V.T @ V)
         V = V @ np.linalg.inv(np.linalg.cholesky(gram)).T
         vectors = []

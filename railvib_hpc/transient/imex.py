@@ -41,6 +41,7 @@ import numpy as np
 
 from ..schema import IMPLICIT_GROUPS
 from .explicit import ExplicitSystem
+from .petsc import csr_matrix
 from .scheme import GeneralizedAlpha
 
 if TYPE_CHECKING:
@@ -165,12 +166,7 @@ def with_diagonal(A, diagonal: np.ndarray, comm):
     local = sp.csr_matrix((v, ix, ip), shape=(n_local, n_global))
     local = local + sp.csr_matrix((diagonal, (np.arange(n_local), r0 + np.arange(n_local))),
                                   shape=(n_local, n_global))
-    local.sort_indices()
-    B = PETSc.Mat().createAIJ(size=((n_local, n_global), (n_local, n_global)),
-                              csr=(local.indptr.astype(PETSc.IntType),
-                                   local.indices.astype(PETSc.IntType), local.data),
-                              comm=comm)
-    B.assemble()
+    B = csr_matrix(comm, local)
     B.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     B.setOption(PETSc.Mat.Option.SYMMETRY_ETERNAL, True)
     return B

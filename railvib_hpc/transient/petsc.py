@@ -197,14 +197,7 @@ class TransientSystem:
     def solve_matrix(self, A, B: np.ndarray) -> np.ndarray:
         """``A^-1 B`` for a block B with a separate MUMPS Cholesky factor of A (e.g. K for a
         static start, M for a consistent initial acceleration); the factor is freed."""
-        from ..modal.factor import ShiftInvertFactor
-
-        op = ShiftInvertFactor(A, self.M, 0.0, self.comm, PREFIX + "aux_",
-                               extra_gb=16.0 * B.size / 1e9)
-        try:
-            return op.solve(np.ascontiguousarray(B, dtype=float))
-        finally:
-            op.destroy()
+        return factor_solve(A, self.M, B, self.comm, PREFIX + "aux_")
 
     def destroy(self) -> None:
         self.op.destroy()
@@ -217,6 +210,20 @@ class TransientSystem:
             A.destroy()
         for w in self._work:
             w.destroy()
+
+
+def factor_solve(A, M, B: np.ndarray, comm, prefix: str) -> np.ndarray:
+    """``A^-1 B`` for a block B of this rank's rows with one MUMPS Cholesky factor of A
+    (:class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0, its memory check
+    included: :class:`~railvib_hpc.modal.factor.InsufficientMemory` when it does not fit),
+    freed before returning (collective)."""
+    from ..modal.factor import ShiftInvertFactor
+
+    op = ShiftInvertFactor(A, M, 0.0, comm, prefix, extra_gb=16.0 * B.size / 1e9)
+    try:
+        return op.solve(np.ascontiguousarray(B, dtype=float))
+    finally:
+        op.destroy()
 
 
 def static_deflection(K, M, comm, dof: int) -> float:
@@ -324,13 +331,8 @@ def _with_diagonal_damping(K, C, diagonal: np.ndarray, comm):
 def diagonal_matrix(comm, rows: tuple[int, int], n_global: int, values: np.ndarray):
     """A distributed AIJ matrix with this rank's rows ``values`` on its diagonal (the
     perfectly matched layers' ``M_e2`` in the explicit engine's stability limit)."""
-    from petsc4py import PETSc
+    import scipy.sparse as sp
 
     r0, r1 = rows
-    n = r1 - r0
-    A = PETSc.Mat().createAIJ(size=((n, n_global), (n, n_global)),
-                              csr=(np.arange(n + 1, dtype=PETSc.IntType),
-                                   np.arange(r0, r1, dtype=PETSc.IntType),
-                                   np.asarray(values, dtype=float)), comm=comm)
-    A.assemble()
-    return A
+    return csr_matrix(comm, sp.diags(np.asarray(values, dtype=float), offsets=r0,
+                                     shape=(r1 - r0, n_global), format="csr"))

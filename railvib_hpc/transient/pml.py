@@ -164,6 +164,21 @@ def pml_warnings(faces: list[PmlFace], problem: Problem) -> list[str]:
     return out
 
 
+def pml_memory_warning(problem: Problem, duration: float) -> str | None:
+    """A line for the classical layer (``boundary.pml_alpha = 0``), else None: its memory
+    integrates a quasi-static stress without decay, and with energy trapped between roller
+    sides its energy was measured to grow from 7.4 s on (docs/transient.md); with
+    ``alpha > 0`` every memory variable decays at the rate ``alpha`` and stays bounded
+    (measured: no growth in 10 s / 20,000-step runs). ``duration`` [s]: the simulated
+    time, named in the line."""
+    if problem.boundary.pml_alpha > 0.0:
+        return None
+    return ("warning: boundary.pml_alpha = 0: the classical layer's memory never decays, so "
+            "a quasi-static stress in the layers accumulates, and its energy can grow on long "
+            f"runs (measured from 7.4 s on; this run lasts {duration:.4g} s); a frequency "
+            "shift alpha > 0 bounds it (default pi 1/s)")
+
+
 def damping_at(points: np.ndarray, faces: list[PmlFace], problem: Problem) -> np.ndarray:
     """``d_0, d_1, d_2`` [1/s] at ``points`` (..., 3): each face's profile over the depth
     into its layer, along its axis (the largest where two faces share an axis)."""
@@ -339,7 +354,8 @@ class PmlLayer:
         """What :meth:`force` would return at ``u``, the layer left as it was (collective):
         with ``u = 0``, the part of the next step's force that the history makes,
         ``force(0) = force(u) - A u`` (:meth:`instant_matrix`)."""
-        saved = (self.kernel.memory(), self._u.copy(), [c.copy() for c in self._chi])
+        # (force rebinds _u and updates _chi and the kernel's memory in place)
+        saved = (self.kernel.memory(), self._u, [c.copy() for c in self._chi])
         try:
             return self.force(u, dt)
         finally:
@@ -371,4 +387,4 @@ class PmlLayer:
 
 
 __all__ = ["PmlError", "PmlFace", "PmlLayer", "damping_at", "pml_faces", "pml_geometry",
-           "pml_line", "pml_warnings"]
+           "pml_line", "pml_memory_warning", "pml_warnings"]

@@ -599,6 +599,9 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     if not resume_ok:
         record(0, init.get("info0"))
     interval = case["transient.checkpoint_interval"]
+    if layers and (interval > 0 or checkpoint_steps is not None):
+        rep.info("  checkpoints: none written (the perfectly matched layers' memory is not in "
+                 "them): an interrupted run starts again at t = 0")
     t_run = time.perf_counter()
     last_progress = last_ckpt = t_run
     first_step = state.step
@@ -735,6 +738,12 @@ def _setup(ctx: StageContext) -> dict:
                     "imex": "implicit-explicit Newmark (Hughes-Liu), "}[engine] + limit)
     rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
              f"steps; {scheme_text}")
+    if pml is not None:
+        from .pml import pml_memory_warning
+
+        line = pml_memory_warning(problem, nt * dt)
+        if line is not None:
+            rep.info(line)
     n_wheels = run["wheel_rail"].size
     scheme = None
     if not explicit:
@@ -781,7 +790,7 @@ def _setup(ctx: StageContext) -> dict:
         from ..modal.dofmap import rigid_body_modes
 
         # GAMG's near null space for the static start, when it is solved by CG
-        system.near_null = rigid_body_modes(mesh.points, dofmap, comm.rank)
+        system.near_null = lambda: rigid_body_modes(mesh.points, dofmap, comm.rank)
     names, coords = probe_points(mesh, case)
     return {"mesh": mesh, "mesh_sha": mesh_sha, "problem": problem, "dofmap": dofmap,
             "rails": rails,

@@ -13,6 +13,7 @@ from transient_cases import BASELINE
 
 from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
+from railvib_hpc.io.files import TRANSIENT_CHECKPOINT_H5
 
 comm = MPI.COMM_WORLD
 #: The coarse thesis model, the wheelset rolling 0.2 m onto the flexible rail; explicit.
@@ -114,6 +115,51 @@ def test_a_layer_that_reaches_the_building_is_refused(tmp_path, capsys):
     err = _refused(tmp_path, capsys, "transient", *LAYERS, "domain.extra_depth=0",
                    "boundary.layer_thickness=3", "boundary.y_max=absorbing")
     assert "the pml layer of boundary.base reaches the building" in err
+
+
+def test_the_classical_layer_and_the_unwritten_checkpoints_are_said(tmp_path, capsys):
+    """``boundary.pml_alpha = 0`` (the classical layer: its memory never decays, and its
+    energy was measured to grow from 7.4 s on) gets a warning naming the run's length, and
+    ``transient.checkpoint_interval > 0`` with layers says that no checkpoint is written
+    (the layers' memory is not in them); the default alpha warns of nothing."""
+    _stage(tmp_path / "classical", *LAYERS, "transient.engine=imex", "boundary.pml_alpha=0",
+           "transient.checkpoint_interval=1e-9")
+    out = capsys.readouterr()
+    text = out.out + out.err
+    assert "warning: boundary.pml_alpha = 0: the classical layer's memory never decays" in text
+    assert "this run lasts 0.00" in text
+    assert "checkpoints: none written (the perfectly matched layers' memory" in text
+    assert not (tmp_path / "classical" / TRANSIENT_CHECKPOINT_H5).exists()
+    from railvib_hpc.problem import Problem
+    from railvib_hpc.transient.pml import pml_memory_warning
+
+    shifted = Problem.from_case(load_case(BASELINE, [*SHORT, *LAYERS]))
+    assert pml_memory_warning(shifted, 100.0) is None
+
+
+@pytest.mark.slow
+def test_the_pml_job_runs_end_to_end_and_is_assessed(tmp_path, capsys):
+    """``jobs/pml_boundaries.toml`` (layers on all five faces, outside the thesis domain)
+    through ``railvib transient`` and ``railvib assess``, coarse and short: the log names the
+    five layers, the assessment reads the transient fields and writes its results (measured:
+    2.5 min with the machine loaded, most of it the assessment's figures)."""
+    from pathlib import Path
+
+    job = Path(__file__).resolve().parents[2] / "jobs" / "pml_boundaries.toml"
+    coarse = ["mesh.refinement=0.3", "vehicle.x_start=2.7",
+              "vehicle.x_end=2.9", "output.dt=0.001", "transient.f_max=100",
+              "output.stress_times=[]"]
+    assert run(["transient", str(job), "--out", str(tmp_path), *_sets(*coarse)]) == 0
+    text = capsys.readouterr().out
+    assert "perfectly matched layers (4 m" in text
+    assert all(f"{face} " in text for face in ("x_min", "x_max", "y_min", "y_max", "base"))
+    with h5py.File(tmp_path / "transient.h5", "r") as f:
+        stats = json.loads(f.attrs["stats"])
+    assert stats["engine"] == "imex" and stats["pml_elements"] > 0
+    assert run(["assess", str(job), "--out", str(tmp_path), *_sets(*coarse)]) == 0
+    report = json.loads((tmp_path / "assessment.json").read_text())
+    assert report["solver"] == "transient" and report["complete"] is True
+    assert {"footing", "slab1", "slab2"} <= set(report["results"])
 
 
 def _probes(folder) -> dict[str, np.ndarray]:

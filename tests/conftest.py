@@ -12,6 +12,30 @@ from railvib_hpc.config import load_case
 
 ROOT = Path(__file__).resolve().parents[1]
 BASELINE = ROOT / "jobs" / "thesis_baseline.toml"
+#: The fault-injection entries the pytest-xdist workers handed back
+#: (tests/reliability/conftest.py: ``pytest_sessionfinish``).
+WORKER_FAULT_TALLY: list[dict] = []
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_testnodedown(node, error):
+    """pytest-xdist, on the controller: collect a finished worker's fault-injection
+    entries."""
+    WORKER_FAULT_TALLY.extend(getattr(node, "workeroutput", {}).get("fault_tally", []))
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The fault-injection suite's tally of every xdist worker (in one process its own
+    conftest prints it)."""
+    if not WORKER_FAULT_TALLY:
+        return
+    import sys
+
+    sys.path.insert(0, str(ROOT / "tests" / "reliability"))
+    from faults import tally_line, write_tally
+
+    terminalreporter.write_line(tally_line(WORKER_FAULT_TALLY))
+    write_tally(WORKER_FAULT_TALLY)
 
 
 @pytest.fixture

@@ -35,3 +35,14 @@ def test_a_hung_test_is_ended_by_its_own_limit(tmp_path):
     assert proc.returncode != 0
     assert "Timeout" in proc.stdout + proc.stderr
     assert seconds < 60, seconds                     # ended by the 2 s limit, not the sleep
+
+
+def test_the_fault_tally_survives_the_worker_processes():
+    """``make test`` runs the one-rank pass in pytest-xdist workers, which print no summary:
+    the fault-injection suite's tally reaches the controller's summary all the same."""
+    target = "tests/reliability/test_user_errors.py::test_empty_case_file_is_refused"
+    proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                           "-n", "1", target], capture_output=True, text=True, timeout=600,
+                          cwd=ROOT)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    assert "fault-injection suite: 1 tries, 1 clear errors" in proc.stdout, proc.stdout[-2000:]

@@ -9,15 +9,22 @@ as JSON.
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import subprocess
 import tempfile
 from pathlib import Path
 
 import pytest
-from faults import BASELINE, COARSE, TALLY, Tally, can_mount, copy_results
+from faults import (
+    BASELINE,
+    COARSE,
+    TALLY,
+    Tally,
+    can_mount,
+    copy_results,
+    tally_line,
+    write_tally,
+)
 from mpi4py import MPI
 
 
@@ -29,17 +36,16 @@ def tally() -> Tally:
 def pytest_terminal_summary(terminalreporter):
     if not TALLY.entries or MPI.COMM_WORLD.rank != 0:
         return
-    c = TALLY.counts()
-    terminalreporter.write_line(
-        f"fault-injection suite: {c['tries']} tries, {c['clear error']} clear errors, "
-        f"{c['recomputed']} recomputed, {c['warning']} warnings, {c['traceback']} tracebacks, "
-        f"{c['hang']} hangs, {c['silent wrong']} silent wrong results"
-        + "".join(f", {v} {k}" for k, v in c.items() if k not in (
-            "tries", "clear error", "recomputed", "warning", "traceback", "hang",
-            "silent wrong")))
-    path = os.environ.get("RAILVIB_FAULT_TALLY")
-    if path:
-        Path(path).write_text(json.dumps({"counts": c, "entries": TALLY.entries}, indent=1))
+    terminalreporter.write_line(tally_line(TALLY.entries))
+    write_tally(TALLY.entries)
+
+
+def pytest_sessionfinish(session):
+    """Under pytest-xdist a worker prints no summary: it hands its entries to the
+    controller (``workeroutput``), whose ``tests/conftest.py`` prints them all."""
+    output = getattr(session.config, "workeroutput", None)
+    if output is not None and TALLY.entries:
+        output["fault_tally"] = list(TALLY.entries)
 
 
 @pytest.fixture(scope="session")

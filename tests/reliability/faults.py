@@ -99,12 +99,41 @@ class Tally:
         return res
 
     def counts(self) -> dict:
-        out = {"tries": len(self.entries)}
-        for e in self.entries:
-            out[e["outcome"]] = out.get(e["outcome"], 0) + 1
-        for k in ("clear error", "recomputed", "warning", "traceback", "hang", "silent wrong"):
-            out.setdefault(k, 0)
-        return out
+        return tally_counts(self.entries)
+
+
+#: The outcomes the summary always names, in its order.
+OUTCOMES = ("clear error", "recomputed", "warning", "traceback", "hang", "silent wrong")
+
+
+def tally_counts(entries: list[dict]) -> dict:
+    """``{"tries": n, outcome: count, ...}`` of the entries of :class:`Tally` (every
+    outcome of :data:`OUTCOMES` present, 0 where none)."""
+    out = {"tries": len(entries)}
+    for e in entries:
+        out[e["outcome"]] = out.get(e["outcome"], 0) + 1
+    for k in OUTCOMES:
+        out.setdefault(k, 0)
+    return out
+
+
+def write_tally(entries: list[dict]) -> None:
+    """``RAILVIB_FAULT_TALLY=<file>``: the counts and entries as JSON there."""
+    path = os.environ.get("RAILVIB_FAULT_TALLY")
+    if path:
+        import json
+
+        Path(path).write_text(json.dumps({"counts": tally_counts(entries), "entries": entries},
+                                         indent=1))
+
+
+def tally_line(entries: list[dict]) -> str:
+    """The terminal summary's line of the fault-injection suite."""
+    c = tally_counts(entries)
+    return (f"fault-injection suite: {c['tries']} tries, {c['clear error']} clear errors, "
+            f"{c['recomputed']} recomputed, {c['warning']} warnings, {c['traceback']} "
+            f"tracebacks, {c['hang']} hangs, {c['silent wrong']} silent wrong results"
+            + "".join(f", {v} {k}" for k, v in c.items() if k not in ("tries", *OUTCOMES)))
 
 
 TALLY = Tally()

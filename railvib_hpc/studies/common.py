@@ -235,19 +235,14 @@ def model_info(modal, modes_used: int | None, n_frequencies: int = 10) -> dict:
     """Size, frequencies and solver statistics of the modes the ``modal`` stage returned
     (its :class:`~railvib_hpc.modal.stage.ModesOutput`, computed or reused)."""
     freq = np.asarray(modal.frequencies_hz)
-    stats = modal.summary
     info = {"n_nodes": int(modal.n_nodes),
             "n_hexes": None if modal.n_hexes is None else int(modal.n_hexes),
             "n_dofs": int(modal.n_dofs or 0)}
     m = int(modes_used or len(freq))
-    keep = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
-            "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks", "time_assembly_total",
-            "time_block_solves", "time_orthogonalization", "max_relative_residual",
-            "reduced")
     info.update({"modes_in_file": len(freq), "modes_used": m,
                  "frequencies_hz": freq[:n_frequencies].tolist(),
                  "f_max_hz": float(freq[m - 1]),
-                 "modal": {k: stats[k] for k in keep if k in stats}})
+                 "modal": dict(modal.solver_statistics)})
     return info
 
 
@@ -505,7 +500,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
             model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,
                      "n_hexes": None, "modes_in_file": None, "modes_used": None,
                      "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
-                     "solver": "direct", "engine": stats.summary.get("engine", "direct"),
+                     "solver": "direct", "engine": stats.engine,
                      "dt": stats.dt, "n_steps": stats.n_steps,
                      "time_integration": stats.time_integration,
                      "peak_rss_gb_total": stats.peak_rss_gb_total}

@@ -437,6 +437,9 @@ class TransientOutput(StageOutput):
         Largest rail deflection under a wheel [m].
     loss_of_contact_steps
         Steps in which a wheel lost contact.
+    engine
+        The time integration's engine (``transient.engine``; ``direct`` for results
+        recorded before there were others).
     """
 
     n_nodes: int
@@ -450,6 +453,7 @@ class TransientOutput(StageOutput):
     min_contact_force: np.ndarray
     max_rail_deflection: float | None
     loss_of_contact_steps: int
+    engine: str = "direct"
 
     @classmethod
     def of_stats(cls, stats: dict) -> TransientOutput:
@@ -466,7 +470,8 @@ class TransientOutput(StageOutput):
                    peak_contact_force=per_wheel("peak_contact_force"),
                    min_contact_force=per_wheel("min_contact_force"),
                    max_rail_deflection=None if deflection is None else float(deflection),
-                   loss_of_contact_steps=int(stats.get("loss_of_contact_steps", 0)))
+                   loss_of_contact_steps=int(stats.get("loss_of_contact_steps", 0)),
+                   engine=stats.get("engine", "direct"))
 
 
 def compute(ctx: StageContext) -> TransientOutput:

@@ -44,11 +44,15 @@ from ..io.files import (
     MBS_H5,
     MODES_H5,
     PROBES_H5,
+    REPORT_HTML,
+    REPORT_JSON,
+    REPORT_MD,
     STATIC_H5,
     TRANSIENT_FIELDS,
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.products import ALL_KEYS, StageFile
 from ..io.stage_outputs import AssessmentOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
@@ -454,8 +458,15 @@ def compute(ctx: StageContext) -> AssessmentOutput:
             assess_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
 
 
+#: ``assessment.json`` (with the report): the whole case; computed from the modal
+#: solution's files (a transient folder's are its own stage's rows).
+ASSESSMENT_FILE = StageFile(ASSESSMENT_JSON, "assess", 2, ALL_KEYS,
+                            (MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5),
+                            (REPORT_MD, REPORT_HTML, REPORT_JSON),
+                            ("mesh.file", "irregularity.file"))
+
 STAGE = Stage(name="assess", help="evaluate the building response against vibration "
-              "standards", products=(ASSESSMENT_JSON,),
+              "standards", products=(ASSESSMENT_FILE,),
               reads=(MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5,
                      *TRANSIENT_INPUTS), compute=compute)
 

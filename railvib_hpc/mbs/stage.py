@@ -55,9 +55,12 @@ from ..io.formats.mbs import check_mbs, check_mbs_arrays, rail_amplitude
 from ..io.formats.modal_damping import check_modal_damping
 from ..io.formats.modes import check_modes
 from ..io.formats.static import check_static
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import PassageOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
+from ..mesh.stage import MESH_KEYS
+from ..modal.stage import MODAL_SOLVER_LAYOUT, RANDOM_FIELDS, REDUCED
 from ..parallel import on_root
 from ..resources import check_memory
 from .case_vehicle import (
@@ -483,8 +486,19 @@ def compute(ctx: StageContext) -> PassageOutput:
             simulate_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
 
 
+#: The passage's case keys: the model's (damping settings included, not the modal solver's
+#: layout), [damping], the vehicle, the irregularity (and its file) and [mbs].
+MBS_KEYS: Selection = MESH_KEYS + (
+    ("materials", ()), ("sections", ()), ("pads", ()), ("modal", MODAL_SOLVER_LAYOUT),
+    ("boundary", ()), ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()),
+    ("mbs", ())) + RANDOM_FIELDS + REDUCED
+#: ``mbs.h5``: computed from the modes (the static fields and the projected damping when
+#: the case uses them).
+MBS_FILE = StageFile(MBS_H5, "mbs", 2, MBS_KEYS, (MODES_H5, STATIC_H5, MODAL_DAMPING_H5), (),
+                     ("mesh.file", "irregularity.file"), check=check_mbs)
+
 STAGE = Stage(name="mbs", help="roll the vehicle over the flexible track in modal coordinates",
-              products=(MBS_H5,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
+              products=(MBS_FILE,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
               compute=compute)
 
 

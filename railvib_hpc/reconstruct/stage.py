@@ -75,13 +75,17 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
+from ..io.formats.fields import check_fields
 from ..io.formats.mbs import check_mbs
 from ..io.formats.modes import check_modes
+from ..io.formats.probes import check_probes
 from ..io.formats.static import check_static
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import FieldsOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
+from ..mbs.stage import MBS_KEYS
 from ..parallel import on_root
 from ..site import line_probes
 from .fields import reconstruct_fields, write_fields_xdmf
@@ -413,9 +417,26 @@ def compute(ctx: StageContext) -> FieldsOutput:
     return on_root(output, ctx.comm)
 
 
+#: The fields' case keys: the passage's, the output steps and window, the precision and
+#: the static correction's rates.
+FIELDS_KEYS: Selection = MBS_KEYS + (("output.dt", ()), ("output.window", ()),
+                                     ("output.float32", ()),
+                                     ("output.static_correction_rates", ()))
+#: The probes' case keys: the passage's, the window, the probes and [probes].
+PROBES_KEYS: Selection = MBS_KEYS + (("output.window", ()), ("output.probes", ()),
+                                     ("output.static_correction_rates", ()), ("probes", ()))
+#: The products: ``fields.h5`` (and its XDMF view) and ``probes.h5``, computed from the
+#: modes and the passage (and the static fields with the static correction).
+PRODUCTS = (
+    StageFile(FIELDS_H5, "reconstruct", 2, FIELDS_KEYS, (MODES_H5, MBS_H5, STATIC_H5),
+              (FIELDS_XDMF,), ("mesh.file", "irregularity.file"), check=check_fields),
+    StageFile(PROBES_H5, "reconstruct", 2, PROBES_KEYS, (MODES_H5, MBS_H5, STATIC_H5), (),
+              ("mesh.file", "irregularity.file"), check=check_probes),
+)
+
 STAGE = Stage(name="reconstruct", help="rebuild displacement/velocity/acceleration fields of "
-              "every node", products=(FIELDS_H5, PROBES_H5),
-              reads=(MODES_H5, STATIC_H5, MBS_H5), compute=compute)
+              "every node", products=PRODUCTS, reads=(MODES_H5, STATIC_H5, MBS_H5),
+              compute=compute)
 
 
 def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,

@@ -73,6 +73,7 @@ from ..io.files import (
     STATIC_H5,
     TRANSIENT_H5,
 )
+from ..io.products import ALL_KEYS, StageFile, declare
 from ..io.provenance import examine, provenance
 from ..io.stage_protocol import StageRunner
 from ..log import Reporter
@@ -89,6 +90,12 @@ ASSESSMENT_BAND_HZ = (1.0, 80.0)
 #: Bumped when the content of ``result.json`` changes (part of the variant digest).
 RESULT_FORMAT = "railvib_hpc.study/1"
 RESULT_NAME = RESULT_JSON
+#: ``result.json`` of a variant: the whole variant case (and the study's settings, in the
+#: digest the study gives it), computed from the modal solution's files or the full-order
+#: solution's (``transient.h5``).
+RESULT_FILE = declare(StageFile(RESULT_JSON, "study", 2, ALL_KEYS,
+                                (MODES_H5, STATIC_H5, MBS_H5, PROBES_H5, TRANSIENT_H5), (),
+                                ("mesh.file", "irregularity.file")))
 FAILED_NAME = FAILED_JSON
 SHARED_DIR = "model"
 #: Files of the shared model linked into each variant folder.

@@ -52,13 +52,13 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..io.products import ALL_KEYS, StageFile
 from ..io.stage_outputs import AssessmentOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..problem import Problem
-from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..site import line_probes, track_lift
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
 from .waves import wave_arrival, wave_speeds  # re-exported

@@ -54,7 +54,7 @@ from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
 from ..io.formats.mbs import check_mbs, check_mbs_arrays, rail_amplitude
 from ..io.formats.modal_damping import check_modal_damping
 from ..io.formats.modes import check_modes
-from ..io.formats.static import check_static
+from ..io.formats.static import check_static, read_rail_statics
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import PassageOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
@@ -83,12 +83,8 @@ MAX_MBS_STEPS = 100_000_000
 
 def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
     """``K^-1`` on the rail DOFs and the deflated static fields' mass from ``static.h5``."""
-    import h5py
-
     path = out_dir / STATIC_H5
-    with h5py.File(path, "r") as f:
-        x_rr = f["static/rail_flexibility"][()]
-        x_mass = f["static/residual_mass"][()]
+    x_rr, x_mass = read_rail_statics(path)
     if x_rr.shape != (n_r, n_r):
         raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
                             f"({n_r}, {n_r})")

@@ -13,7 +13,7 @@ from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text
 from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
-from ..io.formats.mesh import check_mesh
+from ..io.formats.mesh import check_mesh, write_mesh_files
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import MeshOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
@@ -24,7 +24,7 @@ from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
 from .gmsh_model import generate, read_msh
 from .interfaces import interface_nodes, split_interfaces
 from .layout import Layout, build_layout
-from .mesh_io import read_mesh_h5, write_mesh_files
+from .mesh_io import read_mesh_h5
 from .model import Mesh
 from .search import nonconformal_faces
 from .turn import turn_building, turn_line, turn_map

@@ -78,7 +78,7 @@ from ..io.files import (
 from ..io.formats.fields import check_fields
 from ..io.formats.mbs import check_mbs
 from ..io.formats.modes import check_modes
-from ..io.formats.probes import check_probes
+from ..io.formats.probes import check_probes, write_probes_csv, write_probes_h5
 from ..io.formats.static import check_static
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import FieldsOutput
@@ -89,14 +89,7 @@ from ..mbs.stage import MBS_KEYS
 from ..parallel import on_root
 from ..site import line_probes
 from .fields import reconstruct_fields, write_fields_xdmf
-from .probes import (
-    UserProbes,
-    locate_probes,
-    probe_histories,
-    user_probe_dict,
-    write_probes_csv,
-    write_probes_h5,
-)
+from .probes import UserProbes, locate_probes, probe_histories, user_probe_dict
 from .stress import (
     hex_materials,
     rail_moment_history,
@@ -400,7 +393,8 @@ def compute(ctx: StageContext) -> FieldsOutput:
     summary = _outputs(ctx, out_dir / MODES_H5, out_dir / MBS_H5, **opts)
 
     def output() -> FieldsOutput:
-        from .probes import probe_peaks, read_probes
+        from ..io.formats.probes import read_probes
+        from .probes import probe_peaks
 
         def present(name: str) -> Path | None:
             return out_dir / name if (out_dir / name).exists() else None

@@ -292,7 +292,8 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
         ``duration``.
     """
-    from ..reconstruct.probes import probe_histories, write_probes_h5
+    from ..io.formats.probes import write_probes_h5
+    from ..reconstruct.probes import probe_histories
     from ..reconstruct.stage import read_inputs
 
     modes, mbs = vdir / MODES_H5, vdir / MBS_H5
@@ -490,7 +491,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
                         runner: StageRunner, settings: dict[str, Any]) -> dict:
     """A variant solved by the full-order time integration (the ``transient`` stage:
     reused when current, resumed from a current checkpoint)."""
-    from ..reconstruct.probes import read_probes
+    from ..io.formats.probes import read_probes
 
     vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
     t_start = time.perf_counter()

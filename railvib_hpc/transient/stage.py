@@ -1303,7 +1303,7 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     """probes.h5 + probes/*.csv (layout of reconstruct, with the probes' roles) and the rail
     bending moments (rank 0)."""
     from ..fem.beam import shear_deformation_factors
-    from ..reconstruct.probes import write_probes_csv, write_probes_h5
+    from ..io.formats.probes import write_probes_csv, write_probes_h5
     from ..reconstruct.stress import rail_bending_moment, rail_section
     from ..schema import DEFAULT_PROBE_ROLE
 

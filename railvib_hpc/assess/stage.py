@@ -52,6 +52,7 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.formats.mbs import MbsFile
 from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..io.products import ALL_KEYS, StageFile
 from ..io.stage_outputs import AssessmentOutput
@@ -76,7 +77,10 @@ def _contact(out_dir: Path, solver: str):
     ``transient.h5``."""
     import h5py
 
-    path = out_dir / (TRANSIENT_H5 if solver == "transient" else MBS_H5)
+    if solver != "transient":
+        path = out_dir / MBS_H5
+        return MbsFile(path).contact() if path.exists() else (None, None)
+    path = out_dir / TRANSIENT_H5
     if path.exists():
         with h5py.File(path, "r") as f:
             return f["wheels/x"][()], f["wheels/contact_force"][()]
@@ -390,13 +394,11 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
                    f"{100 * case['modal.damping_ratio']:g} %")
     lines.append(f"damping              {damping}")
     if mbs_path.exists():
-        with h5py.File(mbs_path, "r") as f:
-            m = f["modal/omega"].shape[0]
-            zeta = f["modal/zeta"][()]
-            dt = float(f["time"][1] - f["time"][0]) if f["time"].shape[0] > 1 else 0.0
-            lines.append(f"modal damping used   {100 * zeta.min():.2f} - {100 * zeta.max():.2f} "
-                         f"% over {m} modes")
-            lines.append(f"mbs.h5 inputs        sha256 {f.attrs.get('inputs_sha256', '?')}")
+        mbs = MbsFile(mbs_path).summary()
+        m, zeta, dt = mbs["n_modes"], mbs["zeta"], mbs["dt"]
+        lines.append(f"modal damping used   {100 * zeta.min():.2f} - {100 * zeta.max():.2f} "
+                     f"% over {m} modes")
+        lines.append(f"mbs.h5 inputs        sha256 {mbs['inputs_sha256']}")
         lines.append(f"multibody            {case['vehicle.type']} at {case['vehicle.speed']:g} "
                      f"m/s, {m} modes, static correction "
                      f"{'on' if case['mbs.static_correction'] else 'off'}, dt {dt:.2e} s, "

@@ -12,7 +12,8 @@ file                          module                  writer and reader
                                                       static` forms them from the DOF map)
 ``modal_damping.h5``          :mod:`.modal_damping`   here
 ``bands/`` (the band cache)   :mod:`.bands`           here
-``mbs.h5``                    :mod:`.mbs`             :mod:`railvib_hpc.mbs.stage`
+``mbs.h5``                    :mod:`.mbs`             here (of the passage duck-typed; one
+                                                      reader, :class:`.mbs.MbsFile`)
 ``fields.h5``                 :mod:`.fields`          :mod:`railvib_hpc.reconstruct.fields`,
                                                       :mod:`railvib_hpc.transient.output`
 ``probes.h5``, ``probes/``    :mod:`.probes`          here
@@ -25,6 +26,6 @@ Each module's docstring is the file's layout; its ``check_<file>`` is the data c
 plain arrays, or a model object of a higher layer duck-typed (the mesh: its type is named
 under ``TYPE_CHECKING`` only, so the io layer imports nothing above it); a reader gives
 arrays, of which the stage builds its model objects (``mesh.h5``). The writers still with
-their stage (``mbs.h5``, ``fields.h5``, ``transient.h5`` and the checkpoint) take a
-stage's streams; the module names them. :mod:`.checks` has what the checks share.
+their stage (``fields.h5``, ``transient.h5`` and the checkpoint) take a stage's streams;
+the module names them. :mod:`.checks` has what the checks share.
 """

@@ -52,6 +52,7 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.formats.fields import FieldsFile
 from ..io.formats.mbs import MbsFile
 from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..io.products import ALL_KEYS, StageFile
@@ -101,27 +102,22 @@ def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
 
 def _building_displacements(fields_path: Path) -> dict:
     """Max |ux| and |uy| over the building nodes in fields.h5 (streamed over time)."""
-    import h5py
-
     from ..schema import BUILDING_PARTS, PART_ID
 
     if not fields_path.exists():
         return {}
-    with h5py.File(fields_path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            return {}
-        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
-        ids = [PART_ID[p] for p in BUILDING_PARTS]
-        nodes = np.unique(hexes[np.isin(part, ids)])
-        if nodes.size == 0:                     # a mesh without the building (mesh.file)
-            return {}
-        d = f["fields/displacement"]
-        ux = uy = 0.0
-        lo, hi = int(nodes.min()), int(nodes.max()) + 1
-        for s0 in range(0, d.shape[0], 64):
-            blk = d[s0:s0 + 64, lo:hi, :][:, nodes - lo, :]
-            ux = max(ux, float(np.abs(blk[..., 0]).max()))
-            uy = max(uy, float(np.abs(blk[..., 1]).max()))
+    fields = FieldsFile(fields_path)
+    if not fields.complete():
+        return {}
+    _, hexes, part = fields.mesh()
+    ids = [PART_ID[p] for p in BUILDING_PARTS]
+    nodes = np.unique(hexes[np.isin(part, ids)])
+    if nodes.size == 0:                         # a mesh without the building (mesh.file)
+        return {}
+    ux = uy = 0.0
+    for blk in fields.blocks("displacement", nodes, 64):
+        ux = max(ux, float(np.abs(blk[..., 0]).max()))
+        uy = max(uy, float(np.abs(blk[..., 1]).max()))
     return {"building_max_longitudinal_displacement": ux,
             "building_max_transverse_displacement": uy}
 
@@ -133,27 +129,22 @@ def peak_map(fields_path: Path, z_ground: float, png: Path) -> dict | None:
     nodes: ``z = z_ground`` (top of the subgrade); slab nodes: the top faces of
     the slabs. None when there is no complete ``fields.h5``.
     """
-    import h5py
     import matplotlib
 
     from ..schema import PART_ID
 
     if not fields_path.exists():
         return None
-    with h5py.File(fields_path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            return None
-        pts = f["mesh/points"][()]
-        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
-        slab_top = _slab_top_nodes(pts, hexes[part == PART_ID["slab"]])
-        ground = np.flatnonzero(np.isclose(pts[:, 2], z_ground))
-        nodes = np.unique(np.concatenate([ground, slab_top]))
-        vel = f["fields/velocity"]
-        peak = np.zeros(nodes.size)
-        lo, hi = int(nodes.min()), int(nodes.max()) + 1
-        for s0 in range(0, vel.shape[0], 32):
-            blk = vel[s0:s0 + 32, lo:hi, :][:, nodes - lo, :]
-            peak = np.maximum(peak, np.linalg.norm(blk, axis=2).max(axis=0))
+    fields = FieldsFile(fields_path)
+    if not fields.complete():
+        return None
+    pts, hexes, part = fields.mesh()
+    slab_top = _slab_top_nodes(pts, hexes[part == PART_ID["slab"]])
+    ground = np.flatnonzero(np.isclose(pts[:, 2], z_ground))
+    nodes = np.unique(np.concatenate([ground, slab_top]))
+    peak = np.zeros(nodes.size)
+    for blk in fields.blocks("velocity", nodes, 32):
+        peak = np.maximum(peak, np.linalg.norm(blk, axis=2).max(axis=0))
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm

@@ -75,7 +75,7 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
-from ..io.formats.fields import check_fields
+from ..io.formats.fields import FieldsFile, check_fields
 from ..io.formats.mbs import MbsFile, MbsFileError, check_mbs
 from ..io.formats.modes import check_modes
 from ..io.formats.probes import check_probes, write_probes_csv, write_probes_h5
@@ -235,7 +235,6 @@ def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
 
 def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) -> dict:
     """Which outputs in the context's folder are current and sound (rank 0); says why not."""
-    import h5py
 
     out_dir = ctx.out_dir
     ok = {"fields": False, "stress": False, "probes": False}
@@ -244,10 +243,8 @@ def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) 
                              upstream=upstream).ok
     if ok["fields"] and want_stress:
         try:
-            with h5py.File(fields, "r") as f:
-                ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
-                                and _attr(f["stress"], "inputs_sha256") == keys["stress"]
-                                and (out_dir / STRESS_XDMF).is_file())
+            ok["stress"] = (FieldsFile(fields).stress_current(keys["stress"])
+                            and (out_dir / STRESS_XDMF).is_file())
         except (OSError, KeyError):
             ok["stress"] = False
     ok["probes"] = ctx.reuse(PROBES_H5, path=out_dir / PROBES_H5,

@@ -161,12 +161,10 @@ def stress_key(case: Case) -> str:
 
 
 def _stress_current(out_dir: Path, key: str) -> bool:
-    import h5py
+    from ..io.formats.fields import FieldsFile
 
     try:
-        with h5py.File(out_dir / FIELDS_H5, "r") as f:
-            ok = ("stress" in f and int(f.attrs.get("stress_complete", 0)) == 1
-                  and f["stress"].attrs.get("inputs_sha256") == key)
+        ok = FieldsFile(out_dir / FIELDS_H5).stress_current(key)
     except (OSError, KeyError):
         return False
     return ok and (out_dir / STRESS_XDMF).is_file()
@@ -183,11 +181,11 @@ def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
         return
 
     def check_times() -> int:
-        import h5py
+        from ..io.formats.fields import FieldsFile
 
-        with h5py.File(fields, "r") as f:
-            _check_stress_times(case, f["time"][()])
-            n_hexes = f["mesh/hexes"].shape[0]
+        stored = FieldsFile(fields)
+        _check_stress_times(case, stored.times())
+        n_hexes = stored.n_hexes()
         ensure_space(out_dir, _stress_bytes(case, n_hexes), "the stresses of fields.h5")
         return n_hexes
 

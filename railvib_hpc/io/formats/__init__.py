@@ -14,8 +14,10 @@ file                          module                  writer and reader
 ``bands/`` (the band cache)   :mod:`.bands`           here
 ``mbs.h5``                    :mod:`.mbs`             here (of the passage duck-typed; one
                                                       reader, :class:`.mbs.MbsFile`)
-``fields.h5``                 :mod:`.fields`          :mod:`railvib_hpc.reconstruct.fields`,
-                                                      :mod:`railvib_hpc.transient.output`
+``fields.h5``,                :mod:`.fields`          here (layout, XDMF, reader); the
+``fields.xdmf``                                       blocks are streamed by :mod:`railvib_hpc.
+                                                      reconstruct.fields` and :mod:`railvib_hpc.
+                                                      transient.output`
 ``probes.h5``, ``probes/``    :mod:`.probes`          here
 ``transient.h5``,             :mod:`.transient`       :mod:`railvib_hpc.transient.stage`,
 ``transient_checkpoint.h5``                           :mod:`railvib_hpc.transient.output`
@@ -26,6 +28,6 @@ Each module's docstring is the file's layout; its ``check_<file>`` is the data c
 plain arrays, or a model object of a higher layer duck-typed (the mesh: its type is named
 under ``TYPE_CHECKING`` only, so the io layer imports nothing above it); a reader gives
 arrays, of which the stage builds its model objects (``mesh.h5``). The writers still with
-their stage (``fields.h5``, ``transient.h5`` and the checkpoint) take a stage's streams;
-the module names them. :mod:`.checks` has what the checks share.
+their stage (``transient.h5`` and the checkpoint) take a stage's streams; the module
+names them. :mod:`.checks` has what the checks share.
 """

@@ -63,12 +63,12 @@ PHASES = {
     "report: nodes per part": "railvib_hpc.mesh.model:Mesh.nodes_per_part",
     "report: volume per part": "railvib_hpc.mesh.model:Mesh.volume_per_part",
     "HDF5 + XDMF (total)": "railvib_hpc.mesh.stage:write_mesh_files",
-    "HDF5 write (total)": "railvib_hpc.mesh.mesh_io:write_mesh_h5",
+    "HDF5 write (total)": "railvib_hpc.io.formats.mesh:write_mesh_h5",
     "probes' nearest nodes": "railvib_hpc.mesh.model:Mesh.nearest_node",
     "probes' nearest nodes (batch)": "railvib_hpc.mesh.model:Mesh.nearest_nodes",
     "mesh.h5 re-read check": "railvib_hpc.io.formats.mesh:check_mesh",
     "mesh.h5 digest": "railvib_hpc.io.atomic:record_file",
-    "XDMF text": "railvib_hpc.mesh.mesh_io:mesh_xdmf",
+    "XDMF text": "railvib_hpc.io.formats.mesh:mesh_xdmf",
 }
 
 PHASE_WORKER = r"""

@@ -59,6 +59,7 @@ from .io.stage_outputs import (
     MeshOutput,
     ModesOutput,
     PassageOutput,
+    StageOutput,
 )
 from .io.stage_protocol import StageRun, StageRunner
 from .log import Reporter
@@ -479,16 +480,24 @@ class Pipeline:
 
     def _result(self, run: StageRun, unused: tuple[str, ...]) -> StageResult:
         """The typed result of a stage call (:data:`_RESULTS`; others: a :class:`StageResult`)
-        from the stage's own result object."""
+        from the stage's own frozen result object (a
+        :class:`~railvib_hpc.io.stage_outputs.StageOutput`: its attributes, no summary
+        read again).
+
+        Raises
+        ------
+        TypeError
+            When the stage's ``compute`` returned something else.
+        """
         import dataclasses
 
         out = run.result
-        summary = out if isinstance(out, Mapping) else getattr(out, "summary", {})
-        common = {"stage": run.stage, "out_dir": self.out_dir,
-                  "reused": summary.get("reused") if isinstance(out, Mapping)
-                  else getattr(out, "reused", None), "seconds": run.seconds,
-                  "timings": run.timings, "summary": dict(summary),
-                  "unused_petsc_options": unused}
+        if not isinstance(out, StageOutput):
+            raise TypeError(f"stage {run.stage!r}: compute returned {type(out).__name__}, "
+                            "not a StageOutput")
+        common = {"stage": run.stage, "out_dir": self.out_dir, "reused": out.reused,
+                  "seconds": run.seconds, "timings": run.timings,
+                  "summary": dict(out.summary), "unused_petsc_options": unused}
         cls = _RESULTS.get(run.stage, StageResult)
         fields = {f.name: getattr(out, f.name) for f in dataclasses.fields(cls)
                   if f.name not in common}

@@ -2,7 +2,8 @@
 
 :data:`STAGES` is the registry: every stage's name and the module that declares it (its
 ``STAGE``, a :class:`~railvib_hpc.io.stage_protocol.Stage`), in pipeline order. Adding a
-stage is one module with its ``STAGE`` and one line here (or :func:`register`). The
+stage is one module with its ``STAGE`` (its products' rows, checks and case keys
+included) and one line here (or :func:`register`). The
 command line takes its stage commands and their help lines from it, the Python API
 (:class:`~railvib_hpc.api.Pipeline`) and the studies run every stage through it, and
 :data:`PIPELINES` names the commands that run several stages in order: ``railvib run``
@@ -41,6 +42,10 @@ STAGES: dict[str, str] = {
     "assess": "railvib_hpc.assess.stage",
 }
 
+#: Writers of products that are not stages: name -> the module declaring their rows (the
+#: studies' ``result.json``).
+PRODUCT_WRITERS: dict[str, str] = {"study": "railvib_hpc.studies.common"}
+
 #: Commands that run a sequence of stages: name -> the stages, in order.
 PIPELINES: dict[str, tuple[str, ...]] = {
     "run": ("mesh", "modal", "mbs", "reconstruct", "assess"),
@@ -71,6 +76,15 @@ def stage(name: str) -> Stage:
     if declared.name != name:
         raise ValueError(f"{STAGES[name]} declares stage {declared.name!r}, not {name!r}")
     return declared
+
+
+def declare_products() -> None:
+    """Declare every product's row: import each registered stage's module (its ``STAGE``
+    declares its products) and each of :data:`PRODUCT_WRITERS`, by name. The product
+    table (:data:`~railvib_hpc.io.products.STAGE_FILES`) calls it when it is read whole or
+    for a name it lacks."""
+    for module in (*STAGES.values(), *PRODUCT_WRITERS.values()):
+        importlib.import_module(module)
 
 
 def single_stage_commands() -> dict[str, str]:

@@ -44,17 +44,23 @@ from ..io.files import (
     MBS_H5,
     MODES_H5,
     PROBES_H5,
+    REPORT_HTML,
+    REPORT_JSON,
+    REPORT_MD,
     STATIC_H5,
     TRANSIENT_FIELDS,
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
+from ..io.formats.fields import FieldsFile
+from ..io.formats.mbs import MbsFile
+from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
+from ..io.products import ALL_KEYS, StageFile
 from ..io.stage_outputs import AssessmentOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..problem import Problem
-from ..reconstruct.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..site import line_probes, track_lift
 from .thesis import THESIS  # what the thesis reports (re-exported; see .thesis)
 from .waves import wave_arrival, wave_speeds  # re-exported
@@ -72,7 +78,10 @@ def _contact(out_dir: Path, solver: str):
     ``transient.h5``."""
     import h5py
 
-    path = out_dir / (TRANSIENT_H5 if solver == "transient" else MBS_H5)
+    if solver != "transient":
+        path = out_dir / MBS_H5
+        return MbsFile(path).contact() if path.exists() else (None, None)
+    path = out_dir / TRANSIENT_H5
     if path.exists():
         with h5py.File(path, "r") as f:
             return f["wheels/x"][()], f["wheels/contact_force"][()]
@@ -93,27 +102,22 @@ def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
 
 def _building_displacements(fields_path: Path) -> dict:
     """Max |ux| and |uy| over the building nodes in fields.h5 (streamed over time)."""
-    import h5py
-
     from ..schema import BUILDING_PARTS, PART_ID
 
     if not fields_path.exists():
         return {}
-    with h5py.File(fields_path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            return {}
-        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
-        ids = [PART_ID[p] for p in BUILDING_PARTS]
-        nodes = np.unique(hexes[np.isin(part, ids)])
-        if nodes.size == 0:                     # a mesh without the building (mesh.file)
-            return {}
-        d = f["fields/displacement"]
-        ux = uy = 0.0
-        lo, hi = int(nodes.min()), int(nodes.max()) + 1
-        for s0 in range(0, d.shape[0], 64):
-            blk = d[s0:s0 + 64, lo:hi, :][:, nodes - lo, :]
-            ux = max(ux, float(np.abs(blk[..., 0]).max()))
-            uy = max(uy, float(np.abs(blk[..., 1]).max()))
+    fields = FieldsFile(fields_path)
+    if not fields.complete():
+        return {}
+    _, hexes, part = fields.mesh()
+    ids = [PART_ID[p] for p in BUILDING_PARTS]
+    nodes = np.unique(hexes[np.isin(part, ids)])
+    if nodes.size == 0:                         # a mesh without the building (mesh.file)
+        return {}
+    ux = uy = 0.0
+    for blk in fields.blocks("displacement", nodes, 64):
+        ux = max(ux, float(np.abs(blk[..., 0]).max()))
+        uy = max(uy, float(np.abs(blk[..., 1]).max()))
     return {"building_max_longitudinal_displacement": ux,
             "building_max_transverse_displacement": uy}
 
@@ -125,27 +129,22 @@ def peak_map(fields_path: Path, z_ground: float, png: Path) -> dict | None:
     nodes: ``z = z_ground`` (top of the subgrade); slab nodes: the top faces of
     the slabs. None when there is no complete ``fields.h5``.
     """
-    import h5py
     import matplotlib
 
     from ..schema import PART_ID
 
     if not fields_path.exists():
         return None
-    with h5py.File(fields_path, "r") as f:
-        if int(f.attrs.get("complete", 0)) != 1:
-            return None
-        pts = f["mesh/points"][()]
-        hexes, part = f["mesh/hexes"][()], f["mesh/hex_part"][()]
-        slab_top = _slab_top_nodes(pts, hexes[part == PART_ID["slab"]])
-        ground = np.flatnonzero(np.isclose(pts[:, 2], z_ground))
-        nodes = np.unique(np.concatenate([ground, slab_top]))
-        vel = f["fields/velocity"]
-        peak = np.zeros(nodes.size)
-        lo, hi = int(nodes.min()), int(nodes.max()) + 1
-        for s0 in range(0, vel.shape[0], 32):
-            blk = vel[s0:s0 + 32, lo:hi, :][:, nodes - lo, :]
-            peak = np.maximum(peak, np.linalg.norm(blk, axis=2).max(axis=0))
+    fields = FieldsFile(fields_path)
+    if not fields.complete():
+        return None
+    pts, hexes, part = fields.mesh()
+    slab_top = _slab_top_nodes(pts, hexes[part == PART_ID["slab"]])
+    ground = np.flatnonzero(np.isclose(pts[:, 2], z_ground))
+    nodes = np.unique(np.concatenate([ground, slab_top]))
+    peak = np.zeros(nodes.size)
+    for blk in fields.blocks("velocity", nodes, 32):
+        peak = np.maximum(peak, np.linalg.norm(blk, axis=2).max(axis=0))
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import LogNorm
@@ -386,13 +385,11 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
                    f"{100 * case['modal.damping_ratio']:g} %")
     lines.append(f"damping              {damping}")
     if mbs_path.exists():
-        with h5py.File(mbs_path, "r") as f:
-            m = f["modal/omega"].shape[0]
-            zeta = f["modal/zeta"][()]
-            dt = float(f["time"][1] - f["time"][0]) if f["time"].shape[0] > 1 else 0.0
-            lines.append(f"modal damping used   {100 * zeta.min():.2f} - {100 * zeta.max():.2f} "
-                         f"% over {m} modes")
-            lines.append(f"mbs.h5 inputs        sha256 {f.attrs.get('inputs_sha256', '?')}")
+        mbs = MbsFile(mbs_path).summary()
+        m, zeta, dt = mbs["n_modes"], mbs["zeta"], mbs["dt"]
+        lines.append(f"modal damping used   {100 * zeta.min():.2f} - {100 * zeta.max():.2f} "
+                     f"% over {m} modes")
+        lines.append(f"mbs.h5 inputs        sha256 {mbs['inputs_sha256']}")
         lines.append(f"multibody            {case['vehicle.type']} at {case['vehicle.speed']:g} "
                      f"m/s, {m} modes, static correction "
                      f"{'on' if case['mbs.static_correction'] else 'off'}, dt {dt:.2e} s, "
@@ -454,8 +451,15 @@ def compute(ctx: StageContext) -> AssessmentOutput:
             assess_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
 
 
+#: ``assessment.json`` (with the report): the whole case; computed from the modal
+#: solution's files (a transient folder's are its own stage's rows).
+ASSESSMENT_FILE = StageFile(ASSESSMENT_JSON, "assess", 2, ALL_KEYS,
+                            (MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5),
+                            (REPORT_MD, REPORT_HTML, REPORT_JSON),
+                            ("mesh.file", "irregularity.file"))
+
 STAGE = Stage(name="assess", help="evaluate the building response against vibration "
-              "standards", products=(ASSESSMENT_JSON,),
+              "standards", products=(ASSESSMENT_FILE,),
               reads=(MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5,
                      *TRANSIENT_INPUTS), compute=compute)
 

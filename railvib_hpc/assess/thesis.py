@@ -33,6 +33,7 @@ import numpy as np
 
 from ..config import Case
 from ..io.files import MBS_H5, MODES_H5
+from ..io.formats.mbs import MbsFile
 from ..problem import Problem
 from ..site import track_lift
 
@@ -135,13 +136,9 @@ def appendix_c_peaks(modes_path: Path, mbs_path: Path, probes: dict[str, np.ndar
     ``q''`` is a modal acceleration: the scaling is dimensionally inconsistent unless
     SAMS's coordinates were scaled by ``omega`` themselves, which the thesis does not say).
     """
-    import h5py
-
     from ..reconstruct.probes import probe_modes
 
-    with h5py.File(mbs_path, "r") as f:
-        qdd = f["modal/q_ddot"][()]
-        omega = f["modal/omega"][()]
+    qdd, omega = MbsFile(mbs_path).modal_accelerations()
     names = list(probes)
     coords = np.array([probes[n] for n in names])
     phi, _, _ = probe_modes(modes_path, coords, qdd.shape[1], names)

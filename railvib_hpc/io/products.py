@@ -1,10 +1,17 @@
-"""The product table: each stage file's stage, format version, case keys and upstream files.
+"""The product table's machinery: rows, the table, the case keys' selection and digests.
 
 :data:`STAGE_FILES` names, for each result file, the command that writes it, its format
 version, the case keys it depends on (cumulatively: a file depends on everything its
-upstream files depend on) and the upstream files it reads; :func:`inputs_hash` is the
-digest of those keys (and of the external files they name), which each file records
-(:mod:`railvib_hpc.io.provenance`):
+upstream files depend on), the upstream files it reads, its companion files and its data
+check; :func:`inputs_hash` is the digest of those keys (and of the external files they
+name), which each file records (:mod:`railvib_hpc.io.provenance`).
+
+Each row (a :class:`StageFile`) is declared once, by the module of the stage that writes
+it, with that stage (its ``STAGE``'s products: e.g. :data:`railvib_hpc.mesh.stage.MESH_KEYS`
+and ``MESH_FILE``); the studies' ``result.json`` by :mod:`railvib_hpc.studies.common`.
+This module holds only what every row shares; the table is filled as the stage modules
+are imported, and wholly (through the registry, :data:`REGISTRY`) when it is read whole or
+for a name it lacks. The rows, for reference:
 
 ===============  ===========  ==========================================  ===================
 file             written by   case keys (inputs)                          upstream files
@@ -83,42 +90,22 @@ it is current and sound by the same rules as a result, and the partial ``fields.
 
 API
 ---
-:data:`STAGE_FILES` (rows :class:`StageFile`), :func:`spec`, :func:`whole_sections`,
+:data:`STAGE_FILES` (a :class:`ProductTable` of rows :class:`StageFile`, added by
+:func:`declare`), :data:`ALL_KEYS`, :func:`spec`, :func:`whole_sections`,
 :func:`flat_case`, :func:`select` (a :data:`Selection` of case keys),
 :func:`external_files`, :func:`inputs_hash`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+import importlib
+from collections.abc import Callable, Iterator, Mapping, MutableMapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 from ..schema import iter_params
 from .digests import digest, hash_file
-from .files import (
-    ASSESSMENT_JSON,
-    BAND_CACHE,
-    FIELDS_H5,
-    FIELDS_XDMF,
-    MBS_H5,
-    MESH_H5,
-    MESH_REPORT_JSON,
-    MESH_XDMF,
-    MODAL_DAMPING_H5,
-    MODES_H5,
-    MODES_XDMF,
-    PROBES_H5,
-    REPORT_HTML,
-    REPORT_JSON,
-    REPORT_MD,
-    RESULT_JSON,
-    STATIC_H5,
-    TRANSIENT_CHECKPOINT_H5,
-    TRANSIENT_FIELDS,
-    TRANSIENT_H5,
-    TRANSIENT_PROBES,
-)
+from .stage_checks import CHECKS
 
 #: Sections whose defaults are the model as it was before they existed (``[site]``: no key
 #: given, the geometry keys apply; ``[probes]``: no probe lines). A key of theirs at its
@@ -133,58 +120,9 @@ CHECK_ONLY_KEYS = ("mesh.max_dispersion_error", "vehicle.supercritical")
 #: A selection of case keys: (dotted prefix, leaf names left out below it).
 Selection = tuple[tuple[str, tuple[str, ...]], ...]
 
-#: The mesh: its geometry and divisions, the soil layers, the elastic interfaces (they cut
-#: the mesh), and the soils' E, nu, rho (the wavelength sizing, mesh.elements_per_wavelength,
-#: reads their shear-wave speeds).
-_SOIL_WAVE_SPEED = ("damping_ratio",)
-#: (The supported track ends' springs and dashpots are K's and C's, not the mesh's.)
-_MESH = (("geometry", ()), ("track", ("end_stiffness", "end_damping")), ("building", ()),
-         ("mesh", ()), ("domain", ()),
-         ("soil", ()), ("trench", ()), ("wib", ()), ("usp", ()), ("ballast_mat", ()),
-         ("isolation", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
-         ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
-#: The random fields of the soil layers (the element matrices: ``Problem.fields``); at
-#: their defaults (realisation 0: no field) they enter no digest.
-_RANDOM_FIELDS = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
-                  ("uncertainty.seed", ()))
-#: A sample of the reduced model (``uncertainty.basis``: its modes are the reduced model's
-#: on the basis's nominal mesh, or a full solve on that mesh; at their defaults, a plain
-#: model, they enter no digest).
-_REDUCED = (("uncertainty.basis", ()), ("uncertainty.reduced_tol", ()),
-            ("uncertainty.reference", ()))
-#: How the modes are computed, not what they are: the out-of-core switch and the band
-#: split with its parallel layout (they change the modes by round-off only).
-MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")
-#: The damping settings of [modal] and [pads] (and the materials' ratios): not the modes.
-MODAL_DAMPING_KEYS = ("damping_ratio", "damping")
-#: Damping settings and the solver layout do not change the modes.
-MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
-#: A band of the band-sliced solve (its cache in ``<out>/bands``) depends on [modal] as the
-#: modes do, except on how many modes up to which frequency are wanted and on the basis
-#: and shift of an unsliced solve: the band cache's inputs leave them out, so raising
-#: ``modal.f_max`` keeps the cache and only adds bands.
-BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
-_MODAL = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
-                  ("pads", MODAL_ONLY_EXCLUDED), ("modal", MODAL_ONLY_EXCLUDED),
-                  ("boundary", ())) + _RANDOM_FIELDS + _REDUCED
-_BANDS = _MESH + (("materials", MODAL_ONLY_EXCLUDED), ("sections", ()),
-                  ("pads", MODAL_ONLY_EXCLUDED),
-                  ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ())
-                  ) + _RANDOM_FIELDS
-#: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
-#: dashpots and [damping] (the ratios only enter when composed, but the whole section is
-#: kept for safety). Whether the static fields are projected too is in the file's shape:
-#: one with them serves a run without the static correction as well.
-_MODAL_DAMPING = _MODAL + (("pads", ()), ("damping", ()))
-_MBS = _MESH + (("materials", ()), ("sections", ()), ("pads", ()),
-                ("modal", MODAL_SOLVER_LAYOUT), ("boundary", ()), ("damping", ()),
-                ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ())
-                ) + _RANDOM_FIELDS + _REDUCED
-_FIELDS = _MBS + (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
-                  ("output.static_correction_rates", ()))
-_PROBES = _MBS + (("output.window", ()), ("output.probes", ()),
-                  ("output.static_correction_rates", ()), ("probes", ()))
-_ALL: Selection = (("", ()),)
+#: Every case key: the products that depend on the whole case (``assessment.json``,
+#: ``result.json``).
+ALL_KEYS: Selection = (("", ()),)
 
 
 @dataclass(frozen=True)
@@ -209,6 +147,13 @@ class StageFile:
         Files written with it that must exist for it to be reused (XDMF, reports).
     input_files
         Case keys naming external files whose content is part of the inputs.
+    file
+        The file name on disk when it is not the table name (the transient stage's
+        ``fields.h5`` and ``probes.h5``).
+    check
+        Its data check (``check(path, full, context)``: a list of problems; one of
+        :mod:`railvib_hpc.io.formats`), run on write and on reuse; not part of the row's
+        identity.
     """
 
     name: str
@@ -219,6 +164,7 @@ class StageFile:
     companions: tuple[str, ...] = ()
     input_files: tuple[str, ...] = ()
     file: str = ""
+    check: Callable | None = field(default=None, compare=False, repr=False)
 
     @property
     def filename(self) -> str:
@@ -226,50 +172,90 @@ class StageFile:
         return self.file or self.name
 
 
-#: The full-order solution (``railvib transient``): everything that changes K, M, C, the
-#: loads and the time step; ``transient.checkpoint_interval`` is how it runs, not what.
-_TRANSIENT = _MESH + (("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()),
-                      ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()),
-                      ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
-                      ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
-                      ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
-                      ("output.dt", ()), ("track.end_stiffness", ()),
-                      ("track.end_damping", ())) + _RANDOM_FIELDS
-_TRANSIENT_FIELD_KEYS = _TRANSIENT + (("output.window", ()), ("output.float32", ()))
-_TRANSIENT_PROBE_KEYS = _TRANSIENT + (("output.probes", ()), ("output.probe_roles", ()),
-                                      ("probes", ()))
-_TRANSIENT_STATE = _TRANSIENT_FIELD_KEYS + (("output.probes", ()), ("output.probe_roles", ()),
-                                           ("probes", ()))
-_FILES = ("mesh.file", "irregularity.file")
+class ProductTable(MutableMapping):
+    """The product table, table name -> :class:`StageFile`: each row is declared by the
+    module of the stage that writes it (its ``STAGE``'s products, added by
+    :func:`declare`), so adding a stage adds its rows here.
+
+    Reading a name it lacks, or the whole table, first imports the registry's modules
+    (:data:`REGISTRY`'s ``declare_products``: every registered stage's module, by name, as
+    :mod:`railvib_hpc.pipeline` imports them), so the table is whole wherever it is read.
+    """
+
+    def __init__(self) -> None:
+        self._rows: dict[str, StageFile] = {}
+        self._whole = False
+        self._declaring = False
+
+    def declare_all(self) -> None:
+        """Declare every registered product (once; nothing while it declares them)."""
+        if self._whole or self._declaring:
+            return
+        self._declaring = True
+        try:
+            importlib.import_module(REGISTRY).declare_products()
+            self._whole = True
+        finally:
+            self._declaring = False
+
+    def declared(self, name: str) -> StageFile | None:
+        """The row of ``name`` if it is declared already (imports nothing)."""
+        return self._rows.get(name)
+
+    def __getitem__(self, name: str) -> StageFile:
+        if name not in self._rows:
+            self.declare_all()
+        return self._rows[name]
+
+    def __contains__(self, name: object) -> bool:
+        if name not in self._rows:
+            self.declare_all()
+        return name in self._rows
+
+    def __setitem__(self, name: str, row: StageFile) -> None:
+        self._rows[name] = row
+
+    def __delitem__(self, name: str) -> None:
+        del self._rows[name]
+
+    def __iter__(self) -> Iterator[str]:
+        self.declare_all()
+        return iter(dict(self._rows))
+
+    def __len__(self) -> int:
+        self.declare_all()
+        return len(self._rows)
+
+    def __repr__(self) -> str:
+        return f"ProductTable({list(self._rows)!r})"
 
 
-STAGE_FILES: dict[str, StageFile] = {f.name: f for f in (
-    StageFile(MESH_H5, "mesh", 2, _MESH, (), (MESH_XDMF, MESH_REPORT_JSON), ("mesh.file",)),
-    StageFile(MODES_H5, "modal", 2, _MODAL, (MESH_H5,), (MODES_XDMF,), ("mesh.file",)),
-    StageFile(STATIC_H5, "modal", 2, _MODAL, (MESH_H5, MODES_H5), (), ("mesh.file",)),
-    StageFile(MODAL_DAMPING_H5, "modal", 2, _MODAL_DAMPING, (MESH_H5, MODES_H5), (),
-              ("mesh.file",)),
-    StageFile(BAND_CACHE, "modal", 2, _BANDS, (), (), ("mesh.file",)),
-    StageFile(MBS_H5, "mbs", 2, _MBS, (MODES_H5, STATIC_H5, MODAL_DAMPING_H5), (),
-              ("mesh.file", "irregularity.file")),
-    StageFile(FIELDS_H5, "reconstruct", 2, _FIELDS, (MODES_H5, MBS_H5, STATIC_H5),
-              (FIELDS_XDMF,), ("mesh.file", "irregularity.file")),
-    StageFile(PROBES_H5, "reconstruct", 2, _PROBES, (MODES_H5, MBS_H5, STATIC_H5),
-              (), ("mesh.file", "irregularity.file")),
-    StageFile(ASSESSMENT_JSON, "assess", 2, _ALL,
-              (MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5),
-              (REPORT_MD, REPORT_HTML, REPORT_JSON), ("mesh.file", "irregularity.file")),
-    StageFile(RESULT_JSON, "study", 2, _ALL, (MODES_H5, STATIC_H5, MBS_H5, PROBES_H5,
-                                              TRANSIENT_H5),
-              (), ("mesh.file", "irregularity.file")),
-    StageFile(TRANSIENT_H5, "transient", 2, _TRANSIENT, (MESH_H5,), (), _FILES),
-    StageFile(TRANSIENT_FIELDS, "transient", 2, _TRANSIENT_FIELD_KEYS, (MESH_H5,),
-              (FIELDS_XDMF,), _FILES, file=FIELDS_H5),
-    StageFile(TRANSIENT_PROBES, "transient", 2, _TRANSIENT_PROBE_KEYS, (MESH_H5,), (),
-              _FILES, file=PROBES_H5),
-    StageFile(TRANSIENT_CHECKPOINT_H5, "transient", 2, _TRANSIENT_STATE, (MESH_H5,), (),
-              _FILES),
-)}
+#: The module whose ``declare_products()`` imports the modules that declare the products
+#: (the registry of the stages; imported by name, never by the io layer's code).
+REGISTRY = "railvib_hpc.pipeline"
+
+#: The one product table (rows declared by the stage modules).
+STAGE_FILES: ProductTable = ProductTable()
+
+
+def declare(row: StageFile) -> str:
+    """Add a product's row to :data:`STAGE_FILES` (its check, if any, to the checks'
+    table, :data:`~railvib_hpc.io.stage_checks.CHECKS`); returns its name.
+
+    A row already in the table must be the same row (a product is declared once).
+
+    Raises
+    ------
+    ValueError
+        For another row under a name the table already has.
+    """
+    known = STAGE_FILES.declared(row.name)
+    if known is not None and known != row:
+        raise ValueError(f"{row.name} is already a stage file of 'railvib {known.stage}'")
+    STAGE_FILES[row.name] = row
+    if row.check is not None:
+        CHECKS.setdefault(row.name, row.check)
+    return row.name
 
 
 def spec(name: str) -> StageFile:

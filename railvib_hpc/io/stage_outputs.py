@@ -27,7 +27,7 @@ Examples
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,8 +46,16 @@ from .files import (
 if TYPE_CHECKING:
     import numpy as np
 
-__all__ = ["AssessmentOutput", "FieldsOutput", "MeshOutput", "ModesOutput", "PassageOutput",
-           "StageOutput"]
+__all__ = ["SOLVER_STATISTICS", "AssessmentOutput", "FieldsOutput", "MeshOutput", "ModesOutput",
+           "PassageOutput", "StageOutput"]
+
+#: The eigensolver's statistics a :class:`ModesOutput` holds (``solver_statistics``: those
+#: of them its summary has, as recorded in ``modes.h5``; the studies' ``result.json``
+#: copies them).
+SOLVER_STATISTICS = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
+                     "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks",
+                     "time_assembly_total", "time_block_solves", "time_orthogonalization",
+                     "max_relative_residual", "reduced")
 
 
 @dataclass(frozen=True)
@@ -139,6 +147,9 @@ class ModesOutput(StageOutput):
         Peak memory over all ranks of the eigensolve [GB] (None when reused).
     n_nodes, n_hexes
         Size of the mesh of the modes (None with ``modal.band_only``).
+    solver_statistics
+        The eigensolver's statistics of :data:`SOLVER_STATISTICS` the modes were computed
+        with (those recorded; ``peak_rss_gb_total`` as recorded, also when reused).
     """
 
     modes_h5: Path | None
@@ -151,6 +162,7 @@ class ModesOutput(StageOutput):
     peak_rss_gb_total: float | None
     n_nodes: int | None = None
     n_hexes: int | None = None
+    solver_statistics: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
     def of_summary(cls, summary: dict, frequencies, out_dir: Path, static_correction: bool,
@@ -171,7 +183,9 @@ class ModesOutput(StageOutput):
                    peak_rss_gb_total=None if summary.get("reused")
                    else summary.get("peak_rss_gb_total"),
                    n_nodes=mesh_size[0] if mesh_size else None,
-                   n_hexes=mesh_size[1] if mesh_size else None)
+                   n_hexes=mesh_size[1] if mesh_size else None,
+                   solver_statistics={k: summary[k] for k in SOLVER_STATISTICS
+                                      if k in summary})
 
 
 @dataclass(frozen=True)

@@ -1,10 +1,14 @@
 """The stage protocol: every stage declared once (:class:`Stage`), run by :class:`StageRunner`.
 
-A stage module declares one :class:`Stage`: its name, its help line, its products (rows of
-:data:`~railvib_hpc.io.products.STAGE_FILES`, whose data checks are
-:data:`~railvib_hpc.io.stage_checks.CHECKS`: each row and each check is declared once, in
-that table), the upstream files it reads and ``compute(ctx)``. The case keys it depends
-on are its products' rows' (:attr:`Stage.case_keys`).
+A stage module declares one :class:`Stage`, in one place: its name, its help line, its
+products (:class:`~railvib_hpc.io.products.StageFile` rows: format version, the case keys
+each depends on, the upstream files it is computed from, its companion files and its data
+check; declaring the stage adds them to the one table,
+:data:`~railvib_hpc.io.products.STAGE_FILES`, and their checks to
+:data:`~railvib_hpc.io.stage_checks.CHECKS`), the upstream files it reads and
+``compute(ctx)``. The case keys it depends on are its products' rows'
+(:attr:`Stage.case_keys`). Adding a stage is its module and one line of the registry
+(:data:`railvib_hpc.pipeline.STAGES`).
 
 ``compute`` gets a :class:`StageContext` (case, output folder, communicator, reporter,
 PETSc options) and returns a frozen result (a :class:`StageOutput`). The context gives
@@ -39,13 +43,13 @@ from __future__ import annotations
 import contextlib
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from .digests import forget
 from .locks import output_lock
-from .products import STAGE_FILES, Selection, StageFile, spec
+from .products import Selection, StageFile, declare, spec
 from .provenance import Verdict, examine, provenance, require_inputs
 from .stage_checks import CHECKS
 from .stage_outputs import StageOutput
@@ -56,22 +60,17 @@ __all__ = ["NotReusable", "Reuse", "Stage", "StageContext", "StageOutput", "Stag
 
 # ----------------------------------------------------------------------------- declaration
 def declare_product(row: StageFile, check: Callable | None = None) -> str:
-    """Add a new product's row (and data check) to the one table; returns its name.
-
-    A row already in the table must be the same row (a product is declared once).
+    """Add a new product's row (and data check, default the row's) to the one table;
+    returns its name (:func:`~railvib_hpc.io.products.declare`).
 
     Raises
     ------
     ValueError
         For another row under a name the table already has.
     """
-    known = STAGE_FILES.get(row.name)
-    if known is not None and known != row:
-        raise ValueError(f"{row.name} is already a stage file of 'railvib {known.stage}'")
-    STAGE_FILES[row.name] = row
-    if check is not None:
-        CHECKS.setdefault(row.name, check)
-    return row.name
+    if check is not None and row.check is None:
+        row = replace(row, check=check)
+    return declare(row)
 
 
 @dataclass(frozen=True)
@@ -85,9 +84,9 @@ class Stage:
     help
         The command line's help line.
     products
-        The table names of the files it writes (rows of
-        :data:`~railvib_hpc.io.products.STAGE_FILES`); a new stage may give a new row
-        (a :class:`~railvib_hpc.io.products.StageFile`), which is added to the table.
+        The files it writes: their rows (:class:`~railvib_hpc.io.products.StageFile`,
+        added to :data:`~railvib_hpc.io.products.STAGE_FILES` when the stage is
+        declared); after the declaration, their table names.
     reads
         The table names of the upstream files it reads.
     compute

@@ -2,7 +2,8 @@
 
 Everything runs on rank 0 (numpy only); the other ranks wait for the summary
 (or the error) broadcast at the end. Output ``mbs.h5`` (written to a temporary
-name, renamed when complete, reused when its inputs are unchanged):
+name, renamed when complete, reused when its inputs are unchanged; writer and reader in
+:mod:`railvib_hpc.io.formats.mbs`):
 
 * ``/time`` (nt,) [s];
 * ``/wheels/x``, ``contact_force`` (positive: wheel pushes the rail down),
@@ -49,15 +50,18 @@ import numpy as np
 
 from ..config import Case
 from ..errors import DataError, ResourceError
-from ..io.atomic import atomic_file, ensure_space, write_h5
+from ..io.atomic import atomic_file, ensure_space
 from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
-from ..io.formats.mbs import check_mbs, check_mbs_arrays, rail_amplitude
+from ..io.formats.mbs import MbsStatic, check_mbs, check_mbs_arrays, rail_amplitude, write_mbs_h5
 from ..io.formats.modal_damping import check_modal_damping
 from ..io.formats.modes import check_modes
-from ..io.formats.static import check_static
+from ..io.formats.static import check_static, read_rail_statics
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import PassageOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
+from ..mesh.stage import MESH_KEYS
+from ..modal.stage import MODAL_SOLVER_LAYOUT, RANDOM_FIELDS, REDUCED
 from ..parallel import on_root
 from ..resources import check_memory
 from .case_vehicle import (
@@ -80,12 +84,8 @@ MAX_MBS_STEPS = 100_000_000
 
 def _read_static(out_dir: Path, n_r: int) -> tuple[np.ndarray, np.ndarray]:
     """``K^-1`` on the rail DOFs and the deflated static fields' mass from ``static.h5``."""
-    import h5py
-
     path = out_dir / STATIC_H5
-    with h5py.File(path, "r") as f:
-        x_rr = f["static/rail_flexibility"][()]
-        x_mass = f["static/residual_mass"][()]
+    x_rr, x_mass = read_rail_statics(path)
     if x_rr.shape != (n_r, n_r):
         raise MBSInputError(f"{path}: rail_flexibility has shape {x_rr.shape}, expected "
                             f"({n_r}, {n_r})")
@@ -265,12 +265,11 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
                         "settings")
     attrs = ctx.provenance(MBS_H5, upstream)
     attrs["stats"] = json.dumps(stats)
-
-    def fill(f, parallel: bool) -> None:
-        _write(f, case, result, rm, zeta, wheel_rail, vehicle, static, res)
-
-    write_h5(path, None, fill, size_hint=_result_nbytes(result), attrs=attrs,
-             check=lambda tmp: check_mbs(tmp, True, context))
+    write_mbs_h5(path, result, attrs=attrs, check=lambda tmp: check_mbs(tmp, True, context),
+                 rail_index=wheel_rail,
+                 wheel_height=None if vehicle is None else result.y @ vehicle.contact_matrix(),
+                 vehicle_type=case["vehicle.type"], omega=rm.omega, zeta=zeta,
+                 static=None if static is None else _mbs_static(static, rm, res))
     rep.info(f"wrote {path}")
     plots = write_plots(out_dir, result, vehicle)
     rep.info("wrote " + ", ".join(str(p) for p in plots))
@@ -338,15 +337,6 @@ def _split_residual(result, res, m: int):
     return kept, static
 
 
-def _result_nbytes(result) -> int:
-    """Predicted size of ``mbs.h5`` (its arrays; the static correction adds six more)."""
-    arrays = (result.t, result.x, result.contact_force, result.penetration,
-              result.rail_displacement, result.q, result.q_dot, result.q_ddot, result.y,
-              result.y_dot, result.y_ddot, result.rail_loads)
-    extra = 3 * (result.rail_loads.nbytes + result.q.nbytes) if result.rail_loads.size else 0
-    return int(sum(a.nbytes for a in arrays) + extra)
-
-
 def _on_flexible(result, rails) -> np.ndarray:
     """(nt, n_wheels) True where the wheel is on the flexible rail."""
     lo = min(r.x_nodes[0] for r in rails)
@@ -396,39 +386,12 @@ def format_summary(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def _write(f, case: Case, result, rm, zeta, wheel_rail, vehicle, static, res) -> None:
-    """Fill an open ``mbs.h5`` (layout in the module notes)."""
-    f["time"] = result.t
-    w = f.create_group("wheels")
-    w["x"] = result.x
-    w["contact_force"] = result.contact_force
-    w["penetration"] = result.penetration
-    w["rail_displacement"] = result.rail_displacement
-    w["rail_index"] = np.asarray(wheel_rail, dtype=np.int64)
-    if vehicle is not None:
-        w["wheel_height"] = result.y @ vehicle.contact_matrix()
-    v = f.create_group("vehicle")
-    v["y"], v["y_dot"], v["y_ddot"] = result.y, result.y_dot, result.y_ddot
-    v.attrs["dof_names"] = json.dumps(list(result.dof_names))
-    v.attrs["type"] = case["vehicle.type"]
-    mg = f.create_group("modal")
-    mg["q"], mg["q_dot"], mg["q_ddot"] = result.q, result.q_dot, result.q_ddot
-    if np.ndim(zeta) == 2:                 # coupled modes: the matrix and its diagonal
-        mg["damping_matrix"] = zeta
-        zeta = np.diag(zeta) / (2.0 * np.where(rm.omega > 0, rm.omega, 1.0))
-    mg["omega"], mg["zeta"] = rm.omega, zeta
-    if static is not None:
-        from .static_correction import rail_dof_rows
+def _mbs_static(static, rm, res) -> MbsStatic:
+    """The static correction as ``mbs.h5`` stores it (``g`` and its derivatives, the kept
+    modes' rail DOF rows, the residual modes)."""
+    from .static_correction import rail_dof_rows
 
-        s = f.create_group("static")
-        phi_r = rail_dof_rows(rm.rails)
-        for suffix, g in zip(("", "_dot", "_ddot"), static):
-            s["g" + suffix] = g
-            s["q_shift" + suffix] = -(g @ phi_r.T) / rm.omega**2
-        s["residual_omega"] = res.omega
-        s["residual_vectors"] = res.vectors
-        s.attrs["basis_file"] = STATIC_H5
-        s.attrs["basis"] = "static/translation"
+    return MbsStatic(static, rail_dof_rows(rm.rails), res.omega, res.vectors, STATIC_H5)
 
 
 def write_plots(out_dir: Path, result, vehicle) -> list[Path]:
@@ -483,8 +446,19 @@ def compute(ctx: StageContext) -> PassageOutput:
             simulate_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
 
 
+#: The passage's case keys: the model's (damping settings included, not the modal solver's
+#: layout), [damping], the vehicle, the irregularity (and its file) and [mbs].
+MBS_KEYS: Selection = MESH_KEYS + (
+    ("materials", ()), ("sections", ()), ("pads", ()), ("modal", MODAL_SOLVER_LAYOUT),
+    ("boundary", ()), ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()),
+    ("mbs", ())) + RANDOM_FIELDS + REDUCED
+#: ``mbs.h5``: computed from the modes (the static fields and the projected damping when
+#: the case uses them).
+MBS_FILE = StageFile(MBS_H5, "mbs", 2, MBS_KEYS, (MODES_H5, STATIC_H5, MODAL_DAMPING_H5), (),
+                     ("mesh.file", "irregularity.file"), check=check_mbs)
+
 STAGE = Stage(name="mbs", help="roll the vehicle over the flexible track in modal coordinates",
-              products=(MBS_H5,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
+              products=(MBS_FILE,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
               compute=compute)
 
 

@@ -13,6 +13,8 @@ from ..config import Case
 from ..errors import MeshError
 from ..io.atomic import write_text
 from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
+from ..io.formats.mesh import check_mesh, write_mesh_files
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import MeshOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..log import Reporter
@@ -22,7 +24,7 @@ from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
 from .gmsh_model import generate, read_msh
 from .interfaces import interface_nodes, split_interfaces
 from .layout import Layout, build_layout
-from .mesh_io import read_mesh_h5, write_mesh_files
+from .mesh_io import read_mesh_h5
 from .model import Mesh
 from .search import nonconformal_faces
 from .turn import turn_building, turn_line, turn_map
@@ -389,8 +391,24 @@ def compute(ctx: StageContext) -> MeshOutput:
     return on_root(work, ctx.comm)
 
 
+#: The soils' damping ratios do not size the mesh (their E, nu, rho do).
+_SOIL_WAVE_SPEED = ("damping_ratio",)
+#: The case keys of the mesh: its geometry and divisions, the soil layers, the elastic
+#: interfaces (they cut the mesh), and the soils' E, nu, rho (the wavelength sizing,
+#: mesh.elements_per_wavelength, reads their shear-wave speeds). (The supported track
+#: ends' springs and dashpots are K's and C's, not the mesh's.) Every later product
+#: depends on them.
+MESH_KEYS: Selection = (
+    ("geometry", ()), ("track", ("end_stiffness", "end_damping")), ("building", ()),
+    ("mesh", ()), ("domain", ()), ("soil", ()), ("trench", ()), ("wib", ()), ("usp", ()),
+    ("ballast_mat", ()), ("isolation", ()), ("materials.ballast", _SOIL_WAVE_SPEED),
+    ("materials.subballast", _SOIL_WAVE_SPEED), ("materials.subgrade", _SOIL_WAVE_SPEED))
+#: ``mesh.h5`` (with its XDMF view and quality report; the content of ``mesh.file``).
+MESH_FILE = StageFile(MESH_H5, "mesh", 2, MESH_KEYS, (), (MESH_XDMF, MESH_REPORT_JSON),
+                      ("mesh.file",), check=check_mesh)
+
 STAGE = Stage(name="mesh", help="build the gmsh model, check its quality, write "
-              "mesh.msh/.h5/.xdmf", products=(MESH_H5,), compute=compute)
+              "mesh.msh/.h5/.xdmf", products=(MESH_FILE,), compute=compute)
 
 
 def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -13,22 +13,25 @@ from ..config import Case
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
 from ..errors import DataError
 from ..io.atomic import ensure_space
-from ..io.files import BAND_CACHE, MESH_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
-from ..io.formats.bands import read_index
-from ..io.formats.modal_damping import write_damping_parts
+from ..io.files import BAND_CACHE, MESH_H5, MODAL_DAMPING_H5, MODES_H5, MODES_XDMF, STATIC_H5
+from ..io.formats.bands import check_band_cache, read_index
+from ..io.formats.modal_damping import check_modal_damping, write_damping_parts
 from ..io.formats.modes import (
     check_eigenvalues,
     check_mode_shapes,
+    check_modes,
     has_probe_roles,
     read_strain_energies,
     write_modes,
     write_modes_xdmf,
 )
+from ..io.formats.static import check_static
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import ModesOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
-from ..mesh.stage import build_or_reuse_mesh
+from ..mesh.stage import MESH_KEYS, build_or_reuse_mesh
 from ..parallel import on_root
 from ..problem import Problem
 from ..resources import peak_memory_gb
@@ -140,9 +143,56 @@ def compute(ctx: StageContext) -> ModesOutput:
                                   bool(ctx.case["mbs.static_correction"]), mesh_size)
 
 
+# ----------------------------------------------------------------------------- products
+#: The random fields of the soil layers (the element matrices: ``Problem.fields``); at
+#: their defaults (realisation 0: no field) they enter no digest.
+RANDOM_FIELDS: Selection = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
+                            ("uncertainty.seed", ()))
+#: A sample of the reduced model (``uncertainty.basis``: its modes are the reduced model's
+#: on the basis's nominal mesh, or a full solve on that mesh; at their defaults, a plain
+#: model, they enter no digest).
+REDUCED: Selection = (("uncertainty.basis", ()), ("uncertainty.reduced_tol", ()),
+                      ("uncertainty.reference", ()))
+#: How the modes are computed, not what they are: the out-of-core switch and the band
+#: split with its parallel layout (they change the modes by round-off only).
+MODAL_SOLVER_LAYOUT = ("out_of_core", "bands", "band_modes", "band_groups", "band_only")
+#: The damping settings of [modal] and [pads] (and the materials' ratios): not the modes.
+MODAL_DAMPING_KEYS = ("damping_ratio", "damping")
+#: Damping settings and the solver layout do not change the modes.
+MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
+#: A band of the band-sliced solve (its cache in ``<out>/bands``) depends on [modal] as the
+#: modes do, except on how many modes up to which frequency are wanted and on the basis
+#: and shift of an unsliced solve: the band cache's inputs leave them out, so raising
+#: ``modal.f_max`` keeps the cache and only adds bands.
+BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
+#: The modes' case keys (and the static fields'): the mesh's, materials, sections, pads and
+#: [modal] less damping and solver layout, the boundary, the random fields.
+MODES_KEYS: Selection = MESH_KEYS + (
+    ("materials", MODAL_ONLY_EXCLUDED), ("sections", ()), ("pads", MODAL_ONLY_EXCLUDED),
+    ("modal", MODAL_ONLY_EXCLUDED), ("boundary", ())) + RANDOM_FIELDS + REDUCED
+_BAND_KEYS: Selection = MESH_KEYS + (
+    ("materials", MODAL_ONLY_EXCLUDED), ("sections", ()), ("pads", MODAL_ONLY_EXCLUDED),
+    ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ())) + RANDOM_FIELDS
+#: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
+#: dashpots and [damping] (the ratios only enter when composed, but the whole section is
+#: kept for safety). Whether the static fields are projected too is in the file's shape:
+#: one with them serves a run without the static correction as well.
+_DAMPING_KEYS: Selection = MODES_KEYS + (("pads", ()), ("damping", ()))
+#: The products: the modes (and their XDMF view), the static fields, the projected damping,
+#: the band cache (:mod:`~railvib_hpc.io.formats.bands`).
+PRODUCTS = (
+    StageFile(MODES_H5, "modal", 2, MODES_KEYS, (MESH_H5,), (MODES_XDMF,), ("mesh.file",),
+              check=check_modes),
+    StageFile(STATIC_H5, "modal", 2, MODES_KEYS, (MESH_H5, MODES_H5), (), ("mesh.file",),
+              check=check_static),
+    StageFile(MODAL_DAMPING_H5, "modal", 2, _DAMPING_KEYS, (MESH_H5, MODES_H5), (),
+              ("mesh.file",), check=check_modal_damping),
+    StageFile(BAND_CACHE, "modal", 2, _BAND_KEYS, (), (), ("mesh.file",),
+              check=check_band_cache),
+)
+
 STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
-              products=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5, BAND_CACHE), reads=(MESH_H5,),
-              compute=compute, petsc=True)
+              products=PRODUCTS, reads=(MESH_H5,), compute=compute, petsc=True)
 
 
 def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

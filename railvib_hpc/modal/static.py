@@ -5,7 +5,7 @@ displacement) and ``ry`` (rotation about the lateral axis), the static response
 ``x = K^-1 e`` to a unit load on that DOF. Computed with the Cholesky factor of
 K of the block Lanczos eigensolve when it factors K itself (shift 0), else
 with its own factorization. Written to ``static.h5`` (collective, like
-``modes.h5``):
+``modes.h5``; the format, its writer and reader: :mod:`railvib_hpc.io.formats.static`):
 
 * ``/static/rail_flexibility`` (n_r, n_r): ``K^-1`` on the rail DOFs (zero rows and
   columns for constrained DOFs, e.g. rotations fixed at the pads);
@@ -29,8 +29,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from ..io.atomic import write_h5
-from ..io.formats.static import check_static
+from ..io.formats.static import write_static_h5
 from ..io.parallel_h5 import h5py_parallel_ok
 
 if TYPE_CHECKING:
@@ -140,23 +139,8 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
         if comm.rank == 0:
             translation = np.concatenate(parts, axis=1)
             nodes = slice(0, mesh.n_nodes)
-
-    def fill(f, par: bool) -> None:
-        g = f.create_group("static")
-        d_f = g.create_dataset("rail_flexibility", (n_r, n_r), "f8")
-        d_m = g.create_dataset("residual_mass", (n_r, n_r), "f8")
-        d_t = g.create_dataset("translation", (n_r, mesh.n_nodes, 3), "f8")
-        d_l = g.create_dataset("load_dofs", table.shape, "i8")
-        if comm.rank == 0:
-            d_f[...] = flex
-            d_m[...] = mass
-            d_l[...] = table
-        if nodes.stop > nodes.start:
-            d_t[:, nodes, :] = translation
-
-    size = 8 * (n_r * mesh.n_nodes * 3 + 2 * n_r * n_r + table.size)
-    return write_h5(path, comm, fill, size_hint=size, attrs=attrs, parallel=parallel,
-                    check=lambda tmp: check_static(tmp, False))
+    return write_static_h5(path, comm, mesh.n_nodes, flex, mass, table, translation, nodes,
+                           attrs, parallel)
 
 
 def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:

@@ -65,9 +65,15 @@ import numpy as np
 from .. import __version__
 from ..io.atomic import write_h5
 from ..io.formats.checks import nonfinite
-from ..io.formats.fields import check_fields
+from ..io.formats.fields import (  # FIELD_NAMES, write_fields_xdmf re-exported
+    FIELD_NAMES,
+    check_fields,
+    create_fields,
+    fill_fields_mesh,
+    set_fields_attrs,
+    write_fields_xdmf,
+)
 from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
-from ..io.xdmf import H5Array, Series, hex_mesh, write_series
 from ..log import Reporter
 from ..parallel import check_collective, on_root
 
@@ -76,8 +82,6 @@ if TYPE_CHECKING:
 
 #: Upper bound for the per-rank output buffers of one block of steps (bytes).
 OUTPUT_BUDGET_BYTES = 512 * 2**20
-#: Names of the three reconstructed fields, in the order they are computed.
-FIELD_NAMES = ("displacement", "velocity", "acceleration")
 
 #: An extra basis: (h5 file, dataset of shape (k, n, 3), g (nt, k), g_dot, g_ddot).
 ExtraBasis = tuple[str | os.PathLike, str, np.ndarray, np.ndarray, np.ndarray]
@@ -243,9 +247,11 @@ def reconstruct_fields(modes_path: str | os.PathLike, out_path: str | os.PathLik
         dsets: dict = {}
         try:
             if f is not None:
-                dsets = _create(f, ns, n, basis.hexes_shape, basis.hexes_dtype,
-                                basis.part_dtype, dtype)
-                _set_attrs(f, m, n_basis - m, float32, nb, modes_path)
+                dsets = create_fields(f, ns, n, basis.hexes_shape, basis.hexes_dtype,
+                                      basis.part_dtype, dtype)
+                set_fields_attrs(f, n_modes=m, n_extra=n_basis - m, float32=float32,
+                                 block_steps=nb, modes_file=modes_path.name,
+                                 railvib_version=__version__)
             if comm.rank == 0:
                 _copy_mesh(modes_path, dsets, t[steps],
                            steps if step_numbers is None else np.asarray(step_numbers))
@@ -381,39 +387,14 @@ def _mpi_max():
     return MPI.MAX
 
 
-def _create(f, ns: int, n: int, hshape, hdtype: str, pdtype: str, dtype) -> dict:
-    """Create every dataset at its global size (collective: identical on all ranks)."""
-    out = {"time": f.create_dataset("time", (ns,), "f8"),
-           "steps": f.create_dataset("steps", (ns,), "i8")}
-    g = f.create_group("fields")
-    for name in FIELD_NAMES:
-        out[name] = g.create_dataset(name, (ns, n, 3), dtype)     # contiguous layout
-    gm = f.create_group("mesh")
-    out["points"] = gm.create_dataset("points", (n, 3), "f8")
-    out["hexes"] = gm.create_dataset("hexes", tuple(hshape), np.dtype(hdtype))
-    out["hex_part"] = gm.create_dataset("hex_part", (hshape[0],), np.dtype(pdtype))
-    return out
-
-
-def _set_attrs(f, m: int, k: int, float32: bool, nb: int, modes_path: Path) -> None:
-    f.attrs["n_modes"] = m
-    f.attrs["n_extra"] = k
-    f.attrs["float32"] = int(bool(float32))
-    f.attrs["block_steps"] = nb
-    f.attrs["modes_file"] = modes_path.name
-    f.attrs["railvib_version"] = __version__
-
-
 def _copy_mesh(modes_path: Path, dsets: dict, times: np.ndarray, steps: np.ndarray) -> None:
     """Rank 0: copy the mesh arrays from ``modes.h5`` and write the times."""
     import h5py
 
     with h5py.File(modes_path, "r") as src:
-        for key in ("points", "hexes", "hex_part"):
-            if dsets[key].size:
-                dsets[key][...] = src["mesh/" + key][()]
-    dsets["time"][...] = times
-    dsets["steps"][...] = steps
+        mesh = [src["mesh/" + key][()] if dsets[key].size else None
+                for key in ("points", "hexes", "hex_part")]
+    fill_fields_mesh(dsets, times, steps, *mesh)
 
 
 def _stream(comm: MPI.Comm, dsets: dict, hist: list[np.ndarray], phi2: np.ndarray, buf: np.ndarray,
@@ -504,33 +485,3 @@ def _gather_write(comm: MPI.Comm, ds, block: np.ndarray, s0: int, b: int, ranges
                 error = exc
     if error is not None:
         raise error
-
-
-# --------------------------------------------------------------------------- XDMF
-def write_fields_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Path:
-    """Write ``fields.xdmf`` (+ ``fields_views.h5``) next to ``h5_path``: one grid per
-    stored step with the displacement, velocity and acceleration (serial).
-
-    Parameters
-    ----------
-    h5_path
-        A ``fields.h5`` (complete, or the temporary file that becomes it).
-    name
-        File name the XDMF refers to (default: ``h5_path``'s name).
-
-    Returns
-    -------
-    Path
-        The XDMF file.
-    """
-    import h5py
-
-    h5_path = Path(h5_path)
-    name = name or h5_path.name
-    with h5py.File(h5_path, "r") as f:
-        points, block = hex_mesh(f, name)
-        times = f["time"][()]
-        series = [Series(k, H5Array.of(f, f"/fields/{k}", name), "Node") for k in FIELD_NAMES]
-    xdmf = h5_path.with_name(Path(name).stem + ".xdmf")
-    write_series(xdmf, points, block, times, series)
-    return xdmf

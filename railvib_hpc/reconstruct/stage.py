@@ -75,24 +75,21 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
-from ..io.formats.mbs import check_mbs
+from ..io.formats.fields import FieldsFile, check_fields
+from ..io.formats.mbs import MbsFile, MbsFileError, check_mbs
 from ..io.formats.modes import check_modes
+from ..io.formats.probes import check_probes, write_probes_csv, write_probes_h5
 from ..io.formats.static import check_static
+from ..io.products import Selection, StageFile
 from ..io.stage_outputs import FieldsOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
+from ..mbs.stage import MBS_KEYS
 from ..parallel import on_root
 from ..site import line_probes
 from .fields import reconstruct_fields, write_fields_xdmf
-from .probes import (
-    UserProbes,
-    locate_probes,
-    probe_histories,
-    user_probe_dict,
-    write_probes_csv,
-    write_probes_h5,
-)
+from .probes import UserProbes, locate_probes, probe_histories, user_probe_dict
 from .stress import (
     hex_materials,
     rail_moment_history,
@@ -177,97 +174,21 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
         modes_key = file_digest(modes_path).sha256
         rails = "mesh/rail_nodes" in f and f["mesh/rail_nodes"].size > 0 \
             and "case_toml" in f.attrs and "modes/rotation" in f
-    with _open(mbs_path, "multibody results file") as f:
-        if int(_attr(f, "complete", 0)) != 1:
-            raise ReconstructInputError(f"{mbs_path} is incomplete (attribute complete != 1);"
-                                        " rerun the multibody stage")
-        t = _dataset(f, mbs_path, "time")[()]
-        if t.ndim != 1 or len(t) == 0:
-            raise ReconstructInputError(f"{mbs_path}: dataset 'time' has shape {t.shape}, "
-                                        "expected (nt,) with nt >= 1")
-        if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-            raise ReconstructInputError(f"{mbs_path}: 'time' must be finite and strictly "
-                                        "increasing")
-        nt = len(t)
-        if window is None:
-            i0, i1 = 0, nt
-        else:
-            t0, t1 = (float(v) for v in window)
-            if not t0 <= t1:
-                raise ReconstructInputError(f"time window {window!r}: start must not exceed "
-                                            "end")
-            i0, i1 = int(np.searchsorted(t, t0, "left")), int(np.searchsorted(t, t1, "right"))
-            if i1 <= i0:
-                raise ReconstructInputError(f"time window {window!r} contains no step of "
-                                            f"{mbs_path} (time {t[0]} .. {t[-1]} s)")
-        hist = _read_histories(f, mbs_path, ("modal/q", "modal/q_dot", "modal/q_ddot"), nt,
-                               i0, i1)
-        m = hist[0].shape[1]
-        if not 1 <= m <= n_modes:
-            raise ReconstructInputError(f"{mbs_path}: modal/q has {m} modal coordinates but "
-                                        f"{modes_path} holds {n_modes} modes (need 1 <= m <= "
-                                        f"{n_modes})")
-        for name, h in zip(("modal/q", "modal/q_dot", "modal/q_ddot"), hist):
-            if not np.all(np.isfinite(h)):
-                raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has non-finite "
-                                            "values")
-        mbs_key = file_digest(mbs_path).sha256
-        extra, static_key, k = [], "", 0
-        if "static" in f:
-            extra, static_key, k = _read_static(f["static"], mbs_path, nt, n, i0, i1)
-            # mode-acceleration: the static basis holds K^-1 g, so the modes' own static
-            # part Phi Lambda^-1 Phi_r^T g is removed from the modal coordinates
-            shifts = ("q_shift", "q_shift_dot", "q_shift_ddot")
-            for j, name in enumerate(shifts if correction_rates else shifts[:1]):
-                if f"static/{name}" in f:
-                    hist[j] = hist[j] + f[f"static/{name}"][i0:i1, :m]
-            if not correction_rates:
-                file, basis, g, g_dot, g_ddot = extra[0]
-                extra = [(file, basis, g, np.zeros_like(g_dot), np.zeros_like(g_ddot))]
+    try:
+        w = MbsFile(mbs_path).window(n_modes, n, window, correction_rates,
+                                     modes_name=str(modes_path))
+    except MbsFileError as exc:
+        raise ReconstructInputError(str(exc)) from None
+    mbs_key = file_digest(mbs_path).sha256
+    extra = [w.static] if w.static is not None else []
+    static_key = file_digest(Path(w.static[0])).sha256 if w.static is not None else ""
+    i0, i1, m, k = w.first, w.first + w.t.size, w.m, w.k
     steps = np.arange(0, i1 - i0, int(stride))
-    return {"t": t[i0:i1], "q": hist[0], "q_dot": hist[1], "q_ddot": hist[2], "first": i0,
+    return {"t": w.t, "q": w.q, "q_dot": w.q_dot, "q_ddot": w.q_ddot, "first": i0,
             "steps": steps, "extra": extra, "m": m, "k": k, "n_nodes": n, "n_modes": n_modes,
             "modes_key": modes_key, "mbs_key": mbs_key, "static_key": static_key,
             "static_file": extra[0][0] if extra else "", "rails": bool(rails),
             "n_hexes": int(n_hexes)}
-
-
-def _read_histories(f, mbs_path: Path, names: tuple[str, ...], nt: int, i0: int,
-                    i1: int) -> list[np.ndarray]:
-    """Rows ``i0:i1`` of the (nt, m) datasets ``names`` of ``mbs.h5`` (validated: present,
-    2-D with nt rows, the same number of columns)."""
-    hist = []
-    for name in names:
-        ds = _dataset(f, mbs_path, name)
-        if ds.ndim != 2 or ds.shape[0] != nt:
-            raise ReconstructInputError(f"{mbs_path}: dataset '{name}' has shape "
-                                        f"{ds.shape}, expected (nt, columns) with nt = {nt}")
-        hist.append(ds[i0:i1].astype(float))
-    if any(h.shape[1] != hist[0].shape[1] for h in hist):
-        raise ReconstructInputError(f"{mbs_path}: {', '.join(names)} have different shapes "
-                                    f"{[h.shape for h in hist]}")
-    return hist
-
-
-def _read_static(g, mbs_path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[list, str, int]:
-    """The static-correction basis of ``mbs.h5``'s ``/static`` group (validated)."""
-    for key in ("basis_file", "basis"):
-        if key not in g.attrs:
-            raise ReconstructInputError(f"{mbs_path}: group 'static' has no attribute '{key}'")
-    basis_file = (mbs_path.parent / str(_attr(g, "basis_file"))).resolve()
-    basis = str(_attr(g, "basis"))
-    hist = _read_histories(g.file, mbs_path, ("static/g", "static/g_dot", "static/g_ddot"), nt,
-                           i0, i1)
-    k = hist[0].shape[1]
-    with _open(basis_file, "static-correction basis file") as f:
-        if "complete" in f.attrs and int(_attr(f, "complete")) != 1:
-            raise ReconstructInputError(f"{basis_file} is incomplete (attribute complete != 1)")
-        ds = _dataset(f, basis_file, basis)
-        if ds.shape != (k, n, 3):
-            raise ReconstructInputError(f"{basis_file}: dataset '{basis}' has shape {ds.shape},"
-                                        f" expected (k, n, 3) = ({k}, {n}, 3) to match "
-                                        f"{mbs_path}:static/g and the modes")
-    return [(str(basis_file), basis, *hist)], file_digest(basis_file).sha256, k
 
 
 def _upstream(info: dict) -> dict[str, str]:
@@ -314,7 +235,6 @@ def _refresh_xdmf(xdmf: Path, write, comm, rep: Reporter) -> None:
 
 def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) -> dict:
     """Which outputs in the context's folder are current and sound (rank 0); says why not."""
-    import h5py
 
     out_dir = ctx.out_dir
     ok = {"fields": False, "stress": False, "probes": False}
@@ -323,10 +243,8 @@ def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) 
                              upstream=upstream).ok
     if ok["fields"] and want_stress:
         try:
-            with h5py.File(fields, "r") as f:
-                ok["stress"] = ("stress" in f and int(_attr(f, "stress_complete", 0)) == 1
-                                and _attr(f["stress"], "inputs_sha256") == keys["stress"]
-                                and (out_dir / STRESS_XDMF).is_file())
+            ok["stress"] = (FieldsFile(fields).stress_current(keys["stress"])
+                            and (out_dir / STRESS_XDMF).is_file())
         except (OSError, KeyError):
             ok["stress"] = False
     ok["probes"] = ctx.reuse(PROBES_H5, path=out_dir / PROBES_H5,
@@ -337,15 +255,12 @@ def _reusable(ctx: StageContext, keys: dict, upstream: dict, want_stress: bool) 
 def reconstruct_options(case, out_dir: Path) -> dict:
     """Stride, window, precision, stress times and user probes from ``[output]`` (rank 0;
     the stride is ``output.dt`` over the step of ``mbs.h5``)."""
-    import h5py
-
     mbs = out_dir / MBS_H5
     stride = 1
     if mbs.exists() and case["output.dt"] > 0:
-        with h5py.File(mbs, "r") as f:
-            t = f["time"][:2]
-        if t.size == 2:
-            stride = max(1, int(round(case["output.dt"] / float(t[1] - t[0]))))
+        dt = MbsFile(mbs).time_step()
+        if dt is not None:
+            stride = max(1, int(round(case["output.dt"] / dt)))
     w = case["output.window"]
     probes = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
     names = [f"user_{i + 1}" for i in range(len(probes))]
@@ -362,13 +277,10 @@ def reconstruct_options(case, out_dir: Path) -> dict:
 def input_files(out_dir: Path) -> tuple[str, ...]:
     """The stage files the reconstruction reads (``static.h5`` when ``mbs.h5`` has a
     static correction)."""
-    import h5py
-
     names = [MODES_H5, MBS_H5]
     try:
-        with h5py.File(out_dir / MBS_H5, "r") as f:
-            if "static" in f:
-                names.insert(1, STATIC_H5)
+        if MbsFile(out_dir / MBS_H5).has_static_correction():
+            names.insert(1, STATIC_H5)
     except OSError:
         pass
     return tuple(names)
@@ -396,7 +308,8 @@ def compute(ctx: StageContext) -> FieldsOutput:
     summary = _outputs(ctx, out_dir / MODES_H5, out_dir / MBS_H5, **opts)
 
     def output() -> FieldsOutput:
-        from .probes import probe_peaks, read_probes
+        from ..io.formats.probes import read_probes
+        from .probes import probe_peaks
 
         def present(name: str) -> Path | None:
             return out_dir / name if (out_dir / name).exists() else None
@@ -413,9 +326,26 @@ def compute(ctx: StageContext) -> FieldsOutput:
     return on_root(output, ctx.comm)
 
 
+#: The fields' case keys: the passage's, the output steps and window, the precision and
+#: the static correction's rates.
+FIELDS_KEYS: Selection = MBS_KEYS + (("output.dt", ()), ("output.window", ()),
+                                     ("output.float32", ()),
+                                     ("output.static_correction_rates", ()))
+#: The probes' case keys: the passage's, the window, the probes and [probes].
+PROBES_KEYS: Selection = MBS_KEYS + (("output.window", ()), ("output.probes", ()),
+                                     ("output.static_correction_rates", ()), ("probes", ()))
+#: The products: ``fields.h5`` (and its XDMF view) and ``probes.h5``, computed from the
+#: modes and the passage (and the static fields with the static correction).
+PRODUCTS = (
+    StageFile(FIELDS_H5, "reconstruct", 2, FIELDS_KEYS, (MODES_H5, MBS_H5, STATIC_H5),
+              (FIELDS_XDMF,), ("mesh.file", "irregularity.file"), check=check_fields),
+    StageFile(PROBES_H5, "reconstruct", 2, PROBES_KEYS, (MODES_H5, MBS_H5, STATIC_H5), (),
+              ("mesh.file", "irregularity.file"), check=check_probes),
+)
+
 STAGE = Stage(name="reconstruct", help="rebuild displacement/velocity/acceleration fields of "
-              "every node", products=(FIELDS_H5, PROBES_H5),
-              reads=(MODES_H5, STATIC_H5, MBS_H5), compute=compute)
+              "every node", products=PRODUCTS, reads=(MODES_H5, STATIC_H5, MBS_H5),
+              compute=compute)
 
 
 def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,

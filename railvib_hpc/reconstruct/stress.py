@@ -58,6 +58,7 @@ from ..fem.beam import shear_deformation_factors, shear_modulus
 from ..fem.material import lame_parameters
 from ..fem.reference import hex_centre_gradients
 from ..io.files import STRESS_XDMF
+from ..io.formats.fields import FieldsFile
 from ..io.parallel_h5 import h5py_parallel_ok, open_h5, read_slab, write_slab
 from ..io.temp_names import final_name
 from ..log import Reporter
@@ -384,14 +385,7 @@ def stress_from_fields(fields_path: str | os.PathLike, comm: MPI.Comm, times: Se
     fields_path = Path(fields_path)
     parallel = h5py_parallel_ok(comm)
 
-    def header():
-        import h5py
-
-        with h5py.File(fields_path, "r") as f:
-            return (int(f.attrs.get("complete", 0)), f["time"][()], f["fields/displacement"].shape,
-                    f["mesh/hexes"].shape)
-
-    complete, stored, ushape, hshape = on_root(header, comm)
+    complete, stored, ushape, hshape = on_root(FieldsFile(fields_path).header, comm)
     if require_complete and complete != 1:  # the same decision on every rank
         raise ValueError(f"{fields_path} is not complete")
     sel = select_steps(stored, times)

@@ -73,6 +73,7 @@ from ..io.files import (
     STATIC_H5,
     TRANSIENT_H5,
 )
+from ..io.products import ALL_KEYS, StageFile, declare
 from ..io.provenance import examine, provenance
 from ..io.stage_protocol import StageRunner
 from ..log import Reporter
@@ -89,6 +90,12 @@ ASSESSMENT_BAND_HZ = (1.0, 80.0)
 #: Bumped when the content of ``result.json`` changes (part of the variant digest).
 RESULT_FORMAT = "railvib_hpc.study/1"
 RESULT_NAME = RESULT_JSON
+#: ``result.json`` of a variant: the whole variant case (and the study's settings, in the
+#: digest the study gives it), computed from the modal solution's files or the full-order
+#: solution's (``transient.h5``).
+RESULT_FILE = declare(StageFile(RESULT_JSON, "study", 2, ALL_KEYS,
+                                (MODES_H5, STATIC_H5, MBS_H5, PROBES_H5, TRANSIENT_H5), (),
+                                ("mesh.file", "irregularity.file")))
 FAILED_NAME = FAILED_JSON
 SHARED_DIR = "model"
 #: Files of the shared model linked into each variant folder.
@@ -235,19 +242,14 @@ def model_info(modal, modes_used: int | None, n_frequencies: int = 10) -> dict:
     """Size, frequencies and solver statistics of the modes the ``modal`` stage returned
     (its :class:`~railvib_hpc.modal.stage.ModesOutput`, computed or reused)."""
     freq = np.asarray(modal.frequencies_hz)
-    stats = modal.summary
     info = {"n_nodes": int(modal.n_nodes),
             "n_hexes": None if modal.n_hexes is None else int(modal.n_hexes),
             "n_dofs": int(modal.n_dofs or 0)}
     m = int(modes_used or len(freq))
-    keep = ("factor_memory_gb", "time_factorization", "time_solve", "linear_solves",
-            "peak_rss_gb_total", "peak_rss_gb_per_rank", "ranks", "time_assembly_total",
-            "time_block_solves", "time_orthogonalization", "max_relative_residual",
-            "reduced")
     info.update({"modes_in_file": len(freq), "modes_used": m,
                  "frequencies_hz": freq[:n_frequencies].tolist(),
                  "f_max_hz": float(freq[m - 1]),
-                 "modal": {k: stats[k] for k in keep if k in stats}})
+                 "modal": dict(modal.solver_statistics)})
     return info
 
 
@@ -290,7 +292,8 @@ def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
         ``probes``, ``assessment``, ``spectra`` (see the module notes), ``n_steps``,
         ``duration``.
     """
-    from ..reconstruct.probes import probe_histories, write_probes_h5
+    from ..io.formats.probes import write_probes_h5
+    from ..reconstruct.probes import probe_histories
     from ..reconstruct.stage import read_inputs
 
     modes, mbs = vdir / MODES_H5, vdir / MBS_H5
@@ -488,7 +491,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
                         runner: StageRunner, settings: dict[str, Any]) -> dict:
     """A variant solved by the full-order time integration (the ``transient`` stage:
     reused when current, resumed from a current checkpoint)."""
-    from ..reconstruct.probes import read_probes
+    from ..io.formats.probes import read_probes
 
     vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
     t_start = time.perf_counter()
@@ -505,7 +508,7 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
             model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,
                      "n_hexes": None, "modes_in_file": None, "modes_used": None,
                      "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
-                     "solver": "direct", "engine": stats.summary.get("engine", "direct"),
+                     "solver": "direct", "engine": stats.engine,
                      "dt": stats.dt, "n_steps": stats.n_steps,
                      "time_integration": stats.time_integration,
                      "peak_rss_gb_total": stats.peak_rss_gb_total}

@@ -181,30 +181,23 @@ class FieldWriter:
     def _create(self, mesh: Mesh, attrs: dict) -> None:
         import h5py
 
+        from ..io.formats.fields import create_fields, fill_fields_mesh, set_fields_attrs
+
         f = self.file
-        f.create_dataset("time", (self.ns,), "f8")
-        f.create_dataset("steps", (self.ns,), "i8")
-        g = f.create_group("fields")
         # storage allocated now (no fill written): after the first :meth:`sync` the file's
         # metadata on disk does not change any more, so a killed run leaves a readable file
         dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
         dcpl.set_alloc_time(h5py.h5d.ALLOC_TIME_EARLY)
         dcpl.set_fill_time(h5py.h5d.FILL_TIME_NEVER)
-        for name in ("displacement", "velocity", "acceleration"):
-            g.create_dataset(name, (self.ns, self.n, 3), self.dtype, dcpl=dcpl)
-        gm = f.create_group("mesh")
-        gm.create_dataset("points", (self.n, 3), "f8")
-        gm.create_dataset("hexes", mesh.hexes.shape, mesh.hexes.dtype)
-        gm.create_dataset("hex_part", mesh.hex_part.shape, mesh.hex_part.dtype)
-        f.attrs.update({**attrs, "n_modes": 0, "n_extra": 0, "float32": int(self.float32),
-                        "block_steps": self.block, "solver": "transient",
-                        "modes_file": "", "complete": 0})
+        dsets = create_fields(f, self.ns, self.n, mesh.hexes.shape, mesh.hexes.dtype,
+                              mesh.hex_part.dtype, self.dtype, dcpl=dcpl)
+        f.attrs.update(attrs)
+        set_fields_attrs(f, n_modes=0, n_extra=0, float32=self.float32,
+                         block_steps=self.block, solver="transient", modes_file="",
+                         complete=0)
         if self.comm.rank == 0:
-            f["time"][...] = self.times
-            f["steps"][...] = self.steps
-            gm["points"][...] = mesh.points
-            gm["hexes"][...] = mesh.hexes
-            gm["hex_part"][...] = mesh.hex_part
+            fill_fields_mesh(dsets, self.times, self.steps, mesh.points, mesh.hexes,
+                             mesh.hex_part)
 
     def put(self, k: int, u: np.ndarray, v: np.ndarray, a: np.ndarray) -> None:
         """Buffer output step ``k`` (index into ``times``) from local DOF arrays."""
@@ -296,9 +289,8 @@ class FieldWriter:
         rename and record ``fields.h5``; write ``fields.xdmf`` (rank 0). Returns the content
         digest."""
         from ..io.atomic import commit_h5
-        from ..io.formats.fields import check_fields
+        from ..io.formats.fields import check_fields, write_fields_xdmf
         from ..parallel import on_root
-        from ..reconstruct.fields import write_fields_xdmf
 
         self.close()
         self.comm.Barrier()

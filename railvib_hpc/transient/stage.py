@@ -68,6 +68,7 @@ from ..io.atomic import ensure_space, write_h5
 from ..io.digests import digest, record_file
 from ..io.files import (
     FIELDS_H5,
+    FIELDS_XDMF,
     MESH_H5,
     PROBES_CSV_DIR,
     PROBES_H5,
@@ -77,12 +78,16 @@ from ..io.files import (
     TRANSIENT_H5,
     TRANSIENT_PROBES,
 )
-from ..io.formats.transient import check_transient
-from ..io.products import inputs_hash
+from ..io.formats.fields import check_fields
+from ..io.formats.probes import check_probes
+from ..io.formats.transient import check_checkpoint, check_transient
+from ..io.products import Selection, StageFile, inputs_hash
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.temp_names import resume_path
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
+from ..mesh.stage import MESH_KEYS
+from ..modal.stage import RANDOM_FIELDS
 from ..parallel import on_root
 from ..problem import Problem
 from ..resources import check_memory, peak_memory_gb
@@ -156,12 +161,10 @@ def stress_key(case: Case) -> str:
 
 
 def _stress_current(out_dir: Path, key: str) -> bool:
-    import h5py
+    from ..io.formats.fields import FieldsFile
 
     try:
-        with h5py.File(out_dir / FIELDS_H5, "r") as f:
-            ok = ("stress" in f and int(f.attrs.get("stress_complete", 0)) == 1
-                  and f["stress"].attrs.get("inputs_sha256") == key)
+        ok = FieldsFile(out_dir / FIELDS_H5).stress_current(key)
     except (OSError, KeyError):
         return False
     return ok and (out_dir / STRESS_XDMF).is_file()
@@ -178,11 +181,11 @@ def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
         return
 
     def check_times() -> int:
-        import h5py
+        from ..io.formats.fields import FieldsFile
 
-        with h5py.File(fields, "r") as f:
-            _check_stress_times(case, f["time"][()])
-            n_hexes = f["mesh/hexes"].shape[0]
+        stored = FieldsFile(fields)
+        _check_stress_times(case, stored.times())
+        n_hexes = stored.n_hexes()
         ensure_space(out_dir, _stress_bytes(case, n_hexes), "the stresses of fields.h5")
         return n_hexes
 
@@ -437,6 +440,9 @@ class TransientOutput(StageOutput):
         Largest rail deflection under a wheel [m].
     loss_of_contact_steps
         Steps in which a wheel lost contact.
+    engine
+        The time integration's engine (``transient.engine``; ``direct`` for results
+        recorded before there were others).
     """
 
     n_nodes: int
@@ -450,6 +456,7 @@ class TransientOutput(StageOutput):
     min_contact_force: np.ndarray
     max_rail_deflection: float | None
     loss_of_contact_steps: int
+    engine: str = "direct"
 
     @classmethod
     def of_stats(cls, stats: dict) -> TransientOutput:
@@ -466,7 +473,8 @@ class TransientOutput(StageOutput):
                    peak_contact_force=per_wheel("peak_contact_force"),
                    min_contact_force=per_wheel("min_contact_force"),
                    max_rail_deflection=None if deflection is None else float(deflection),
-                   loss_of_contact_steps=int(stats.get("loss_of_contact_steps", 0)))
+                   loss_of_contact_steps=int(stats.get("loss_of_contact_steps", 0)),
+                   engine=stats.get("engine", "direct"))
 
 
 def compute(ctx: StageContext) -> TransientOutput:
@@ -490,9 +498,41 @@ def compute(ctx: StageContext) -> TransientOutput:
                                                ctx.options.get("stop_after")))
 
 
+# ----------------------------------------------------------------------------- products
+#: The full-order solution's case keys: everything that changes K, M, C, the loads and the
+#: time step (no ``[mbs]`` key: it has its own time step and contact loop; of ``[modal]``
+#: only the keys that change K, M and C); ``transient.checkpoint_interval`` is how it
+#: runs, not what.
+TRANSIENT_KEYS: Selection = MESH_KEYS + (
+    ("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()), ("damping", ()),
+    ("vehicle", ()), ("train2", ()), ("irregularity", ()),
+    ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
+    ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
+    ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
+    ("output.dt", ()), ("track.end_stiffness", ()), ("track.end_damping", ())) + RANDOM_FIELDS
+_FIELD_KEYS: Selection = TRANSIENT_KEYS + (("output.window", ()), ("output.float32", ()))
+_PROBE_KEYS: Selection = TRANSIENT_KEYS + (("output.probes", ()), ("output.probe_roles", ()),
+                                           ("probes", ()))
+#: The checkpoint resumes all three products: the union of their keys.
+_STATE_KEYS: Selection = _FIELD_KEYS + (("output.probes", ()), ("output.probe_roles", ()),
+                                        ("probes", ()))
+_FILES = ("mesh.file", "irregularity.file")
+#: The rows of the products and the checkpoint: ``fields.h5`` and ``probes.h5`` in the
+#: layout of ``reconstruct`` under their own table names (``transient:fields.h5``, ...).
+ROWS = (
+    StageFile(HISTORIES, "transient", 2, TRANSIENT_KEYS, (MESH_H5,), (), _FILES,
+              check=check_transient),
+    StageFile(FIELDS, "transient", 2, _FIELD_KEYS, (MESH_H5,), (FIELDS_XDMF,), _FILES,
+              file=FIELDS_H5, check=check_fields),
+    StageFile(PROBES, "transient", 2, _PROBE_KEYS, (MESH_H5,), (), _FILES, file=PROBES_H5,
+              check=check_probes),
+    StageFile(CHECKPOINT, "transient", 2, _STATE_KEYS, (MESH_H5,), (), _FILES,
+              check=check_checkpoint),
+)
+
 STAGE = Stage(name="transient", help="direct time integration of the full FE model "
-              "(absorbing faces, causal waves)", products=PRODUCTS + (CHECKPOINT,),
-              reads=(MESH_H5,), compute=compute, petsc=True)
+              "(absorbing faces, causal waves)", products=ROWS, reads=(MESH_H5,),
+              compute=compute, petsc=True)
 
 
 def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
@@ -1270,7 +1310,7 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     """probes.h5 + probes/*.csv (layout of reconstruct, with the probes' roles) and the rail
     bending moments (rank 0)."""
     from ..fem.beam import shear_deformation_factors
-    from ..reconstruct.probes import write_probes_csv, write_probes_h5
+    from ..io.formats.probes import write_probes_csv, write_probes_h5
     from ..reconstruct.stress import rail_bending_moment, rail_section
     from ..schema import DEFAULT_PROBE_ROLE
 

@@ -4,21 +4,30 @@ check.
 ============================  ======================  =====================================
 file                          module                  writer and reader
 ============================  ======================  =====================================
-``mesh.h5``                   :mod:`.mesh`            :mod:`railvib_hpc.mesh.mesh_io`
+``mesh.h5``, ``mesh.xdmf``    :mod:`.mesh`            here (the reader gives the arrays:
+                                                      :mod:`railvib_hpc.mesh.mesh_io` makes
+                                                      the mesh model of them)
 ``modes.h5``, ``modes.xdmf``  :mod:`.modes`           here
-``static.h5``                 :mod:`.static`          :mod:`railvib_hpc.modal.static`
+``static.h5``                 :mod:`.static`          here (of arrays: :mod:`railvib_hpc.modal.
+                                                      static` forms them from the DOF map)
 ``modal_damping.h5``          :mod:`.modal_damping`   here
 ``bands/`` (the band cache)   :mod:`.bands`           here
-``mbs.h5``                    :mod:`.mbs`             :mod:`railvib_hpc.mbs.stage`
-``fields.h5``                 :mod:`.fields`          :mod:`railvib_hpc.reconstruct.fields`,
-                                                      :mod:`railvib_hpc.transient.output`
-``probes.h5``                 :mod:`.probes`          :mod:`railvib_hpc.reconstruct.probes`
+``mbs.h5``                    :mod:`.mbs`             here (of the passage duck-typed; one
+                                                      reader, :class:`.mbs.MbsFile`)
+``fields.h5``,                :mod:`.fields`          here (layout, XDMF, reader); the
+``fields.xdmf``                                       blocks are streamed by :mod:`railvib_hpc.
+                                                      reconstruct.fields` and :mod:`railvib_hpc.
+                                                      transient.output`
+``probes.h5``, ``probes/``    :mod:`.probes`          here
 ``transient.h5``,             :mod:`.transient`       :mod:`railvib_hpc.transient.stage`,
 ``transient_checkpoint.h5``                           :mod:`railvib_hpc.transient.output`
 ============================  ======================  =====================================
 
 Each module's docstring is the file's layout; its ``check_<file>`` is the data check
-(:data:`railvib_hpc.io.stage_checks.CHECKS`), on write and on reuse. A writer that takes
-a model object of a higher layer (the mesh, the DOF map, a stage's streams) lives with
-that stage, and the module names it. :mod:`.checks` has what the checks share.
+(:data:`railvib_hpc.io.stage_checks.CHECKS`), on write and on reuse. A writer here takes
+plain arrays, or a model object of a higher layer duck-typed (the mesh: its type is named
+under ``TYPE_CHECKING`` only, so the io layer imports nothing above it); a reader gives
+arrays, of which the stage builds its model objects (``mesh.h5``). The writers still with
+their stage (``transient.h5`` and the checkpoint) take a stage's streams; the module
+names them. :mod:`.checks` has what the checks share.
 """

@@ -255,7 +255,8 @@ def main() -> None:
         if args.json and "error" not in r:
             with open(args.json, "a") as fj:
                 fj.write(json.dumps({"name": name, "ranks": args.ranks, "wall": r["wall"],
-                                     "n_modes": len(r["lam"]), "stats": r["stats"]},
+                                     "n_modes": len(r["lam"]), "stats": r["stats"],
+                                     "eigenvalues": r["lam"].tolist()},
                                     default=float) + "\n")
         if "error" not in r:
             if ref_lam is None:

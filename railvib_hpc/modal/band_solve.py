@@ -720,7 +720,7 @@ def _band_grams(K, M, Phi: np.ndarray, comm, stiff: list[np.ndarray],
             c = slice(j, min(j + NORMALISE_CHUNK, b1))
             KP, MP = sparse_times_block_pair(K, M, Phi[:, c], comm)
             GK[:b0, c], GM[:b0, c] = Phi[:, :b0].T @ KP, Phi[:, :b0].T @ MP
-            progress("merge: Gram products", c.stop - edges[1], m - edges[1])
+            progress("merge: K- and M-Gram products", c.stop - edges[1], m - edges[1])
     out = []
     for G, diagonal in ((GK, stiff), (GM, gram)):
         comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
@@ -805,8 +805,10 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
         GK, GM = _band_grams(K, M, Phi, comm, [c.stiff for c in blocks],
                              [c.gram for c in blocks], progress)
         stats["merge_gram"] = "cross-band blocks (the bands' own blocks from their checks)"
-        result = _merge_as_they_are(Phi, np.concatenate(lams), bands, blocks, GK, GM, points,
-                                    counts, n_total, s, stats, t1)
+        # (one band: _merge_one_band's rule; it only comes here when that refused)
+        result = None if len(bands) == 1 else _merge_as_they_are(
+            Phi, np.concatenate(lams), bands, blocks, GK, GM, points, counts, n_total, s,
+            stats, t1)
         if result is not None:
             return result
     else:

@@ -25,7 +25,9 @@ all block solves (Lanczos and purification), orthogonalisation (Gram-Schmidt, th
 restarts, Ritz vectors), Lanczos's Rayleigh-Ritz convergence tests (and how many), the
 purification's K and M products and solve residuals, the final Rayleigh-Ritz step
 (projection, dense eigenproblem, rotation), the checks (``normalise_and_check``: K Phi and
-M Phi afresh, orthonormality, residuals, round-off floors) and the share of the last four
+M Phi afresh, orthonormality, residuals, round-off floors; since the fourth round of issue
+26 also the first pass over the Ritz vectors as block Lanczos returns them, whose K and M
+products were "purification" before) and the share of the last four
 in the eigensolve; then the purification's solves (inside "solves") and the whole time
 after the Lanczos phase (``time_purify_project``: purification with its solves, Rayleigh-
 Ritz, checks; bands summed, the merge added) and its share of the eigensolve. The load
@@ -255,7 +257,8 @@ def main() -> None:
         if args.json and "error" not in r:
             with open(args.json, "a") as fj:
                 fj.write(json.dumps({"name": name, "ranks": args.ranks, "wall": r["wall"],
-                                     "n_modes": len(r["lam"]), "stats": r["stats"]},
+                                     "n_modes": len(r["lam"]), "stats": r["stats"],
+                                     "eigenvalues": r["lam"].tolist()},
                                     default=float) + "\n")
         if "error" not in r:
             if ref_lam is None:

@@ -695,34 +695,39 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     return symmetric_from_upper(G)
 
 
-def _band_gram(A, Phi: np.ndarray, comm, diagonal: list[np.ndarray], progress=None,
-               phase: str = "merge: Gram products") -> np.ndarray:
-    """``Phi^T A Phi`` (all ranks) for ``Phi`` = the bands' modes side by side, whose
-    diagonal blocks (each band's ``Phi_b^T A Phi_b``) the bands' own checks measured of
-    these very vectors (``diagonal``): only the blocks between bands are formed, band
-    ``j``'s products against the bands before it, :data:`~railvib_hpc.modal.ritz.
-    NORMALISE_CHUNK` columns at a time (the sparse products of every band but the first,
-    and the dense products between bands only: measured at the issue-26 case, 2 bands of
-    161 and 135 modes, half of :func:`_gram`'s work)."""
+def _band_grams(K, M, Phi: np.ndarray, comm, stiff: list[np.ndarray],
+                gram: list[np.ndarray], progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """``Phi^T K Phi`` and ``Phi^T M Phi`` (all ranks) for ``Phi`` = the bands' modes side
+    by side, whose diagonal blocks (each band's ``Phi_b^T K Phi_b``, ``Phi_b^T M Phi_b``)
+    the bands' own checks measured of these very vectors (``stiff``, ``gram``): only the
+    blocks between bands are formed, band ``j``'s products against the bands before it,
+    :data:`~railvib_hpc.modal.ritz.NORMALISE_CHUNK` columns at a time (the sparse products
+    of every band but the first, and the dense products between bands only: measured at
+    the issue-26 case, 2 bands of 161 and 135 modes, half of :func:`_gram`'s work); the K
+    and M products of a chunk in one pass (the chunk copied to PETSc once)."""
     from mpi4py import MPI
 
     from .block_lanczos import no_progress, symmetric_from_upper
-    from .factor import sparse_times_block
+    from .factor import sparse_times_block_pair
     from .ritz import NORMALISE_CHUNK
 
     progress = progress or no_progress
     m = Phi.shape[1]
-    G = np.zeros((m, m))
-    edges = np.concatenate([[0], np.cumsum([len(d) for d in diagonal])])
+    GK, GM = np.zeros((m, m)), np.zeros((m, m))
+    edges = np.concatenate([[0], np.cumsum([len(d) for d in gram])])
     for b0, b1 in zip(edges[1:-1], edges[2:]):
         for j in range(b0, b1, NORMALISE_CHUNK):
             c = slice(j, min(j + NORMALISE_CHUNK, b1))
-            G[:b0, c] = Phi[:, :b0].T @ sparse_times_block(A, Phi[:, c], comm)
-            progress(phase, c.stop - edges[1], m - edges[1])
-    comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
-    for d, b0, b1 in zip(diagonal, edges[:-1], edges[1:]):
-        G[b0:b1, b0:b1] = np.triu(d)
-    return symmetric_from_upper(G)
+            KP, MP = sparse_times_block_pair(K, M, Phi[:, c], comm)
+            GK[:b0, c], GM[:b0, c] = Phi[:, :b0].T @ KP, Phi[:, :b0].T @ MP
+            progress("merge: K- and M-Gram products", c.stop - edges[1], m - edges[1])
+    out = []
+    for G, diagonal in ((GK, stiff), (GM, gram)):
+        comm.Allreduce(MPI.IN_PLACE, G, op=MPI.SUM)
+        for d, b0, b1 in zip(diagonal, edges[:-1], edges[1:]):
+            G[b0:b1, b0:b1] = np.triu(d)
+        out.append(symmetric_from_upper(G))
+    return out[0], out[1]
 
 
 def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
@@ -752,11 +757,13 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     import h5py
 
     per_band = [cache.find(b) for b in bands]
-    keeps = []
+    keeps, lams = [], []
     for rec in per_band:
         with h5py.File(s.cache_dir / rec.file, "r") as f:
             # the band's own modes and its margin, but nothing far above f_max
-            keeps.append(np.flatnonzero(f["eigenvalue"][()] <= lam_max * (1.0 + 0.05)))
+            lam_b = f["eigenvalue"][()]
+            keeps.append(np.flatnonzero(lam_b <= lam_max * (1.0 + 0.05)))
+            lams.append(lam_b[keeps[-1]])
     Phi = np.empty((r1 - r0, sum(len(k) for k in keeps)))
     col = 0
     for rec, keep in zip(per_band, keeps):
@@ -795,11 +802,15 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     known = [(proven or {}).get(b.index) for b in bands]
     if all(c is not None and c.gram is not None for c in known):
         blocks = [c.subset(k) for c, k in zip(known, keeps)]
-        GM = _band_gram(M, Phi, comm, [c.gram for c in blocks], progress,
-                        "merge: M-Gram products")
-        GK = _band_gram(K, Phi, comm, [c.stiff for c in blocks], progress,
-                        "merge: K-Gram products")
+        GK, GM = _band_grams(K, M, Phi, comm, [c.stiff for c in blocks],
+                             [c.gram for c in blocks], progress)
         stats["merge_gram"] = "cross-band blocks (the bands' own blocks from their checks)"
+        # (one band: _merge_one_band's rule; it only comes here when that refused)
+        result = None if len(bands) == 1 else _merge_as_they_are(
+            Phi, np.concatenate(lams), bands, blocks, GK, GM, points, counts, n_total, s,
+            stats, t1)
+        if result is not None:
+            return result
     else:
         GM = _gram(M, Phi, comm, progress=progress, phase="merge: M-Gram products")
         GK = _gram(K, Phi, comm, progress=progress, phase="merge: K-Gram products")
@@ -818,6 +829,73 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
                  time_merge_rayleigh_ritz=t_rr, merge_rayleigh_ritz="full")
     result = Eigenpairs(lam[:n_total], np.ascontiguousarray(Phi), stats)
     normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress)
+    result.warnings = convergence_verdict(result, s.tol)
+    return result
+
+
+#: A multi-band merge keeps the bands' modes as they are (no Rayleigh-Ritz step, no checks
+#: afresh: :func:`_merge_as_they_are`) when, each band's own modes taken once, the measured
+#: Gram matrices show them M-orthonormal and K-orthogonal as well as that step would make
+#: them: :data:`~railvib_hpc.modal.ritz.RAW_RITZ_GRAM` and
+#: :data:`~railvib_hpc.modal.ritz.RAW_RITZ_STIFF`, as for a band's own Ritz vectors.
+
+
+def _merge_as_they_are(Phi: np.ndarray, lam: np.ndarray, bands: list[Band],
+                       blocks: list[BandChecks], GK: np.ndarray, GM: np.ndarray,
+                       points: list[float], counts: list[int], n_total: int, s: BandSettings,
+                       stats: dict, t1: float) -> Eigenpairs | None:
+    """The merge of a multi-band plan without its Rayleigh-Ritz step, or ``None`` (the caller
+    runs it). ``Phi``, ``lam``: the candidates (the bands' kept modes side by side, as the
+    band files hold them bit for bit, and their eigenvalues); ``blocks``: their bands' checks
+    (:class:`BandChecks`); ``GK``, ``GM``: ``Phi^T K Phi`` and ``Phi^T M Phi``, measured
+    (:func:`_band_grams`: the bands' own blocks by their checks, the blocks between bands
+    afresh). Each band contributes the modes inside its own edges (``[lo, hi)``, at most
+    f_max): the duplicates of the neighbours' margins drop out. Taken when they are
+    ``n_total``, agree with every inertia count, and their Gram matrices (the submatrices of
+    ``GK``, ``GM``: every entry measured) meet :data:`~railvib_hpc.modal.ritz.
+    RAW_RITZ_GRAM` and :data:`~railvib_hpc.modal.ritz.RAW_RITZ_STIFF`: then the residuals
+    and round-off floors are the bands' (measured of these very vectors), the maxima of
+    ``|Phi^T M Phi - I|`` and ``|Phi^T K Phi - Lambda| / lambda_max`` are those of the
+    submatrices, and the rotation and the checks afresh (two sparse products per mode and
+    two Gram products) are saved. ``Phi`` is overwritten (the modes, ascending, in its
+    first ``n_total`` columns) only when taken."""
+    from .block_lanczos import narrow_columns, permute_columns
+    from .ritz import RAW_RITZ_GRAM, RAW_RITZ_STIFF
+
+    lam_max = float(omega2(s.f_max))
+    edges = np.concatenate([[0], np.cumsum([len(b.residuals) for b in blocks])])
+    own = []
+    for band, b0, b1 in zip(bands, edges[:-1], edges[1:]):
+        lo, hi, lb = float(omega2(band.lo_hz)), float(omega2(band.hi_hz)), lam[b0:b1]
+        own.append(b0 + np.flatnonzero((lb >= lo) & (lb < hi) & (lb <= lam_max)))
+    sel = np.concatenate(own)
+    sel = sel[np.argsort(lam[sel], kind="stable")]
+    if len(sel) != n_total or check_counts(points, counts, hz(lam[sel])):
+        stats["merge_as_they_are"] = "no: the bands' own modes do not match the counts"
+        return None
+    ix = np.ix_(sel, sel)
+    upper = np.triu(np.ones((n_total, n_total), dtype=bool))
+    err_m = float(np.abs(GM[ix] - np.eye(n_total))[upper].max(initial=0.0))
+    err_k = float(np.abs(GK[ix] - np.diag(lam[sel]))[upper].max(initial=0.0)
+                  / max(float(lam[sel].max(initial=0.0)), 1e-300))
+    stats.update(merge_raw_gram_error=err_m, merge_raw_stiffness_error=err_k)
+    if err_m > RAW_RITZ_GRAM or err_k > RAW_RITZ_STIFF * s.tol:
+        stats["merge_as_they_are"] = (f"no: Gram errors {err_m:.1e} (M), {err_k:.1e} (K) "
+                                      f"> {RAW_RITZ_GRAM:g}, {RAW_RITZ_STIFF:g} tol")
+        return None
+    residuals = np.concatenate([b.residuals for b in blocks])[sel]
+    floors = np.concatenate([b.floors for b in blocks])[sel]
+    rest = np.setdiff1d(np.arange(Phi.shape[1]), sel)
+    permute_columns(Phi, np.concatenate([sel, rest]))
+    result = Eigenpairs(lam[sel].copy(), narrow_columns(Phi, n_total), stats)
+    result.residuals, result.residual_floors = residuals, floors
+    stats.update(max_orthonormality_error=err_m, max_stiffness_diag_error=err_k,
+                 max_relative_residual=float(residuals.max(initial=0.0)),
+                 max_residual_floor=float(floors.max(initial=0.0)),
+                 n_candidates=int(Phi.shape[1]), n_duplicates=int((lam[rest] <= lam_max).sum()),
+                 merge_rayleigh_ritz="skipped: the bands' modes as they are",
+                 merge_as_they_are="yes", merge_checks="the bands'", time_checks=0.0,
+                 time_merge_rayleigh_ritz=time.perf_counter() - t1)
     result.warnings = convergence_verdict(result, s.tol)
     return result
 
@@ -856,7 +934,7 @@ class BandChecks:
     max_orthonormality_error: float
     max_stiffness_diag_error: float
     #: Phi^T M Phi and Phi^T K Phi of the band's modes (the multi-band merge's diagonal
-    #: blocks, :func:`_band_gram`)
+    #: blocks, :func:`_band_grams`)
     gram: np.ndarray | None = None
     stiff: np.ndarray | None = None
 

@@ -17,7 +17,7 @@ arithmetic). When the basis is full, the best ``nev + block`` Ritz vectors are
 kept (thick restart, Krylov-Schur style arrow matrix) and the expansion goes on
 from the next block. A pair is converged when its residual estimate is below
 ``tol * theta``; the final true residuals ``||K x - lambda M x|| / ||K x||`` are
-computed and reported by :func:`railvib_hpc.modal.eigen.normalise_and_check`.
+computed and reported by :func:`railvib_hpc.modal.ritz.normalise_and_check`.
 
 The starting block depends only on global DOF numbers, so the result does not
 depend on the number of ranks (beyond round-off).
@@ -68,11 +68,11 @@ def dense_gb(n_global: int, basis: int, block: int, wanted: int, static_cols: in
 
     * Lanczos: the basis (``basis + block``), :data:`LANCZOS_WORK_BLOCKS` work blocks and
       the Ritz vectors ``wanted`` (guards included) formed from the basis at its end;
-    * purification (:func:`purify_and_project`, in place): the Ritz vectors, the K
-      products of the first pass rotated with them for the checks to reuse and the
-      round-off bound of :func:`~railvib_hpc.modal.ritz.normalise_and_check` (3 x
-      ``wanted``; the other K and M products go by blocks) and :data:`PURIFY_WORK_BLOCKS`
-      work blocks (at the default basis of 3 x the modes, below the Lanczos phase);
+    * purification (:func:`~railvib_hpc.modal.ritz.purified_modes`, in place): the Ritz
+      vectors and the round-off bound of :func:`~railvib_hpc.modal.ritz.normalise_and_check`
+      (counted as 3 x ``wanted``, a margin over the two; the K and M products go by blocks)
+      and :data:`PURIFY_WORK_BLOCKS` work blocks (at the default basis of 3 x the modes,
+      below the Lanczos phase);
     * static solves: the modes, right-hand sides and solutions of ``static_cols`` loads and
       the solve's work blocks.
     """
@@ -490,98 +490,3 @@ def permute_columns(A: np.ndarray, order: np.ndarray) -> None:
     """``A[:] = A[:, order]`` by slices of :data:`ROTATE_ROWS` rows (no n x k copy)."""
     for r in range(0, A.shape[0], ROTATE_ROWS):
         A[r:r + ROTATE_ROWS] = A[r:r + ROTATE_ROWS][:, order]
-
-
-def purify_and_project(op: ShiftInvertFactor, X: np.ndarray, block: int, refine: bool = False,
-                       select: Callable[[np.ndarray], np.ndarray] | None = None,
-                       progress: Progress | None = None, timings: dict | None = None,
-                       kx: np.ndarray | None = None, purify: bool = True
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One more operator application (purification), then Rayleigh-Ritz with K and M.
-
-    ``purify=False``: Rayleigh-Ritz with K and M on the vectors as they are (no solve; the
-    returned solve-residual bounds are 0): :func:`~railvib_hpc.modal.ritz.purified_modes`
-    checks the true residuals of these pairs and purifies only those that fail.
-
-    Applying ``(K - sigma M)^-1 M`` once more damps the high-frequency error left in the
-    Ritz vectors (what SLEPc calls purification); the final Rayleigh-Ritz step makes the
-    modes exactly M-orthonormal and K-orthogonal. Returns eigenvalues, modes ``Phi`` and
-    for every mode an upper bound of the norm of its solve residual ``M X - (K - sigma M)
-    X_p`` (the accuracy of the factorisation: a floor for the eigen-residual, since ``K phi
-    - lambda M phi`` contains it). ``refine``: one step of iterative refinement per solve
-    (``X_p += (K - sigma M)^-1 s``), which brings an inaccurate factor's solves to working
-    accuracy.
-
-    An extra pass with converged modes locked is :func:`~railvib_hpc.modal.ritz.
-    purify_locked`.
-
-    The projected matrices ``X_p^T K X_p`` and ``X_p^T M X_p`` are accumulated block by
-    block while the K and M products of the block are at hand, their upper triangles only
-    (block ``j`` against the blocks up to ``j``: half the products of the full matrices);
-    the products are not kept: the checks form ``K Phi`` and ``M Phi`` of the final modes
-    afresh (:func:`~railvib_hpc.modal.ritz.normalise_and_check`).
-
-    Memory: ``X`` is overwritten: it becomes ``Phi`` (the purified vectors are written over
-    the block just solved with, then rotated in place, :func:`rotate_in_place`), so the
-    phase holds ``X`` and a few solve blocks. ``select(lam)``: the order of the returned
-    pairs, a permutation of ``range(k)`` (default: ascending eigenvalues). ``progress``:
-    :data:`Progress` (phases "purification" and "Rayleigh-Ritz"); ``timings``: seconds
-    added under ``"solves"``, ``"products"`` (the K and M products and solve residuals) and
-    ``"rayleigh_ritz"`` (projection, dense eigenproblem, rotation).
-
-    ``kx`` (C-contiguous, X's shape): filled with ``K Phi``, the K
-    products of the purified vectors rotated by the same Rayleigh-Ritz rotation as the
-    vectors themselves (exact in exact arithmetic; the rounding of the rotation, ~1e-16
-    ``||K Phi||``, is far below any residual tolerance), for the checks to reuse
-    instead of a second sparse product with K (one more n x k array while it lives).
-    """
-    from mpi4py import MPI
-
-    if kx is not None and kx.shape != X.shape:
-        raise ValueError("purify_and_project: kx needs X's shape")
-    progress = progress or no_progress
-    timings = {} if timings is None else timings
-    clock = dict.fromkeys(("solves", "products", "rayleigh_ritz"), 0.0)
-    k = X.shape[1]
-    kp = np.zeros((k, k))
-    mp = np.zeros((k, k))
-    sres = np.zeros(k)
-    for j in range(0, k, block):
-        c = slice(j, min(j + block, k))
-        t0, s0 = time.perf_counter(), op.time_solves
-        if purify:
-            B = op.mass(X[:, c])
-            Y = op.solve(B, chunk=max(B.shape[1], 1))
-            KY, MY = op.stiffness(Y), op.mass(Y)
-            if refine:
-                Y += op.solve(B - (KY - op.sigma * MY), chunk=max(B.shape[1], 1))
-                KY, MY = op.stiffness(Y), op.mass(Y)
-            S = B - (KY - op.sigma * MY)
-            sres[c] = np.sum(S**2, axis=0)
-            X[:, c] = Y
-        else:
-            KY, MY = op.stiffness(X[:, c]), op.mass(X[:, c])
-        if kx is not None:
-            kx[:, c] = KY
-        t1 = time.perf_counter()
-        clock["solves"] += op.time_solves - s0
-        clock["products"] += t1 - t0 - (op.time_solves - s0)
-        kp[:c.stop, c] = X[:, :c.stop].T @ KY
-        mp[:c.stop, c] = X[:, :c.stop].T @ MY
-        clock["rayleigh_ritz"] += time.perf_counter() - t1
-        progress("purification" if purify else "Rayleigh-Ritz products", c.stop, k)
-    t0 = time.perf_counter()
-    for a in (sres, kp, mp):
-        op.comm.Allreduce(MPI.IN_PLACE, a, op=MPI.SUM)
-    lam, Z = eigh(symmetric_from_upper(kp), symmetric_from_upper(mp))
-    if select is not None:
-        perm = np.asarray(select(lam))
-        lam, Z = lam[perm], Z[:, perm]
-    rotate_in_place(X, Z, progress, "Rayleigh-Ritz")
-    if kx is not None:
-        rotate_in_place(kx, Z, progress, "Rayleigh-Ritz (K Phi)")
-    clock["rayleigh_ritz"] += time.perf_counter() - t0
-    for key, value in clock.items():
-        timings[key] = timings.get(key, 0.0) + value
-    # ||S z_i|| <= sum_j |z_ji| ||s_j|| (triangle inequality; S itself is not kept)
-    return lam, X, np.abs(Z).T @ np.sqrt(sres)

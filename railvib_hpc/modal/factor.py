@@ -53,6 +53,21 @@ def sparse_times_block(A, X: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     return out
 
 
+def sparse_times_block_pair(A, B, X: np.ndarray, comm: MPI.Comm
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """This rank's rows of ``A X`` and ``B X`` (A and B with the same layout, e.g. K and
+    M): the block is copied into PETSc's dense matrix once for both products (two calls of
+    :func:`sparse_times_block` copy it twice)."""
+    D = dense_block(X, A.getSize()[0], comm)
+    out = []
+    for S in (A, B):
+        R = S.matMult(D)
+        out.append(R.getDenseArray().copy())
+        R.destroy()
+    D.destroy()
+    return out[0], out[1]
+
+
 def abs_matrix(A, comm):
     """``|A|`` (entrywise absolute values) with A's parallel layout and pattern."""
     from petsc4py import PETSc
@@ -357,6 +372,15 @@ class ShiftInvertFactor:
     def stiffness(self, X: np.ndarray) -> np.ndarray:
         """``K X`` for a block X (n_local, b)."""
         return self._product(self.K, X)
+
+    def shifted(self, X: np.ndarray) -> np.ndarray:
+        """``(K - sigma M) X`` for a block X (n_local, b): one product with the factored
+        matrix (K itself when sigma is 0)."""
+        return self._product(self.A, X)
+
+    def stiffness_and_mass(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``K X`` and ``M X`` for a block X (n_local, b), X copied to PETSc once."""
+        return sparse_times_block_pair(self.K, self.M, X, self.comm)
 
     def apply(self, X: np.ndarray) -> np.ndarray:
         """``(K - sigma M)^-1 M X`` for a block X (n_local, b)."""

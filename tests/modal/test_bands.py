@@ -26,6 +26,7 @@ from modal_cases import (
     soil_case,
     solve,
     solve_banded,
+    to_scipy,
 )
 from mpi4py import MPI
 
@@ -604,3 +605,38 @@ def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():
     assert np.all(np.abs(res.residuals - again.residuals) <= 2 * floors + 1e-14)
     assert again.stats["max_orthonormality_error"] <= ORTHONORMAL
     assert res.stats["max_orthonormality_error"] <= ORTHONORMAL
+
+
+def test_the_merge_keeps_the_bands_modes_only_where_the_measured_grams_allow(tmp_path,
+                                                                            monkeypatch):
+    """Issue 26: a multi-band merge whose bands' own modes (each band's inside its edges,
+    taken once) the measured Gram matrices show M-orthonormal and K-orthogonal skips its
+    Rayleigh-Ritz step and its checks afresh: the bands' residuals and floors stand, the
+    maxima are the measured submatrices'. Forced here (the thresholds set to infinity) on
+    the 60-element column (whose Gram errors at tol 1e-10 make the default take the full
+    merge), it gives the full merge's modes, and what it reports is what the vectors show."""
+    from railvib_hpc.modal import ritz
+
+    mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
+    ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
+    n, f_max = _cut(ref.frequencies_hz, 30)
+    runs = {}
+    for name, bound in (("full", -1.0), ("as they are", np.inf)):
+        monkeypatch.setattr(ritz, "RAW_RITZ_GRAM", bound)
+        monkeypatch.setattr(ritz, "RAW_RITZ_STIFF", bound)
+        runs[name], *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path / name,
+                                      band_modes=12)
+    full, kept = runs["full"], runs["as they are"]
+    assert full.stats["n_bands"] >= 2 and full.stats["merge_as_they_are"].startswith("no")
+    assert kept.stats["merge_as_they_are"] == "yes"
+    assert kept.stats["merge_rayleigh_ritz"].startswith("skipped")
+    _same_modes(full, ref, K, M, n, 12)
+    np.testing.assert_allclose(kept.eigenvalues, full.eigenvalues, rtol=1e-9, atol=0)
+    Ks, Ms = to_scipy(K), to_scipy(M)
+    phi, lam = kept.phi, kept.eigenvalues
+    gram = np.abs(phi.T @ (Ms @ phi) - np.eye(n)).max()
+    assert gram == pytest.approx(kept.stats["max_orthonormality_error"], rel=0.5, abs=1e-14)
+    rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
+    # (the two evaluations differ by rounding, up to ~5 % for the pairs at their floor)
+    np.testing.assert_allclose(rho, kept.residuals, rtol=0.1, atol=1e-14)
+    assert np.all(kept.residuals <= np.maximum(1e-10, kept.residual_floors))

@@ -75,6 +75,7 @@ from ..io.files import (
     STATIC_H5,
     STRESS_XDMF,
 )
+from ..io.formats.checks import open_input, text_attr
 from ..io.formats.fields import FieldsFile, check_fields
 from ..io.formats.mbs import MbsFile, MbsFileError, check_mbs
 from ..io.formats.modes import check_modes
@@ -106,21 +107,11 @@ class ReconstructInputError(UserError):
     """Missing, incomplete or inconsistent input of the reconstruct stage."""
 
 
-def _attr(f, key: str, default=None):
-    v = f.attrs.get(key, default)
-    return v.decode() if isinstance(v, bytes) else v
+_attr = text_attr
 
 
 def _open(path: Path, what: str):
-    import h5py
-
-    if not path.is_file():
-        raise ReconstructInputError(f"{what} {path} not found")
-    try:
-        return h5py.File(path, "r")
-    except OSError as exc:
-        raise ReconstructInputError(f"{what} {path} is not a readable HDF5 file ({exc})") \
-            from None
+    return open_input(path, what, ReconstructInputError)
 
 
 def _dataset(f, path: Path, name: str):

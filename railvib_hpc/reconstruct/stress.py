@@ -503,17 +503,8 @@ def write_stress_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Pa
     Path
         The XDMF file.
     """
-    import h5py
-
-    from ..io.xdmf import H5Array, Series, hex_mesh, write_series
+    from ..io.formats.fields import write_series_xdmf
 
     h5_path = Path(h5_path)
-    name = name or h5_path.name
-    with h5py.File(h5_path, "r") as f:
-        points, block = hex_mesh(f, name)
-        times = f["stress/time"][()]
-        series = [Series(k, H5Array.of(f, f"/stress/{k}", name), "Cell")
-                  for k in ("von_mises", "strain_eq")]
-    xdmf = h5_path.with_name(STRESS_XDMF)
-    write_series(xdmf, points, block, times, series)
-    return xdmf
+    return write_series_xdmf(h5_path, name or h5_path.name, "stress/time", "stress",
+                             ("von_mises", "strain_eq"), "Cell", h5_path.with_name(STRESS_XDMF))

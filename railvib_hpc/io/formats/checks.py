@@ -1,4 +1,5 @@
-"""What the data checks of the file formats share: finite values, bounds, reading HDF5.
+"""What the data checks and readers of the file formats share: finite values, bounds,
+reading HDF5 (an input opened with one clear error, text attributes).
 
 Each format module of :mod:`railvib_hpc.io.formats` has its ``check_<file>(path, full,
 context)``, which returns a list of problems (empty: sound). ``full`` is False when the
@@ -44,6 +45,25 @@ def h5_read(path: Path):
     import h5py
 
     return h5py.File(path, "r")
+
+
+def text_attr(f, key: str, default=None):
+    """The attribute ``key`` of an HDF5 object, bytes decoded (``default`` without it)."""
+    v = f.attrs.get(key, default)
+    return v.decode() if isinstance(v, bytes) else v
+
+
+def open_input(path: Path, what: str, error: type[Exception]):
+    """``path`` opened for reading, or ``error`` with one line naming ``what`` and the path
+    (missing, or not a readable HDF5 file)."""
+    import h5py
+
+    if not path.is_file():
+        raise error(f"{what} {path} not found")
+    try:
+        return h5py.File(path, "r")
+    except OSError as exc:
+        raise error(f"{what} {path} is not a readable HDF5 file ({exc})") from None
 
 
 def absent(f, names) -> list[str]:

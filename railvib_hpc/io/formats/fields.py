@@ -24,7 +24,7 @@ with ``full`` every field value is finite).
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -129,15 +129,24 @@ def write_fields_xdmf(h5_path: str | os.PathLike, name: str | None = None) -> Pa
     Path
         The XDMF file.
     """
-    import h5py
-
     h5_path = Path(h5_path)
     name = name or h5_path.name
+    return write_series_xdmf(h5_path, name, "time", "fields", FIELD_NAMES, "Node",
+                             h5_path.with_name(Path(name).stem + ".xdmf"))
+
+
+def write_series_xdmf(h5_path: Path, name: str, time: str, group: str,
+                      datasets: Sequence[str], center: str, xdmf: Path) -> Path:
+    """Write ``xdmf`` (+ its views file) of the hexahedral mesh of ``h5_path`` with the
+    datasets ``/<group>/<datasets>`` at the times ``/<time>`` as ``center`` data ("Node" or
+    "Cell"), one grid per time; ``name`` is the file name the XDMF refers to (serial).
+    Serves ``fields.xdmf`` and ``stress.xdmf`` (:mod:`railvib_hpc.reconstruct.stress`)."""
+    import h5py
+
     with h5py.File(h5_path, "r") as f:
         points, block = hex_mesh(f, name)
-        times = f["time"][()]
-        series = [Series(k, H5Array.of(f, f"/fields/{k}", name), "Node") for k in FIELD_NAMES]
-    xdmf = h5_path.with_name(Path(name).stem + ".xdmf")
+        times = f[time][()]
+        series = [Series(k, H5Array.of(f, f"/{group}/{k}", name), center) for k in datasets]
     write_series(xdmf, points, block, times, series)
     return xdmf
 

@@ -40,7 +40,16 @@ import numpy as np
 
 from ...errors import UserError
 from ..atomic import write_h5
-from .checks import CONTACT_FORCE_FACTOR, absent, exceeds, h5_read, nonfinite, static_wheel_load
+from .checks import (
+    CONTACT_FORCE_FACTOR,
+    absent,
+    exceeds,
+    h5_read,
+    nonfinite,
+    open_input,
+    static_wheel_load,
+    text_attr,
+)
 
 #: Safety factor on the Duhamel bounds of the modal coordinates.
 MODAL_RESPONSE_FACTOR = 10.0
@@ -223,20 +232,11 @@ class MbsFileError(UserError):
     static-correction basis it names)."""
 
 
-def _attr(f, key: str, default=None):
-    v = f.attrs.get(key, default)
-    return v.decode() if isinstance(v, bytes) else v
+_attr = text_attr
 
 
 def _open(path: Path, what: str):
-    import h5py
-
-    if not path.is_file():
-        raise MbsFileError(f"{what} {path} not found")
-    try:
-        return h5py.File(path, "r")
-    except OSError as exc:
-        raise MbsFileError(f"{what} {path} is not a readable HDF5 file ({exc})") from None
+    return open_input(path, what, MbsFileError)
 
 
 def _dataset(f, path: Path, name: str):

@@ -107,13 +107,6 @@ class ReconstructInputError(UserError):
     """Missing, incomplete or inconsistent input of the reconstruct stage."""
 
 
-_attr = text_attr
-
-
-def _open(path: Path, what: str):
-    return open_input(path, what, ReconstructInputError)
-
-
 def _dataset(f, path: Path, name: str):
     if name not in f:
         raise ReconstructInputError(f"{path}: dataset '{name}' is missing")
@@ -150,8 +143,8 @@ def read_inputs(modes_path: Path, mbs_path: Path, stride: int = 1,
     """
     if int(stride) != stride or stride < 1:
         raise ReconstructInputError(f"stride must be a positive integer, got {stride!r}")
-    with _open(modes_path, "modes file") as f:
-        if int(_attr(f, "complete", 0)) != 1:
+    with open_input(modes_path, "modes file", ReconstructInputError) as f:
+        if int(text_attr(f, "complete", 0)) != 1:
             raise ReconstructInputError(f"{modes_path} is incomplete (attribute complete != 1);"
                                         " rerun the modal stage")
         trans = _dataset(f, modes_path, "modes/translation")

@@ -232,13 +232,6 @@ class MbsFileError(UserError):
     static-correction basis it names)."""
 
 
-_attr = text_attr
-
-
-def _open(path: Path, what: str):
-    return open_input(path, what, MbsFileError)
-
-
 def _dataset(f, path: Path, name: str):
     if name not in f:
         raise MbsFileError(f"{path}: dataset '{name}' is missing")
@@ -324,8 +317,8 @@ class MbsFile:
         messages); the static basis must be (k, n_nodes, 3).
         """
         path = self.path
-        with _open(path, "multibody results file") as f:
-            if int(_attr(f, "complete", 0)) != 1:
+        with open_input(path, "multibody results file", MbsFileError) as f:
+            if int(text_attr(f, "complete", 0)) != 1:
                 raise MbsFileError(f"{path} is incomplete (attribute complete != 1); rerun "
                                    "the multibody stage")
             t = _dataset(f, path, "time")[()]
@@ -393,12 +386,12 @@ def _static(g, path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[tuple, in
     for key in ("basis_file", "basis"):
         if key not in g.attrs:
             raise MbsFileError(f"{path}: group 'static' has no attribute '{key}'")
-    basis_file = (path.parent / str(_attr(g, "basis_file"))).resolve()
-    basis = str(_attr(g, "basis"))
+    basis_file = (path.parent / str(text_attr(g, "basis_file"))).resolve()
+    basis = str(text_attr(g, "basis"))
     hist = _histories(g.file, path, ("static/g", "static/g_dot", "static/g_ddot"), nt, i0, i1)
     k = hist[0].shape[1]
-    with _open(basis_file, "static-correction basis file") as f:
-        if "complete" in f.attrs and int(_attr(f, "complete")) != 1:
+    with open_input(basis_file, "static-correction basis file", MbsFileError) as f:
+        if "complete" in f.attrs and int(text_attr(f, "complete")) != 1:
             raise MbsFileError(f"{basis_file} is incomplete (attribute complete != 1)")
         ds = _dataset(f, basis_file, basis)
         if ds.shape != (k, n, 3):

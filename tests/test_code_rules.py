@@ -79,3 +79,19 @@ def test_the_case_rule_finds_a_case_parameter_and_a_case_import(tmp_path):
                                     "no such module"]]
     assert "imports Case from the case module" in found[1]
     assert "assemble() takes a parameter named case" in found[2]
+
+
+def test_file_names_come_from_one_place():
+    assert code_rules.file_name_violations() == []
+
+
+def test_a_file_name_spelled_outside_its_home_is_found(tmp_path):
+    pkg = tmp_path / "railvib_hpc"
+    (pkg / "io").mkdir(parents=True)
+    (pkg / "io" / "files.py").write_text('"""Names."""\nMODES_H5 = "modes.h5"\nRECORD_DIR = ".x"\n')
+    (pkg / "stage.py").write_text('"""Writes ``modes.h5``."""\n\n\ndef f(out):\n'
+                                  '    """Reads modes.h5."""\n    return out / "modes.h5"\n')
+    assert code_rules.file_names(tmp_path) == {"modes.h5"}
+    assert code_rules.file_name_violations(tmp_path) == [
+        "railvib_hpc/stage.py: line 6: the file name 'modes.h5' (use its constant from "
+        "railvib_hpc/io/files.py)"]

@@ -1,4 +1,5 @@
-"""Two rules of ``make lint``: function length, and kernels that never take the case.
+"""Three rules of ``make lint``: function length, kernels that never take the case, and
+file names from one place.
 
 *Function length*: no function over 150 lines unless allowed. A function's length is
 counted by its syntax tree, from its ``def`` line to its last line, docstring and comments
@@ -12,6 +13,10 @@ problem object (:class:`railvib_hpc.problem.Problem`), so it may neither import 
 ``railvib_hpc.config`` (``Case``, ``build_case``, ..., under ``TYPE_CHECKING`` too) nor
 have a parameter named ``case``. Modules still to be converted are listed in
 :data:`PENDING` with the reason; an entry that no longer reads the case breaks the rule.
+
+*File names from one place* (issue 27): the package's file names (``"modes.h5"``, ...) are
+the constants of ``railvib_hpc/io/files.py``; no other module of ``railvib_hpc`` spells one
+as a string (docstrings, which name the files for the reader, aside).
 
 Usage::
 
@@ -149,9 +154,55 @@ def case_violations(root: Path = ROOT, translators: Mapping[str, str] = TRANSLAT
     return out
 
 
+#: The one home of the package's file names (relative to ``railvib_hpc/``).
+FILE_NAMES_MODULE = "io/files.py"
+
+
+def file_names(root: Path = ROOT) -> set[str]:
+    """The file names that :data:`FILE_NAMES_MODULE` defines: its module-level string
+    constants that end in a file extension (``"modes.h5"``, ``"run.json"``, ...)."""
+    tree = ast.parse((root / "railvib_hpc" / FILE_NAMES_MODULE).read_text())
+    out = set()
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant) and \
+                isinstance(node.value.value, str) and "." in node.value.value.strip("."):
+            out.add(node.value.value)
+    return out
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    """The ids of the docstring constants of a module, its classes and functions."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                out.add(id(body[0].value))
+    return out
+
+
+def file_name_violations(root: Path = ROOT) -> list[str]:
+    """Every string literal of ``railvib_hpc`` outside :data:`FILE_NAMES_MODULE` that is one
+    of its file names, one line each (empty: the rule holds)."""
+    names = file_names(root)
+    out = []
+    for path in sorted((root / "railvib_hpc").rglob("*.py")):
+        rel = path.relative_to(root / "railvib_hpc").as_posix()
+        if rel == FILE_NAMES_MODULE:
+            continue
+        tree = ast.parse(path.read_text(), str(path))
+        skip = _docstrings(tree)
+        out += [f"railvib_hpc/{rel}: line {node.lineno}: the file name {node.value!r} "
+                f"(use its constant from railvib_hpc/{FILE_NAMES_MODULE})"
+                for node in ast.walk(tree)
+                if isinstance(node, ast.Constant) and isinstance(node.value, str)
+                and node.value in names and id(node) not in skip]
+    return out
+
+
 def main() -> int:
     """Print the breaches of the rules; 1 if there are any."""
-    found = violations() + case_violations()
+    found = violations() + case_violations() + file_name_violations()
     for line in found:
         print(line, file=sys.stderr)
     return 1 if found else 0

@@ -78,4 +78,6 @@ TRANSIENT_PROBES = f"transient:{PROBES_H5}"
 
 #: A study variant: its result, or the record of its failure.
 RESULT_JSON = "result.json"
+#: ``railvib study uncertainty``: the design and the outputs per sample.
+UNCERTAINTY_H5 = "uncertainty.h5"
 FAILED_JSON = "failed.json"

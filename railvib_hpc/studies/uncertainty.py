@@ -510,10 +510,11 @@ def write_results(analysis: dict, root: Path) -> dict[str, Path]:
     import h5py
 
     from ..io.atomic import atomic_file
+    from ..io.files import UNCERTAINTY_H5
 
     if "design" not in analysis:
         return {}
-    path = root / "uncertainty.h5"
+    path = root / UNCERTAINTY_H5
     with atomic_file(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["method"] = analysis["method"]
         f.attrs["parameters"] = list(analysis["parameters"])

@@ -346,7 +346,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "track.rigid_length on springs and graded dashpots to fixed ground at "
                       "every sleeper position, fitted to the modelled track's static "
                       "receptance, its far ends clamped: no rigid-to-flexible drop at the "
-                      "box, trains of any length pass; railvib transient only)",
+                      "box, trains of any length pass; the modal path needs modal.damping = "
+                      "'full', which projects the supports' dashpots on the modes)",
                       choices=("rigid", "supported"),
                       source=f"{_APDL}: rigid rail sections (Rigid=3)"),
         "end_stiffness": Param(0.0, "float", "N/m",

@@ -553,3 +553,96 @@ def insert_layer_damping(C, mesh: Mesh, problem: Problem, dofmap: DofMap, rank: 
                        np.ascontiguousarray(cols, dtype=PETSc.IntType),
                        np.ascontiguousarray(local), addv=PETSc.InsertMode.ADD_VALUES)
     return int((weights > 0).sum())
+
+
+def static_receptance(K, M, comm, dof: int, prefix: str) -> float:
+    """``u[dof]`` of ``K u = e_dof``: the static receptance of one DOF [m/N] (collective).
+
+    One MUMPS Cholesky factor of K (through
+    :class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0, with its memory
+    check; PETSc options prefix ``prefix``), freed before returning. Used to fit the
+    supported track ends (:func:`fit_track_ends`).
+    """
+    from .factor import ShiftInvertFactor
+
+    r0, r1 = K.getOwnershipRange()
+    own = r0 <= dof < r1
+    rhs = np.zeros((r1 - r0, 1))
+    if own:
+        rhs[dof - r0, 0] = 1.0
+    op = ShiftInvertFactor(K, M, 0.0, comm, prefix)
+    try:
+        x = op.solve(rhs)
+    finally:
+        op.destroy()
+    return float(comm.allreduce(float(x[dof - r0, 0]) if own else 0.0))
+
+
+def fit_track_ends(mesh: Mesh, dofmap: DofMap, problem: Problem, K, M, comm,
+                   prefix: str) -> tuple[Problem, str]:
+    """The problem with the supported track ends' springs, added to the assembled K, and
+    the line that says so (collective; both paths, modal and full-order, call it).
+
+    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.fit_stiffness`)
+    to the static receptance of the modelled track at the first rail's node nearest the
+    middle of the box (one static solve of K, whose end sections then hang free from the
+    box's rail; PETSc options ``prefix``); a given stiffness is in K already
+    (:func:`~railvib_hpc.modal.boundary.boundary_node_blocks`). Rigid ends: ``problem``
+    unchanged and an empty line.
+
+    Raises
+    ------
+    ValueError
+        A receptance that cannot be measured or fitted, naming ``track.end_stiffness``
+        (each stage raises it as its own one-line error).
+    """
+    import dataclasses
+
+    from .track_ends import (
+        far_end_nodes,
+        fit_stiffness,
+        support_blocks,
+        support_nodes,
+        winkler_modulus,
+    )
+
+    ends = problem.track_ends
+    if not ends.supported:
+        return problem, ""
+    n_far = len(far_end_nodes(mesh, ends))
+    where = f"{len(support_nodes(mesh, ends)[0]) - n_far} supports and {n_far} clamped far ends"
+    rail = problem.sections["rail"]
+    ei = problem.material("rail").E * rail.iyy
+    if ends.stiffness > 0:
+        return problem, (f"  track ends: supported, {where}, k = {ends.stiffness:.4g} N/m per "
+                         "rail (track.end_stiffness)")
+    nodes = mesh.rail_nodes()[0]
+    rail_x = mesh.points[nodes, 0]
+    middle = 0.5 * (ends.box_start + ends.box_end)
+    node = int(np.argmin(np.abs(rail_x - middle)))
+    dof = int(dofmap.index[nodes[node], 2])
+    if dof < 0:
+        raise ValueError(
+            "track.end_stiffness = 0: the rail's vertical DOF at the middle of the box "
+            f"(x = {rail_x[node]:g} m) is constrained, so the receptance to fit the "
+            "supported ends to cannot be measured; give track.end_stiffness > 0")
+    receptance = static_receptance(K, M, comm, dof, prefix)
+    if not receptance > 0:
+        raise ValueError(
+            f"track.end_stiffness = 0: the modelled track's static receptance at x = "
+            f"{rail_x[node]:g} m is {receptance:.4g} m/N (not > 0); give "
+            "track.end_stiffness > 0")
+    per_bay = max(1, int(round(ends.spacing / float(np.diff(rail_x).min()))))
+    try:
+        stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
+    except ValueError as exc:
+        raise ValueError(f"track.end_stiffness = 0: {exc}; give track.end_stiffness > 0"
+                         ) from None
+    problem = dataclasses.replace(problem, track_ends=dataclasses.replace(
+        ends, stiffness=stiffness))
+    insert_node_blocks(K, dofmap, comm.rank, *support_blocks(mesh, problem, "spring"))
+    K.assemble()
+    return problem, (f"  track ends: supported, {where}, k = {stiffness:.4g} N/m per "
+                     f"rail fitted to the static receptance {receptance:.4g} m/N at x = "
+                     f"{rail_x[node]:g} m (the Winkler beam's modulus "
+                     f"{winkler_modulus(receptance, ei):.4g} N/m^2, EI = {ei:.4g} N m^2)")

@@ -118,13 +118,14 @@ def compute(ctx: StageContext) -> ModesOutput:
     Builds or reuses ``mesh.h5`` when the modes are recomputed. The summary holds
     ``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics.
     """
-    if ctx.case["track.ends"] != "rigid":
+    if ctx.case["track.ends"] == "supported" and ctx.case["modal.damping"] != "full":
         from ..errors import CaseError
 
-        raise CaseError([("track.ends", ctx.case["track.ends"],
-                          "the modal path (modal, mbs, run and the modal studies) models "
-                          "the thesis's rigid rail ends; 'supported' is for railvib "
-                          "transient")])
+        raise CaseError([("modal.damping", ctx.case["modal.damping"],
+                          "track.ends = 'supported' in the modal path (modal, mbs, run and "
+                          "the modal studies) needs 'full': the supports' graded dashpots, "
+                          "which absorb the rail's bending waves, are no proportional "
+                          "damping, so only their projection on the modes keeps them")])
     pml = [f for f in BOUNDARY_FACES if ctx.case[f"boundary.{f}"] == "pml"]
     if pml:
         from ..errors import CaseError
@@ -293,6 +294,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     on_root(lambda: _check_space(case, out_dir, mesh, dofmap, want_static), comm)
     with rep.stage("assembly"):
         K, M, ainfo = assemble(mesh, problem, dofmap, comm)
+        problem = _with_track_ends(ctx, mesh, dofmap, problem, K, M)
     t_assembly = time.perf_counter() - t0
     static_rhs = None
     if want_static:
@@ -387,6 +389,27 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
         rep.info(f"wrote {static_path}: static solutions for {free.size} unit loads on the "
                  "rail DOFs (static correction)")
     return summary, f, (int(mesh.n_nodes), len(mesh.hexes))
+
+
+#: PETSc options prefix of the static solve that fits the supported track ends' springs.
+TRACK_ENDS_PREFIX = "railvib_eig_ends_"
+
+
+def _with_track_ends(ctx: StageContext, mesh, dofmap, problem: Problem, K, M) -> Problem:
+    """The problem with the supported track ends' fitted springs, added to K
+    (:func:`~.petsc.fit_track_ends`, shared with the full-order path; its line goes to the
+    log). Rigid ends: ``problem`` unchanged (collective)."""
+    from ..errors import UserError
+    from .petsc import fit_track_ends
+
+    try:
+        problem, line = fit_track_ends(mesh, dofmap, problem, K, M, ctx.comm,
+                                       TRACK_ENDS_PREFIX)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    if line:
+        ctx.rep.info(line)
+    return problem
 
 
 def _full_eigensolve(ctx: StageContext, mesh, problem: Problem, dofmap, K, M, static_rhs):
@@ -548,6 +571,7 @@ def _static_only(ctx: StageContext, modes_sha: str) -> None:
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
         dofmap = problem_dofmap(mesh, problem, comm.size)
         K, M, _ = assemble(mesh, problem, dofmap, comm)
+        problem = _with_track_ends(ctx, mesh, dofmap, problem, K, M)
     load_dofs, table = rail_load_dofs(mesh, dofmap)
     rhs, free = unit_loads(load_dofs, *dofmap.owned_dofs(comm.rank))
     with rep.stage("static solves"):
@@ -597,7 +621,10 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
         mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
         dofmap = problem_dofmap(mesh, problem, comm.size)
         want_static = bool(case["mbs.static_correction"])
-        K, M, _ = assemble(mesh, problem, dofmap, comm, mass=want_static)
+        # (the supported track ends' fit needs M for its factor's memory check)
+        K, M, _ = assemble(mesh, problem, dofmap, comm,
+                           mass=want_static or problem.track_ends.supported)
+        problem = _with_track_ends(ctx, mesh, dofmap, problem, K, M)
         phi = read_phi_rows(out_dir / MODES_H5, dofmap, comm.rank, m)
         if want_static:           # the residual vectors' rows too (their rotations included)
             load_dofs, _ = rail_load_dofs(mesh, dofmap)
@@ -605,6 +632,7 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
             x_def = residual_mass(M, phi, solve_static(K, M, comm, rhs), free,
                                   load_dofs.size, comm)[0]
             phi = np.hstack([phi, x_def])
+        if M is not None:
             M.destroy()
         parts = project_damping_parts(mesh, problem, dofmap, comm, K, phi)
         K.destroy()

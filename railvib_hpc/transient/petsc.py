@@ -226,30 +226,6 @@ def factor_solve(A, M, B: np.ndarray, comm, prefix: str) -> np.ndarray:
         op.destroy()
 
 
-def static_deflection(K, M, comm, dof: int) -> float:
-    """``u[dof]`` of ``K u = e_dof``: the static receptance of one DOF [m/N] (collective).
-
-    One MUMPS Cholesky factor of K (through
-    :class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0, with its memory
-    check; options prefix ``railvib_tr_ends_``), freed before returning. Used to fit the
-    supported track ends (:mod:`railvib_hpc.modal.track_ends`).
-    """
-    from ..modal.factor import ShiftInvertFactor
-
-    r0, r1 = K.getOwnershipRange()
-    own = r0 <= dof < r1
-    rhs = np.zeros((r1 - r0, 1))
-    if own:
-        rhs[dof - r0, 0] = 1.0
-    op = ShiftInvertFactor(K, M, 0.0, comm, PREFIX + "ends_")
-    try:
-        x = op.solve(rhs)
-    finally:
-        op.destroy()
-    return float(comm.allreduce(float(x[dof - r0, 0]) if own else 0.0))
-
-
-
 class GhostGather:
     """Values of a distributed vector at given global DOFs, on this rank (a PETSc
     scatter from the global vector into a sequential one; collective construction and

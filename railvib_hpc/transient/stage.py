@@ -123,6 +123,10 @@ MAX_TRANSIENT_STEPS = 200_000
 HISTORY_COPIES = 2
 
 
+#: PETSc options prefix of the static solve that fits the supported track ends' springs.
+TRACK_ENDS_PREFIX = "railvib_tr_ends_"
+
+
 class TransientInputError(UserError):
     """A case the full-order solver cannot run (no rails for a vehicle, probes outside...)."""
 
@@ -751,7 +755,7 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, rails, problem,
+        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, problem,
                                                       pml)
         with rep.stage("transient: stability limit"):
             if explicit:
@@ -788,7 +792,7 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, rails, problem, pml)
+            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, problem, pml)
             layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
@@ -867,7 +871,7 @@ def speed_warning(case: Case, speed: float) -> str:
             "there (the track's critical speed)")
 
 
-def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem,
+def _assemble(ctx: StageContext, mesh, dofmap, problem: Problem,
               pml: tuple | None = None) -> tuple:
     """K, M, C (None when nothing damps), the damping summary, for the explicit engine
     the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
@@ -886,7 +890,7 @@ def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem
         K, M, _ = assemble(mesh, problem, dofmap, comm,
                            mass=True if engine == "direct" else "diagonal",
                            full_hexes=None if pml is None else pml[1])
-        problem = _fit_track_ends(ctx, mesh, dofmap, rails, problem, K, M)
+        problem = _fit_track_ends(ctx, mesh, dofmap, problem, K, M)
         # the explicit engine takes diagonal dashpots at the full step, apart from C
         dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
             if engine == "explicit" else None
@@ -910,67 +914,19 @@ def _assemble(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem
     return K, M, C, cinfo, dashpots, problem
 
 
-def _fit_track_ends(ctx: StageContext, mesh, dofmap, rails: RailDofs, problem: Problem, K,
-                    M) -> Problem:
-    """The problem with the supported track ends' springs, added to the assembled K.
+def _fit_track_ends(ctx: StageContext, mesh, dofmap, problem: Problem, K, M) -> Problem:
+    """The problem with the supported track ends' springs, added to the assembled K
+    (:func:`~railvib_hpc.modal.petsc.fit_track_ends`, which the modal path shares; its
+    line goes to the log). Rigid ends: ``problem`` unchanged."""
+    from ..modal.petsc import fit_track_ends
 
-    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.fit_stiffness`)
-    to the static receptance of the modelled track at the rail node nearest its middle
-    (one static solve of K, whose end sections then hang free from the box's rail);
-    a given stiffness is in K already (:func:`~railvib_hpc.modal.boundary.boundary_node_blocks`).
-    Rigid ends: ``problem`` unchanged.
-    """
-    import dataclasses
-
-    from ..modal.petsc import insert_node_blocks
-    from ..modal.track_ends import (
-        far_end_nodes,
-        fit_stiffness,
-        support_blocks,
-        support_nodes,
-        winkler_modulus,
-    )
-    from .petsc import static_deflection
-
-    ends = problem.track_ends
-    if not ends.supported:
-        return problem
-    n_far = len(far_end_nodes(mesh, ends))
-    where = f"{len(support_nodes(mesh, ends)[0]) - n_far} supports and {n_far} clamped far ends"
-    rail = problem.sections["rail"]
-    ei = problem.material("rail").E * rail.iyy
-    if ends.stiffness > 0:
-        ctx.rep.info(f"  track ends: supported, {where}, k = {ends.stiffness:.4g} N/m per "
-                     "rail (track.end_stiffness)")
-        return problem
-    middle = 0.5 * (ends.box_start + ends.box_end)
-    node = int(np.argmin(np.abs(rails.x[0] - middle)))
-    dof = int(rails.dofs[0, node, 0])
-    if dof < 0:
-        raise TransientInputError(
-            "track.end_stiffness = 0: the rail's vertical DOF at the middle of the box "
-            f"(x = {rails.x[0, node]:g} m) is constrained, so the receptance to fit the "
-            "supported ends to cannot be measured; give track.end_stiffness > 0")
-    receptance = static_deflection(K, M, ctx.comm, dof)
-    if not receptance > 0:
-        raise TransientInputError(
-            f"track.end_stiffness = 0: the modelled track's static receptance at x = "
-            f"{rails.x[0, node]:g} m is {receptance:.4g} m/N (not > 0); give "
-            "track.end_stiffness > 0")
-    per_bay = max(1, int(round(ends.spacing / float(np.diff(rails.x[0]).min()))))
     try:
-        stiffness = fit_stiffness(receptance, problem, ends.spacing, per_bay)
+        problem, line = fit_track_ends(mesh, dofmap, problem, K, M, ctx.comm,
+                                       TRACK_ENDS_PREFIX)
     except ValueError as exc:
-        raise TransientInputError(f"track.end_stiffness = 0: {exc}; give "
-                                  "track.end_stiffness > 0") from None
-    problem = dataclasses.replace(problem, track_ends=dataclasses.replace(
-        ends, stiffness=stiffness))
-    insert_node_blocks(K, dofmap, ctx.comm.rank, *support_blocks(mesh, problem, "spring"))
-    K.assemble()
-    ctx.rep.info(f"  track ends: supported, {where}, k = {stiffness:.4g} N/m per "
-                 f"rail fitted to the static receptance {receptance:.4g} m/N at x = "
-                 f"{rails.x[0, node]:g} m (the Winkler beam's modulus "
-                 f"{winkler_modulus(receptance, ei):.4g} N/m^2, EI = {ei:.4g} N m^2)")
+        raise TransientInputError(str(exc)) from None
+    if line:
+        ctx.rep.info(line)
     return problem
 
 

@@ -240,12 +240,17 @@ def test_bad_track_ends_are_refused_in_one_line(tmp_path, capsys):
         assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
 
-def test_the_modal_path_refuses_supported_ends(tmp_path, capsys):
+def test_the_modal_path_refuses_supported_ends_without_the_full_damping(tmp_path, capsys):
+    """The supports' graded dashpots are no proportional damping: the modal path takes
+    supported ends with ``modal.damping = 'full'`` only (one line, exit 2, no file)."""
     code = run(["modal", str(BASELINE), "--out", str(tmp_path), "--set",
                 "mesh.refinement=0.25", "--set", "track.ends=supported"])
     err = capsys.readouterr().err
     assert code == 2
-    assert "track.ends = 'supported': the modal path" in err and "Traceback" not in err
+    assert "modal.damping = 'uniform'" in err and "track.ends = 'supported' in the modal " \
+        "path" in err and "needs 'full'" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "modes.h5").exists()
 
 
 def test_rigid_ends_leave_the_digests_unchanged():

@@ -1,10 +1,10 @@
 """The modal path with supported track ends (``track.ends = 'supported'``, issue 28 item 3).
 
 The rail continues beyond the soil box on fitted springs and graded dashpots; the modal
-path (``railvib run``) takes it with ``modal.damping = 'full'`` (the dashpots projected on
-the modes) and fits the springs with the same function as the full-order path
-(:func:`railvib_hpc.modal.petsc.fit_track_ends`). Checked against the direct path on the
-same tiny model, on the rank count the test runs on.
+path (``railvib run``, its modal and mbs stages) takes it with ``modal.damping = 'full'``
+(the dashpots projected on the modes) and fits the springs with the same function as the
+full-order path (:func:`railvib_hpc.modal.petsc.fit_track_ends`). Checked against the
+direct path on the same tiny model, on the rank count the test runs on.
 """
 
 from __future__ import annotations
@@ -53,14 +53,17 @@ def _fit_line(text: str) -> str:
 @pytest.mark.slow
 @pytest.mark.mpi
 def test_the_modal_path_with_supported_ends_matches_the_direct_path(shared_tmp, capsys):
-    """``railvib run`` and ``railvib transient`` (direct) on the same model: the same
+    """``railvib modal`` + ``mbs`` and ``railvib transient`` (direct) on the same model: the same
     fitted springs, and the rail's deflection under the leading wheel within
     :data:`DEFLECTION_RTOL` over the whole modelled rail, the supports included. Then a
     changed ``damping.f2`` recomputes only ``modal_damping.h5`` (reused modes): its
     dashpot part, which the fitted springs set, is the first run's."""
     out = shared_tmp / f"ends_{comm.size}"
-    assert run(["run", str(BASELINE), "--out", str(out / "modal"), *CASE]) == 0
+    # (modal and mbs: what the comparison reads, without the fields and the report)
+    assert run(["modal", str(BASELINE), "--out", str(out / "modal"), *CASE]) == 0
     modal_log = capsys.readouterr().out
+    assert run(["mbs", str(BASELINE), "--out", str(out / "modal"), *CASE]) == 0
+    capsys.readouterr()
     assert run(["transient", str(BASELINE), "--out", str(out / "direct"), *CASE]) == 0
     direct_log = capsys.readouterr().out
     if comm.rank == 0:                        # the log is rank 0's

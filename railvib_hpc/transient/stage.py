@@ -64,7 +64,7 @@ import numpy as np
 
 from ..config import Case
 from ..errors import ResourceError, UserError
-from ..io.atomic import ensure_space, write_h5
+from ..io.atomic import ensure_space
 from ..io.digests import digest, record_file
 from ..io.files import (
     FIELDS_H5,
@@ -80,7 +80,15 @@ from ..io.files import (
 )
 from ..io.formats.fields import check_fields
 from ..io.formats.probes import check_probes
-from ..io.formats.transient import check_checkpoint, check_transient
+from ..io.formats.transient import (
+    CheckpointHeader,
+    check_checkpoint,
+    check_transient,
+    read_checkpoint,
+    transient_stats,
+    write_checkpoint,
+    write_transient_h5,
+)
 from ..io.products import Selection, StageFile, inputs_hash
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.temp_names import resume_path
@@ -100,7 +108,7 @@ from .integrate import (
     gather_values,
     initial_acceleration,
 )
-from .output import FieldWriter, PointSampler, RailSampler, read_checkpoint, write_checkpoint
+from .output import FieldWriter, PointSampler, RailSampler
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
 
@@ -151,7 +159,7 @@ def previous_results(ctx: StageContext) -> dict | None:
                                   context=_checks_context(ctx.case))
     if verdicts is None:
         return None
-    return json.loads(str(verdicts[HISTORIES].attrs.get("stats", "{}")))
+    return transient_stats(verdicts[HISTORIES].attrs)
 
 
 def stress_key(case: Case) -> str:
@@ -223,8 +231,8 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
     partial = resume_path(ctx.out_dir / FIELDS_H5)
 
     def matching(v) -> str:
-        run_id = str(v.attrs.get("run_id", ""))
-        step, written = int(v.attrs.get("step", -1)), int(v.attrs.get("fields_written", -1))
+        header = CheckpointHeader.of_attrs(v.attrs)
+        run_id, step, written = header.run_id, header.step, header.fields_written
         try:
             with h5py.File(partial, "r") as f:
                 a = f.attrs
@@ -581,7 +589,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         ctx, init["mesh_sha"], (steps_out.size, mesh.n_nodes, 3), nt), comm)
     resume_ok = run_id is not None
     if resume_ok:
-        ck = read_checkpoint(ckpt_path, dofmap, comm.rank)
+        ck = read_checkpoint(ckpt_path, dofmap.owned_dofs(comm.rank), comm.rank)
         state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
                       ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
         if comm.rank == 0:
@@ -662,10 +670,10 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
             if want and state.step < nt and not layers:
                 writer.sync()          # the fields on disk up to this step, then the state
                 fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
-                write_checkpoint(ckpt_path, comm,
-                                 checkpoint_attrs() if comm.rank == 0 else None, state.step,
-                                 fields_written_box[0], state, dofmap,
-                                 recorder.arrays if comm.rank == 0 else None)
+                _write_checkpoint(ckpt_path, comm,
+                                  checkpoint_attrs() if comm.rank == 0 else None,
+                                  fields_written_box[0], state, dofmap,
+                                  recorder.arrays if comm.rank == 0 else None)
                 last_ckpt = time.perf_counter()
                 if stop_after is not None and state.step >= stop_after:
                     writer.close()
@@ -1359,32 +1367,28 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
 
 def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, stats: dict,
                      prov: dict) -> None:
-    """``transient.h5`` (rank 0; checked, atomic, recorded)."""
+    """``transient.h5`` (rank 0; checked, atomic, recorded) of the run's recorder and setup
+    (:func:`~railvib_hpc.io.formats.transient.write_transient_h5`)."""
     a = recorder.arrays
     vehicle = init["vehicle"]
-
-    def fill(f, parallel: bool) -> None:
-        f["time"] = init["times"]
-        w = f.create_group("wheels")
-        w["x"] = init["x"]
-        w["contact_force"] = a["contact_force"]
-        w["penetration"] = a["penetration"]
-        w["rail_displacement"] = a["rail_displacement"]
-        w["wheel_height"] = a["wheel_height"]
-        w["rail_index"] = init["run"]["wheel_rail"]
-        v = f.create_group("vehicle")
-        v["y"], v["y_dot"], v["y_ddot"] = a["y"], a["y_dot"], a["y_ddot"]
-        v.attrs["dof_names"] = json.dumps(list(vehicle.dof_names) if vehicle is not None
-                                          else [])
-        v.attrs["type"] = case["vehicle.type"]
-        r = f.create_group("rail")
-        r["x"] = init["rails"].x
-        r["uz"] = a["rail"][..., 0]
-        r["ry"] = a["rail"][..., 1]
-
-    attrs = {**prov, "stats": json.dumps(stats, default=float), "solver": "transient"}
-    size = sum(v.nbytes for k, v in a.items() if k != "probes") + init["times"].nbytes \
-        + init["x"].nbytes
     context = _checks_context(case)
-    write_h5(path, None, fill, size_hint=int(size), attrs=attrs,
-             check=lambda tmp: check_transient(tmp, True, context))
+    write_transient_h5(path, stats=stats, provenance=prov,
+                       check=lambda tmp: check_transient(tmp, True, context),
+                       time=init["times"], wheel_x=init["x"],
+                       rail_index=init["run"]["wheel_rail"],
+                       histories={k: v for k, v in a.items() if k not in ("probes", "rail")},
+                       dof_names=list(vehicle.dof_names) if vehicle is not None else [],
+                       vehicle_type=case["vehicle.type"], rail_x=init["rails"].x,
+                       rail=a["rail"])
+
+
+def _write_checkpoint(path: Path, comm, attrs: dict | None, fields_written: int,
+                      state: State, dofmap, history: dict | None) -> None:
+    """``transient_checkpoint.h5`` of the state after ``state.step`` (collective; this
+    rank's rows of the state vectors by global DOF number,
+    :func:`~railvib_hpc.io.formats.transient.write_checkpoint`)."""
+    small = {"y": state.y, "y_dot": state.y_dot, "y_ddot": state.y_ddot,
+             "penetration": state.penetration, "force": state.force}
+    write_checkpoint(path, comm, attrs, state.step, fields_written,
+                     {"u": state.u, "v": state.v, "a": state.a},
+                     dofmap.owned_dofs(comm.rank), dofmap.n_dofs, small, history)

@@ -45,11 +45,9 @@ def _overrides(row: dict) -> dict[str, str]:
 
 
 def _top_soil_rayleigh_speed(report: dict) -> tuple[str, float]:
-    """The Rayleigh speed of the soil at the ground (the first layer, or the subgrade)."""
-    case = Case.from_file(report["case"]["file"])
-    for key, value in report["settings"].get("case_overrides", {}).items():
-        case = case.replace({key: value})
-    speeds = ground_rayleigh_speeds(case)
+    """The Rayleigh speed of the soil at the ground (the first layer, or the subgrade) of
+    the study's case file (``--set`` overrides of the soil are not in ``report.json``)."""
+    speeds = ground_rayleigh_speeds(Case.from_file(report["case"]["file"]))
     name = "soil_layer_1" if "soil_layer_1" in speeds else "subgrade"
     return name, speeds.get(name, min(speeds.values()))
 
@@ -59,13 +57,10 @@ def table(folder: Path) -> list[str]:
     report = json.loads((folder / "report.json").read_text())
     rows = report["analysis"]["rows"]
     soil, c_r = _top_soil_rayleigh_speed(report)
-    f_top = max((float(v.get("band_hz", 0) or 0) for v in report.get("variants", [])),
-                default=0.0)
     lines = [f"# {folder}: c_R = {c_r:.1f} m/s ({soil}); "
              f"{len(rows)} measures; complete: {report['complete']}"]
+    # (the study keeps only the bands both variants resolve: transient.f_max, direct)
     bands = sorted({float(f) for r in rows for d in r["il_band_db"].values() for f in d})
-    if f_top > 0:
-        bands = [f for f in bands if f <= f_top]
     head = f"{'measure':<20} {'D [m]':>6} {'probes':>8} " + " ".join(
         f"{f:>7g}" for f in bands)
     lines += [head, f"{'':<20} {'':>6} {'D/lR':>8} " + " ".join(

@@ -203,7 +203,7 @@ class StageResult(_Frozen):
         The output folder.
     reused
         What the stage reused instead of computing (a bool, or per file for
-        ``reconstruct``).
+        ``reconstruct``; None for ``assess``, which gives no reuse verdict).
     seconds
         Wall time of the call [s] (rank 0).
     timings

@@ -89,6 +89,9 @@ TRANSLATORS: dict[str, str] = {
     "mesh/interfaces.py": "turns the case's elastic interfaces into their planes",
     "mesh/dispersion_check.py": "checks the case's mesh sizes against its wavelengths",
     "mbs/case_vehicle.py": "the case -> vehicle and passage translation",
+    "transient/engines.py": "the transient stage's setup of its engines (split from "
+                            "transient/stage.py): reads the case's transient, damping and "
+                            "boundary keys",
     "mbs/damping_model.py": "the case's modal.damping and mbs.damping_* overrides",
     "assess/thesis.py": "the thesis comparison: describes the case's mesh, vehicle and "
                         "geometry next to the thesis's tables",

@@ -55,6 +55,7 @@ from ..io.files import (
 from ..io.formats.fields import FieldsFile
 from ..io.formats.mbs import MbsFile
 from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
+from ..io.formats.transient import TransientFile
 from ..io.products import ALL_KEYS, StageFile
 from ..io.stage_outputs import AssessmentOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
@@ -76,16 +77,9 @@ AssessStageError = ProbesFileError
 def _contact(out_dir: Path, solver: str):
     """Wheel positions and contact forces of ``mbs.h5``, or of the full-order solution's
     ``transient.h5``."""
-    import h5py
-
-    if solver != "transient":
-        path = out_dir / MBS_H5
-        return MbsFile(path).contact() if path.exists() else (None, None)
-    path = out_dir / TRANSIENT_H5
-    if path.exists():
-        with h5py.File(path, "r") as f:
-            return f["wheels/x"][()], f["wheels/contact_force"][()]
-    return None, None
+    reader = (MbsFile(out_dir / MBS_H5) if solver != "transient"
+              else TransientFile(out_dir / TRANSIENT_H5))
+    return reader.contact() if reader.path.exists() else (None, None)
 
 
 def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
@@ -413,11 +407,7 @@ def _site_summary(case: Case) -> list[str]:
 
 def _transient_summary(case: Case, path: Path) -> list[str]:
     """Report lines of a full-order (``railvib transient``) solution."""
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        stats = json.loads(f.attrs.get("stats", "{}"))
-        key = f.attrs.get("inputs_sha256", "?")
+    stats, key = TransientFile(path).summary()
     faces = ", ".join(f"{k} {case[f'boundary.{k}']}" for k in
                       ("x_min", "x_max", "y_min", "y_max", "base"))
     d = case["damping"]

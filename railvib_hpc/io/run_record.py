@@ -27,7 +27,8 @@ One entry::
     started, finished    UTC times
     wall_s          wall time of the call [s] (rank 0)
     substages       [[name, seconds], ...]: the Reporter's timed parts of the call
-    reused          what the stage reused (its summary's ``reused``: bool or per file)
+    reused          what the stage reused (its output's ``reused``: bool, per file, or
+                    null for a stage that gives no reuse verdict, ``assess``)
     ranks, hosts    the MPI ranks and the distinct host names
     peak_rss_gb_per_rank, peak_rss_gb_total, peak_rss_gb_max
                     peak resident memory of every rank's process during the call
@@ -246,11 +247,13 @@ class StageCall:
         self.reused: Any = None
 
     def done(self, result: Any) -> None:
-        """The stage returned ``result``: its summary dict, or a result object with one
-        (:class:`~railvib_hpc.io.stage_protocol.StageOutput`); the summary's ``reused``
-        goes into the entry."""
-        summary = result if isinstance(result, dict) else getattr(result, "summary", None)
-        self.reused = summary.get("reused") if summary is not None else None
+        """The stage returned ``result``: its typed output
+        (:class:`~railvib_hpc.io.stage_protocol.StageOutput`, duck-typed), whose
+        ``reused`` goes into the entry, or a plain summary dict (its ``reused``)."""
+        if isinstance(result, dict):
+            self.reused = result.get("reused")
+        else:
+            self.reused = getattr(result, "reused", None)
 
 
 @contextlib.contextmanager

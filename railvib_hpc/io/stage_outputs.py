@@ -65,7 +65,8 @@ class StageOutput:
     Attributes
     ----------
     reused
-        What it reused instead of computing (a bool, or per file); ``run.json`` records it.
+        What it reused instead of computing (a bool, or per file; None for a stage that
+        gives no reuse verdict, ``assess``); ``run.json`` records it.
     summary
         Its full summary (the statistics it printed and recorded).
     """
@@ -290,14 +291,14 @@ class AssessmentOutput(StageOutput):
     def of_summary(cls, summary: dict, out_dir: Path) -> AssessmentOutput:
         """The output of an assessment's summary
         (:func:`~railvib_hpc.assess.stage.assess_case`) in ``out_dir``; it is always
-        computed anew (``reused`` False)."""
+        computed anew and gives no reuse verdict (``reused`` None, null in ``run.json``)."""
         report = {k: Path(v) for k, v in summary.get("report", {}).items()}
         utilisation: dict[str, float | None] = {}
         for name, res in summary.get("results", {}).items():
             binding = [b.get("utilisation") for b in res.get("standards", {}).values()
                        if not b.get("comparison_only") and b.get("utilisation") is not None]
             utilisation[name] = float(max(binding)) if binding else None
-        return cls(reused=False, summary=summary, assessment_json=out_dir / ASSESSMENT_JSON,
+        return cls(reused=None, summary=summary, assessment_json=out_dir / ASSESSMENT_JSON,
                    report_html=report.get("html"), report_md=report.get("markdown"),
                    report_json=report.get("json"), verdict=dict(summary.get("verdict", {})),
                    max_utilisation=utilisation)

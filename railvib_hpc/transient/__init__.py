@@ -3,8 +3,10 @@
 Layers (each imports only downward): :mod:`.scheme` (generalized-alpha coefficients, time
 step, accuracy; numpy), :mod:`.rail` (wheel-rail coupling on the rail DOFs; numpy),
 :mod:`.petsc` (effective matrix, MUMPS factor, products; PETSc), :mod:`.integrate` (the
-stepping loop with prescribed loads or a vehicle), :mod:`.output` (fields, probes,
-checkpoints), :mod:`.stage` (the command).
+stepping loop with prescribed loads or a vehicle), :mod:`.output` (fields, probes),
+:mod:`.engines` (the engines' matrices, systems, steps and initial state), :mod:`.stage`
+(the command; ``transient.h5`` and the checkpoints are written through
+:mod:`railvib_hpc.io.formats.transient`).
 
 Why not PETSc's ``TSALPHA2`` (available in 3.18, the same Chung-Hulbert scheme): its step is
 one nonlinear solve of the whole model, so the exact Hertz contact would re-factor the

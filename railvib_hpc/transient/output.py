@@ -1,4 +1,4 @@
-"""Outputs of the full-order solution: probes, rail histories, ``fields.h5``, checkpoints.
+"""Outputs of the full-order solution: probes, rail histories, ``fields.h5``.
 
 The files have the layout of the ``reconstruct`` stage, so ``assess`` and the studies read
 them unchanged:
@@ -16,12 +16,9 @@ them unchanged:
 * rail histories (:class:`RailSampler`): ``uz``, ``ry`` of every flexible-rail node at every
   step (rail bending moments, rail displacement under the wheels).
 
-Checkpoints (:func:`write_checkpoint`, :func:`read_checkpoint`) hold the state vectors by
-global DOF number (the numbering does not depend on the number of ranks, so a run may
-resume on another number of ranks) and rank 0's histories. They are stage files
-(``transient_checkpoint.h5``, written by :func:`~railvib_hpc.io.atomic.write_h5` with
-their provenance); whether one may be resumed is decided by the stage
-(:mod:`.stage`).
+The checkpoints (``transient_checkpoint.h5``) and ``transient.h5`` have their layout,
+writer and reader in :mod:`railvib_hpc.io.formats.transient`; whether a checkpoint may be
+resumed is decided by the stage (:mod:`.stage`).
 """
 
 from __future__ import annotations
@@ -300,77 +297,3 @@ class FieldWriter:
                         check=lambda tmp: check_fields(tmp, False))
         on_root(lambda: write_fields_xdmf(self.final), self.comm)
         return sha
-
-
-# --------------------------------------------------------------------------- checkpoints
-def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_written: int,
-                     state, dofmap: DofMap, history: dict | None) -> None:
-    """Store the state after ``step`` (collective, atomic, recorded; the previous checkpoint
-    is replaced by the rename).
-
-    ``attrs`` (rank 0) are its provenance and run id; ``history`` (rank 0: name -> array)
-    holds the recorded histories.
-    """
-    from ..io.atomic import write_h5
-    from ..io.formats.transient import check_checkpoint
-    from ..io.parallel_h5 import h5py_parallel_ok
-
-    parallel = h5py_parallel_ok(comm)
-    r0, r1 = dofmap.owned_dofs(comm.rank)
-    n = dofmap.n_dofs
-    vecs = {"u": state.u, "v": state.v, "a": state.a}
-    if not parallel and comm.size > 1:
-        gathered = {k: comm.gather(v, root=0) for k, v in vecs.items()}
-        if comm.rank == 0:
-            vecs = {k: np.concatenate(v) for k, v in gathered.items()}
-            r0, r1 = 0, n
-    small = {"y": state.y, "y_dot": state.y_dot, "y_ddot": state.y_ddot,
-             "penetration": state.penetration, "force": state.force}
-    hist_meta = comm.bcast({k: (v.shape, v.dtype.str) for k, v in (history or {}).items()}
-                           if comm.rank == 0 else None, root=0)
-    size = 3 * 8 * n + sum(8 * np.size(v) for v in small.values()) + sum(
-        int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in hist_meta.values())
-
-    def fill(f, par: bool) -> None:
-        f.attrs["step"] = int(step)
-        f.attrs["fields_written"] = int(fields_written)
-        g = f.create_group("state")
-        for name, v in vecs.items():
-            d = g.create_dataset(name, (n,), "f8")
-            if par:
-                from ..io.parallel_h5 import write_slab
-
-                write_slab(d, (r0,), (r1 - r0,), v if r1 > r0 else None, True)
-            elif r1 > r0:
-                d[r0:r1] = v
-        s = f.create_group("small")
-        for name, v in small.items():
-            d = s.create_dataset(name, np.shape(v), "f8")
-            if comm.rank == 0 and np.size(v):
-                d[...] = v
-        h = f.create_group("history")
-        for name, (shape, dtype) in hist_meta.items():
-            d = h.create_dataset(name, shape, dtype)
-            if comm.rank == 0:
-                d[...] = history[name]
-
-    write_h5(path, comm, fill, size_hint=int(size), attrs=attrs, parallel=parallel,
-             check=lambda tmp: check_checkpoint(tmp))
-
-
-def read_checkpoint(path: Path, dofmap: DofMap, rank: int) -> dict:
-    """This rank's part of a checkpoint the stage found current and sound (every rank reads
-    its own rows, plain h5py, read only)."""
-    import h5py
-
-    with h5py.File(path, "r") as f:
-        r0, r1 = dofmap.owned_dofs(rank)
-        out = {"step": int(f.attrs["step"]), "fields_written": int(f.attrs["fields_written"])}
-        for name in ("u", "v", "a"):
-            out[name] = f[f"state/{name}"][r0:r1]
-        for name in f["small"]:
-            out[name] = f[f"small/{name}"][()]
-        out["history"] = ({name: f[f"history/{name}"][()] for name in f["history"]}
-                          if rank == 0 else None)
-        return out
-

@@ -63,8 +63,8 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Case
-from ..errors import ResourceError, UserError
-from ..io.atomic import ensure_space, write_h5
+from ..errors import ResourceError
+from ..io.atomic import ensure_space
 from ..io.digests import digest, record_file
 from ..io.files import (
     FIELDS_H5,
@@ -80,7 +80,15 @@ from ..io.files import (
 )
 from ..io.formats.fields import check_fields
 from ..io.formats.probes import check_probes
-from ..io.formats.transient import check_checkpoint, check_transient
+from ..io.formats.transient import (
+    CheckpointHeader,
+    check_checkpoint,
+    check_transient,
+    read_checkpoint,
+    transient_stats,
+    write_checkpoint,
+    write_transient_h5,
+)
 from ..io.products import Selection, StageFile, inputs_hash
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, StageRunner
 from ..io.temp_names import resume_path
@@ -92,15 +100,17 @@ from ..parallel import on_root
 from ..problem import Problem
 from ..resources import check_memory, peak_memory_gb
 from ..site import line_probes
-from .integrate import (
-    DirectSolver,
-    RailColumns,
-    State,
-    VehicleDriver,
-    gather_values,
-    initial_acceleration,
+from .engines import (  # TransientInputError re-exported
+    TransientInputError,
+    assemble_matrices,
+    check_implicit_outside_layers,
+    explicit_system,
+    imex_partition,
+    initial_state,
+    pml_layer,
 )
-from .output import FieldWriter, PointSampler, RailSampler, read_checkpoint, write_checkpoint
+from .integrate import DirectSolver, RailColumns, State, VehicleDriver
+from .output import FieldWriter, PointSampler, RailSampler
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
 
@@ -121,14 +131,6 @@ MAX_TRANSIENT_STEPS = 200_000
 #: Copies of rank 0's histories held at once at the end of a run (the histories and the
 #: rail bending moments and file buffers computed from them while the files are written).
 HISTORY_COPIES = 2
-
-
-#: PETSc options prefix of the static solve that fits the supported track ends' springs.
-TRACK_ENDS_PREFIX = "railvib_tr_ends_"
-
-
-class TransientInputError(UserError):
-    """A case the full-order solver cannot run (no rails for a vehicle, probes outside...)."""
 
 
 class Interrupted(RuntimeError):
@@ -155,7 +157,7 @@ def previous_results(ctx: StageContext) -> dict | None:
                                   context=_checks_context(ctx.case))
     if verdicts is None:
         return None
-    return json.loads(str(verdicts[HISTORIES].attrs.get("stats", "{}")))
+    return transient_stats(verdicts[HISTORIES].attrs)
 
 
 def stress_key(case: Case) -> str:
@@ -227,8 +229,8 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
     partial = resume_path(ctx.out_dir / FIELDS_H5)
 
     def matching(v) -> str:
-        run_id = str(v.attrs.get("run_id", ""))
-        step, written = int(v.attrs.get("step", -1)), int(v.attrs.get("fields_written", -1))
+        header = CheckpointHeader.of_attrs(v.attrs)
+        run_id, step, written = header.run_id, header.step, header.fields_written
         try:
             with h5py.File(partial, "r") as f:
                 a = f.attrs
@@ -585,7 +587,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
         ctx, init["mesh_sha"], (steps_out.size, mesh.n_nodes, 3), nt), comm)
     resume_ok = run_id is not None
     if resume_ok:
-        ck = read_checkpoint(ckpt_path, dofmap, comm.rank)
+        ck = read_checkpoint(ckpt_path, dofmap.owned_dofs(comm.rank), comm.rank)
         state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
                       ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
         if comm.rank == 0:
@@ -597,7 +599,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     else:
         run_id = on_root(lambda: uuid.uuid4().hex, comm)
         with rep.stage("transient: initial state"):
-            state = _initial_state(init, comm, rep)
+            state = initial_state(init, comm, rep)
         fields_written = 0
 
     def fields_attrs() -> dict:
@@ -666,10 +668,10 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
             if want and state.step < nt and not layers:
                 writer.sync()          # the fields on disk up to this step, then the state
                 fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
-                write_checkpoint(ckpt_path, comm,
-                                 checkpoint_attrs() if comm.rank == 0 else None, state.step,
-                                 fields_written_box[0], state, dofmap,
-                                 recorder.arrays if comm.rank == 0 else None)
+                _write_checkpoint(ckpt_path, comm,
+                                  checkpoint_attrs() if comm.rank == 0 else None,
+                                  fields_written_box[0], state, dofmap,
+                                  recorder.arrays if comm.rank == 0 else None)
                 last_ckpt = time.perf_counter()
                 if stop_after is not None and state.step >= stop_after:
                     writer.close()
@@ -735,7 +737,7 @@ def _setup(ctx: StageContext) -> dict:
         # refused before assembly); assembly and the layer's kernel take them from here
         pml = pml_geometry(mesh, problem) if pml_faces(problem) else None
         if pml is not None and case["transient.engine"] == "imex":
-            _check_implicit_outside_layers(case, mesh, pml[1])
+            check_implicit_outside_layers(case, mesh, pml[1])
         unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)
@@ -755,14 +757,14 @@ def _setup(ctx: StageContext) -> dict:
     explicit = engine == "explicit"
     if engine != "direct":
         # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots, problem = _assemble(ctx, mesh, dofmap, problem,
-                                                      pml)
+        K, M, C, cinfo, dashpots, problem = assemble_matrices(ctx, mesh, dofmap, problem,
+                                                              pml)
         with rep.stage("transient: stability limit"):
             if explicit:
-                system, dt, limit = _explicit_system(ctx, mesh, dofmap, problem, rails,
+                system, dt, limit = explicit_system(ctx, mesh, dofmap, problem, rails,
                                                      vehicle, (K, M, C, dashpots), dt, pml)
             else:
-                partition, dt, limit, layer = _imex_partition(ctx, mesh, dofmap, problem, K,
+                partition, dt, limit, layer = imex_partition(ctx, mesh, dofmap, problem, K,
                                                               M, C, dt, pml)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
@@ -792,8 +794,8 @@ def _setup(ctx: StageContext) -> dict:
     scheme = None
     if not explicit:
         if engine == "direct":
-            K, M, C, cinfo, _, _ = _assemble(ctx, mesh, dofmap, problem, pml)
-            layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
+            K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
+            layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
         col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
@@ -869,319 +871,6 @@ def speed_warning(case: Case, speed: float) -> str:
     return (f"WARNING: the train's speed {speed:g} m/s is {speed / c_r:.0%} of c_R = "
             f"{c_r:.1f} m/s ({part}): {what}; the response near the track grows steeply "
             "there (the track's critical speed)")
-
-
-def _assemble(ctx: StageContext, mesh, dofmap, problem: Problem,
-              pml: tuple | None = None) -> tuple:
-    """K, M, C (None when nothing damps), the damping summary, for the explicit engine
-    the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
-    in C), and the problem (with the supported track ends' fitted stiffness,
-    :func:`_fit_track_ends`) (collective). ``problem``: the run's, built once from the
-    case by :func:`_setup`; ``pml``: its :func:`~.pml.pml_geometry` (None without ``pml``
-    faces), whose hexahedra take the plain full formulation, the one their memory terms
-    use."""
-    from ..modal.boundary import dashpot_diagonal
-    from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
-
-    case, comm = ctx.case, ctx.comm
-    engine = case["transient.engine"]
-    with ctx.rep.stage("transient: assembly"):
-        # the explicit engines keep the lumped mass on the diagonal alone
-        K, M, _ = assemble(mesh, problem, dofmap, comm,
-                           mass=True if engine == "direct" else "diagonal",
-                           full_hexes=None if pml is None else pml[1])
-        problem = _fit_track_ends(ctx, mesh, dofmap, problem, K, M)
-        # the explicit engine takes diagonal dashpots at the full step, apart from C
-        dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
-            if engine == "explicit" else None
-        # (every rank must agree: a rank without face nodes has an all-zero diagonal)
-        if engine == "explicit" and comm.allreduce(dashpots is None, op=_MPI_LOR()):
-            dashpots = None
-        stored = dashpots is None
-        C = None
-        if engine != "direct":
-            # Rayleigh damping applied, not stored, where it can be (the explicit engines)
-            from .explicit import lumped_diagonal
-
-            C, cinfo = rayleigh_operator(mesh, problem, dofmap, comm, K,
-                                         lumped_diagonal(M, comm), dashpots=stored)
-        if C is None:
-            C, cinfo = assemble_damping(mesh, problem, dofmap, comm, K, M, dashpots=stored)
-        if case["damping.model"] == "none" and (cinfo["dashpot_nodes"] == 0 or not stored) \
-                and cinfo["layer_elements"] == 0 and not case["damping.pads"]:
-            destroy_damping(C)
-            C = None
-    return K, M, C, cinfo, dashpots, problem
-
-
-def _fit_track_ends(ctx: StageContext, mesh, dofmap, problem: Problem, K, M) -> Problem:
-    """The problem with the supported track ends' springs, added to the assembled K
-    (:func:`~railvib_hpc.modal.petsc.fit_track_ends`, which the modal path shares; its
-    line goes to the log). Rigid ends: ``problem`` unchanged."""
-    from ..modal.petsc import fit_track_ends
-
-    try:
-        problem, line = fit_track_ends(mesh, dofmap, problem, K, M, ctx.comm,
-                                       TRACK_ENDS_PREFIX)
-    except ValueError as exc:
-        raise TransientInputError(str(exc)) from None
-    if line:
-        ctx.rep.info(line)
-    return problem
-
-
-def _explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: RailDofs,
-                     vehicle,
-                     matrices: tuple, dt_band: float, pml: tuple | None = None) -> tuple:
-    """The explicit engine's system, its step and a line on its stability limit
-    (``pml``: the setup's :func:`~.pml.pml_geometry`, None without ``pml`` faces).
-
-    The limit is :data:`~.explicit.STEP_SAFETY` of the critical step of the model's largest
-    natural frequency (:func:`~.explicit.stability_limit`) and, with a vehicle, of the
-    linearised Hertz spring on the lightest rail node (:func:`~.explicit.contact_frequency`).
-    ``transient.dt`` above it is refused, naming what sets it; the automatic step is the
-    band's step ``dt_band`` or the limit, whichever is smaller, divided into ``output.dt``.
-    """
-    from .explicit import (
-        ExplicitSystem,
-        contact_frequency,
-        critical_step,
-        limiting_element,
-        stability_limit,
-    )
-
-    case, comm = ctx.case, ctx.comm
-    K, M, C, dashpots = matrices
-    layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
-    # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
-    system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots, pml=layer)
-    plus = _layer_stiffening(comm, K, layer)
-    lim = stability_limit(K, system.m, C, comm, plus=plus)
-    if plus is not None:
-        plus.destroy()
-    critical = lim.dt_critical
-    where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
-    if vehicle is not None:
-        uz = rails.dofs[:, :, 0].ravel()
-        own = uz[(uz >= system.r0) & (uz < system.r1)] - system.r0
-        rail_mass = comm.allreduce(float(system.m[own].min(initial=np.inf)), op=_MPI_MIN())
-        w_c = contact_frequency(vehicle.hertz_constant,
-                                float(np.max(vehicle.static_wheel_loads())), rail_mass)
-        if w_c > 0 and critical_step(w_c) < critical:
-            critical = critical_step(w_c)
-            where = (f"the wheel-rail contact (linearised Hertz spring on a {rail_mass:.3g} kg "
-                     f"rail node, {w_c / (2 * math.pi):.4g} Hz)")
-    try:
-        dt, text = _stable_step(case, lim, critical, where, dt_band, "explicit")
-    except TransientInputError:
-        system.destroy()
-        raise
-    system.dt = float(dt)
-    return system, dt, text
-
-
-def _pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K, pml: tuple | None):
-    """The perfectly matched layers of the ``pml`` faces (None without), with their log
-    lines (collective). ``pml``: the checked :func:`~.pml.pml_geometry` of the setup."""
-    from .petsc import GhostGather
-    from .pml import PmlLayer, pml_line, pml_warnings
-
-    if pml is None:
-        return None
-    comm = ctx.comm
-    rows, n_global = K.getOwnershipRange(), K.getSize()[0]
-    layer = PmlLayer(mesh, problem, dofmap, comm.rank, *rows,
-                     lambda dofs: GhostGather(comm, rows, n_global, dofs), geometry=pml)
-    n_el = comm.allreduce(layer.n_elements)
-    ctx.rep.info(f"  {pml_line(layer.faces, problem)}; {n_el} element computations on "
-                 f"{comm.size} rank(s), {comm.allreduce(layer.nbytes) / 1e6:.3g} MB")
-    for line in pml_warnings(layer.faces, problem):
-        ctx.rep.info(line)
-    return layer
-
-
-def _layer_stiffening(comm, K, layer):
-    """The layers' ``M_e2`` diagonal as a matrix in K's layout, for the stability limit's
-    ``plus`` (it stiffens their nodes; None without layers; the caller destroys it)."""
-    if layer is None:
-        return None
-    from .petsc import diagonal_matrix
-
-    return diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
-                           layer.stiffness_diagonal)
-
-
-def _stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
-                 engine: str) -> tuple[float, str]:
-    """The step of a conditionally stable engine and a line on its limit: ``transient.dt``
-    (refused above :data:`~.explicit.STEP_SAFETY` of ``critical``, naming ``where`` the
-    limit sits) or the automatic one, ``min(dt_band, allowed)`` divided into ``output.dt``.
-    ``lim``: the :class:`~.explicit.StableStep` of the model (its largest mode, and whether
-    damping that is not proportional to it lowers the limit).
-    """
-    from .explicit import STEP_SAFETY
-
-    allowed = STEP_SAFETY * critical
-    omega = lim.omega_max
-    damped = (f"; the damping not proportional to that mode (absorbing faces' dashpots, "
-              f"pads) lowers its step {lim.dt_mode:.4g} s" if lim.damping_limited else "")
-    text = (f"stable up to {allowed:.4g} s ({STEP_SAFETY:g} x the critical step "
-            f"{critical:.4g} s, set by {where}; omega_max = {omega:.4g} rad/s = "
-            f"{omega / (2 * math.pi):.4g} Hz, damping ratio of that mode {lim.xi:.3g}{damped})")
-    dt = case["transient.dt"]
-    if dt > 0 and dt > allowed * (1 + 1e-9):
-        raise TransientInputError(
-            f"transient.dt = {dt:g} s: the {engine} engine is {text}; allowed: "
-            f"0 < transient.dt <= {allowed:.4g} s, or 0 (automatic)")
-    if dt <= 0:
-        dt = min(dt_band, allowed)
-        odt = case["output.dt"]
-        if odt > 0:
-            dt = odt / math.ceil(odt / dt * (1.0 - 1e-6))
-    return float(dt), text
-
-
-def _check_implicit_outside_layers(case: Case, mesh, inside: np.ndarray) -> None:
-    """Refuse implicit parts (``transient.implicit_parts``) with hexahedra in a perfectly
-    matched layer (``inside``: the layers' mask): the layer's memory forces are explicit,
-    and with its elements implicit the layer grew unstable (measured on the plane-strain
-    slab, an implicit column through the base layer: the energy grew 1000 x in 1.5 s)."""
-    from ..mesh.stage import present_parts
-    from ..schema import PART_ID
-    from .imex import implicit_part_names
-
-    names = list(case["transient.implicit_parts"])
-    parts = implicit_part_names(names, present_parts(mesh))
-    hit = [p for p in parts if np.any(inside & (mesh.hex_part == PART_ID[p]))]
-    if hit:
-        raise TransientInputError(
-            f"transient.implicit_parts = {names}: the part(s) {', '.join(hit)} have "
-            f"hexahedra in a perfectly matched layer (boundary.layer_thickness = "
-            f"{case['boundary.layer_thickness']:g} m); the layer's memory forces are "
-            "explicit and with implicit elements in it the layer grows unstable; allowed: "
-            "implicit parts outside the layers (leave them out of transient.implicit_parts, "
-            "make the layer thinner, or give that face absorbing)")
-
-
-def _imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
-                    dt_band: float, pml: tuple | None = None) -> tuple:
-    """The IMEX engine's implicit partition ``(K_I, C_I)``, its step, a line on the
-    explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
-    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`) and the
-    perfectly matched layers (None without ``pml``, the setup's
-    :func:`~.pml.pml_geometry`; their ``M_e2`` is in the limit, their hexahedra take the
-    full formulation in the partition as in K)."""
-    from ..mesh.stage import present_parts
-    from ..modal.petsc import assemble_partition
-    from ..schema import PART_ID
-    from .explicit import STEP_SAFETY, limiting_element, lumped_diagonal, stability_limit
-    from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names
-
-    case, comm = ctx.case, ctx.comm
-    parts = implicit_part_names(list(case["transient.implicit_parts"]), present_parts(mesh))
-    extra = None
-    if case["transient.implicit_elements"] == "auto":
-        target = case["transient.dt"] if case["transient.dt"] > 0 else dt_band
-        # (never a layer's element: its memory forces are explicit,
-        # _check_implicit_outside_layers)
-        outside = ~np.isin(mesh.hex_part, [PART_ID[p] for p in parts])
-        if pml is not None:
-            outside &= ~pml[1]
-        extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY, outside)
-    K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True,
-                                  full_hexes=None if pml is None else pml[1])
-    layer = plus = None
-    try:
-        m = lumped_diagonal(M, comm)
-        layer = _pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        plus = _layer_stiffening(comm, K, layer)
-        lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
-                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
-        where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
-        dt, text = _stable_step(case, lim, lim.dt_critical, where, dt_band, "imex")
-    except BaseException:
-        for A in (K_I, C_I):
-            if A is not None:
-                A.destroy()
-        if layer is not None:
-            layer.destroy()
-        raise
-    finally:
-        if plus is not None:
-            plus.destroy()
-    auto = (f" and {int(extra.sum()):,} elements below the target step" if extra is not None
-            else "")
-    text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
-            f"dashpots{', the layers M_e1' if layer is not None else ''}; explicit part {text}")
-    return (K_I, C_I), dt, text, layer
-
-
-def _MPI_MIN():
-    from mpi4py import MPI
-
-    return MPI.MIN
-
-
-def _MPI_LOR():
-    from mpi4py import MPI
-
-    return MPI.LOR
-
-
-def _initial_state(init: dict, comm, rep: Reporter) -> State:
-    """At rest; a vehicle in static equilibrium on the (possibly deflected) rail."""
-    from ..mbs.vehicles import static_equilibrium
-
-    system = init["system"]
-    n_local = system.n_local
-    state = State(0, np.zeros(n_local), np.zeros(n_local), np.zeros(n_local))
-    vehicle, driver = init["vehicle"], init["driver"]
-    if vehicle is None:
-        if init["prescribed"] is not None:
-            if init["scheme"] is None:
-                from .explicit import initial_acceleration as explicit_acceleration
-
-                explicit_acceleration(system, state, [init["prescribed"](0)])
-            else:
-                initial_acceleration(system, state, [init["prescribed"](0)])
-        return state
-    dofs, coef, _ = driver.coupling.at(driver.x[0])
-    r = driver.heights(0)
-    nw = coef.shape[0]
-    flat = dofs.ravel()
-    if np.all(flat < 0):
-        flex = np.zeros((nw, nw))
-        xcols = None
-    else:
-        rep.info("  a wheel starts on the flexible rail: static equilibrium with K")
-        # one solve per wheel, K x_j = E_D c_j (its Hermite weights on its DOFs), not one
-        # per DOF: the flexibility c_i . x_j[D_i] and u_0 = -sum_j x_j F_j need no more
-        # (8 x fewer solves than the columns of every DOF: the static start of the explicit
-        # engines, CG + GAMG per column, took 185-523 s on 68k-178k DOFs before)
-        rhs = np.zeros((n_local, nw))
-        own = (dofs >= system.r0) & (dofs < system.r1)
-        wheel = np.broadcast_to(np.arange(nw)[:, None], dofs.shape)
-        np.add.at(rhs, (dofs[own] - system.r0, wheel[own]), coef[own])
-        xcols = system.solve_matrix(system.K, rhs)
-        if getattr(system, "static_method", None):
-            rep.info(f"  static start: {system.static_method}")
-        w = np.zeros((nw, nw))
-        for j in range(nw):
-            at = gather_values(comm, xcols[:, j], system.r0, flat).reshape(dofs.shape)
-            w[:, j] = (coef * at).sum(axis=1)
-        flex = 0.5 * (w + w.T)
-    y, force = static_equilibrium(vehicle, flex, r)
-    if xcols is not None:
-        state.u[:] = -(xcols @ force)
-    if getattr(system, "pml", None) is not None:
-        # the static deflection is the layers' rest state (PmlLayer.start)
-        system.pml.start(state.u)
-    state.y, state.y_dot = y, np.zeros(vehicle.n_dof)
-    state.y_ddot = driver.newmark.acceleration(y, state.y_dot, force)
-    state.force = force
-    w = flex @ (-force) if xcols is not None else np.zeros(nw)
-    state.penetration = w + r - vehicle.contact_matrix().T @ y
-    return state
 
 
 def _stress_writer(case: Case, comm, rep: Reporter, key: str):
@@ -1315,32 +1004,28 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
 
 def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, stats: dict,
                      prov: dict) -> None:
-    """``transient.h5`` (rank 0; checked, atomic, recorded)."""
+    """``transient.h5`` (rank 0; checked, atomic, recorded) of the run's recorder and setup
+    (:func:`~railvib_hpc.io.formats.transient.write_transient_h5`)."""
     a = recorder.arrays
     vehicle = init["vehicle"]
-
-    def fill(f, parallel: bool) -> None:
-        f["time"] = init["times"]
-        w = f.create_group("wheels")
-        w["x"] = init["x"]
-        w["contact_force"] = a["contact_force"]
-        w["penetration"] = a["penetration"]
-        w["rail_displacement"] = a["rail_displacement"]
-        w["wheel_height"] = a["wheel_height"]
-        w["rail_index"] = init["run"]["wheel_rail"]
-        v = f.create_group("vehicle")
-        v["y"], v["y_dot"], v["y_ddot"] = a["y"], a["y_dot"], a["y_ddot"]
-        v.attrs["dof_names"] = json.dumps(list(vehicle.dof_names) if vehicle is not None
-                                          else [])
-        v.attrs["type"] = case["vehicle.type"]
-        r = f.create_group("rail")
-        r["x"] = init["rails"].x
-        r["uz"] = a["rail"][..., 0]
-        r["ry"] = a["rail"][..., 1]
-
-    attrs = {**prov, "stats": json.dumps(stats, default=float), "solver": "transient"}
-    size = sum(v.nbytes for k, v in a.items() if k != "probes") + init["times"].nbytes \
-        + init["x"].nbytes
     context = _checks_context(case)
-    write_h5(path, None, fill, size_hint=int(size), attrs=attrs,
-             check=lambda tmp: check_transient(tmp, True, context))
+    write_transient_h5(path, stats=stats, provenance=prov,
+                       check=lambda tmp: check_transient(tmp, True, context),
+                       time=init["times"], wheel_x=init["x"],
+                       rail_index=init["run"]["wheel_rail"],
+                       histories={k: v for k, v in a.items() if k not in ("probes", "rail")},
+                       dof_names=list(vehicle.dof_names) if vehicle is not None else [],
+                       vehicle_type=case["vehicle.type"], rail_x=init["rails"].x,
+                       rail=a["rail"])
+
+
+def _write_checkpoint(path: Path, comm, attrs: dict | None, fields_written: int,
+                      state: State, dofmap, history: dict | None) -> None:
+    """``transient_checkpoint.h5`` of the state after ``state.step`` (collective; this
+    rank's rows of the state vectors by global DOF number,
+    :func:`~railvib_hpc.io.formats.transient.write_checkpoint`)."""
+    small = {"y": state.y, "y_dot": state.y_dot, "y_ddot": state.y_ddot,
+             "penetration": state.penetration, "force": state.force}
+    write_checkpoint(path, comm, attrs, state.step, fields_written,
+                     {"u": state.u, "v": state.v, "a": state.a},
+                     dofmap.owned_dofs(comm.rank), dofmap.n_dofs, small, history)

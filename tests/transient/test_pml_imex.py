@@ -87,7 +87,7 @@ def test_a_10_s_undamped_imex_run_of_over_20000_steps_shows_no_growth():
 
 def test_implicit_elements_inside_the_layer_make_it_unstable():
     """Why the stage refuses implicit parts in a layer and keeps the automatic partition
-    out of it (``_check_implicit_outside_layers``): with implicit soil reaching into the
+    out of it (``check_implicit_outside_layers``): with implicit soil reaching into the
     base layer (a column under the source through the whole slab) the energy grows
     (measured: the second second's peak 1000 x the first's, the source's), where the
     partition around the source alone decays (the test above)."""

@@ -19,15 +19,16 @@ file                          module                  writer and reader
                                                       reconstruct.fields` and :mod:`railvib_hpc.
                                                       transient.output`
 ``probes.h5``, ``probes/``    :mod:`.probes`          here
-``transient.h5``,             :mod:`.transient`       :mod:`railvib_hpc.transient.stage`,
-``transient_checkpoint.h5``                           :mod:`railvib_hpc.transient.output`
+``transient.h5``,             :mod:`.transient`       here (of arrays: :mod:`railvib_hpc.
+``transient_checkpoint.h5``                           transient.stage` forms them; one reader
+                                                      of ``transient.h5``,
+                                                      :class:`.transient.TransientFile`)
 ============================  ======================  =====================================
 
 Each module's docstring is the file's layout; its ``check_<file>`` is the data check
 (:data:`railvib_hpc.io.stage_checks.CHECKS`), on write and on reuse. A writer here takes
 plain arrays, or a model object of a higher layer duck-typed (the mesh: its type is named
 under ``TYPE_CHECKING`` only, so the io layer imports nothing above it); a reader gives
-arrays, of which the stage builds its model objects (``mesh.h5``). The writers still with
-their stage (``transient.h5`` and the checkpoint) take a stage's streams; the module
-names them. :mod:`.checks` has what the checks share.
+arrays, of which the stage builds its model objects (``mesh.h5``). :mod:`.checks` has
+what the checks and readers share.
 """

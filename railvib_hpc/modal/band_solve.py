@@ -903,7 +903,7 @@ def _merge_as_they_are(Phi: np.ndarray, lam: np.ndarray, bands: list[Band],
 
 
 def _coupled_set(GK: np.ndarray, GM: np.ndarray, lam: np.ndarray, tol: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """The pairs of a merge that its Rayleigh-Ritz step must rotate, and the step.
 
     ``GK``, ``GM``: the measured ``Phi^T K Phi`` and ``Phi^T M Phi`` of the bands' own
@@ -958,7 +958,7 @@ def _merge_coupled(K, M, comm, Phi: np.ndarray, lam: np.ndarray, bands: list[Ban
     """The merge of a multi-band plan with its Rayleigh-Ritz step on the coupled pairs only,
     or ``None`` (the caller runs the full merge). Arguments as :func:`_merge_as_they_are`,
     which refused (some entries of the measured Gram matrices exceed its bounds: at the
-    issue-26 case the overlaps between the modes on either side of a band edge, ~1e-9).
+    issue-26 case M-overlaps between bands up to 1.2e-9).
 
     The bands' own modes (each once, :func:`_own_modes`) must be ``n_total`` and agree with
     every inertia count, before and after the step. :func:`_coupled_set` splits them into
@@ -982,9 +982,9 @@ def _merge_coupled(K, M, comm, Phi: np.ndarray, lam: np.ndarray, bands: list[Ban
     ``S``). ``Phi`` is overwritten only when taken (the modes, ascending, in its first
     ``n_total`` columns). It pays where the coupling is local (the 60-element column:
     2 of 31 modes); at the issue-26 case (2 bands of 161 and 135 modes) every mode of
-    the upper band overlaps some mode of the lower one by 1.6e-11 or more (its Ritz vectors
-    carry components of the lower band's top modes), so every pair is coupled and the full
-    merge runs.
+    the upper band overlaps some mode of the lower one by 1.6e-11 or more (measured: 99.99 %
+    of each one's overlaps fall on the lower band's top 20 modes), so every pair is coupled
+    and the full merge runs.
     """
     from .block_lanczos import narrow_columns, permute_columns, rotate_in_place
     from .ritz import Known, normalise_and_check

@@ -18,7 +18,10 @@ The plan and its proof are in :mod:`railvib_hpc.modal.bands`. Here:
    the modes two bands found both (directions of the union's M-Gram matrix below
    :data:`DUPLICATE_GRAM`) and makes all modes M-orthonormal together; the eigenvalues
    below ``f_max`` are kept and counted against the inertia of every stretch between two
-   counted points (:func:`railvib_hpc.modal.bands.check_counts`).
+   counted points (:func:`railvib_hpc.modal.bands.check_counts`). Bands solved in this run
+   need less: their modes as they are when the measured Gram matrices allow
+   (:func:`_merge_as_they_are`), else the step on the coupled pairs only
+   (:func:`_merge_coupled`), else the full step.
 
 Cache: ``<out>/bands`` (:mod:`railvib_hpc.io.formats.bands`: its layout, writer, reader
 and check) records the bands, the inertia counts and the merged chain. It is a product of
@@ -735,7 +738,9 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     """Union of the bands' modes -> dedup + Rayleigh-Ritz -> the modes below f_max,
     counted against the inertia of every stretch. A one-band plan skips the Rayleigh-Ritz
     step (:func:`_merge_one_band`; ``proven``: :class:`BandChecks` by band index, of the
-    bands solved in this run)."""
+    bands solved in this run); a multi-band plan of bands solved in this run keeps their
+    modes as they are (:func:`_merge_as_they_are`) or rotates only the coupled pairs
+    (:func:`_merge_coupled`) where the measured Gram matrices allow."""
     from scipy.linalg import eigh
 
     from .block_lanczos import narrow_columns, rotate_narrowing
@@ -809,6 +814,9 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
         result = None if len(bands) == 1 else _merge_as_they_are(
             Phi, np.concatenate(lams), bands, blocks, GK, GM, points, counts, n_total, s,
             stats, t1)
+        if result is None and len(bands) > 1:
+            result = _merge_coupled(K, M, comm, Phi, np.concatenate(lams), bands, blocks, GK,
+                                    GM, points, counts, n_total, s, stats, t1, progress)
         if result is not None:
             return result
     else:
@@ -863,13 +871,7 @@ def _merge_as_they_are(Phi: np.ndarray, lam: np.ndarray, bands: list[Band],
     from .ritz import RAW_RITZ_GRAM, RAW_RITZ_STIFF
 
     lam_max = float(omega2(s.f_max))
-    edges = np.concatenate([[0], np.cumsum([len(b.residuals) for b in blocks])])
-    own = []
-    for band, b0, b1 in zip(bands, edges[:-1], edges[1:]):
-        lo, hi, lb = float(omega2(band.lo_hz)), float(omega2(band.hi_hz)), lam[b0:b1]
-        own.append(b0 + np.flatnonzero((lb >= lo) & (lb < hi) & (lb <= lam_max)))
-    sel = np.concatenate(own)
-    sel = sel[np.argsort(lam[sel], kind="stable")]
+    sel = _own_modes(lam, bands, blocks, lam_max)
     if len(sel) != n_total or check_counts(points, counts, hz(lam[sel])):
         stats["merge_as_they_are"] = "no: the bands' own modes do not match the counts"
         return None
@@ -898,6 +900,148 @@ def _merge_as_they_are(Phi: np.ndarray, lam: np.ndarray, bands: list[Band],
                  time_merge_rayleigh_ritz=time.perf_counter() - t1)
     result.warnings = convergence_verdict(result, s.tol)
     return result
+
+
+def _coupled_set(GK: np.ndarray, GM: np.ndarray, lam: np.ndarray, tol: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+    """The pairs of a merge that its Rayleigh-Ritz step must rotate, and the step.
+
+    ``GK``, ``GM``: the measured ``Phi^T K Phi`` and ``Phi^T M Phi`` of the bands' own
+    modes (each once, eigenvalues ``lam``). An entry is *coupled* when it exceeds what a
+    Ritz vector kept as it is may show: ``|(Phi^T M Phi - I)_ij| >``
+    :data:`~railvib_hpc.modal.ritz.RAW_RITZ_GRAM` or ``|(Phi^T K Phi - Lambda)_ij| /
+    lambda_max >`` :data:`~railvib_hpc.modal.ritz.RAW_RITZ_STIFF` ``tol``; the pairs of a
+    coupled entry form ``S``, the others ``U``. The Rayleigh-Ritz step in ``span(Phi_S)``
+    (``Z``: ``Z^T G_SS Z = I``, ``Z^T K_SS Z = diag(mu)``) leaves ``Phi_U`` as it is and
+    changes the blocks between the two sets to ``G_US Z`` and ``K_US Z``; a pair of ``U``
+    with an entry there above the same bounds joins ``S`` and the step is made again, until
+    none has (``S`` only grows). Then every entry among ``U`` (measured) and, to the
+    rotation's rounding, between ``U`` and the rotated ``S`` meets the bounds (the merge's
+    checks measure the latter afresh).
+
+    Returns ``(S, U, Z, mu)`` (positions in ``lam``), or ``None`` when the full merge must
+    run instead: every pair is coupled, or ``G_SS`` has a direction below
+    :data:`DUPLICATE_GRAM` (a duplicate, which the full merge drops).
+    """
+    from scipy.linalg import eigh
+
+    from .ritz import RAW_RITZ_GRAM, RAW_RITZ_STIFF
+
+    n = len(lam)
+    lam_top = max(float(np.abs(lam).max(initial=0.0)), 1e-300)
+
+    def above(gm: np.ndarray, gk: np.ndarray) -> np.ndarray:
+        return (np.abs(gm) > RAW_RITZ_GRAM) | (np.abs(gk) / lam_top > RAW_RITZ_STIFF * tol)
+
+    bad = above(GM - np.eye(n), GK - np.diag(lam))
+    coupled = bad.any(axis=0) | bad.any(axis=1)
+    while True:
+        S, U = np.flatnonzero(coupled), np.flatnonzero(~coupled)
+        if not U.size:
+            return None
+        w, V = eigh(GM[np.ix_(S, S)])
+        if w.min(initial=1.0) <= DUPLICATE_GRAM * w.max(initial=1.0):
+            return None
+        W = V / np.sqrt(w)
+        mu, Y = eigh(W.T @ GK[np.ix_(S, S)] @ W)
+        Z = W @ Y
+        grow = above(GM[np.ix_(U, S)] @ Z, GK[np.ix_(U, S)] @ Z).any(axis=1)
+        if not grow.any():
+            return S, U, Z, mu
+        coupled[U[grow]] = True
+
+
+def _merge_coupled(K, M, comm, Phi: np.ndarray, lam: np.ndarray, bands: list[Band],
+                   blocks: list[BandChecks], GK: np.ndarray, GM: np.ndarray,
+                   points: list[float], counts: list[int], n_total: int, s: BandSettings,
+                   stats: dict, t1: float, progress=None) -> Eigenpairs | None:
+    """The merge of a multi-band plan with its Rayleigh-Ritz step on the coupled pairs only,
+    or ``None`` (the caller runs the full merge). Arguments as :func:`_merge_as_they_are`,
+    which refused (some entries of the measured Gram matrices exceed its bounds: at the
+    issue-26 case M-overlaps between bands up to 1.2e-9).
+
+    The bands' own modes (each once, :func:`_own_modes`) must be ``n_total`` and agree with
+    every inertia count, before and after the step. :func:`_coupled_set` splits them into
+    ``U``, kept as they are, and ``S``, rotated by a Rayleigh-Ritz step in their own span.
+    What is reported, and why it covers what the full merge's checks afresh measured:
+
+    * ``U``: the same vectors, bit for bit, as the band files (the bands' checks measured
+      them): their residuals and round-off floors are the bands'; their Gram blocks among
+      themselves are the measured ones (the bands' own blocks from their checks, the
+      cross-band blocks afresh, :func:`_band_grams`), every entry within
+      :data:`~railvib_hpc.modal.ritz.RAW_RITZ_GRAM` and ``RAW_RITZ_STIFF tol``; their
+      eigenvalues are the bands' (a coupling ``e`` within those bounds moves a Rayleigh-
+      Ritz eigenvalue by ``O(e^2 / relgap)``, below the eigenvalues' own accuracy).
+    * ``S``: rotated and checked afresh (:func:`~railvib_hpc.modal.ritz.
+      normalise_and_check` with the ``U`` checks as ``known``): K and M products of the
+      rotated vectors, their Gram entries against every mode, their residuals and floors.
+
+    So every entry of ``Phi^T M Phi`` and ``Phi^T K Phi`` and every residual of the result
+    is measured of the returned vectors, as in the full merge; the rotation of ``U``, its
+    K and M products and its floors are saved (``stats["merge_coupled"]``: the size of
+    ``S``). ``Phi`` is overwritten only when taken (the modes, ascending, in its first
+    ``n_total`` columns). It pays where the coupling is local (the 60-element column:
+    2 of 31 modes); at the issue-26 case (2 bands of 161 and 135 modes) every mode of
+    the upper band overlaps some mode of the lower one by 1.6e-11 or more (measured: 99.99 %
+    of each one's overlaps fall on the lower band's top 20 modes), so every pair is coupled
+    and the full merge runs.
+    """
+    from .block_lanczos import narrow_columns, permute_columns, rotate_in_place
+    from .ritz import Known, normalise_and_check
+
+    lam_max = float(omega2(s.f_max))
+    sel = _own_modes(lam, bands, blocks, lam_max)
+    if len(sel) != n_total or check_counts(points, counts, hz(lam[sel])):
+        return None
+    ix = np.ix_(sel, sel)
+    split = _coupled_set(GK[ix], GM[ix], lam[sel], s.tol)
+    if split is None:
+        stats["merge_coupled"] = "no: every pair coupled, or a duplicate"
+        return None
+    S, U, Z, mu = split
+    lam_new = np.concatenate([lam[sel[U]], mu])
+    if check_counts(points, counts, hz(np.sort(lam_new))):
+        stats["merge_coupled"] = "no: the rotated eigenvalues do not match the counts"
+        return None
+    c, q = U.size, S.size
+    rest = np.setdiff1d(np.arange(Phi.shape[1]), sel)
+    permute_columns(Phi, np.concatenate([sel[U], sel[S], rest]))
+    rotate_in_place(Phi[:, c:c + q], Z, progress, "merge: rotation")
+    phi = narrow_columns(Phi, n_total)
+    t_rr = time.perf_counter() - t1
+    residuals = np.concatenate([b.residuals for b in blocks])[sel[U]]
+    floors = np.concatenate([b.floors for b in blocks])[sel[U]]
+    iu = np.ix_(sel[U], sel[U])
+    # (||K phi|| of the known modes is not read: their floors are given)
+    known = Known(GM[iu], GK[iu], np.full(c, np.nan), residuals, floors)
+    result = Eigenpairs(lam_new, phi, stats)
+    normalise_and_check(result, K, M, comm, tol=s.tol, progress=progress, known=known)
+    asc = np.argsort(result.eigenvalues, kind="stable")
+    permute_columns(result.phi, asc)
+    result.eigenvalues = result.eigenvalues[asc]
+    result.residuals = result.residuals[asc]
+    result.residual_floors = result.residual_floors[asc]
+    stats.update(n_candidates=int(Phi.shape[1]),
+                 n_duplicates=int((lam[rest] <= lam_max).sum()),
+                 merge_rayleigh_ritz=f"coupled pairs: {q} of {n_total}", merge_coupled=q,
+                 merge_checks=f"afresh for the {q} rotated modes, the bands' for the others",
+                 time_merge_rayleigh_ritz=t_rr)
+    result.warnings = convergence_verdict(result, s.tol)
+    return result
+
+
+def _own_modes(lam: np.ndarray, bands: list[Band], blocks: list[BandChecks],
+               lam_max: float) -> np.ndarray:
+    """The candidates (``lam``: the bands' kept eigenvalues side by side, ``blocks``: their
+    checks, one per band) that lie inside their own band's edges (``[lo, hi)``, at most
+    ``lam_max``), ascending: each mode once, the neighbours' margins left out."""
+    edges = np.concatenate([[0], np.cumsum([len(b.residuals) for b in blocks])])
+    own = []
+    for band, b0, b1 in zip(bands, edges[:-1], edges[1:]):
+        lo, hi, lb = float(omega2(band.lo_hz)), float(omega2(band.hi_hz)), lam[b0:b1]
+        own.append(b0 + np.flatnonzero((lb >= lo) & (lb < hi) & (lb <= lam_max)))
+    sel = np.concatenate(own)
+    return sel[np.argsort(lam[sel], kind="stable")]
 
 
 def _check_merged_counts(points: list[float], counts: list[int], lam: np.ndarray,

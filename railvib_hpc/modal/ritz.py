@@ -251,10 +251,16 @@ def _checked_ritz_vectors(X: np.ndarray, n_wanted: int, K, M, comm: MPI.Comm, to
 
     from .block_lanczos import permute_columns, rotate_in_place
 
-    floors_of = (lambda r: ~in_window(r, window)) if PURIFICATIONS else None
+    # Round-off floors only where one is read: none with purification. The pairs above tol
+    # in the window are purified next (their new checks bring their floors); those outside
+    # it (a band's margin) are neither returned (the band keeps its window only,
+    # band_solve._trim, with the same window) nor judged (the passes, their verdicts and
+    # the band's retry take the window only); before, the first pass formed |K|, |M| and
+    # the floors of the margin's pairs above tol (a band's 7-21 pairs outside its window).
+    def floors_of(r: Eigenpairs) -> np.ndarray:
+        return in_window(r, window) & (PURIFICATIONS == 0)
+
     result = Eigenpairs(np.zeros(n_wanted), X[:, :n_wanted], {})
-    # (the pairs above tol in the window are purified next: their round-off floors are
-    # not needed, only those of the others above tol, which stay)
     checks = normalise_and_check(result, K, M, comm, tol=tol, progress=progress,
                                  rayleigh=True, floors_of=floors_of)
     lam = result.eigenvalues
@@ -509,8 +515,9 @@ def normalise_and_check(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float = 0
     for Ritz vectors that no Rayleigh-Ritz step with K and M went over. ``floors_of``:
     ``floors_of(result)`` (residuals and eigenvalues measured) is a mask of the modes whose
     round-off floors are wanted (default: all); the others get 0, for modes the caller
-    replaces anyway (:func:`purified_modes`: the first pass's pairs above ``tol`` that it
-    purifies next; their floors were never read).
+    replaces or drops anyway (:func:`purified_modes`: the first pass's pairs above ``tol``
+    that it purifies next, and a band's pairs outside its window; their floors were never
+    read).
 
     Records the relative residuals ``rho_i = ||K phi_i - lambda_i M phi_i|| / ||K phi_i||``
     (``result.residuals``) and, for the modes with ``rho_i > tol``, their round-off floor

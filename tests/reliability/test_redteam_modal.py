@@ -180,8 +180,8 @@ def test_every_phase_after_the_expansions_reports_progress(tmp_path):
         s = BandSettings(f_max=60.0, edges=[30.0], band_modes=250, groups=1, band_only=0,
                          tol=1e-10, block_size=4, max_restarts=50, out_of_core="auto",
                          cache_dir=tmp_path)
-        solve_modes(K, M, comm, f_max=60.0, block_size=4, tol=1e-10, bands=s,
-                    progress=progress)
+        merged = solve_modes(K, M, comm, f_max=60.0, block_size=4, tol=1e-10, bands=s,
+                             progress=progress)
         banded = {p for p, d, t in calls if d == t}
     finally:
         K.destroy()
@@ -190,8 +190,15 @@ def test_every_phase_after_the_expansions_reports_progress(tmp_path):
     for phase in ("Ritz vectors", "purification", "Rayleigh-Ritz", "residual checks"):
         assert any(p.startswith("band 1/2") and p.endswith(phase) for p in banded), phase
         assert any(p.startswith("band 2/2") and p.endswith(phase) for p in banded), phase
-    # (the cross-band K and M Gram blocks in one pass since the fourth round of issue 26)
-    assert {"merge: K- and M-Gram products", "merge: rotation", "residual checks"} <= banded
+    # (the cross-band K and M Gram blocks in one pass since the fourth round of issue 26);
+    # the rotation and its checks run unless the bands' modes are taken as they are, which
+    # depends on round-off here (measured Gram errors 2.5e-14 with one BLAS thread, 1.1e-13
+    # with two, against the 1e-13 bound)
+    assert "merge: K- and M-Gram products" in banded
+    if merged.stats["merge_as_they_are"] != "yes":
+        assert {"merge: rotation", "residual checks"} <= banded
+    else:
+        assert not {"merge: rotation", "residual checks"} & banded
     assert all(0 <= d <= t for _, d, t in calls)
 
 

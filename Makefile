@@ -43,9 +43,10 @@ PYTEST   = $(PY) -m pytest -q $(PYTEST_ARGS)
 # The one-rank passes in NP worker processes (pytest-xdist; each worker is its own MPI world of
 # one rank); XDIST= runs them in one process.
 XDIST   ?= -n $(NP) --dist loadfile
-# One BLAS/OpenMP thread per worker process: NP workers already fill NP cores, and OpenBLAS's
-# own threads on top of them oversubscribe the cores (a dense eigh of 2,745 took 10.3 s with
-# the default threads against 7.3 s with one, the machine loaded). An exported value wins.
+# One BLAS/OpenMP thread per worker process and per MPI rank: NP workers or ranks already fill
+# NP cores, and OpenBLAS's own threads on top of them oversubscribe the cores (a dense eigh of
+# 2,745 took 10.3 s with the default threads against 7.3 s with one, the machine loaded; the
+# 2-rank modal track-ends test 55.0 s against 50.1 s, idle). An exported value wins.
 OPENBLAS_NUM_THREADS ?= 1
 OMP_NUM_THREADS ?= 1
 WORKERS  = OPENBLAS_NUM_THREADS=$(OPENBLAS_NUM_THREADS) OMP_NUM_THREADS=$(OMP_NUM_THREADS)
@@ -54,17 +55,17 @@ ALLOW_EMPTY = || [ $$? -eq 5 ]
 
 test: setup-test
 	$(WORKERS) $(PYTEST) $(XDIST) -m "not slow"
-	$(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
+	$(WORKERS) $(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
 
 test-slow: setup-test
 	$(WORKERS) $(PYTEST) $(XDIST) -m "slow and not mpi" $(ALLOW_EMPTY)
-	$(MPIRUN) $(PYTEST) -m "mpi and slow" -p no:cacheprovider $(ALLOW_EMPTY)
+	$(WORKERS) $(MPIRUN) $(PYTEST) -m "mpi and slow" -p no:cacheprovider $(ALLOW_EMPTY)
 
 test-serial: setup-test
 	$(WORKERS) $(PYTEST) $(XDIST) -m "not slow"
 
 test-mpi: setup
-	$(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
+	$(WORKERS) $(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
 
 test-all: test test-slow
 

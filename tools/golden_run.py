@@ -25,6 +25,7 @@ import json
 import re
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import h5py
@@ -92,8 +93,27 @@ def _peaks(out: Path) -> dict[str, list[float]]:
             for g in f["probes"].values()}
 
 
-def record(folder: Path) -> dict:
-    """Run the coarse ``run`` three times and the coarse ``transient`` twice in ``folder``."""
+def _check_on_root(check: Callable[[Path, str, str], None], run_dir: Path, texts: list[str],
+                   comm: MPI.Comm) -> None:
+    """``check`` on rank 0; a failure there is raised on every rank (none is left waiting in
+    the next run's collectives)."""
+    failure = None
+    if comm.rank == 0:
+        try:
+            check(run_dir, *texts)
+        except AssertionError as exc:
+            failure = exc
+    if comm.bcast(failure is not None):
+        raise failure or AssertionError("the end-to-end checks failed on rank 0")
+
+
+def record(folder: Path, check: Callable[[Path, str, str], None] | None = None) -> dict:
+    """Run the coarse ``run`` three times and the coarse ``transient`` twice in ``folder``.
+
+    ``check(run_folder, first_output, rerun_output)``, when given, is called on rank 0
+    after the second ``run`` (which reuses everything), before the third changes a key:
+    the end-to-end checks of the outputs share the runs the record needs.
+    """
     comm = MPI.COMM_WORLD
     out = {}
     run_dir, tr_dir = folder / "run", folder / "transient"
@@ -106,6 +126,8 @@ def record(folder: Path) -> dict:
         if not extra and len(texts) == 1:
             out["run"] = {"provenance": _provenance(run_dir) if comm.rank == 0 else {},
                           "peaks": _peaks(run_dir) if comm.rank == 0 else {}}
+        if len(texts) == 2 and check is not None:
+            _check_on_root(check, run_dir, texts, comm)
     out["run"]["rerun"] = _verdicts(texts[1], run_dir)
     out["run"]["changed"] = _verdicts(texts[2], run_dir)
     texts = []

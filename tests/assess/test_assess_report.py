@@ -108,3 +108,32 @@ def test_report_input_checks(tmp_path, probes):
         write_report(tmp_path, {}, hist)
     with pytest.raises(ValueError, match="contact"):
         write_report(tmp_path, results, hist, contact=(np.zeros(3), np.zeros(4)))
+
+
+def test_a_long_record_is_drawn_and_kept_as_its_envelope(tmp_path, probes):
+    """A record longer than two samples per bucket: report.json keeps each series' min/max
+    per bucket in time order (every extreme kept exactly), at most 2 x ENVELOPE_BUCKETS
+    points; a short one is kept whole (test above)."""
+    from railvib_hpc.assess.report import ENVELOPE_BUCKETS
+
+    results, _ = probes
+    long = {"slab 1": _history(0.03, [10.0, 4.0, 3.0], fs=2048.0, duration=12.0),
+            "slab/2": _history(0.08, [12.0, 6.0, 6.0], fs=2048.0, duration=12.0)}
+    write_report(tmp_path, results, long)
+    data = _strict_json(tmp_path / "report.json")["figures"]["time_slab_1"]["data"]
+    h = long["slab 1"]
+    n = h["t"].size
+    assert data["envelope"]["samples"] == n
+    k = data["envelope"]["samples_per_bucket"]
+    assert len(data["t"]) == 2 * -(-n // k) <= 2 * ENVELOPE_BUCKETS
+    assert np.all(np.diff(data["t"]) >= 0)
+    for q in ("displacement", "velocity", "acceleration"):
+        for i, d in enumerate("xyz"):
+            got, full = np.asarray(data[q][d]), h[q][:, i]
+            assert got.max() == full.max() and got.min() == full.min()
+            # bucket j's pair is its own min and max, in the order they occur
+            j = int(np.argmax(np.abs(full))) // k
+            block = full[j * k:(j + 1) * k]
+            pair = got[2 * j:2 * j + 2]
+            assert sorted(pair) == [block.min(), block.max()]
+            assert (pair[0] == block.min()) == (block.argmin() <= block.argmax())

@@ -11,7 +11,7 @@ import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
-from transient_cases import BASELINE, tiny_case
+from transient_cases import BASELINE, run_transient_only, tiny_case
 
 from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
@@ -347,12 +347,10 @@ def test_a_train_longer_than_the_box_passes_entirely(tmp_path, capsys):
     Measured: 2624 steps of 1 ms in 38 s; every wheel 690 steps or more on the rail; no
     step off the rail; contact forces in the box 0.90 .. 1.13 of the static 54.5 kN."""
     out = tmp_path / "train"
-    sets = [a for s in ("mesh.refinement=0.25", "output.dt=0.01", "output.stress_times=[]",
-                        "transient.checkpoint_interval=0", "transient.f_max=50",
-                        "track.ends=supported", "vehicle.type=vehicle", "vehicle.n_cars=3",
-                        "vehicle.speed=40")
-            for a in ("--set", s)]
-    assert run(["transient", str(BASELINE), "--out", str(out), *sets]) == 0
+    run_transient_only(out, ("mesh.refinement=0.25", "output.dt=0.01", "output.stress_times=[]",
+                             "transient.checkpoint_interval=0", "transient.f_max=50",
+                             "track.ends=supported", "vehicle.type=vehicle",
+                             "vehicle.n_cars=3", "vehicle.speed=40"))
     capsys.readouterr()
     with h5py.File(out / "transient.h5", "r") as f:
         x = f["wheels/x"][()]
@@ -376,17 +374,14 @@ def test_the_three_engines_agree_with_supported_ends(tmp_path, capsys):
     path at 5e-5 s (a tenth of its automatic step), within 1 %.
 
     Measured: explicit (its stable 6.1e-6 s) 0.018 % largest, IMEX (its 4e-4 s) 0.17 %."""
-    sets = [a for s in ("mesh.refinement=0.25", "output.dt=0.002", "output.stress_times=[]",
-                        "transient.checkpoint_interval=0", "transient.f_max=100",
-                        "track.ends=supported", "vehicle.x_start=1.8", "vehicle.x_end=3.6",
-                        "modal.lumped_mass=true")
-            for a in ("--set", s)]
+    sets = ("mesh.refinement=0.25", "output.dt=0.002", "output.stress_times=[]",
+            "transient.checkpoint_interval=0", "transient.f_max=100", "track.ends=supported",
+            "vehicle.x_start=1.8", "vehicle.x_end=3.6", "modal.lumped_mass=true")
     peaks = {}
     engines = (("direct", "transient.dt=5e-05"), ("explicit", "transient.engine=explicit"),
                ("imex", "transient.engine=imex"))
     for engine, extra in engines:
-        assert run(["transient", str(BASELINE), "--out", str(tmp_path / engine), *sets,
-                    "--set", extra]) == 0
+        run_transient_only(tmp_path / engine, (*sets, extra))
         with h5py.File(tmp_path / engine / "probes.h5", "r") as f:
             peaks[engine] = {str(g.attrs["name"]):
                              np.linalg.norm(g["velocity"][()], axis=-1).max()

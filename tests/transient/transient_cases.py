@@ -19,3 +19,16 @@ TINY = ["mesh.refinement=0.25", "vehicle.x_start=2.7", "vehicle.x_end=4.2",
 def tiny_case(*extra: str):
     """The tiny case with extra overrides."""
     return load_case(BASELINE, [*TINY, *extra])
+
+
+def run_transient_only(out, overrides, comm=None) -> None:
+    """``railvib transient``'s integration of the baseline with ``overrides`` (``key=value``)
+    into ``out``, without the assessment (for the tests that compare probes.h5 or
+    transient.h5 only: the assessment's report costs ~10 s a run)."""
+    from mpi4py import MPI
+
+    from railvib_hpc.log import Reporter
+    from railvib_hpc.transient.stage import run_transient_stage
+
+    comm = comm or MPI.COMM_WORLD
+    run_transient_stage(load_case(BASELINE, list(overrides)), out, comm, Reporter(comm.rank))

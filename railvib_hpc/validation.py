@@ -595,7 +595,7 @@ def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
 def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
     """A fill embankment's base stays clear of the building and inside the soil."""
     g, h = case["geometry"], track_lift(case)
-    if h == 0:
+    if h == 0 or case["track.count"] == 0:              # (no track: _check_surface_load)
         return []
     toe, face = embankment_toe(case), -placed_plan(case)[3]
     if not toe < face:
@@ -967,7 +967,7 @@ def _check_track_ends(case: Case) -> list[tuple[str, Any, str]]:
     """``track.ends = 'supported'``: whole bays, a rail whose torsion something holds, the
     generated mesh, and wheels that start and end on the modelled rail."""
     t, g, v = case["track"], case["geometry"], case["vehicle"]
-    if t["ends"] != "supported":
+    if t["ends"] != "supported" or t["count"] == 0:     # (no track: _check_surface_load)
         return []
     out: list[tuple[str, Any, str]] = []
     bays = t["rigid_length"] / t["sleeper_spacing"]

@@ -395,7 +395,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "from the building, on the same embankment), or 0: no track, no "
                        "embankment and no vehicle, the bare soil (and the building) loaded by "
                        "the moving surface load of [load] (railvib transient only: the modal "
-                       "path needs a track)", "nonneg", maximum=2,
+                       "path needs a track)", "nonneg",
                        source=f"{_APDL}: one track"),
         "spacing": Param(4.0, "float", "m",
                          "distance between the two tracks' centre lines (track.count = 2)",

@@ -496,7 +496,8 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     ``[train2]`` keys only with it."""
     g, t = case["geometry"], case["track"]
     if t["count"] > 2:
-        return [("track.count", t["count"], "must be 0 (no track, with [load]), 1 or 2")]
+        return [("track.count", t["count"], "must be 1 or 2, or 0 (no track: the moving load "
+                 "of [load] on the bare soil)")]
     if t["count"] < 2:
         return [(f"train2.{k}", v, "applies to a second track only: set track.count = 2 (or "
                  "leave it out)")

@@ -238,7 +238,7 @@ def test_the_surface_load_case_runs_and_is_assessed(tmp_path, capsys):
     (["track.count=0"], "track.count = 0: 0 (no track) needs the moving surface load"),
     (["load.force=1e5"], "load.force = 100000.0: applies to the moving load on the bare "
                          "soil only: set track.count = 0"),
-    (["track.count=3"], "track.count = 3: must be <= 2"),
+    (["track.count=3"], "track.count = 3: must be 1 or 2, or 0 (no track"),
     (["track.count=-1"], "track.count = -1: must be >= 0"),
     (["track.count=0", "load.force=1e5", "load.speed=0"], "load.speed = 0"),
     (["track.count=0", "load.force=-5"], "load.force = -5"),

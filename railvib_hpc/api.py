@@ -469,10 +469,27 @@ class Pipeline:
         """
         return self._runner.session(command or self._label("session"))
 
+    def _check_command(self, name: str) -> None:
+        """Refuse a stage the case cannot run (a case without a track and the modal path:
+        :func:`~railvib_hpc.validation.command_problems`), before anything is written.
+
+        Raises
+        ------
+        CaseError
+            One line naming the key, its value and what is allowed.
+        """
+        from .errors import CaseError
+        from .validation import command_problems
+
+        problems = command_problems(self.case, name)
+        if problems:
+            raise CaseError(problems)
+
     def _call(self, name: str) -> tuple[StageRun, tuple[str, ...]]:
         """Run stage ``name`` in a session of its own (or the open one); the options of
         that session nothing used."""
         declared = stage(name)
+        self._check_command(name)
         label = self._label(name)
         with self._runner.session(label) as unused:
             run = self._runner.run(declared, self.case, command=label)
@@ -563,6 +580,8 @@ class Pipeline:
         names = tuple(names)
         for name in names:
             stage(name)
+        for name in names:
+            self._check_command(name)
         t0 = time.perf_counter()
         label = self._label("run")
         outer, self._run_label = self._run_label, label

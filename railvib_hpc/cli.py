@@ -30,7 +30,7 @@ from pathlib import Path
 
 from . import __version__
 from .config import Case, load_case, results_folder_name
-from .errors import UserError
+from .errors import CaseError, UserError
 from .io.files import RECORD_DIR, TRANSIENT_DIR
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
@@ -120,8 +120,15 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     lay = build_layout(case)
     rep.info(f"case '{case['case.name']}' is valid (preset '{case['case.preset']}', "
              f"file {case.path or '<defaults>'})")
-    rep.info(f"  track: {len(lay.sleeper_x)} sleepers, flexible rail "
-             f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
+    if case["track.count"]:
+        rep.info(f"  track: {len(lay.sleeper_x)} sleepers, flexible rail "
+                 f"{case['track.rail_length']:g} m, {lay.rail_div} rail elements per bay")
+    else:
+        ld = case["load"]
+        rep.info(f"  track: none (track.count = 0): the bare soil under {len(ld['offsets'])} "
+                 f"moving load(s) of {ld['force']:g} N at {ld['speed']:g} m/s on y = "
+                 f"{ld['y']:g} m from x = {ld['x_start']:g} m (ramp {ld['ramp_time']:g} s, "
+                 f"half-width {ld['half_width']:g} m)")
     from .mbs.case_vehicle import tracks_line
 
     tracks = tracks_line(case)
@@ -139,7 +146,8 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
     turned = turn_line(case)
     if turned:
         rep.info(f"  {turned}")
-    rep.info(f"  track bed: {site_line(case)}")
+    if case["track.count"]:
+        rep.info(f"  track bed: {site_line(case)}")
     z1 = case["geometry.z1"]
     for x in soil_layers(case):
         rep.info(f"  soil: {x['part']} {z1 - x['z_top']:g}-{z1 - x['z_bottom']:g} m deep, "
@@ -209,6 +217,11 @@ def run(argv: list[str] | None = None) -> int:
         case = on_root(lambda: load_case(args.case, args.overrides))
         for note in case.notes:
             rep.info(f"note: {note}")
+        from .validation import command_problems
+
+        problems = command_problems(case, args.command)
+        if problems:                  # before anything is written: one line, exit 2
+            raise CaseError(problems)
         out = _out_dir(args, case, rep)
         code, unused = _dispatch(args, case, out, comm, rep, petsc_options, command)
         if unused:

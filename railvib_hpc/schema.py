@@ -392,7 +392,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                   source="not in the thesis: 1V:1.5H, the usual fill slope"),
         "count": Param(1, "int", "-",
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
-                       "from the building, on the same embankment)", "pos",
+                       "from the building, on the same embankment), or 0: no track, no "
+                       "embankment and no vehicle, the bare soil (and the building) loaded by "
+                       "the moving surface load of [load] (railvib transient only: the modal "
+                       "path needs a track)", "nonneg",
                        source=f"{_APDL}: one track"),
         "spacing": Param(4.0, "float", "m",
                          "distance between the two tracks' centre lines (track.count = 2)",
@@ -991,6 +994,42 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "kept as residual modes with their mass and damping "
                                    "(modal truncation augmentation; needs static.h5 from the "
                                    "modal stage)"),
+    },
+    "load": {
+        "force": Param(0.0, "float", "N",
+                       "with track.count = 0: downward force of each point load moving over "
+                       "the bare soil surface (0: no surface load; STEM's 'moving load on "
+                       "soil', the verification against the steady state of a load moving "
+                       "over an elastic half-space, railvib_hpc.fem.halfspace)", "nonneg",
+                       source="issue 28 item 5: a verification load, no default model"),
+        "speed": Param(30.0, "float", "m/s",
+                       "the surface load's speed along +x (at or above the ground's Rayleigh "
+                       "speed only with vehicle.supercritical = true)", "pos",
+                       source="vehicle.speed's default"),
+        "y": Param(0.0, "float", "m",
+                   "lateral position of the load's path on the ground (the line y = load.y, "
+                   "z = geometry.z1); it must cross the soil"),
+        "x_start": Param(0.0, "float", "m",
+                         "position of the leading load at t = 0 (a load off the soil's ground "
+                         "is off)"),
+        "x_end": Param(0.0, "float", "m",
+                       "the run ends when the last load reaches this position (0: the soil's "
+                       "end along x, geometry.x4 + domain.extra_length)", "nonneg"),
+        "t_after": Param(0.0, "float", "s",
+                         "extra time simulated after the last load reaches load.x_end",
+                         "nonneg"),
+        "offsets": Param([0.0], "floats", "m",
+                         "positions of the loads along x relative to the leading one "
+                         "(<= 0; one load of load.force each)"),
+        "ramp_time": Param(0.0, "float", "s",
+                           "switch-on: the loads grow as sin^2(pi t / (2 ramp_time)) over "
+                           "this time, then stay (0: a step at t = 0, which radiates a "
+                           "pulse)", "nonneg"),
+        "half_width": Param(0.0, "float", "m",
+                            "half-width a of each load's spreading along x, (1 + cos(pi s / "
+                            "a)) / (2 a) over |s| <= a (0: a point load, the consistent load "
+                            "of the element under it; a >= 2 element sizes keeps a point "
+                            "load's grid pulses at speed / element size small)", "nonneg"),
     },
     "transient": {
         "dt": Param(0.0, "float", "s",

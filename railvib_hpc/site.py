@@ -554,11 +554,11 @@ def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:
     >>> line_ranges(Case.defaults(), 5.0, "away")
     [(4.25, 8.25)]
     """
+    toe = embankment_toe(case) if case["track.count"] else 0.0    # 0: the bare soil
     if side == "away":
-        near = (case["track.spacing"] if case["track.count"] == 2 else 0.0) \
-            + embankment_toe(case)
+        near = (case["track.spacing"] if case["track.count"] == 2 else 0.0) + toe
         return [(near, case["geometry.ys0"])] if near < case["geometry.ys0"] else []
-    out = [(embankment_toe(case), -(case["geometry.ys4"] - case["domain.extra_width"]))]
+    out = [(toe, -(case["geometry.ys4"] - case["domain.extra_width"]))]
     tr = case["trench"]
     holes = [_footprint(case, x)]
     if tr["type"] == "open" and tr["width"] > 0:

@@ -416,6 +416,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must lie between ballast_top_half_width = {g['ballast_top_half_width']:g} "
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
+    out.extend(_check_surface_load(case))
     out.extend(_check_track_ends(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
@@ -495,8 +496,9 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     ``[train2]`` keys only with it."""
     g, t = case["geometry"], case["track"]
     if t["count"] > 2:
-        return [("track.count", t["count"], "must be 1 or 2")]
-    if t["count"] == 1:
+        return [("track.count", t["count"], "must be 1 or 2, or 0 (no track: the moving load "
+                 "of [load] on the bare soil)")]
+    if t["count"] < 2:
         return [(f"train2.{k}", v, "applies to a second track only: set track.count = 2 (or "
                  "leave it out)")
                 for k, v in case["train2"].items() if v != ALL_KEYS[f"train2.{k}"].default]
@@ -520,10 +522,81 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
+    """``track.count = 0`` (the bare soil) goes with the moving surface load of ``[load]``
+    and nothing of the track or the vehicle; ``[load]`` goes with it only."""
+    t, ld = case["track"], case["load"]
+    if t["count"] != 0:
+        return [(f"load.{k}", v, "applies to the moving load on the bare soil only: set "
+                 "track.count = 0 (or leave [load] out)")
+                for k, v in ld.items() if v != ALL_KEYS[f"load.{k}"].default]
+    if not ld["force"] > 0:
+        return [("track.count", 0, "0 (no track) needs the moving surface load: set "
+                 "load.force > 0 ([load]); with a track: 1 or 2")]
+    out: list[tuple[str, Any, str]] = []
+    bare = "with track.count = 0 (no track: the moving load of [load] on the bare soil)"
+    # the train's keys: a file that lists them at their defaults (the baseline) is fine
+    given = sorted(k for k in (case.given or {})
+                   if k.split(".", 1)[0] in ("vehicle", "irregularity", "train2")
+                   and k in ALL_KEYS and case[k] != ALL_KEYS[k].default
+                   and k != "vehicle.supercritical")       # (the load's speed check too)
+    out.extend((k, case[k], f"applies to the train; {bare} leave it at its default "
+                f"{ALL_KEYS[k].default!r} (the load's keys are load.*)") for k in given)
+    for key, allowed in (("track.embankment_height", 0.0), ("track.ends", "rigid")):
+        if case[key] != allowed:
+            out.append((key, case[key], f"belongs to the track; {bare} leave it at "
+                        f"{allowed!r}"))
+    if case["mesh.file"]:
+        out.append(("mesh.file", case["mesh.file"], f"{bare} the mesh is the generated one "
+                    "(its soil without the track bed): leave mesh.file out"))
+    if any(o > 0 for o in ld["offsets"]) or not ld["offsets"]:
+        out.append(("load.offsets", ld["offsets"],
+                    "must be a non-empty list of offsets <= 0 (behind the leading load)"))
+    g, d = case["geometry"], case["domain"]
+    lo, hi = g["ys4"] - d["extra_width"], g["ys0"]
+    if not lo < ld["y"] < hi:
+        out.append(("load.y", ld["y"], f"the path must run on the soil: {lo:g} < y < "
+                    f"{hi:g} m (geometry.ys4 - domain.extra_width to geometry.ys0)"))
+    last = ld["x_start"] + min(ld["offsets"] or [0.0])
+    if ld["x_end"] and not ld["x_end"] > last:
+        out.append(("load.x_end", ld["x_end"], f"must lie beyond the last load's start "
+                    f"{last:g} m (load.x_start + the smallest offset), or be 0 (the soil's "
+                    "end)"))
+    return out
+
+
+#: The commands that solve the model with its track (modes, the vehicle on them, what is
+#: rebuilt from them): a case without a track (``track.count = 0``) is for
+#: ``railvib transient`` (and ``check``, ``mesh``, ``assess`` of its results).
+TRACK_COMMANDS = ("modal", "mbs", "reconstruct", "run", "study")
+
+
+def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
+    """What a case asks of a command that the command cannot do (empty: nothing).
+
+    Parameters
+    ----------
+    case
+        The validated case.
+    command
+        The ``railvib`` command (``run``, ``modal``, ``transient``, ...).
+
+    Returns
+    -------
+    list
+        ``(key, value, allowed)`` problems, for :class:`~railvib_hpc.errors.CaseError`.
+    """
+    if case["track.count"] == 0 and command in TRACK_COMMANDS:
+        return [("track.count", 0, f"railvib {command} needs a track (the modal path runs the "
+                 "vehicle on the track's modes): 1 or 2; the bare soil with the moving load of "
+                 "[load] runs with railvib transient")]
+    return []
+
+
 def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
     """A fill embankment's base stays clear of the building and inside the soil."""
     g, h = case["geometry"], track_lift(case)
-    if h == 0:
+    if h == 0 or case["track.count"] == 0:              # (no track: _check_surface_load)
         return []
     toe, face = embankment_toe(case), -placed_plan(case)[3]
     if not toe < face:
@@ -879,7 +952,8 @@ def _speed_problems(case: Case) -> list[tuple[str, Any, str]]:
     except (KeyError, ValueError, ZeroDivisionError):
         return []                        # (bad materials are reported by their own checks)
     part, c_r = min(speeds.items(), key=lambda kv: kv[1])
-    trains = [("vehicle.speed", case["vehicle.speed"])]
+    trains = [("vehicle.speed", case["vehicle.speed"]) if case["track.count"]
+              else ("load.speed", case["load.speed"])]           # the surface load's
     if case["track.count"] == 2 and case["train2.speed"] > 0:
         trains.append(("train2.speed", case["train2.speed"]))
     return [(key, v, f"is at or above the ground's Rayleigh speed c_R = {c_r:.1f} m/s "
@@ -894,7 +968,7 @@ def _check_track_ends(case: Case) -> list[tuple[str, Any, str]]:
     """``track.ends = 'supported'``: whole bays, a rail whose torsion something holds, the
     generated mesh, and wheels that start and end on the modelled rail."""
     t, g, v = case["track"], case["geometry"], case["vehicle"]
-    if t["ends"] != "supported":
+    if t["ends"] != "supported" or t["count"] == 0:     # (no track: _check_surface_load)
         return []
     out: list[tuple[str, Any, str]] = []
     bays = t["rigid_length"] / t["sleeper_spacing"]

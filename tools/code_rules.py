@@ -89,6 +89,8 @@ TRANSLATORS: dict[str, str] = {
     "mesh/interfaces.py": "turns the case's elastic interfaces into their planes",
     "mesh/dispersion_check.py": "checks the case's mesh sizes against its wavelengths",
     "mbs/case_vehicle.py": "the case -> vehicle and passage translation",
+    "transient/surface_case.py": "the case's [load] -> the moving surface load and its "
+                                 "passage (track.count = 0), as mbs/case_vehicle.py the train",
     "transient/engines.py": "the transient stage's setup of its engines (split from "
                             "transient/stage.py): reads the case's transient, damping and "
                             "boundary keys",

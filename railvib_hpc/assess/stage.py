@@ -82,6 +82,20 @@ def _contact(out_dir: Path, solver: str):
     return reader.contact() if reader.path.exists() else (None, None)
 
 
+def _load_entry(case: Case) -> tuple[np.ndarray, float]:
+    """Where and when the load enters the model, the origin of the wave arrivals: the first
+    wheel on the flexible rail of track 1 (its left rail), or with ``track.count = 0`` the
+    leading surface load on the soil's ground (``load.y``, ``geometry.z1``)."""
+    if case["track.count"]:
+        x_entry = case["geometry.x1"]
+        t_entry = (x_entry - case["vehicle.x_start"]) / case["vehicle.speed"]
+        return (np.array([x_entry, -0.5 * case["track.gauge"],
+                          case["geometry.z4"] + track_lift(case)]), t_entry)
+    x_entry = max(case["load.x_start"], case["geometry.x1"] - case["domain.extra_length"])
+    t_entry = (x_entry - case["load.x_start"]) / case["load.speed"]
+    return np.array([x_entry, case["load.y"], case["geometry.z1"]]), t_entry
+
+
 def _thesis_comparison(hist: dict, fields_path: Path) -> dict:
     """Our values of the quantities the thesis reports."""
     out: dict[str, float | None] = {}
@@ -252,16 +266,13 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
             building_use=a["building_use"], period=a["period"], fta_events=a["fta_events"],
             din4150_3_location=location,
             din4150_2_events=a["din4150_2_events"] or None)
-    # wave arrivals relative to the first wheel entering the flexible rail
+    # wave arrivals relative to the first wheel entering the flexible rail (or the surface
+    # load entering the soil)
     c_p, c_s = wave_speeds(Problem.from_case(case))
-    x_entry = case["geometry.x1"]
-    t_entry = (x_entry - case["vehicle.x_start"]) / case["vehicle.speed"]
-    y_rail = -0.5 * case["track.gauge"]
+    entry, t_entry = _load_entry(case)
     arrivals = {}
     for name, h in hist.items():
-        r = float(np.linalg.norm(h["coords"] - np.array([x_entry, y_rail,
-                                                          case["geometry.z4"]
-                                                          + track_lift(case)])))
+        r = float(np.linalg.norm(h["coords"] - entry))
         t_det = wave_arrival(h["t"], h["acceleration"], t_entry, a["wave_threshold"])
         arrivals[name] = {"distance": r, "t_entry": t_entry, "detected": t_det,
                           "after_entry": t_det - t_entry,
@@ -271,15 +282,23 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     comparison = {k: {"thesis": v, "railvib": ours.get(k)} for k, v in THESIS.items()
                   if not k.endswith("arrival_basement_wall")}
     # arrivals on the thesis's clock (t = 0 with the wheel at x = 0) at the wall's far end
-    arrival = thesis_clock_arrival(case, hist)
+    arrival = thesis_clock_arrival(case, hist) if case["track.count"] else None
     if arrival is not None:
         for key, c in (("p_wave_arrival_basement_wall", c_p),
                        ("s_wave_arrival_basement_wall", c_s)):
             comparison[key] = {"thesis": THESIS[key],
                                "railvib": arrival["detected"] if key[0] == "p" else None,
                                "analytic": arrival["t_entry"] + arrival["distance"] / c}
-    rows = thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
+    # the bare soil under a surface load (track.count = 0) is no thesis model
+    rows = (thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
+            if case["track.count"] else [])
+    origin = ("the first wheel enters the flexible rail" if case["track.count"]
+              else "the surface load enters the soil")
+    if not case["track.count"]:
+        comparison = {}
     x, force = _contact(out_dir, solver)
+    if x is not None and not np.size(x, 1):       # no wheel (the surface load): no figure
+        x = force = None
     extra = []
     pm = peak_map(out_dir / FIELDS_H5, case["geometry.z1"], out_dir / "figures" / "peak_map.png")
     if pm is not None:
@@ -288,8 +307,8 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     floors = floor_summary(results, {name: h["role"] for name, h in hist.items()})
     text = [("Model and settings", model_summary(case, out_dir, solver)),
             ("Assessment per floor", format_floor_table(floors)),
-            ("Comparison with the thesis", format_thesis_table(rows)),
-            ("Wave arrivals", format_comparison(comparison, arrivals, c_p, c_s))]
+            *([("Comparison with the thesis", format_thesis_table(rows))] if rows else []),
+            ("Wave arrivals", format_comparison(comparison, arrivals, c_p, c_s, origin))]
     free = free_field_summary(hist, line_probes(case))            # [[probes.line]]
     if free:
         text.insert(2, ("Free field (probe lines)", format_free_field(free)))
@@ -308,25 +327,28 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     rep.info(format_floor_table(floors))
     if free:
         rep.info(format_free_field(free))
-    rep.info(format_thesis_table(rows))
-    rep.info(format_comparison(comparison, arrivals, c_p, c_s))
+    if rows:
+        rep.info(format_thesis_table(rows))
+    rep.info(format_comparison(comparison, arrivals, c_p, c_s, origin))
     rep.info(f"assessed the results of the {SOLVER_TEXT[solver]}")
     rep.info(f"wrote {out_dir / ASSESSMENT_JSON}, {files.get('html')}, {files.get('markdown')}")
     return summary
 
 
-def format_comparison(comparison: dict, arrivals: dict, c_p: float, c_s: float) -> str:
-    """Printable thesis comparison and wave-arrival table."""
+def format_comparison(comparison: dict, arrivals: dict, c_p: float, c_s: float,
+                      origin: str = "the first wheel enters the flexible rail") -> str:
+    """Printable thesis comparison (none when ``comparison`` is empty) and wave-arrival
+    table, the arrivals counted from ``origin``."""
     lines = ["thesis values (benchmarks.md section 2; arrivals on the thesis's clock, t = 0 "
              "with the wheel at x = 0, at basement_wall_far):",
-             f"  {'quantity':42s} {'thesis':>12s} {'railvib':>12s}"]
+             f"  {'quantity':42s} {'thesis':>12s} {'railvib':>12s}"] if comparison else []
     for k, v in comparison.items():
         ours = v.get("railvib")
         lines.append(f"  {k:42s} {v['thesis']:12.4g} "
                      + (f"{ours:12.4g}" if ours is not None else f"{'-':>12s}")
                      + (f"   (analytic {v['analytic']:.3f} s)" if "analytic" in v else ""))
     lines.append(f"wave arrivals (subgrade c_P = {c_p:.1f} m/s, c_S = {c_s:.1f} m/s; time after "
-                 "the first wheel enters the flexible rail):")
+                 f"{origin}):")
     lines.append(f"  {'probe':16s} {'r [m]':>7s} {'detected [s]':>13s} {'r/c_P [s]':>10s} "
                  f"{'r/c_S [s]':>10s}")
     for name, w in arrivals.items():

@@ -112,7 +112,8 @@ from .stage_checks import CHECKS
 #: default stays out of every inputs digest, so a case that does not use them keeps the
 #: digests, and the results, it had (the golden record, ``tests/data/golden_run.json``,
 #: stands). A given site key's effect is in the geometry keys it sets (hashed anyway).
-DIGEST_NEUTRAL_SECTIONS = ("site", "probes", "uncertainty")
+#: ``[load]``: no moving surface load (issue 28, item 5).
+DIGEST_NEUTRAL_SECTIONS = ("site", "probes", "uncertainty", "load")
 #: Keys that only decide whether a stage accepts what it computed (a check's limit), never
 #: what a file holds: they enter no inputs digest, and the stage checks a reused file again.
 CHECK_ONLY_KEYS = ("mesh.max_dispersion_error", "vehicle.supercritical")

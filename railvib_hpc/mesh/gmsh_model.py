@@ -142,7 +142,7 @@ def build_geometry(gmsh, lay: Layout) -> None:
                          ("sleeper", sleeper_curves)):
         if curves:                    # (no rigid rail with track.ends = 'supported')
             gmsh.model.addPhysicalGroup(1, curves, PART_ID[part], name=part)
-    for part in PAD_PARTS:
+    for part in PAD_PARTS if pad_curves else ():      # (none on the bare soil)
         gmsh.model.addPhysicalGroup(1, pad_curves, PART_ID[part], name=part)
     for k, (name, faces) in enumerate(boundary.items()):
         gmsh.model.addPhysicalGroup(2, sorted(set(faces)), 101 + k, name=name)

@@ -244,7 +244,10 @@ def build_layout(case: Case) -> Layout:
     zdiv = _vertical_divisions(case, levels, layers)
     blocks = _blocks(case, bldg, plan, xb, yb, levels, cross, layers)
     probes, probe_roles = _named_probes(case, bldg, plan, cross, bounds[2])
-    centres, hs, hg, lift = cross.centres, cross.half_sleeper, cross.half_gauge, cross.lift
+    # track.count = 0: the bare soil (no rails, sleepers, pads); the track's grid lines stay
+    # (a finer grid along the notional track, where the surface load usually runs)
+    centres = cross.centres if t["count"] else ()
+    hs, hg, lift = cross.half_sleeper, cross.half_gauge, cross.lift
     rail_div = max(1, round(m["rail_elements_per_bay"] * r))
     end_div = (rail_div * max(1, round(t["rigid_length"] / sp))
                if t["ends"] == "supported" else 0)
@@ -252,7 +255,7 @@ def build_layout(case: Case) -> Layout:
         xb=xb, yb=yb, nx=nx, ny=ny, blocks=blocks, zdiv=zdiv, sleeper_x=sleeper_x,
         rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
         rail_div=rail_div, rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
-        sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]),
+        sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]).reshape(-1, 4),
         sleeper_z=g["z3"] + lift, end_div=end_div, deform=_shoulder_slopes(g, yb, cross),
         bounds=bounds, probes=probes, probe_roles=probe_roles)
 
@@ -444,7 +447,7 @@ def _blocks(case: Case, bldg: Building, plan: tuple[float, float, float, float],
                         else _ground_part(case, layers, yc, zc))
                 if part:
                     blocks.append(Block(i, j, float(z0), float(z1), part))
-            if -cross.toe < yc < cross.toe_far:
+            if -cross.toe < yc < cross.toe_far and case["track.count"]:
                 for (z0, z1), part in zip(zip(embank[:-1], embank[1:]), levels.embank_parts):
                     blocks.append(Block(i, j, float(z0), float(z1), part))
             if in_plan:

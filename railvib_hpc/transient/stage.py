@@ -8,7 +8,10 @@ average acceleration) on one MUMPS factor of the effective matrix. The loads are
 moving forces or the vehicle of ``[vehicle]`` with the Hertz contact and the
 irregularities of ``[irregularity]``, exactly as in the ``mbs`` stage (same vehicle models
 and contact solver, :mod:`.integrate`), but on the full model: a causal solution whose
-waves travel at the speeds of the mesh, with no truncation of a modal basis.
+waves travel at the speeds of the mesh, with no truncation of a modal basis. A site
+without a track (``track.count = 0``) is loaded instead by the point loads of ``[load]``
+moving over its bare ground (:mod:`.surface_case`): no rail, wheel or vehicle, so the
+rail and wheel tables below are empty and ``probes.h5`` has no ``/rail``.
 
 Outputs in the output folder (the layout of ``reconstruct``'s files, so ``assess`` and the
 studies read them unchanged; their own rows of
@@ -113,6 +116,13 @@ from .integrate import DirectSolver, RailColumns, State, VehicleDriver
 from .output import FieldWriter, PointSampler, RailSampler
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
+from .surface_case import (
+    element_time,
+    no_rails,
+    surface_load,
+    surface_passage,
+    uses_surface_load,
+)
 
 #: Table names of the products (:data:`railvib_hpc.io.products.STAGE_FILES`), in the
 #: order they are checked (the solution first; it is written last).
@@ -315,15 +325,18 @@ def check_run_size(case: Case, run: dict, dt: float, how: str, n_wheels: int, n_
     """
     from ..mbs.results import n_steps
 
-    t_end, t_after = run["t_end"], case["vehicle.t_after"]
+    sec = "load" if uses_surface_load(case) else "vehicle"
+    what = "load" if sec == "load" else "wheel"
+    t_end, t_after = run["t_end"], case[f"{sec}.t_after"]
     nt = n_steps(t_end, dt)
-    advice = ("shorten the passage (vehicle.t_after, vehicle.x_start, vehicle.x_end, "
-              "train2.t_start) or use a larger transient.dt (0 = automatic)")
+    advice = (f"shorten the passage ({sec}.t_after, {sec}.x_start, {sec}.x_end"
+              + (", train2.t_start" if sec == "vehicle" else "")
+              + ") or use a larger transient.dt (0 = automatic)")
     if nt > MAX_TRANSIENT_STEPS:
         raise ResourceError(
-            f"the passage lasts {t_end:.4g} s ({t_end - t_after:.4g} s until the last wheel "
+            f"the passage lasts {t_end:.4g} s ({t_end - t_after:.4g} s until the last {what} "
             f"reaches x = {run['x_end']:g} m at up to {float(np.abs(run['speeds']).max()):g} "
-            f"m/s, then vehicle.t_after = {t_after:g} s): {nt:.3g} steps of {how}, more than "
+            f"m/s, then {sec}.t_after = {t_after:g} s): {nt:.3g} steps of {how}, more than "
             f"the limit of {MAX_TRANSIENT_STEPS:,} (about 7.5 hours at thesis size); "
             + advice)
     need = history_bytes(nt, n_wheels, n_dof, n_probes, n_rails, n_rail_nodes)
@@ -342,9 +355,11 @@ def precheck_size(case: Case) -> None:
     from ..mesh.layout import build_layout
 
     lay = build_layout(case)
-    vehicle = build_vehicle(case)
-    flexible_end = float(np.max(lay.sleeper_x))
-    run = passage(case, vehicle, flexible_end)
+    if uses_surface_load(case):
+        vehicle, run = None, surface_passage(case)
+    else:
+        vehicle = build_vehicle(case)
+        run = passage(case, vehicle, float(np.max(lay.sleeper_x)))
     if not run["t_end"] > 0:
         return                      # an empty passage: refused later with its own message
     tr = case["transient"]
@@ -511,7 +526,7 @@ def compute(ctx: StageContext) -> TransientOutput:
 #: runs, not what.
 TRANSIENT_KEYS: Selection = MESH_KEYS + (
     ("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()), ("damping", ()),
-    ("vehicle", ()), ("train2", ()), ("irregularity", ()),
+    ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("load", ()),
     ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
     ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
     ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
@@ -712,9 +727,25 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     return {**stats, "reused": False}
 
 
+def _passage(case: Case, mesh, dofmap) -> tuple:
+    """The rails, the vehicle (None: moving forces) and the passage
+    (:func:`~railvib_hpc.mbs.case_vehicle.passage`); with ``track.count = 0`` no rail, no
+    vehicle and the surface load's passage (:func:`.surface_case.surface_passage`)."""
+    from ..mbs.case_vehicle import build_vehicle, passage
+
+    if uses_surface_load(case):
+        return no_rails(), None, surface_passage(case)
+    try:
+        rails = RailDofs.from_mesh(mesh, dofmap.index)
+    except ValueError as exc:
+        raise TransientInputError(f"railvib transient: {exc}") from None
+    vehicle = build_vehicle(case)
+    return rails, vehicle, passage(case, vehicle, float(rails.x.max()))
+
+
 def _setup(ctx: StageContext) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
-    from ..mbs.case_vehicle import build_vehicle, passage, passage_irregularity
+    from ..mbs.case_vehicle import passage_irregularity
     from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
     from .petsc import TransientSystem
@@ -741,18 +772,15 @@ def _setup(ctx: StageContext) -> dict:
         unsupported = support_warning(mesh, problem)
         if unsupported:
             rep.info(unsupported)
-    try:
-        rails = RailDofs.from_mesh(mesh, dofmap.index)
-    except ValueError as exc:
-        raise TransientInputError(f"railvib transient: {exc}") from None
-    vehicle = build_vehicle(case)
-    run = passage(case, vehicle, float(rails.x.max()))
+    surface = uses_surface_load(case)     # track.count = 0: [load] on the bare soil
+    rails, vehicle, run = _passage(case, mesh, dofmap)
     speed = float(np.max(np.abs(run["speeds"])))
     critical = speed_warning(case, speed)
     if critical:
         rep.info(critical)
-    h_min = float(np.diff(rails.x, axis=1).min())
-    dt = time_step(case, h_min / speed, rep)
+    crossing = (element_time(mesh, speed) if surface
+                else float(np.diff(rails.x, axis=1).min()) / speed)
+    dt = time_step(case, crossing, rep)
     engine = case["transient.engine"]
     explicit = engine == "explicit"
     if engine != "direct":
@@ -775,6 +803,8 @@ def _setup(ctx: StageContext) -> dict:
                                         rails.n_nodes), comm)
     times = np.arange(nt + 1) * dt
     x = run["x_start"] + run["offsets"][None, :] + run["speeds"][None, :] * times[:, None]
+    if surface:
+        x = x[:, :0]                     # no wheel: the loads' positions are the case's
     steps_out = output_steps(case, dt, nt)
     if case["output.stress_times"]:
         _check_stress_times(case, steps_out * dt)
@@ -812,9 +842,16 @@ def _setup(ctx: StageContext) -> dict:
                      + (" (out of core)" if system.out_of_core else "")
                      + (f"; {system.implicit_rows:,} of {dofmap.n_dofs:,} rows implicit"
                         if engine == "imex" else ""))
-    driver = columns = prescribed = None
+    driver = columns = prescribed = coupling = None
     forces = run["forces"]
-    if vehicle is None:
+    if surface:
+        forces = None
+        try:
+            prescribed = surface_load(case, mesh, dofmap.index, dt, nt)
+        except ValueError as exc:
+            raise TransientInputError(f"railvib transient: load.y = {case['load.y']:g}: "
+                                      f"{exc}") from None
+    elif vehicle is None:
         coupling = WheelCoupling(rails, run["wheel_rail"])
 
         def prescribed(n: int):
@@ -978,7 +1015,12 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
                       "acceleration": pr[:, 2, i], "coords": init["probe_coords"][i],
                       "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i],
                       "role": role}
+    attrs = {**prov, "solver": "transient"}
     rails = init["rails"]
+    if not rails.nodes.shape[0]:             # no track (track.count = 0): no rail group
+        write_probes_h5(out_dir / PROBES_H5, hist, attrs=attrs, groups={})
+        write_probes_csv(out_dir / PROBES_CSV_DIR, hist)
+        return
     sec = rail_section(init["problem"])
     rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
     moments, ends = [], []
@@ -995,7 +1037,7 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     groups = {"rail": {"time": t, "x": rails.x, "y": rails.y, "nodes": rails.nodes,
                        "bending_moment": np.stack(moments, axis=1),
                        "bending_moment_ends": np.stack(ends, axis=1)}}
-    attrs = {**prov, "solver": "transient",
+    attrs = {**attrs,
              "rail_moment_sign": "sagging positive (M = E I dpsi/dx, psi = -ry)",
              "rail_moment_static_correction_included": 1}
     write_probes_h5(out_dir / PROBES_H5, hist, attrs=attrs, groups=groups)
@@ -1015,7 +1057,8 @@ def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, sta
                        rail_index=init["run"]["wheel_rail"],
                        histories={k: v for k, v in a.items() if k not in ("probes", "rail")},
                        dof_names=list(vehicle.dof_names) if vehicle is not None else [],
-                       vehicle_type=case["vehicle.type"], rail_x=init["rails"].x,
+                       vehicle_type=("surface_load" if uses_surface_load(case)
+                                     else case["vehicle.type"]), rail_x=init["rails"].x,
                        rail=a["rail"])
 
 

@@ -41,8 +41,10 @@ thesis: setup
 # time, not by a pass-wide kill near the total. PYTEST_ARGS adds options (e.g. --durations=20).
 PYTEST   = $(PY) -m pytest -q $(PYTEST_ARGS)
 # The one-rank passes in NP worker processes (pytest-xdist; each worker is its own MPI world of
-# one rank); XDIST= runs them in one process.
-XDIST   ?= -n $(NP) --dist loadfile
+# one rank); XDIST= runs them in one process. Files are handed out longest first
+# (tests/conftest.py sorts them by tests/data/test_weights.json, tools/test_weights.py),
+# not by xdist's count of tests per file.
+XDIST   ?= -n $(NP) --dist loadfile --no-loadscope-reorder
 # One BLAS/OpenMP thread per worker process and per MPI rank: NP workers or ranks already fill
 # NP cores, and OpenBLAS's own threads on top of them oversubscribe the cores (a dense eigh of
 # 2,745 took 10.3 s with the default threads against 7.3 s with one, the machine loaded; the

@@ -17,6 +17,29 @@ BASELINE = ROOT / "jobs" / "thesis_baseline.toml"
 WORKER_FAULT_TALLY: list[dict] = []
 
 
+#: Seconds per test of an earlier pass (tools/test_weights.py writes it).
+TEST_WEIGHTS = ROOT / "tests" / "data" / "test_weights.json"
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """The test files in the order of their selected tests' recorded seconds, the longest
+    first (the order within a file kept): pytest-xdist hands out whole files in this
+    order (``--dist loadfile --no-loadscope-reorder``, Makefile), so a long file does not
+    start last while the other workers idle (tools/test_weights.py). ``trylast``: after
+    ``-m`` deselected what this pass does not run."""
+    import json
+
+    if not TEST_WEIGHTS.exists():
+        return
+    seconds = json.loads(TEST_WEIGHTS.read_text())
+    per_file: dict[str, float] = {}
+    for item in items:
+        path = item.nodeid.split("::")[0]
+        per_file[path] = per_file.get(path, 0.0) + seconds.get(item.nodeid, 0.0)
+    items.sort(key=lambda item: -per_file[item.nodeid.split("::")[0]])
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_testnodedown(node, error):
     """pytest-xdist, on the controller: collect a finished worker's fault-injection

@@ -34,7 +34,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -55,7 +54,7 @@ PASSAGE_S = (96.6 + 18.0) / 30.0 + 0.3
 
 def one(n_dofs: float, steps: int) -> dict:
     """The direct path's factor and step on the box of ``n_dofs`` (collective)."""
-    from explicit_bench import box
+    from explicit_bench import box, time_per_step
     from mpi4py import MPI
 
     from railvib_hpc.config import load_case
@@ -67,7 +66,7 @@ def one(n_dofs: float, steps: int) -> dict:
     from railvib_hpc.problem import Problem
 
     init_petsc([])
-    from railvib_hpc.transient.integrate import DirectSolver, State
+    from railvib_hpc.transient.integrate import DirectSolver
     from railvib_hpc.transient.petsc import TransientSystem
     from railvib_hpc.transient.scheme import GeneralizedAlpha
 
@@ -91,14 +90,7 @@ def one(n_dofs: float, steps: int) -> dict:
         return np.array([dof]), np.array([-1e4 * np.sin(2 * np.pi * 20.0 * n * 5e-4)])
 
     solver = DirectSolver(system, load)
-    st = State(0, *(np.zeros(system.n_local) for _ in range(3)))
-    solver.step(st)                                      # (warm-up)
-    comm.Barrier()
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        solver.step(st)
-    comm.Barrier()
-    t_step = (time.perf_counter() - t0) / steps
+    t_step = time_per_step(solver, system.n_local, comm, steps)
     peak, _ = peak_memory_gb()
     out = {"dofs": dofmap.n_dofs, "ranks": comm.size, "assembly_s": t_assembly,
            "factor_s": system.time_factorization, "factor_entries": entries,
@@ -143,17 +135,14 @@ def main() -> None:
     print("| DOFs | factor entries | factor [GB] | factorisation [s] | direct step [s] | "
           "explicit step [s] | peak [GB] |")
     print("|---|---|---|---|---|---|---|")
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    from explicit_bench import run_one
+
     rows = []
     for n in args.dofs:
-        cmd = ["mpirun", "--oversubscribe", "-n", str(args.ranks), sys.executable, __file__,
-               "--one", str(n), "--steps", str(args.steps)]
-        proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
-        line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-        if proc.returncode or not line:
-            print(f"| {n:.3g} | failed: {proc.stderr.strip()[-300:]} |")
+        r, error = run_one(__file__, args.ranks, ["--one", str(n), "--steps", str(args.steps)])
+        if r is None:
+            print(f"| {n:.3g} | failed: {error} |")
             continue
-        r = json.loads(line[0][7:])
         rows.append(r)
         print(f"| {r['dofs']:,} | {r['factor_entries']:,} | {r['factor_gb']:.2f} | "
               f"{r['factor_s']:.1f} | {r['step_s']:.4f} | {r['explicit_step_s']:.4f} | "

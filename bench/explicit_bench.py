@@ -89,6 +89,20 @@ def box(n_dofs: float, strip: bool = False):
     return mesh, top
 
 
+def time_per_step(solver, n_local: int, comm, steps: int) -> float:
+    """Seconds per step of ``solver`` from rest, after one warm-up step (collective)."""
+    from railvib_hpc.transient.integrate import State
+
+    st = State(0, *(np.zeros(n_local) for _ in range(3)))
+    solver.step(st)                                      # (warm-up)
+    comm.Barrier()
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        solver.step(st)
+    comm.Barrier()
+    return (time.perf_counter() - t0) / steps
+
+
 def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
     """One configuration in this process (collective)."""
     from mpi4py import MPI
@@ -116,7 +130,7 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
         stability_limit,
     )
     from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR, ImexSystem
-    from railvib_hpc.transient.integrate import DirectSolver, State
+    from railvib_hpc.transient.integrate import DirectSolver
 
     comm = MPI.COMM_WORLD
     case = load_case(None, [*(f"boundary.{f}=absorbing" for f in
@@ -154,14 +168,7 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
         return np.array([dof]), np.array([-1e4 * np.sin(2 * np.pi * 20.0 * n * system.dt)])
 
     solver = DirectSolver(system, load) if imex else ExplicitSolver(system, load)
-    st = State(0, *(np.zeros(system.n_local) for _ in range(3)))
-    solver.step(st)                                      # (warm-up)
-    comm.Barrier()
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        solver.step(st)
-    comm.Barrier()
-    t_steps = (time.perf_counter() - t0) / steps
+    t_steps = time_per_step(solver, system.n_local, comm, steps)
     ray = rayleigh_parts(C)
     stored = [K, M, *([C] if ray is None else [ray.C_b])]
     nnz = sum(A.getInfo()["nz_used"] for A in stored)              # (summed over the ranks)
@@ -183,6 +190,18 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
             "step_ns_per_dof": 1e9 * t_steps / n, "nnz": int(nnz),
             "matrix_gb": 12.0 * nnz / 1e9, "peak_gb": peak, "bytes_per_dof": peak * 1e9 / n,
             "traffic_gbs": traffic}
+
+
+def run_one(script: str, ranks: int, argv: list[str]) -> tuple[dict | None, str]:
+    """``script argv`` under ``mpirun -n ranks`` in its own processes (so its peak memory is
+    its own): the dict its rank 0 printed after ``RESULT``, or None and the error's tail."""
+    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
+    cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, script, *argv]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
+    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+    if proc.returncode or not line:
+        return None, proc.stderr.strip()[-300:]
+    return json.loads(line[0][7:]), ""
 
 
 def main() -> None:
@@ -210,17 +229,13 @@ def main() -> None:
           "matrices [GB] | peak [GB] | "
           "peak / DOF [B] | traffic [GB/s] | of ranks x triad |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    env = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1"}
     for n in args.dofs:
         for ranks in args.ranks:
-            cmd = ["mpirun", "--oversubscribe", "-n", str(ranks), sys.executable, __file__,
-                   "--one", str(n), "--steps", str(args.steps), "--engine", args.engine]
-            proc = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT)
-            line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-            if proc.returncode or not line:
-                print(f"| {n:.3g} | {ranks} | failed: {proc.stderr.strip()[-300:]} |")
+            r, error = run_one(__file__, ranks, ["--one", str(n), "--steps", str(args.steps),
+                                                 "--engine", args.engine])
+            if r is None:
+                print(f"| {n:.3g} | {ranks} | failed: {error} |")
                 continue
-            r = json.loads(line[0][7:])
             if args.json:
                 with open(args.json, "a") as f:
                     f.write(json.dumps({**r, "engine": args.engine,

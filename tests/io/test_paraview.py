@@ -169,3 +169,41 @@ def test_stress_xdmf_in_every_reader(loaded):
     assert len(t) == 2 and data["von_mises"].max() > 0
     _check_series(report["files"][str(out / "stress.xdmf")], t, n, ne, part,
                   lambda k: {}, lambda k: {name: a[k] for name, a in data.items()}, "stress")
+
+
+#: The bare soil under a moving load (``track.count = 0``, ``[load]``; the case of
+#: tests/transient/test_surface_load_case.py): the transient stage's fields of a mesh
+#: without a track.
+BARE_SOIL = ["mesh.refinement=0.25", "track.count=0", "load.force=1e5", "load.speed=50",
+             "load.x_start=3", "load.x_end=4.5", "load.ramp_time=0.01",
+             "modal.lumped_mass=true", "transient.engine=explicit", "output.dt=0.002",
+             "transient.checkpoint_interval=0", "output.stress_times=[]",
+             "transient.f_max=100"]
+
+
+def test_the_bare_soils_transient_fields_in_every_reader(pvbatch, tmp_path):
+    """The fields and mesh of a case without a track open in every reader with the arrays
+    of fields.h5 (no rail, no track part)."""
+    from railvib_hpc.config import load_case
+    from railvib_hpc.log import Reporter
+    from railvib_hpc.transient.stage import run_transient_stage
+
+    out = tmp_path / "bare"
+    run_transient_stage(load_case(BASELINE, BARE_SOIL), out, MPI.COMM_SELF, Reporter(0))
+    report = tmp_path / "paraview.json"
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith(("PMIX_", "PMI_", "PYTHON", "VIRTUAL_ENV"))
+           and not (k.startswith("OMPI_") and not k.startswith("OMPI_ALLOW_RUN_AS_ROOT"))}
+    proc = subprocess.run([pvbatch, str(PROBE), str(report), str(out / "fields.xdmf")],
+                          env=env, cwd=tmp_path, capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert "ERR|" not in proc.stderr and "XDMF Error" not in proc.stderr, proc.stderr[-3000:]
+    with h5py.File(out / "fields.h5", "r") as f:
+        t = f["time"][()]
+        data = {name: f[f"fields/{name}"][()]
+                for name in ("displacement", "velocity", "acceleration")}
+        n, ne, part = len(f["mesh/points"]), len(f["mesh/hexes"]), f["mesh/hex_part"][()]
+    assert len(t) > 5 and np.abs(data["velocity"]).max() > 0
+    _check_series(json.loads(report.read_text())["files"][str(out / "fields.xdmf")], t, n, ne,
+                  part, lambda k: {name: a[k] for name, a in data.items()}, lambda k: {},
+                  "bare-soil fields")

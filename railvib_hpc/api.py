@@ -580,7 +580,6 @@ class Pipeline:
         names = tuple(names)
         for name in names:
             stage(name)
-        for name in names:
             self._check_command(name)
         t0 = time.perf_counter()
         label = self._label("run")

@@ -278,24 +278,24 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                           "after_entry": t_det - t_entry,
                           "p_analytic": r / c_p, "s_analytic": r / c_s,
                           "apparent_speed": r / (t_det - t_entry) if t_det > t_entry else None}
-    ours = _thesis_comparison(hist, out_dir / FIELDS_H5)
+    # the bare soil under a surface load (track.count = 0) is no thesis model: no thesis
+    # comparison, no thesis table
+    has_track = bool(case["track.count"])
+    ours = _thesis_comparison(hist, out_dir / FIELDS_H5) if has_track else {}
     comparison = {k: {"thesis": v, "railvib": ours.get(k)} for k, v in THESIS.items()
-                  if not k.endswith("arrival_basement_wall")}
+                  if has_track and not k.endswith("arrival_basement_wall")}
     # arrivals on the thesis's clock (t = 0 with the wheel at x = 0) at the wall's far end
-    arrival = thesis_clock_arrival(case, hist) if case["track.count"] else None
+    arrival = thesis_clock_arrival(case, hist) if has_track else None
     if arrival is not None:
         for key, c in (("p_wave_arrival_basement_wall", c_p),
                        ("s_wave_arrival_basement_wall", c_s)):
             comparison[key] = {"thesis": THESIS[key],
                                "railvib": arrival["detected"] if key[0] == "p" else None,
                                "analytic": arrival["t_entry"] + arrival["distance"] / c}
-    # the bare soil under a surface load (track.count = 0) is no thesis model
     rows = (thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
-            if case["track.count"] else [])
-    origin = ("the first wheel enters the flexible rail" if case["track.count"]
+            if has_track else [])
+    origin = ("the first wheel enters the flexible rail" if has_track
               else "the surface load enters the soil")
-    if not case["track.count"]:
-        comparison = {}
     x, force = _contact(out_dir, solver)
     if x is not None and not np.size(x, 1):       # no wheel (the surface load): no figure
         x = force = None

@@ -65,10 +65,7 @@ def loaded(pvbatch, tmp_path_factory):
         assert run([stage, str(BASELINE), *COARSE, "--out", str(out)]) == 0
     t_run = time.perf_counter() - t0
     report = out / "paraview.json"
-    # ParaView's own Python: none of the project's (or an MPI launcher's) environment
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("PMIX_", "PMI_", "PYTHON", "VIRTUAL_ENV"))
-           and not (k.startswith("OMPI_") and not k.startswith("OMPI_ALLOW_RUN_AS_ROOT"))}
+    env = _pvbatch_env()
     t0 = time.perf_counter()
     proc = subprocess.run([pvbatch, str(PROBE), str(report),
                            *(str(out / f"{name}.xdmf") for name in OUTPUTS)],
@@ -79,6 +76,21 @@ def loaded(pvbatch, tmp_path_factory):
     assert "ERR|" not in proc.stderr and "XDMF Error" not in proc.stderr, proc.stderr[-3000:]
     print(f"\ncoarse run {t_run:.1f} s, pvbatch {t_pv:.1f} s")
     return out, json.loads(report.read_text())
+
+
+def _pvbatch_env() -> dict[str, str]:
+    """ParaView's own Python: none of the project's (or an MPI launcher's) environment."""
+    return {k: v for k, v in os.environ.items()
+            if not k.startswith(("PMIX_", "PMI_", "PYTHON", "VIRTUAL_ENV"))
+            and not (k.startswith("OMPI_") and not k.startswith("OMPI_ALLOW_RUN_AS_ROOT"))}
+
+
+def _fields(path: Path) -> tuple[np.ndarray, dict, int, int, np.ndarray]:
+    """Times, the three nodal fields, node and element counts and parts of fields.h5."""
+    with h5py.File(path, "r") as f:
+        return (f["time"][()], {name: f[f"fields/{name}"][()]
+                                for name in ("displacement", "velocity", "acceleration")},
+                len(f["mesh/points"]), len(f["mesh/hexes"]), f["mesh/hex_part"][()])
 
 
 def _check_arrays(got: dict, expected: dict, where: str) -> None:
@@ -150,11 +162,7 @@ def test_modes_xdmf_in_every_reader(loaded):
 
 def test_fields_xdmf_in_every_reader(loaded):
     out, report = loaded
-    with h5py.File(out / "fields.h5", "r") as f:
-        t = f["time"][()]
-        data = {name: f[f"fields/{name}"][()]
-                for name in ("displacement", "velocity", "acceleration")}
-        n, ne, part = len(f["mesh/points"]), len(f["mesh/hexes"]), f["mesh/hex_part"][()]
+    t, data, n, ne, part = _fields(out / "fields.h5")
     assert len(t) > 50 and np.abs(data["acceleration"]).max() > 0
     _check_series(report["files"][str(out / "fields.xdmf")], t, n, ne, part,
                   lambda k: {name: a[k] for name, a in data.items()}, lambda k: {}, "fields")
@@ -191,18 +199,12 @@ def test_the_bare_soils_transient_fields_in_every_reader(pvbatch, tmp_path):
     out = tmp_path / "bare"
     run_transient_stage(load_case(BASELINE, BARE_SOIL), out, MPI.COMM_SELF, Reporter(0))
     report = tmp_path / "paraview.json"
-    env = {k: v for k, v in os.environ.items()
-           if not k.startswith(("PMIX_", "PMI_", "PYTHON", "VIRTUAL_ENV"))
-           and not (k.startswith("OMPI_") and not k.startswith("OMPI_ALLOW_RUN_AS_ROOT"))}
+    env = _pvbatch_env()
     proc = subprocess.run([pvbatch, str(PROBE), str(report), str(out / "fields.xdmf")],
                           env=env, cwd=tmp_path, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     assert "ERR|" not in proc.stderr and "XDMF Error" not in proc.stderr, proc.stderr[-3000:]
-    with h5py.File(out / "fields.h5", "r") as f:
-        t = f["time"][()]
-        data = {name: f[f"fields/{name}"][()]
-                for name in ("displacement", "velocity", "acceleration")}
-        n, ne, part = len(f["mesh/points"]), len(f["mesh/hexes"]), f["mesh/hex_part"][()]
+    t, data, n, ne, part = _fields(out / "fields.h5")
     assert len(t) > 5 and np.abs(data["velocity"]).max() > 0
     _check_series(json.loads(report.read_text())["files"][str(out / "fields.xdmf")], t, n, ne,
                   part, lambda k: {name: a[k] for name, a in data.items()}, lambda k: {},

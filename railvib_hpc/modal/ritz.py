@@ -74,6 +74,17 @@ PURIFICATIONS = 1
 EXTRA_PURIFICATIONS = 2
 
 
+#: The first this many purification passes purify the failing pairs only; the guards enter
+#: their Rayleigh-Ritz step as block Lanczos returned them (their K and M products, no
+#: solves). The passes after them purify the guards too. Measured at the issue-26 case (2
+#: bands, 296 modes, 2 ranks, tol 1e-8): the same pairs pass after the first pass either
+#: way, and the solves of the 2 x 29 guards (2 per guard: solve and refinement), 2.4 s of the
+#: 12.8 s after Lanczos, are saved. On the 60-element column at tol 1e-10 the top pair of a
+#: band stalled at 6e-9 without purified guards (its neighbour beyond the band, coupled to
+#: it at eigenvalue ratio ~1, needs its guard purified too): the next pass purifies them.
+GUARDS_AS_THEY_ARE = 1
+
+
 def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: float,
                    stats: dict | None = None, window: tuple[float, float] | None = None,
                    progress=None) -> Eigenpairs:
@@ -96,9 +107,11 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     (a pair is accepted by its measured residual, whatever it went through); the others
     (those at their round-off floor included: purification still improves them) go to a
     purification pass that **locks** the converged modes (those within ``tol``, or
-    outside ``window``): it purifies only the others and the guards (whose components of
-    the next modes, damped by purification only by lambda_i / lambda_j ~ 1 near the top of
-    the set, the Rayleigh-Ritz step removes), M-orthogonalises them against the locked
+    outside ``window``): it purifies only the others, takes the guards into its
+    Rayleigh-Ritz step (whose components of the next modes, damped by purification only by
+    lambda_i / lambda_j ~ 1 near the top of the set, that step removes; the first
+    :data:`GUARDS_AS_THEY_ARE` passes take them as they are, the later ones purify them
+    too), M-orthogonalises them against the locked
     modes and projects in that complement (:func:`purify_locked`); the ``n_wanted`` pairs
     nearest to the shift are kept, and only the new ones are checked, against every mode
     (:func:`normalise_and_check`'s ``known``). Before, every Ritz vector was purified
@@ -160,7 +173,11 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
         permute_columns(X, np.concatenate([kept, np.flatnonzero(redo),
                                            np.arange(n_wanted, X.shape[1])]))
         locked = (checks.stiff[np.ix_(kept, kept)], checks.gram[np.ix_(kept, kept)])
-        lam_new, bounds_new = purify_locked(op, X, c, block, locked, progress, timings)
+        # the first pass purifies the failing pairs only (the guards enter as they are),
+        # the extra passes the guards too (GUARDS_AS_THEY_ARE)
+        lam_new, bounds_new = purify_locked(
+            op, X, c, block, locked, progress, timings,
+            n_purify=int(redo.sum()) if attempt < GUARDS_AS_THEY_ARE else None)
         lam_all = np.concatenate([result.eigenvalues[kept], lam_new])
         # the locked modes the n_wanted nearest to the shift still include come first (as
         # they are), then the new ones among them, then the rest (the next guards)
@@ -301,11 +318,15 @@ def _checked_ritz_vectors(X: np.ndarray, n_wanted: int, K, M, comm: MPI.Comm, to
 
 def purify_locked(op, X: np.ndarray, n_locked: int, block: int,
                   locked: tuple[np.ndarray, np.ndarray], progress=None,
-                  timings: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  timings: dict | None = None, n_purify: int | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """An extra purification pass with the first ``n_locked`` columns of ``X`` locked.
 
     The other columns ``W`` are purified once more (one solve and one step of iterative
-    refinement each, its residual by one product with ``K - sigma M``), M-orthogonalised
+    refinement each, its residual by one product with ``K - sigma M``): the first
+    ``n_purify`` of them (default: all); the ones after those (the guards) enter as they
+    are, by their K and M products alone (see :func:`purified_modes`). Then ``W`` is
+    M-orthogonalised
     against the locked modes ``Phi_c`` (``W' = W - Phi_c C``, ``C = G_c^-1 Phi_c^T M W``)
     and projected in that complement: ``W'^T M W' = W^T M W - (Phi_c^T M W)^T C`` and
     ``W'^T K W' = W^T K W - C^T Phi_c^T K W - (Phi_c^T K W)^T C + C^T S_c C``, with
@@ -334,19 +355,26 @@ def purify_locked(op, X: np.ndarray, n_locked: int, block: int,
     clock = dict.fromkeys(("solves", "products", "rayleigh_ritz"), 0.0)
     c, k = n_locked, X.shape[1]
     q = k - c
+    end = k if n_purify is None else c + n_purify
     kp, mp, sres = np.zeros((q, q)), np.zeros((q, q)), np.zeros(q)
     ck, cm = np.zeros((c, q)), np.zeros((c, q))
-    for j in range(c, k, block):
-        s, w = slice(j, min(j + block, k)), slice(j - c, min(j + block, k) - c)
+    # the purified columns by blocks, then the guards by blocks (a block never mixes them)
+    starts = [*range(c, end, block), *range(end, k, block)]
+    for j in starts:
+        s = slice(j, min(j + block, end if j < end else k))
+        w = slice(s.start - c, s.stop - c)
         t0, s0 = time.perf_counter(), op.time_solves
-        B = op.mass(X[:, s])
-        Y = op.solve(B, chunk=max(B.shape[1], 1))
-        # the refinement's residual by one product with the factored K - sigma M (was K Y
-        # and M Y: one sparse product per vector less)
-        Y += op.solve(B - op.shifted(Y), chunk=max(B.shape[1], 1))
-        KY, MY = op.stiffness_and_mass(Y)
-        sres[w] = np.sum((B - (KY - op.sigma * MY)) ** 2, axis=0)
-        X[:, s] = Y
+        if j < end:
+            B = op.mass(X[:, s])
+            Y = op.solve(B, chunk=max(B.shape[1], 1))
+            # the refinement's residual by one product with the factored K - sigma M (was
+            # K Y and M Y: one sparse product per vector less)
+            Y += op.solve(B - op.shifted(Y), chunk=max(B.shape[1], 1))
+            KY, MY = op.stiffness_and_mass(Y)
+            sres[w] = np.sum((B - (KY - op.sigma * MY)) ** 2, axis=0)
+            X[:, s] = Y
+        else:                          # a guard as it is: no solve, no solve residual
+            KY, MY = op.stiffness_and_mass(X[:, s])
         t1 = time.perf_counter()
         clock["solves"] += op.time_solves - s0
         clock["products"] += t1 - t0 - (op.time_solves - s0)

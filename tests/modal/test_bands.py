@@ -47,6 +47,16 @@ def _cut(f: np.ndarray, n: int) -> tuple[int, float]:
     return n, 0.5 * (f[n - 1] + f[n])
 
 
+def _same_residuals(rho: np.ndarray, res) -> None:
+    """``rho`` (scipy's relative residuals of ``res``'s vectors) and ``res.residuals`` agree
+    within 10 %, or, for a pair below its round-off floor (``res.residual_floors``: the
+    bound of either evaluation's rounding), within twice the floor: there both evaluations
+    are rounding noise (measured 5-11 % apart at a floor 85 times the residual)."""
+    limited = res.residuals <= res.residual_floors
+    np.testing.assert_allclose(rho[~limited], res.residuals[~limited], rtol=0.1, atol=1e-14)
+    assert np.all(np.abs(rho - res.residuals)[limited] <= 2 * res.residual_floors[limited])
+
+
 def _same_modes(res, ref, K, M, n: int, clusters_min: int) -> None:
     lam = ref.eigenvalues[:n]
     assert len(res.eigenvalues) == n
@@ -637,8 +647,7 @@ def test_the_merge_keeps_the_bands_modes_only_where_the_measured_grams_allow(tmp
     gram = np.abs(phi.T @ (Ms @ phi) - np.eye(n)).max()
     assert gram == pytest.approx(kept.stats["max_orthonormality_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
-    # (the two evaluations differ by rounding, up to ~5 % for the pairs at their floor)
-    np.testing.assert_allclose(rho, kept.residuals, rtol=0.1, atol=1e-14)
+    _same_residuals(rho, kept)
     assert np.all(kept.residuals <= np.maximum(1e-10, kept.residual_floors))
 
 
@@ -676,7 +685,6 @@ def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
     stiff = np.abs(phi.T @ (Ks @ phi) - np.diag(lam)).max() / lam.max()
     assert stiff == pytest.approx(part.stats["max_stiffness_diag_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
-    # (the two evaluations differ by rounding, up to ~5 % for the pairs at their floor)
-    np.testing.assert_allclose(rho, part.residuals, rtol=0.1, atol=1e-14)
+    _same_residuals(rho, part)
     assert np.all(part.residuals <= np.maximum(1e-10, part.residual_floors))
     _same_verdicts(part.warnings, full.warnings)

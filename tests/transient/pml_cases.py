@@ -145,7 +145,8 @@ def _system(mesh, problem, dofmap, comm, matrices: tuple, layer, implicit, direc
 def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receivers,
             t_end: float, f0: float, comm, plane_strain: bool = False,
             extra: tuple = (), courant: float | None = None, record_energy: bool = False,
-            implicit: np.ndarray | None = None, direct: float | None = None):
+            implicit: np.ndarray | None = None, direct: float | None = None,
+            history=None, progress=None):
     """Step ``mesh`` with the given face types and a Ricker point force.
 
     Parameters
@@ -182,6 +183,11 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         A step [s]: step with the direct engine instead
         (:class:`~railvib_hpc.transient.petsc.TransientSystem`, the trapezoidal rule, one
         LU factor; the layers implicit).
+    history
+        The forces' time history ``history(t)`` (default: the Ricker of peak frequency
+        ``f0``; a history other than a Ricker must start at zero too).
+    progress
+        Called as ``progress(step, steps)`` after every step (a bench's progress line).
 
     Returns
     -------
@@ -226,8 +232,10 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     rec = np.array([int(np.argmin(((mesh.points - p) ** 2).sum(axis=1))) for p in receivers])
     rdofs = dofmap.index[rec, :3]
 
+    shape = history or (lambda t: ricker(t, f0))
+
     def prescribed(n):
-        return own_src, own_amp * float(ricker(n * dt, f0))
+        return own_src, own_amp * float(shape(n * dt))
 
     def sample(x):
         out = np.zeros(rdofs.shape)
@@ -249,12 +257,14 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     steps = int(math.ceil(t_end / dt))
     u, v, energy = [sample(st.u)], [sample(st.v)], []
     t0 = time.perf_counter()
-    for _ in range(steps):
+    for k in range(steps):
         solver.step(st)
         u.append(sample(st.u))
         v.append(sample(st.v))
         if record_energy:
             energy.append(_energy(system, st, direct is not None))
+        if progress is not None:
+            progress(k + 1, steps)
     elapsed = time.perf_counter() - t0
     out = {"t": np.arange(steps + 1) * dt, "u": np.array(u), "v": np.array(v), "dt": dt,
            "dofs": n_global, "time_per_step": elapsed / steps, "energy": np.array(energy),

@@ -1259,7 +1259,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         },
         "speed": {
             "speeds": Param([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats", "m/s",
-                            "vehicle speeds (one MBS run each on the same modes)", "pos",
+                            "vehicle speeds (one MBS run each on the same modes); without a track "
+                            "(track.count = 0, solver = direct): the moving load's, load.speed",
+                            "pos",
                             unique=True),
             "solver": _study_solver("every speed is then a full-order run, no shared modes"),
             "probes": _study_probes(),

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Case
-from .common import StudyPlan, Variant, has_vehicle, response_quantities
+from .common import StudyPlan, Variant, response_quantities
 from .report import figure, fmt, save, transpose
 
 TITLE = "Speed sweep"
@@ -66,7 +66,6 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
         gov = max(ass, key=lambda p: ass[p]["max_utilisation"] or 0.0) if ass else None
         mbs = r["mbs"] or {}                         # None: no vehicle (no track)
         data.append({"variant": v.name, "speed": v.parameter["speed"], "quantities": q,
-                     "vehicle": has_vehicle(r),
                      "dynamic_factor": mbs.get("dynamic_factor"),
                      "min_contact_force": mbs.get("min_contact_force"),
                      "max_rail_deflection": mbs.get("max_rail_deflection"),
@@ -76,7 +75,7 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                 None if None in passed or not passed else True),
                      "duration": r["duration"], "wall_s": r["timings"]["total"]})
     acc = [k for k in data[0]["quantities"] if k != "peak contact force"]
-    vehicle = all(d["vehicle"] for d in data)    # the contact forces of a train, if any
+    vehicle = _with_vehicle(data)    # the contact forces of a train, if any
     head = ["variant", "speed [m/s]", *(VEHICLE_HEAD if vehicle else ()), *acc,
             "max utilisation", "assessment", "record [s]", "wall [s]"]
     rows = [[d["variant"], fmt(d["speed"]), *(_vehicle_cells(d) if vehicle else ()),
@@ -93,6 +92,12 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
             "tables": [{"title": "Responses per speed",
                         **dict(zip(("head", "rows"), transpose(head, rows))),
                         "note": note}]}
+
+
+def _with_vehicle(data: list[dict]) -> bool:
+    """Whether every speed has a vehicle's contact force (not the moving load of a case
+    without a track)."""
+    return all("peak contact force" in d["quantities"] for d in data)
 
 
 #: The columns of a vehicle's metrics (left out without a track).
@@ -119,7 +124,7 @@ def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
     crit = max(data, key=lambda d: building_peak(d)[0])
     a_crit, key = building_peak(crit)
     lo = data[0]
-    vehicle = all(d["vehicle"] for d in data)
+    vehicle = _with_vehicle(data)
     fmax = max(data, key=lambda d: d["quantities"]["peak contact force"]) if vehicle else None
     fails = [d["speed"] for d in data if d["passed"] is False]
     undet = [d["speed"] for d in data if d["passed"] is None]
@@ -157,7 +162,7 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     if not data:
         return []
     speeds = [d["speed"] for d in data]
-    vehicle = all(d["vehicle"] for d in data)     # no contact-force panel without one
+    vehicle = _with_vehicle(data)     # no contact-force panel without one
     fig = figure(figsize=(13 if vehicle else 9, 4.2))
     axes = list(fig.subplots(1, 3 if vehicle else 2))
     a1, a3 = axes[0], axes[-1]

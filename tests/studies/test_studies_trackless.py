@@ -199,7 +199,7 @@ def _fake(speed: float, acc: float, mbs: dict | None) -> dict:
                       "solver": "direct"}}
 
 
-def test_the_speed_study_of_a_trackless_case_varies_the_load_speed():
+def test_the_speed_study_of_a_trackless_case_varies_the_load_speed(tmp_path):
     """``load.speed`` per variant; the table, verdict and figure without a vehicle's
     contact force, dynamic factor or rail deflection."""
     from railvib_hpc.studies import speed
@@ -218,6 +218,7 @@ def test_the_speed_study_of_a_trackless_case_varies_the_load_speed():
     assert "no vehicle" in out["verdict"]["text"]
     assert out["verdict"]["critical_speed"] == 40
     assert out["verdict"]["max_contact_force_speed"] is None
+    assert speed.figures(out, cfg, tmp_path)                    # drawn without it
 
 
 def test_the_reflection_and_convergence_analyses_leave_out_the_contact_force(tmp_path):

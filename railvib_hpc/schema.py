@@ -394,8 +394,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
                        "from the building, on the same embankment), or 0: no track, no "
                        "embankment and no vehicle, the bare soil (and the building) loaded by "
-                       "the moving surface load of [load] (railvib transient only: the modal "
-                       "path needs a track)", "nonneg",
+                       "the moving surface load of [load] (railvib transient, and railvib study "
+                       "with solver = direct: the modal path needs a track)", "nonneg",
                        source=f"{_APDL}: one track"),
         "spacing": Param(4.0, "float", "m",
                          "distance between the two tracks' centre lines (track.count = 2)",

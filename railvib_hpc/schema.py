@@ -394,8 +394,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
                        "from the building, on the same embankment), or 0: no track, no "
                        "embankment and no vehicle, the bare soil (and the building) loaded by "
-                       "the moving surface load of [load] (railvib transient only: the modal "
-                       "path needs a track)", "nonneg",
+                       "the moving surface load of [load] (railvib transient, and railvib study "
+                       "with solver = direct: the modal path needs a track)", "nonneg",
                        source=f"{_APDL}: one track"),
         "spacing": Param(4.0, "float", "m",
                          "distance between the two tracks' centre lines (track.count = 2)",
@@ -1259,7 +1259,9 @@ SCHEMA: dict[str, dict[str, Any]] = {
         },
         "speed": {
             "speeds": Param([10.0, 20.0, 30.0, 40.0, 50.0, 60.0], "floats", "m/s",
-                            "vehicle speeds (one MBS run each on the same modes)", "pos",
+                            "vehicle speeds (one MBS run each on the same modes); without a track "
+                            "(track.count = 0, solver = direct): the moving load's, load.speed",
+                            "pos",
                             unique=True),
             "solver": _study_solver("every speed is then a full-order run, no shared modes"),
             "probes": _study_probes(),

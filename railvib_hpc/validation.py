@@ -567,8 +567,10 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
 
 #: The commands that solve the model with its track (modes, the vehicle on them, what is
 #: rebuilt from them): a case without a track (``track.count = 0``) is for
-#: ``railvib transient`` (and ``check``, ``mesh``, ``assess`` of its results).
-TRACK_COMMANDS = ("modal", "mbs", "reconstruct", "run", "study")
+#: ``railvib transient`` (and ``check``, ``mesh``, ``assess`` of its results) and for
+#: ``railvib study`` with ``solver = direct`` (the study decides, knowing its settings:
+#: :func:`railvib_hpc.studies.runner.trackless_problem`).
+TRACK_COMMANDS = ("modal", "mbs", "reconstruct", "run")
 
 
 def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
@@ -589,7 +591,8 @@ def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
     if case["track.count"] == 0 and command in TRACK_COMMANDS:
         return [("track.count", 0, f"railvib {command} needs a track (the modal path runs the "
                  "vehicle on the track's modes): 1 or 2; the bare soil with the moving load of "
-                 "[load] runs with railvib transient")]
+                 "[load] runs with railvib transient (or railvib study with solver = "
+                 "direct)")]
     return []
 
 

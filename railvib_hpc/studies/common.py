@@ -28,6 +28,9 @@ writes to ``probes.h5`` for these points, without the full fields (GBs per varia
              peak_rss_gb_total, ranks, ...}}
     mbs     {peak_contact_force, static_wheel_load, dynamic_increment, dynamic_factor,
              min_contact_force, max_rail_deflection, dt, n_steps, loss_of_contact_steps}
+            (null for a case without a track, track.count = 0: no vehicle)
+    load    {type = "surface_load", force, count, speed, y}   (only without a track: the
+            moving load of [load] that replaces the vehicle)
     probes  {name: {coords, t_onset, acc_x, acc_y, acc_vertical, acc_total, t_acc_total,
                     vel_total, disp_total}}                      (every mesh probe; t_onset:
                     first time |a| reaches assessment.wave_threshold of its peak)
@@ -253,11 +256,15 @@ def model_info(modal, modes_used: int | None, n_frequencies: int = 10) -> dict:
     return info
 
 
-def mbs_metrics(passage) -> dict:
+def mbs_metrics(passage) -> dict | None:
     """Contact-force and rail metrics of a passage: the result of the ``mbs`` stage
     (:class:`~railvib_hpc.mbs.stage.PassageOutput`) or of the ``transient`` stage
-    (:class:`~railvib_hpc.transient.stage.TransientOutput`)."""
+    (:class:`~railvib_hpc.transient.stage.TransientOutput`); None for a run without
+    wheels (a case without a track, ``track.count = 0``: the moving load of ``[load]``
+    has no contact force, wheel load or rail)."""
     peak = np.asarray(passage.peak_contact_force, dtype=float)
+    if peak.size == 0:
+        return None
     static = np.asarray(passage.static_wheel_load, dtype=float)
     ok = static > 0
     return {
@@ -271,6 +278,21 @@ def mbs_metrics(passage) -> dict:
         "loss_of_contact_steps": int(passage.loss_of_contact_steps),
         "peak_per_wheel": peak.tolist(),
     }
+
+
+def surface_load_info(case: Case) -> dict:
+    """The loading of a case without a track (``track.count = 0``), for its ``result.json``
+    (``load``): the moving load of ``[load]`` (force of each load [N], their number, speed
+    [m/s], path ``y`` [m]); the result's ``mbs`` is None (no wheel, no rail)."""
+    ld = case["load"]
+    return {"type": "surface_load", "force": float(ld["force"]),
+            "count": len(ld["offsets"]), "speed": float(ld["speed"]), "y": float(ld["y"])}
+
+
+def has_vehicle(result: dict) -> bool:
+    """Whether a variant's result has a vehicle's metrics (``mbs``): False for a case
+    without a track (the moving load of ``[load]``, :func:`surface_load_info`)."""
+    return result.get("mbs") is not None
 
 
 def probe_response(vdir: Path, case: Case, probes: Sequence[str]) -> dict:
@@ -518,6 +540,8 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
                 "inputs_sha256": digest, "railvib_version": __version__, "ranks": comm.size,
                 "model": model, "mbs": mbs_metrics(stats), **resp, "timings": timings,
                 "reused": {"transient": bool(stats.reused)}, "complete": True}
+            if vcase["track.count"] == 0:              # no vehicle: mbs is None
+                result["load"] = surface_load_info(vcase)
             write_result(vdir, result, vcase)
             return result
 
@@ -670,12 +694,14 @@ def response_quantities(result: dict, probes: Sequence[str]) -> dict[str, float]
     """The compared response quantities of a result: building peaks and contact force.
 
     Keys: ``<probe> a_z`` and ``<probe> |a|`` (peak vertical and total acceleration [m/s²])
-    for each probe, ``peak contact force`` [N].
+    for each probe, ``peak contact force`` [N] (left out for a case without a track: no
+    vehicle, :func:`has_vehicle`).
     """
     out: dict[str, float] = {}
     for p in probes:
         pk = result["probes"][p]
         out[f"{p} a_z"] = pk["acc_vertical"]
         out[f"{p} |a|"] = pk["acc_total"]
-    out["peak contact force"] = result["mbs"]["peak_contact_force"]
+    if has_vehicle(result):
+        out["peak contact force"] = result["mbs"]["peak_contact_force"]
     return out

@@ -94,7 +94,9 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
         "title": "Quantities per level, relative changes and Richardson estimate",
         "head": head, "rows": rows,
         "note": ("Frequencies in Hz, accelerations (a_z vertical, |a| total peak) in m/s², "
-                 "contact force in N. Mesh size h = DOFs^(-1/3); observed order from the "
+                 + ("contact force in N. " if "peak contact force" in names else
+                    "no contact force (no vehicle: a case without a track). ")
+                 + "Mesh size h = DOFs^(-1/3); observed order from the "
                  "three finest levels (Celik et al. 2008, any refinement ratios). basis "
                  "'observed': monotone, order in [0.5, 8], error = |finest - extrapolated| / "
                  f"|extrapolated|; 'assumed': two levels, formal order "
@@ -154,8 +156,9 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
         if ext.get("basis") == "observed" and ext.get("extrapolated"):
             target.plot([dofs[-1] * 1.35], [ext["extrapolated"] / vals[-1]], "*", ms=8,
                         color=line.get_color())
+    force = ", contact force" if "peak contact force" in names else ""
     for ax, title in ((ax1, "lowest natural frequencies"),
-                      (ax2, "peak responses (building probes, contact force)")):
+                      (ax2, f"peak responses (building probes{force})")):
         ax.set_xscale("log")
         ax.axhline(1.0, color="k", lw=0.6)
         tol = settings["tolerance"] / 100.0

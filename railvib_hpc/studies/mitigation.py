@@ -56,6 +56,35 @@ GEOMETRIC = {"trench": "trench.type=none", "wib": "wib.type=none"}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
+#: Case sections of the track and the train: a measure on them has nothing to act on in a
+#: case without a track (``track.count = 0``).
+TRACK_SECTIONS = ("track", "pads", "usp", "ballast_mat", "sections", "vehicle", "train2",
+                  "irregularity", "mbs")
+
+
+def trackless_problem(settings: dict[str, Any]) -> tuple[str, Any, str] | None:
+    """The first measure that sets a key of the track or the train (:data:`TRACK_SECTIONS`),
+    for a case without a track (None: every measure acts on the soil, the building or the
+    load).
+
+    Returns
+    -------
+    tuple or None
+        ``(key, value, allowed)`` naming ``study.mitigation.measures`` and the measure.
+    """
+    for text in settings["measures"]:
+        name, overrides = parse_measure(text)
+        keys = [ov.split("=", 1)[0].strip() for ov in overrides]
+        track = [k for k in keys if k.split(".", 1)[0] in TRACK_SECTIONS]
+        if track:
+            return ("study.mitigation.measures", text,
+                    f"the measure {name!r} sets {', '.join(track)}, of the track or the "
+                    "train; a case without a track (track.count = 0) has neither: give "
+                    "measures in the soil or the building (e.g. 'trench: trench.type=open; "
+                    "trench.distance=6; trench.width=0.6; trench.depth=3')")
+    return None
+
+
 def parse_measure(text: str) -> tuple[str, tuple[str, ...]]:
     """``"name: key=value; key=value"`` -> ``(name, ("key=value", ...))``.
 
@@ -188,7 +217,7 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                      "utilisation_before": u_before, "utilisation_after": u_after,
                      "passed_before": ok_before, "passed_after": ok_after,
                      "governing_probe": gov,
-                     "peak_contact_force": q["peak contact force"],
+                     "peak_contact_force": q.get("peak contact force"),   # None: no track
                      "wall_s": r["timings"]["total"]})
     if not rows:
         return {"title": TITLE, "verdict": {"text": "no measure finished together with its "

@@ -210,19 +210,23 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
         return {"title": TITLE, "verdict": {"text": "fewer than 2 domains of any boundary "
                                             "setting finished; need 2", "ok": None},
                 "tables": [], "rows": []}
+    # the contact force of a vehicle; none without a track (the moving load of [load])
+    force = all("peak contact force" in d["quantities"] for d in data)
     head = ["domain", "boundary", "+depth [m]", "+length [m]", "+width [m]", "nodes", "DOFs",
-            "modes", "band [Hz]", "f1 [Hz]", *names, "peak contact force"]
+            "modes", "band [Hz]", "f1 [Hz]", *names,
+            *(["peak contact force"] if force else [])]
     rows = [[d["variant"], d["boundary"], fmt(d["extra_depth"]), fmt(d["extra_length"]),
              fmt(d["extra_width"]), fmt(d["n_nodes"]), fmt(d["n_dofs"]), fmt(d["modes"]),
              fmt(d["band_hz"]), fmt(d["f1_hz"]), *(fmt(d["quantities"][k]) for k in names),
-             fmt(d["quantities"]["peak contact force"])] for d in data]
+             *([fmt(d["quantities"]["peak contact force"])] if force else [])] for d in data]
     srows = [[d["variant"], *(fmt(d["spectrum_db"][p], 3) for p in settings["probes"])]
              for d in data]
     direct = settings.get("solver", "modal") == "direct"
     tables = [
         {"title": "Domains and peak responses",
          **dict(zip(("head", "rows"), transpose(head, rows))),
-         "note": "Accelerations in m/s² (a_z vertical, |a| total peak), contact force in N; "
+         "note": "Accelerations in m/s² (a_z vertical, |a| total peak)"
+                 + (", contact force in N; " if force else " (no contact force: no vehicle); ")
                  + ("solver: direct time integration of the full model (band: "
                     "transient.f_max, no modes)." if direct else
                     "band: frequency of the highest mode used, f1: lowest natural "

@@ -4,7 +4,8 @@ Written by rank 0 into ``<out>/<study>/`` from the finished variants (each file 
 temporary name, renamed when complete). ``report.json`` (schema
 ``railvib_hpc.study_report/1``)::
 
-    study, case {name, file}, settings {..}, generated (UTC ISO time)
+    study, case {name, file, loading (a case without a track only)}, settings {..},
+    generated (UTC ISO time)
     variants [{name, parameter, status: finished|failed|pending|stale, wall_s, error}]
     complete (every variant finished), verdict {text, ok, ...}
     analysis {..}  (study-specific tables and numbers, see each study module)
@@ -107,7 +108,9 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
     kind
         The study.
     case_info
-        ``{"name", "file"}`` of the case.
+        ``{"name", "file"}`` of the case, and for a case without a track ``loading``: the
+        sentence saying what loads it and which vehicle quantities are absent (the
+        report's **Loading** line).
     settings
         The study settings.
     status
@@ -130,6 +133,8 @@ def write_report(root: Path, kind: str, case_info: dict, settings: dict,
     lines = [f"# {analysis.get('title', kind)}", "",
              f"Case `{case_info['name']}` ({case_info['file']}), generated {now}.", "",
              f"**Verdict:** {analysis['verdict']['text']}", ""]
+    if case_info.get("loading"):
+        lines += [f"**Loading:** {case_info['loading']}", ""]
     if not complete:
         lines += [f"**Incomplete:** {finished} of {len(status)} variants finished; the "
                   "verdict uses the finished ones only.", ""]

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..config import Case
+from ..errors import CaseError
 from ..io.locks import output_lock
 from ..log import Reporter
 from ..parallel import on_root
@@ -54,6 +55,62 @@ if TYPE_CHECKING:
 STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
                  "speed": speed, "thesis": thesis, "mitigation": mitigation,
                  "uncertainty": uncertainty}
+
+
+#: The studies that run a case without a track (``track.count = 0``: the moving load of
+#: ``[load]`` on the bare soil) with ``solver = direct``: their variants change the mesh,
+#: the domain, the soil or the building, or the load's speed. The others compare the
+#: vehicle on the track's modes (``modes``, ``thesis``) or sample the train's inputs
+#: (``uncertainty``, not yet without a track).
+TRACKLESS_KINDS = ("convergence", "mitigation", "reflection", "speed")
+#: Why each of the other studies needs a track (the refusal's sentence).
+_NEEDS_TRACK = {
+    "modes": "it compares numbers of the track's modes under the vehicle (the modal path)",
+    "thesis": "it compares the vehicle's passage on the track's modes with the thesis",
+    "uncertainty": "its samples and reduced model are built for the train's passage (not "
+                   "yet for the moving load of [load])",
+}
+
+
+def trackless_problem(kind: str, case: Case, settings: dict[str, Any]
+                      ) -> tuple[str, Any, str] | None:
+    """What a study cannot do with a case without a track (None: it can, or the case has
+    a track): a study of :data:`TRACKLESS_KINDS` with ``solver = direct`` (the transient
+    engines), and what the study's own ``trackless_problem`` finds in its settings (e.g. a
+    mitigation measure on the track's keys).
+
+    Returns
+    -------
+    tuple or None
+        One ``(key, value, allowed)`` problem, for :class:`~railvib_hpc.errors.CaseError`.
+    """
+    if case["track.count"] != 0:
+        return None
+    kinds = ", ".join(TRACKLESS_KINDS)
+    if kind not in TRACKLESS_KINDS:
+        return ("track.count", 0, f"railvib study {kind} needs a track (1 or 2): "
+                f"{_NEEDS_TRACK[kind]}; a case without a track runs the studies {kinds} "
+                "with solver = direct")
+    if settings.get("solver") != "direct":
+        return (f"study.{kind}.solver", settings.get("solver"),
+                "a case without a track (track.count = 0: the moving load of [load]) runs "
+                "its studies on the full-order transient engines only: set it to direct "
+                f"(--study-set solver=direct, or solver = \"direct\" in [study.{kind}])")
+    own = getattr(STUDY_MODULES[kind], "trackless_problem", None)
+    return own(settings) if own is not None else None
+
+
+def _refuse_trackless(kind: str, case: Case, settings: dict[str, Any]) -> None:
+    """Raise the :func:`trackless_problem` of a study, if any (before anything is written).
+
+    Raises
+    ------
+    CaseError
+        One line naming the key, its value and what is allowed.
+    """
+    problem = trackless_problem(kind, case, settings)
+    if problem is not None:
+        raise CaseError([problem])
 
 
 def make_plan(kind: str, case: Case, settings: dict[str, Any], root: Path | None = None
@@ -170,9 +227,7 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
         figs = mod.figures(analysis, results, settings, fig_dir)
     else:
         figs = mod.figures(analysis, settings, fig_dir)
-    files = write_report(root, kind, {"name": case["case.name"],
-                                      "file": str(case.path or "<defaults>")},
-                         settings, entries, analysis, figs)
+    files = write_report(root, kind, case_info(case), settings, entries, analysis, figs)
     if hasattr(mod, "write_results"):                 # e.g. the uncertainty study's HDF5
         files.update(mod.write_results(analysis, root))
     for t in analysis.get("tables", []):
@@ -186,6 +241,22 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     return {"verdict": analysis["verdict"], "files": {k: str(p) for k, p in files.items()},
             "variants": entries, "tables": analysis.get("tables", []),
             "rows": analysis.get("rows", []), "figures": [str(p) for p in figs]}
+
+
+def case_info(case: Case) -> dict[str, str]:
+    """The case as the report names it: ``name``, ``file``, and for a case without a track
+    ``loading``, the sentence that says the moving load of ``[load]`` loads it and that the
+    vehicle's quantities are absent."""
+    info = {"name": case["case.name"], "file": str(case.path or "<defaults>")}
+    if case["track.count"] == 0:
+        ld = case["load"]
+        info["loading"] = (
+            f"no track (track.count = 0): the moving load of [load] on the bare soil, "
+            f"{len(ld['offsets'])} load(s) of {ld['force']:g} N at {ld['speed']:g} m/s "
+            f"along y = {ld['y']:g} m (the variants' own values where they change them); "
+            "no vehicle: the contact forces, wheel loads and rail deflection are absent from "
+            "this report (result.json: mbs = null, load = the moving load)")
+    return info
 
 
 def _solver_text(variant: dict) -> str:
@@ -286,6 +357,7 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
     """
     t0 = time.perf_counter()
     cfg = on_root(lambda: study_settings(kind, study_set, settings, case), comm)
+    on_root(lambda: _refuse_trackless(kind, case, cfg), comm)
     root = Path(out) / kind
     plan = on_root(lambda: make_plan(kind, case, cfg, root), comm)
     chosen = on_root(lambda: select(plan, variants), comm) if variants else []

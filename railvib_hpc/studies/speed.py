@@ -7,6 +7,11 @@ every speed with the full-order time integration (``railvib transient``) instead
 automatic MBS step keeps 40 steps per rail element passage, so every speed costs about the
 same.
 
+A case without a track (``track.count = 0``, ``solver = direct`` only) varies the speed of
+its moving load, ``load.speed`` (below the ground's Rayleigh speed unless
+``vehicle.supercritical``); its table, verdict and figure leave out the vehicle's contact
+force, dynamic factor and rail deflection (there is none).
+
 Verdict: the speed with the largest building acceleration, how the peak contact force
 grows with speed, and whether every speed passes the assessment of ``[assessment]``
 (largest utilisation of the binding standards at the study's probes); with speeds not
@@ -26,11 +31,19 @@ from .report import figure, fmt, save, transpose
 TITLE = "Speed sweep"
 
 
+def speed_key(case: Case) -> str:
+    """The key a speed variant sets: ``vehicle.speed``, or ``load.speed`` for a case
+    without a track (``track.count = 0``: the moving load of ``[load]``)."""
+    return "load.speed" if case["track.count"] == 0 else "vehicle.speed"
+
+
 def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
     """A shared model (the case's modes); one MBS variant per speed. With ``solver =
-    direct`` every speed is a full-order time integration of its own (no shared model)."""
+    direct`` every speed is a full-order time integration of its own (no shared model);
+    a case without a track varies the speed of its moving load (:func:`speed_key`)."""
     direct = settings.get("solver", "modal") == "direct"
-    variants = tuple(Variant(name=f"v{s:g}", overrides=(f"vehicle.speed={s!r}",),
+    key = speed_key(case)
+    variants = tuple(Variant(name=f"v{s:g}", overrides=(f"{key}={s!r}",),
                              parameter={"speed": s}, shared=not direct)
                      for s in settings["speeds"])
     return StudyPlan("speed", variants, shared_overrides=None if direct else ())
@@ -51,32 +64,51 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
         utils = [a["max_utilisation"] for a in ass.values() if a["max_utilisation"] is not None]
         passed = [a["passed"] for a in ass.values()]
         gov = max(ass, key=lambda p: ass[p]["max_utilisation"] or 0.0) if ass else None
+        mbs = r["mbs"] or {}                         # None: no vehicle (no track)
         data.append({"variant": v.name, "speed": v.parameter["speed"], "quantities": q,
-                     "dynamic_factor": r["mbs"]["dynamic_factor"],
-                     "min_contact_force": r["mbs"]["min_contact_force"],
-                     "max_rail_deflection": r["mbs"]["max_rail_deflection"],
-                     "loss_of_contact_steps": r["mbs"]["loss_of_contact_steps"],
+                     "dynamic_factor": mbs.get("dynamic_factor"),
+                     "min_contact_force": mbs.get("min_contact_force"),
+                     "max_rail_deflection": mbs.get("max_rail_deflection"),
+                     "loss_of_contact_steps": mbs.get("loss_of_contact_steps"),
                      "max_utilisation": max(utils) if utils else None, "governing_probe": gov,
                      "passed": (False if False in passed else
                                 None if None in passed or not passed else True),
                      "duration": r["duration"], "wall_s": r["timings"]["total"]})
     acc = [k for k in data[0]["quantities"] if k != "peak contact force"]
-    head = ["variant", "speed [m/s]", "peak contact force [N]", "dynamic factor",
-            "min contact force [N]", "rail deflection [mm]", *acc, "max utilisation",
-            "assessment", "record [s]", "wall [s]"]
-    rows = [[d["variant"], fmt(d["speed"]), fmt(d["quantities"]["peak contact force"]),
-             fmt(d["dynamic_factor"]), fmt(d["min_contact_force"]),
-             fmt(1e3 * d["max_rail_deflection"]), *(fmt(d["quantities"][k]) for k in acc),
-             fmt(d["max_utilisation"], 3),
+    vehicle = _with_vehicle(data)    # the contact forces of a train, if any
+    head = ["variant", "speed [m/s]", *(VEHICLE_HEAD if vehicle else ()), *acc,
+            "max utilisation", "assessment", "record [s]", "wall [s]"]
+    rows = [[d["variant"], fmt(d["speed"]), *(_vehicle_cells(d) if vehicle else ()),
+             *(fmt(d["quantities"][k]) for k in acc), fmt(d["max_utilisation"], 3),
              {True: "pass", False: "FAIL", None: "undetermined"}[d["passed"]],
              fmt(d["duration"], 3), fmt(d["wall_s"], 3)] for d in data]
     verdict = _verdict(data, acc, len(plan_.variants))
+    note = ("Accelerations in m/s² (a_z vertical, |a| total peak). max utilisation: largest "
+            "value/limit of the binding standards over the probes (≤ 1 passes).")
+    if not vehicle:
+        note += (" No vehicle (a case without a track): the speed is the moving load's "
+                 "(load.speed); no contact force, dynamic factor or rail deflection.")
     return {"title": TITLE, "verdict": verdict, "rows": data,
             "tables": [{"title": "Responses per speed",
                         **dict(zip(("head", "rows"), transpose(head, rows))),
-                        "note": "Accelerations in m/s² (a_z vertical, |a| total peak). max "
-                                "utilisation: largest value/limit of the binding standards "
-                                "over the probes (≤ 1 passes)."}]}
+                        "note": note}]}
+
+
+def _with_vehicle(data: list[dict]) -> bool:
+    """Whether every speed has a vehicle's contact force (not the moving load of a case
+    without a track)."""
+    return all("peak contact force" in d["quantities"] for d in data)
+
+
+#: The columns of a vehicle's metrics (left out without a track).
+VEHICLE_HEAD = ("peak contact force [N]", "dynamic factor", "min contact force [N]",
+                "rail deflection [mm]")
+
+
+def _vehicle_cells(d: dict) -> list[str]:
+    """The :data:`VEHICLE_HEAD` cells of one speed."""
+    return [fmt(d["quantities"]["peak contact force"]), fmt(d["dynamic_factor"]),
+            fmt(d["min_contact_force"]), fmt(1e3 * d["max_rail_deflection"])]
 
 
 def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
@@ -92,15 +124,19 @@ def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
     crit = max(data, key=lambda d: building_peak(d)[0])
     a_crit, key = building_peak(crit)
     lo = data[0]
-    fmax = max(data, key=lambda d: d["quantities"]["peak contact force"])
+    vehicle = _with_vehicle(data)
+    fmax = max(data, key=lambda d: d["quantities"]["peak contact force"]) if vehicle else None
     fails = [d["speed"] for d in data if d["passed"] is False]
     undet = [d["speed"] for d in data if d["passed"] is None]
     umax = max(data, key=lambda d: d["max_utilisation"] or 0.0)
     text = (f"largest building acceleration at {crit['speed']:g} m/s ({key} = {a_crit:.3g} "
             f"m/s², {a_crit / max(lo['quantities'][key], 1e-300):.2f}x its value at "
-            f"{lo['speed']:g} m/s); largest contact force "
-            f"{fmax['quantities']['peak contact force']:.0f} N at {fmax['speed']:g} m/s "
-            f"(dynamic factor {fmax['dynamic_factor']:.3f}); ")
+            f"{lo['speed']:g} m/s); ")
+    if fmax is not None:
+        text += (f"largest contact force {fmax['quantities']['peak contact force']:.0f} N "
+                 f"at {fmax['speed']:g} m/s (dynamic factor {fmax['dynamic_factor']:.3f}); ")
+    else:
+        text += "no vehicle (the moving load of [load]: no contact force); "
     if fails:
         text += "limits EXCEEDED at " + ", ".join(f"{s:g}" for s in fails) + " m/s"
     elif undet:
@@ -115,7 +151,8 @@ def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
     ok = False if fails else (None if len(data) < planned else True)
     return {"text": text, "ok": ok, "critical_speed": crit["speed"],
             "critical_quantity": key, "critical_value": a_crit,
-            "max_contact_force_speed": fmax["speed"], "failing_speeds": fails,
+            "max_contact_force_speed": None if fmax is None else fmax["speed"],
+            "failing_speeds": fails,
             "max_utilisation": umax["max_utilisation"], "max_utilisation_speed": umax["speed"]}
 
 
@@ -125,21 +162,26 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     if not data:
         return []
     speeds = [d["speed"] for d in data]
-    fig = figure(figsize=(13, 4.2))
-    a1, a2, a3 = fig.subplots(1, 3)
+    vehicle = _with_vehicle(data)     # no contact-force panel without one
+    fig = figure(figsize=(13 if vehicle else 9, 4.2))
+    axes = list(fig.subplots(1, 3 if vehicle else 2))
+    a1, a3 = axes[0], axes[-1]
     for p in settings["probes"]:
         a1.plot(speeds, [d["quantities"][f"{p} |a|"] for d in data], "o-", ms=4, label=p)
     a1.set_ylabel("peak total acceleration [m/s²]")
-    a2.plot(speeds, [d["quantities"]["peak contact force"] / 1e3 for d in data], "o-", ms=4,
-            label="peak")
-    a2.plot(speeds, [d["min_contact_force"] / 1e3 for d in data], "s--", ms=4, label="min")
-    a2.set_ylabel("contact force [kN]")
+    if vehicle:
+        a2 = axes[1]
+        a2.plot(speeds, [d["quantities"]["peak contact force"] / 1e3 for d in data], "o-",
+                ms=4, label="peak")
+        a2.plot(speeds, [d["min_contact_force"] / 1e3 for d in data], "s--", ms=4,
+                label="min")
+        a2.set_ylabel("contact force [kN]")
+        a2.legend(fontsize=7)
     a3.plot(speeds, [d["max_utilisation"] or 0.0 for d in data], "o-", ms=4)
     a3.axhline(1.0, color="r", lw=0.8)
     a3.set_ylabel("largest utilisation (≤ 1 passes)")
-    for ax in (a1, a2, a3):
-        ax.set_xlabel("speed [m/s]")
+    for ax in axes:
+        ax.set_xlabel("speed [m/s]" if vehicle else "load speed [m/s]")
         ax.grid(alpha=0.3)
     a1.legend(fontsize=7)
-    a2.legend(fontsize=7)
     return [save(fig, fig_dir / "speed.png")]

@@ -62,6 +62,22 @@ def pytest_terminal_summary(terminalreporter):
 
 
 @pytest.fixture
+def one_line_refusal(capsys):
+    """A check of a refused command: ``check(code, out, needle)`` asserts exit code 2, one
+    non-blank line on stderr that contains ``needle``, no traceback, and nothing written in
+    the output folder ``out``."""
+    def check(code: int, out: Path, needle: str) -> None:
+        err = capsys.readouterr().err
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert code == 2, err
+        assert "Traceback" not in err
+        assert len(lines) == 1, err
+        assert needle in lines[0], lines[0]
+        assert not out.exists() or not any(out.iterdir())
+    return check
+
+
+@pytest.fixture
 def shared_tmp():
     """A temporary folder with the same path on every MPI rank."""
     from mpi4py import MPI

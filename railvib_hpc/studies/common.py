@@ -289,6 +289,16 @@ def surface_load_info(case: Case) -> dict:
             "count": len(ld["offsets"]), "speed": float(ld["speed"]), "y": float(ld["y"])}
 
 
+#: The compared quantity of a vehicle (:func:`response_quantities`); absent without a track.
+CONTACT_FORCE = "peak contact force"
+
+
+def all_with_contact_force(data: list[dict]) -> bool:
+    """Whether every entry's ``quantities`` (:func:`response_quantities`) has the vehicle's
+    contact force: False when some variant is a case without a track."""
+    return all(CONTACT_FORCE in d["quantities"] for d in data)
+
+
 def has_vehicle(result: dict) -> bool:
     """Whether a variant's result has a vehicle's metrics (``mbs``): False for a case
     without a track (the moving load of ``[load]``, :func:`surface_load_info`)."""
@@ -703,5 +713,5 @@ def response_quantities(result: dict, probes: Sequence[str]) -> dict[str, float]
         out[f"{p} a_z"] = pk["acc_vertical"]
         out[f"{p} |a|"] = pk["acc_total"]
     if has_vehicle(result):
-        out["peak contact force"] = result["mbs"]["peak_contact_force"]
+        out[CONTACT_FORCE] = result["mbs"]["peak_contact_force"]
     return out

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Case
-from .common import StudyPlan, Variant, relative, response_quantities
+from .common import CONTACT_FORCE, StudyPlan, Variant, relative, response_quantities
 from .report import figure, fmt, pct, save
 from .richardson import extrapolate, mesh_sizes
 
@@ -94,7 +94,7 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
         "title": "Quantities per level, relative changes and Richardson estimate",
         "head": head, "rows": rows,
         "note": ("Frequencies in Hz, accelerations (a_z vertical, |a| total peak) in m/s², "
-                 + ("contact force in N. " if "peak contact force" in names else
+                 + ("contact force in N. " if CONTACT_FORCE in names else
                     "no contact force (no vehicle: a case without a track). ")
                  + "Mesh size h = DOFs^(-1/3); observed order from the "
                  "three finest levels (Celik et al. 2008, any refinement ratios). basis "
@@ -156,7 +156,7 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
         if ext.get("basis") == "observed" and ext.get("extrapolated"):
             target.plot([dofs[-1] * 1.35], [ext["extrapolated"] / vals[-1]], "*", ms=8,
                         color=line.get_color())
-    force = ", contact force" if "peak contact force" in names else ""
+    force = ", contact force" if CONTACT_FORCE in names else ""
     for ax, title in ((ax1, "lowest natural frequencies"),
                       (ax2, f"peak responses (building probes{force})")):
         ax.set_xscale("log")

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from ..config import Case
-from .common import StudyPlan, Variant, relative, response_quantities
+from .common import StudyPlan, Variant, all_with_contact_force, relative, response_quantities
 from .report import figure, fmt, pct, save, transpose
 
 TITLE = "Boundary reflection study"
@@ -211,7 +211,7 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                             "setting finished; need 2", "ok": None},
                 "tables": [], "rows": []}
     # the contact force of a vehicle; none without a track (the moving load of [load])
-    force = all("peak contact force" in d["quantities"] for d in data)
+    force = all_with_contact_force(data)
     head = ["domain", "boundary", "+depth [m]", "+length [m]", "+width [m]", "nodes", "DOFs",
             "modes", "band [Hz]", "f1 [Hz]", *names,
             *(["peak contact force"] if force else [])]

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Case
-from .common import StudyPlan, Variant, response_quantities
+from .common import StudyPlan, Variant, all_with_contact_force, response_quantities
 from .report import figure, fmt, save, transpose
 
 TITLE = "Speed sweep"
@@ -75,7 +75,7 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                 None if None in passed or not passed else True),
                      "duration": r["duration"], "wall_s": r["timings"]["total"]})
     acc = [k for k in data[0]["quantities"] if k != "peak contact force"]
-    vehicle = _with_vehicle(data)    # the contact forces of a train, if any
+    vehicle = all_with_contact_force(data)    # the contact forces of a train, if any
     head = ["variant", "speed [m/s]", *(VEHICLE_HEAD if vehicle else ()), *acc,
             "max utilisation", "assessment", "record [s]", "wall [s]"]
     rows = [[d["variant"], fmt(d["speed"]), *(_vehicle_cells(d) if vehicle else ()),
@@ -92,12 +92,6 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
             "tables": [{"title": "Responses per speed",
                         **dict(zip(("head", "rows"), transpose(head, rows))),
                         "note": note}]}
-
-
-def _with_vehicle(data: list[dict]) -> bool:
-    """Whether every speed has a vehicle's contact force (not the moving load of a case
-    without a track)."""
-    return all("peak contact force" in d["quantities"] for d in data)
 
 
 #: The columns of a vehicle's metrics (left out without a track).
@@ -124,7 +118,7 @@ def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
     crit = max(data, key=lambda d: building_peak(d)[0])
     a_crit, key = building_peak(crit)
     lo = data[0]
-    vehicle = _with_vehicle(data)
+    vehicle = all_with_contact_force(data)
     fmax = max(data, key=lambda d: d["quantities"]["peak contact force"]) if vehicle else None
     fails = [d["speed"] for d in data if d["passed"] is False]
     undet = [d["speed"] for d in data if d["passed"] is None]
@@ -162,7 +156,7 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     if not data:
         return []
     speeds = [d["speed"] for d in data]
-    vehicle = _with_vehicle(data)     # no contact-force panel without one
+    vehicle = all_with_contact_force(data)     # no contact-force panel without one
     fig = figure(figsize=(13 if vehicle else 9, 4.2))
     axes = list(fig.subplots(1, 3 if vehicle else 2))
     a1, a3 = axes[0], axes[-1]

@@ -60,12 +60,11 @@ REF_REFINE = 8
 
 
 def peak_rss_gb(comm) -> float:
-    """``VmHWM`` of this process summed over the ranks [GB]."""
-    kb = 0
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            kb = int(line.split()[1])
-    return comm.allreduce(kb) / 1e6
+    """Peak resident memory summed over the ranks [GB]
+    (:func:`railvib_hpc.resources.peak_memory_gb`)."""
+    from railvib_hpc.resources import peak_memory_gb
+
+    return comm.allreduce(peak_memory_gb())
 
 
 #: Zeros after the reference before its propagation (no wrap-around of the FFT).

@@ -42,6 +42,7 @@ from .common import (
     read_result,
     resolved_spectra,
     run_variant,
+    surface_load_info,
     variant_case,
     variant_digest,
 )
@@ -249,10 +250,10 @@ def case_info(case: Case) -> dict[str, str]:
     vehicle's quantities are absent."""
     info = {"name": case["case.name"], "file": str(case.path or "<defaults>")}
     if case["track.count"] == 0:
-        ld = case["load"]
+        ld = surface_load_info(case)
         info["loading"] = (
             f"no track (track.count = 0): the moving load of [load] on the bare soil, "
-            f"{len(ld['offsets'])} load(s) of {ld['force']:g} N at {ld['speed']:g} m/s "
+            f"{ld['count']} load(s) of {ld['force']:g} N at {ld['speed']:g} m/s "
             f"along y = {ld['y']:g} m (the variants' own values where they change them); "
             "no vehicle: the contact forces, wheel loads and rail deflection are absent from "
             "this report (result.json: mbs = null, load = the moving load)")

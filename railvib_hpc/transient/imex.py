@@ -87,15 +87,11 @@ def damped_critical_steps(omega: np.ndarray, alpha: np.ndarray | float,
 AUTO_IMPLICIT_SHARE = 0.05
 
 
-def auto_implicit_hexes(mesh, problem: Problem, target_dt: float, safety: float,
-                        candidates: np.ndarray | None = None,
-                        share: float = AUTO_IMPLICIT_SHARE) -> np.ndarray:
-    """Mask of the hexahedra whose own allowed step (``safety`` x their critical step,
-    :func:`damped_critical_steps` of :func:`~railvib_hpc.modal.elements.hex_max_frequencies`
-    with their Rayleigh coefficients) is below ``target_dt`` and among the ``share`` of
-    the ``candidates`` (default: all; the elements not implicit already) with the smallest
-    steps: the IMEX engine's element-wise partition (``transient.implicit_elements =
-    'auto'``)."""
+def element_allowed_steps(mesh, problem: Problem, safety: float) -> np.ndarray:
+    """Every hexahedron's own allowed step: ``safety`` x its critical step alone
+    (:func:`damped_critical_steps` of :func:`~railvib_hpc.modal.elements.hex_max_frequencies`
+    with its Rayleigh coefficients). By Irons' theorem the explicit part's critical step is
+    at least the smallest of these over its elements (a bound, not the limit itself)."""
     from ..modal.damping import material_rayleigh, rayleigh_coefficients
     from ..modal.elements import hex_max_frequencies, material_groups
     from ..schema import PART_ID
@@ -114,7 +110,17 @@ def auto_implicit_hexes(mesh, problem: Problem, target_dt: float, safety: float,
         for group, parts in groups.items():
             on = np.isin(mesh.hex_part, [PART_ID[p] for p in parts])
             alpha[on], beta[on] = coeffs[group]
-    steps = safety * damped_critical_steps(omega, alpha, beta)
+    return safety * damped_critical_steps(omega, alpha, beta)
+
+
+def auto_implicit_hexes(mesh, problem: Problem, target_dt: float, safety: float,
+                        candidates: np.ndarray | None = None,
+                        share: float = AUTO_IMPLICIT_SHARE) -> np.ndarray:
+    """Mask of the hexahedra whose own allowed step (:func:`element_allowed_steps`) is
+    below ``target_dt`` and among the ``share`` of the ``candidates`` (default: all; the
+    elements not implicit already) with the smallest steps: the IMEX engine's element-wise
+    partition (``transient.implicit_elements = 'auto'``)."""
+    steps = element_allowed_steps(mesh, problem, safety)
     pool = np.ones(len(steps), bool) if candidates is None else np.asarray(candidates, bool)
     if not pool.any():
         return np.zeros(len(steps), dtype=bool)
@@ -152,6 +158,17 @@ def implicit_rows(K_I) -> np.ndarray:
     if values.size:
         stiff[filled] = np.add.reduceat(np.abs(values), ip[:-1][filled])
     return stiff > 0.0
+
+
+def partition_rows(partition: tuple, comm) -> int:
+    """Rows (all ranks) that the implicit partition ``(K_I, C_I)`` touches: at most the
+    support of a column of the IMEX engine's ``K_eff^-1`` at an implicit DOF (the rail
+    columns' memory, :class:`~.integrate.RailColumns`). Collective."""
+    K_I, C_I = partition
+    rows = implicit_rows(K_I)
+    if C_I is not None:
+        rows = rows | implicit_rows(C_I)
+    return comm.allreduce(int(rows.sum()))
 
 
 def with_diagonal(A, diagonal: np.ndarray, comm):
@@ -355,5 +372,5 @@ class ImexSystem(ExplicitSystem):
 
 
 __all__ = ["AUTO_IMPLICIT_SHARE", "DAMPING_STABILITY_FACTOR", "ImexSystem", "auto_implicit_hexes",
-           "damped_critical_steps", "damping_velocity", "implicit_part_names", "implicit_rows",
-           "with_diagonal"]
+           "damped_critical_steps", "damping_velocity", "element_allowed_steps",
+           "implicit_part_names", "implicit_rows", "partition_rows", "with_diagonal"]

@@ -99,6 +99,11 @@ def gather_values(comm, local: np.ndarray, r0: int, dofs: np.ndarray) -> np.ndar
 COLUMN_BLOCK_NODES = 16
 
 
+#: A block of rail columns is kept on all rows (no row index) when its support holds more
+#: than this share of them: a row index and a value take 16 bytes against 8.
+DENSE_SUPPORT = 0.5
+
+
 class RailColumns:
     """Columns ``X[:, d] = K_eff^-1 e_d`` of the rail DOFs near the wheels (this rank's rows).
 
@@ -111,8 +116,17 @@ class RailColumns:
     bits whenever it is computed, so a run resumed from a checkpoint (empty cache) gives
     the uninterrupted run's numbers exactly. The blocks that meet the next ``lookahead``
     rail nodes ahead of every wheel are kept while a wheel is within that window and
-    freed once every wheel has passed: memory ``8 n_local`` bytes per column, a few
-    hundred columns at a time, whatever the length of the track.
+    freed once every wheel has passed: a few hundred columns at a time, whatever the
+    length of the track.
+
+    Each block keeps only the rows where one of its columns is nonzero (:attr:`rows`; the
+    values there in :attr:`cache`): 8 bytes per row of that support and column. For the
+    direct engine that is every row (``8 n_local`` bytes per column); for the IMEX engine
+    only the implicit rows the rail reaches (the explicit rows of ``K_eff`` are diagonal
+    and uncoupled, so their entries are exact zeros): on ``jobs/real_site.toml`` 240,789 of
+    1,491,156 rows at most, where the full columns took ~2 MB per step and rank while the
+    car entered (5.3 GB per rank at step 2,474, measured 2026-12-06). The values are the
+    same bits: adding the zeros changed nothing.
     """
 
     def __init__(self, system: TransientSystem, rails: RailDofs, lookahead: int = 12,
@@ -121,7 +135,10 @@ class RailColumns:
         self.rails = rails
         self.lookahead = int(lookahead)
         self.block_nodes = max(1, int(block_nodes))
+        #: DOF -> its column's values on its block's :attr:`rows`
         self.cache: dict[int, np.ndarray] = {}
+        #: DOF -> the local rows its column's values stand on (``slice(None)``: all)
+        self.rows: dict[int, np.ndarray | slice] = {}
         self.blocks: dict[tuple[int, int], np.ndarray] = {}   # (rail, block) -> its DOFs
         self.n_computed = 0
         self.time = 0.0
@@ -157,6 +174,7 @@ class RailColumns:
         for key in [key for key in self.blocks if key not in keep]:
             for d in self.blocks.pop(key):
                 del self.cache[int(d)]
+                del self.rows[int(d)]
         sys_ = self.system
         for key in sorted(keep - set(self.blocks)):
             todo = self._block_dofs(key)
@@ -164,8 +182,17 @@ class RailColumns:
             own = (todo >= sys_.r0) & (todo < sys_.r1)
             rhs[todo[own] - sys_.r0, np.flatnonzero(own)] = 1.0
             cols = sys_.solve_block(rhs) if todo.size else rhs
+            del rhs
+            support = np.flatnonzero((cols != 0.0).any(axis=1))
+            rows: np.ndarray | slice = support
+            if support.size > DENSE_SUPPORT * sys_.n_local:      # (index + value: 16 bytes)
+                rows, values = slice(None), np.ascontiguousarray(cols.T)
+            else:
+                values = np.ascontiguousarray(cols[support].T)
+            del cols
             for j, d in enumerate(todo):
-                self.cache[int(d)] = np.ascontiguousarray(cols[:, j])
+                self.cache[int(d)] = values[j]
+                self.rows[int(d)] = rows
             self.blocks[key] = todo
             self.n_computed += todo.size
         self.time += time.perf_counter() - t0
@@ -175,8 +202,19 @@ class RailColumns:
         out = np.zeros(self.system.n_local)
         for d, w in zip(np.ravel(dofs), np.ravel(weights)):
             if d >= 0 and w != 0.0:
-                out += w * self.cache[int(d)]
+                out[self.rows[int(d)]] += w * self.cache[int(d)]
         return out
+
+    def values(self, dof: int, rows: np.ndarray) -> np.ndarray:
+        """``X[r0 + rows, dof]``: the column of ``dof`` at the local ``rows`` (zero off its
+        support)."""
+        col, support = self.cache[int(dof)], self.rows[int(dof)]
+        if isinstance(support, slice):
+            return col[rows]
+        if not support.size:
+            return np.zeros(len(rows))
+        at = np.minimum(np.searchsorted(support, rows), support.size - 1)
+        return np.where(support[at] == rows, col[at], 0.0)
 
     def block(self, dofs: np.ndarray) -> np.ndarray:
         """``X[dofs, dofs]`` (flattened ``dofs``; zero rows/columns for -1), on every rank."""
@@ -191,7 +229,7 @@ class RailColumns:
         part = np.zeros((d.size, d.size))
         for j, dj in enumerate(d):
             if dj >= 0:
-                part[own, j] = self.cache[int(dj)][d[own] - sys_.r0]
+                part[own, j] = self.values(int(dj), d[own] - sys_.r0)
         comm = sys_.comm
         if comm.size > 1:
             comm.Allreduce(MPI.IN_PLACE, part, op=MPI.SUM)

@@ -826,7 +826,15 @@ def _setup(ctx: StageContext) -> dict:
         if engine == "direct":
             K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
             layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        col_gb = 8.0 * dofmap.n_dofs * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
+        # the rail columns (RailColumns): on every row for the direct engine, on the
+        # implicit rows at most for the IMEX engine
+        if engine == "direct":
+            col_rows = dofmap.n_dofs
+        else:
+            from .imex import partition_rows
+
+            col_rows = partition_rows(partition, comm)
+        col_gb = 8.0 * col_rows * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
         with rep.stage("transient: factorization"):
             if engine == "direct":
                 scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])

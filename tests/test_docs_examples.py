@@ -28,6 +28,8 @@ MODULES = [
     "railvib_hpc.reconstruct.probes",
     "railvib_hpc.mesh.turn",
     "railvib_hpc.modal.block_lanczos",
+    "railvib_hpc.fem.pml",
+    "railvib_hpc.fem.pml_kernel",
 ]
 
 

@@ -1,5 +1,6 @@
 """Perfectly matched layer (PML) for elastodynamics in the time domain: the profile and the
-batched memory kernel of the stretched hexahedra (pure numpy).
+batched memory kernel of the stretched hexahedra (NumPy, or the fused Numba loop of
+:mod:`railvib_hpc.fem.pml_kernel` where Numba is installed).
 
 Formulation: the unsplit, displacement-based PML with complex coordinate stretching
 ``x_j -> x~_j``, ``dx~_j / dx_j = lambda_j(x_j) = 1 + d_j(x_j) r``, ``r = 1 / (s +
@@ -66,6 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .hex8 import hex8_jacobians
+from .pml_kernel import NUMBA_AVAILABLE, advance_elements
 
 #: Default profile exponent (quadratic: Collino & Tsogka 2001 found p = 2 to 3 best).
 DEFAULT_POWER = 2
@@ -77,6 +79,12 @@ MIN_ELEMENTS = 5
 #: Numbers of memory per Gauss point: psi (9), the previous gradient (9), the previous
 #: stress, S1 and S2 (9 each, kept as full 3 x 3 for the batched products).
 STATE_PER_POINT = 45
+#: The implementation of :meth:`PmlElements.advance` new kernels take: ``"numba"`` (the
+#: fused loop of :mod:`~railvib_hpc.fem.pml_kernel`, several times faster) where Numba
+#: imports, ``"numpy"`` (the batched array operations) otherwise.
+DEFAULT_KERNEL = "numba" if NUMBA_AVAILABLE else "numpy"
+#: The implementations of :meth:`PmlElements.advance`.
+KERNELS = ("numba", "numpy")
 
 
 def profile_strength(c_p: float, thickness: float, power: float, reflection: float) -> float:
@@ -145,7 +153,16 @@ class PmlElements:
     alpha
         The frequency shift ``alpha`` [1/s] of the stretching ``1 + d / (s + alpha)``
         (0: the classical ``1 + d / s``).
+
+    Attributes
+    ----------
+    kernel : str
+        How :meth:`advance` computes, one of :data:`KERNELS` (default
+        :data:`DEFAULT_KERNEL`; for the log): both give the same state and force to
+        round-off, so it may be switched between steps.
     """
+
+    kernel: str = DEFAULT_KERNEL
 
     def __init__(self, x: ArrayLike, lam: ArrayLike, mu: ArrayLike, damping: ArrayLike,
                  alpha: float = 0.0):
@@ -201,6 +218,7 @@ class PmlElements:
         out.grad, out.wdet = self.grad[sel], self.wdet[sel]
         out.lam, out.mu = self.lam[sel], self.mu[sel]
         out.d, out.p, out.q, out.alpha = self.d[sel], self.p[sel], self.q[sel], self.alpha
+        out.kernel = self.kernel
         shape = (len(out.lam), 3, 8, 3)
         out.psi, out.g = np.zeros(shape), np.zeros(shape)
         out.sigma, out.s1, out.s2 = np.zeros(shape), np.zeros(shape), np.zeros(shape)
@@ -259,7 +277,30 @@ class PmlElements:
 
     def advance(self, ue: np.ndarray, dt: float) -> np.ndarray:
         """Advance the memory to the next step's displacements ``ue`` (nel, 8, 3) and
-        return the extra internal force there, (nel, 8, 3). Call once per step."""
+        return the extra internal force there, (nel, 8, 3). Call once per step.
+
+        Computed by :attr:`kernel`: the fused Numba loop or the NumPy arrays."""
+        if self.kernel == "numba":
+            return self._advance_numba(ue, dt)
+        if self.kernel != "numpy":
+            raise ValueError(f"PmlElements.kernel {self.kernel!r} is not one of {KERNELS}")
+        return self._advance_numpy(ue, dt)
+
+    def _advance_numba(self, ue: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`advance` by :func:`~railvib_hpc.fem.pml_kernel.advance_elements` (the
+        state in place, made C-contiguous and writable first where it is not)."""
+        if not NUMBA_AVAILABLE:
+            raise ImportError("PmlElements.kernel 'numba' needs numba (pip install numba); "
+                              "'numpy' needs nothing")
+        state = [np.require(a, dtype=float, requirements=("C", "W"))
+                 for a in (self.psi, self.g, self.sigma, self.s1, self.s2)]
+        self.psi, self.g, self.sigma, self.s1, self.s2 = state
+        inputs = [np.ascontiguousarray(a, dtype=float) for a in
+                  (ue, self.grad, self.wdet[:, 0, :, 0], self.d[:, 0], self.lam, self.mu)]
+        return advance_elements(*inputs, self.alpha, float(dt), *state)
+
+    def _advance_numpy(self, ue: np.ndarray, dt: float) -> np.ndarray:
+        """:meth:`advance` by batched NumPy operations (the reference implementation)."""
         g1 = self.gradients(ue)
         half = 0.5 * dt
         hd = half * (self.d + self.alpha)
@@ -284,5 +325,5 @@ class PmlElements:
         return self._force(memory)
 
 
-__all__ = ["DEFAULT_POWER", "DEFAULT_REFLECTION", "MIN_ELEMENTS", "PmlElements",
-           "mass_coefficients", "profile", "profile_strength"]
+__all__ = ["DEFAULT_KERNEL", "DEFAULT_POWER", "DEFAULT_REFLECTION", "KERNELS", "MIN_ELEMENTS",
+           "PmlElements", "mass_coefficients", "profile", "profile_strength"]

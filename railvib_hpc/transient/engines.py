@@ -164,7 +164,8 @@ def pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K, pml: tuple |
                      lambda dofs: GhostGather(comm, rows, n_global, dofs), geometry=pml)
     n_el = comm.allreduce(layer.n_elements)
     ctx.rep.info(f"  {pml_line(layer.faces, problem)}; {n_el} element computations on "
-                 f"{comm.size} rank(s), {comm.allreduce(layer.nbytes) / 1e6:.3g} MB")
+                 f"{comm.size} rank(s), {comm.allreduce(layer.nbytes) / 1e6:.3g} MB, "
+                 f"{layer.kernel.kernel} kernel")
     for line in pml_warnings(layer.faces, problem):
         ctx.rep.info(line)
     return layer

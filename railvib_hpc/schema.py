@@ -688,7 +688,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "G / t tangential per unit area, as if t metres of the same "
                                    "soil lay behind the face; they give the truncated model "
                                    "static support (0: dashpots only, the model may drift under "
-                                   "a static load)", "nonneg"),
+                                   "a static load). For a static load the half-space's "
+                                   "compliance needs t of 1.5-2.3 times the distance from the "
+                                   "load to the faces (bench/spring_static_study.py, "
+                                   "docs/verification.md)", "nonneg"),
         "layer_thickness": Param(0.0, "float", "m",
                                  "caughey and pml faces: thickness of the absorbing layer, "
                                  "measured "

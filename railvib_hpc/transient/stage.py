@@ -826,15 +826,8 @@ def _setup(ctx: StageContext) -> dict:
         if engine == "direct":
             K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
             layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        # the rail columns (RailColumns): on every row for the direct engine, on the
-        # implicit rows at most for the IMEX engine
-        if engine == "direct":
-            col_rows = dofmap.n_dofs
-        else:
-            from .imex import partition_rows
-
-            col_rows = partition_rows(partition, comm)
-        col_gb = 8.0 * col_rows * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
+        col_gb = _rail_columns_gb(dofmap.n_dofs if engine == "direct" else partition, comm,
+                                  n_wheels)
         with rep.stage("transient: factorization"):
             if engine == "direct":
                 scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
@@ -1068,6 +1061,18 @@ def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, sta
                        vehicle_type=("surface_load" if uses_surface_load(case)
                                      else case["vehicle.type"]), rail_x=init["rails"].x,
                        rail=a["rail"])
+
+
+def _rail_columns_gb(rows_or_partition, comm, n_wheels: int) -> float:
+    """Memory of the rail columns (:class:`~.integrate.RailColumns`) at most [GB]: on every
+    row for the direct engine (``rows_or_partition`` the DOFs), on the implicit rows of the
+    IMEX engine's partition ``(K_I, C_I)`` at most (collective then)."""
+    rows = rows_or_partition
+    if isinstance(rows, tuple):
+        from .imex import partition_rows
+
+        rows = partition_rows(rows, comm)
+    return 8.0 * rows * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
 
 
 def _write_checkpoint(path: Path, comm, attrs: dict | None, fields_written: int,

@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +50,8 @@ def settlements(comm, mesh, faces: str, thickness: float, nu: float, path, recei
     """Static downward settlement at the ``receivers`` nodes with the faces ``faces``
     ('absorbing' with springs of ``thickness``, or 'fixed'), and how it was solved (the
     explicit engines' static start: :meth:`ExplicitSystem.solve_matrix`)."""
+    from wave_cases import soil_case
+
     from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
     from railvib_hpc.modal.dofmap import build_dofmap, rigid_body_modes
     from railvib_hpc.modal.petsc import assemble
@@ -58,7 +59,6 @@ def settlements(comm, mesh, faces: str, thickness: float, nu: float, path, recei
     from railvib_hpc.transient.explicit import ExplicitSystem
     from railvib_hpc.transient.integrate import gather_values
     from railvib_hpc.transient.surface_load import MovingSurfaceLoad
-    from wave_cases import soil_case
 
     case = soil_case(f"materials.subgrade.nu={nu}", "damping.model=none",
                      "modal.lumped_mass=true", "boundary.y_min=roller",
@@ -96,10 +96,10 @@ def main() -> None:
     args = ap.parse_args()
 
     from mpi4py import MPI
+    from wave_cases import box_mesh, soil_case
 
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.transient.surface_load import SPREAD_SPACING, SurfaceLoadPath, spreading
-    from wave_cases import box_mesh, soil_case
 
     init_petsc([])
     comm = MPI.COMM_WORLD

@@ -35,6 +35,7 @@ small ``K_I + gamma / (beta dt) C_I``, and one solve with the small factor.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -160,17 +161,6 @@ def implicit_rows(K_I) -> np.ndarray:
     return stiff > 0.0
 
 
-def partition_rows(partition: tuple, comm) -> int:
-    """Rows (all ranks) that the implicit partition ``(K_I, C_I)`` touches: at most the
-    support of a column of the IMEX engine's ``K_eff^-1`` at an implicit DOF (the rail
-    columns' memory, :class:`~.integrate.RailColumns`). Collective."""
-    K_I, C_I = partition
-    rows = implicit_rows(K_I)
-    if C_I is not None:
-        rows = rows | implicit_rows(C_I)
-    return comm.allreduce(int(rows.sum()))
-
-
 def with_diagonal(A, diagonal: np.ndarray, comm):
     """A new AIJ matrix ``A + diag(diagonal)`` whose pattern is ``A``'s plus the whole
     diagonal (``A``'s rows may be empty; ``diagonal``: this rank's rows)."""
@@ -209,14 +199,16 @@ class ImexSystem(ExplicitSystem):
     comm
         MPI communicator.
     extra_gb
-        Memory the caller needs besides the factor (the rail columns).
+        Memory the caller needs besides the factor (the rail columns) [GB], or a function
+        of the implicit rows (all ranks) that gives it: the rail columns stand on those
+        rows only (:class:`~.integrate.RailColumns`).
     pml
         The perfectly matched layers (:class:`~.pml.PmlLayer`, or None; the system owns
         it): see :meth:`history_rhs`.
     """
 
-    def __init__(self, K, M, C, K_I, C_I, dt: float, comm, extra_gb: float = 0.0,
-                 pml=None):
+    def __init__(self, K, M, C, K_I, C_I, dt: float, comm,
+                 extra_gb: float | Callable[[int], float] = 0.0, pml=None):
         from petsc4py import PETSc
 
         from ..modal.factor import ShiftInvertFactor
@@ -252,6 +244,8 @@ class ImexSystem(ExplicitSystem):
         self.time_setup = time.perf_counter() - t0
         self.time_pml = 0.0
         if self.k_implicit is not None:
+            if callable(extra_gb):
+                extra_gb = extra_gb(self.implicit_rows)
             self.op = ShiftInvertFactor(self.k_implicit, self.k_implicit, 0.0, comm, PREFIX,
                                         extra_gb=extra_gb)
             self.time_factorization = self.op.time_factorization
@@ -372,4 +366,4 @@ class ImexSystem(ExplicitSystem):
 
 __all__ = ["AUTO_IMPLICIT_SHARE", "DAMPING_STABILITY_FACTOR", "ImexSystem", "auto_implicit_hexes",
            "damped_critical_steps", "damping_velocity", "element_allowed_steps",
-           "implicit_part_names", "implicit_rows", "partition_rows", "with_diagonal"]
+           "implicit_part_names", "implicit_rows", "with_diagonal"]

@@ -826,17 +826,16 @@ def _setup(ctx: StageContext) -> dict:
         if engine == "direct":
             K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
             layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        col_gb = _rail_columns_gb(dofmap.n_dofs if engine == "direct" else partition, comm,
-                                  n_wheels)
         with rep.stage("transient: factorization"):
             if engine == "direct":
                 scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
-                system = TransientSystem(K, M, C, scheme, comm, extra_gb=col_gb, pml=layer)
+                system = TransientSystem(K, M, C, scheme, comm, pml=layer,
+                                         extra_gb=_rail_columns_gb(dofmap.n_dofs, n_wheels))
             else:
                 from .imex import ImexSystem
 
-                system = ImexSystem(K, M, C, *partition, dt, comm, extra_gb=col_gb,
-                                    pml=layer)
+                system = ImexSystem(K, M, C, *partition, dt, comm, pml=layer,
+                                    extra_gb=lambda rows: _rail_columns_gb(rows, n_wheels))
                 scheme = system.scheme
             rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
                      f"~{system.factor_memory_gb:.2f} GB"
@@ -1063,15 +1062,10 @@ def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, sta
                        rail=a["rail"])
 
 
-def _rail_columns_gb(rows_or_partition, comm, n_wheels: int) -> float:
-    """Memory of the rail columns (:class:`~.integrate.RailColumns`) at most [GB]: on every
-    row for the direct engine (``rows_or_partition`` the DOFs), on the implicit rows of the
-    IMEX engine's partition ``(K_I, C_I)`` at most (collective then)."""
-    rows = rows_or_partition
-    if isinstance(rows, tuple):
-        from .imex import partition_rows
-
-        rows = partition_rows(rows, comm)
+def _rail_columns_gb(rows: int, n_wheels: int) -> float:
+    """Memory of the rail columns (:class:`~.integrate.RailColumns`) at most [GB], on
+    ``rows`` rows: every DOF for the direct engine, the implicit rows for the IMEX engine
+    (its columns are zero elsewhere)."""
     return 8.0 * rows * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
 
 

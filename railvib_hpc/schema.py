@@ -1033,6 +1033,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                             "a)) / (2 a) over |s| <= a (0: a point load, the consistent load "
                             "of the element under it; a >= 2 element sizes keeps a point "
                             "load's grid pulses at speed / element size small)", "nonneg"),
+        "frequency": Param(0.0, "float", "Hz",
+                           "each load varies as cos(2 pi frequency t) after its switch-on (0: "
+                           "constant): the moving harmonic load, which radiates Rayleigh "
+                           "waves of wavelength (c_R -/+ speed) / frequency ahead of and "
+                           "behind it (its plane-strain reference: "
+                           "railvib_hpc.fem.halfspace_line); at most transient.f_max",
+                           "nonneg", source="issue 28 item 7: a verification load"),
     },
     "transient": {
         "dt": Param(0.0, "float", "s",

@@ -557,6 +557,10 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     if not lo < ld["y"] < hi:
         out.append(("load.y", ld["y"], f"the path must run on the soil: {lo:g} < y < "
                     f"{hi:g} m (geometry.ys4 - domain.extra_width to geometry.ys0)"))
+    if ld["frequency"] > case["transient.f_max"]:
+        out.append(("load.frequency", ld["frequency"], f"must be <= transient.f_max = "
+                    f"{case['transient.f_max']:g} Hz (the automatic step resolves f_max; "
+                    "raise it with the load's frequency)"))
     last = ld["x_start"] + min(ld["offsets"] or [0.0])
     if ld["x_end"] and not ld["x_end"] > last:
         out.append(("load.x_end", ld["x_end"], f"must lie beyond the last load's start "

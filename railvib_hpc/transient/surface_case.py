@@ -95,5 +95,6 @@ def surface_load(case: Case, mesh: Mesh, dof_index: np.ndarray, dt: float,
     path = SurfaceLoadPath(forces=run["forces"], offsets=run["offsets"],
                            x_start=run["x_start"], y=float(ld["y"]), speed=float(ld["speed"]),
                            ramp_time=float(ld["ramp_time"]),
-                           half_width=float(ld["half_width"]))
+                           half_width=float(ld["half_width"]),
+                           frequency=float(ld["frequency"]))
     return MovingSurfaceLoad(mesh, dof_index, path, dt, nt, ground=case["geometry.z1"])

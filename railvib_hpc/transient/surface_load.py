@@ -4,7 +4,8 @@ The load of the moving-load verification (:mod:`railvib_hpc.fem.halfspace`, STEM
 "moving load on soil"): ``n`` vertical forces ``P_j`` (downwards) at ``x_j(t) = x_start +
 offset_j + c t`` on the line ``y = y_load`` of the ground surface, each switched on by a
 smooth ramp ``s(t) = sin^2(pi t / (2 T_ramp))`` over ``T_ramp`` (then 1), so that the start
-radiates little, and optionally spread along x (:func:`spreading`). A point force is the
+radiates little, optionally varying as ``cos(2 pi f_0 t)`` (the moving harmonic load of
+:mod:`railvib_hpc.fem.halfspace_line`) and spread along x (:func:`spreading`). A point force is the
 consistent nodal load of the element under it: the trilinear shape functions at its
 reference coordinates in that hexahedron (the four nodes of the element face it stands
 on), located once for every step of the run (:func:`railvib_hpc.mesh.search.locate`); a
@@ -86,6 +87,9 @@ class SurfaceLoadPath:
     half_width
         Half-width ``a`` of each load's spreading along x [m] (0: a point load): the force
         is spread as ``(1 + cos(pi s / a)) / (2 a)`` over ``|s| <= a`` (:func:`spreading`).
+    frequency
+        Each force varies as ``cos(2 pi f t)`` [Hz] (0: constant): the moving harmonic
+        load (the reference :mod:`railvib_hpc.fem.halfspace_line`).
     """
 
     forces: np.ndarray
@@ -95,6 +99,7 @@ class SurfaceLoadPath:
     speed: float
     ramp_time: float
     half_width: float = 0.0
+    frequency: float = 0.0
 
     def positions(self, t: np.ndarray) -> np.ndarray:
         """(nt, n) x of every load at the times ``t``."""
@@ -103,7 +108,11 @@ class SurfaceLoadPath:
 
     def amplitudes(self, t: np.ndarray) -> np.ndarray:
         """(nt, n) downward force of every load at the times ``t`` [N]."""
-        return ramp(t, self.ramp_time)[:, None] * np.asarray(self.forces, float)[None, :]
+        t = np.asarray(t, dtype=float)
+        shape = ramp(t, self.ramp_time)
+        if self.frequency:
+            shape = shape * np.cos(2.0 * math.pi * self.frequency * t)
+        return shape[:, None] * np.asarray(self.forces, float)[None, :]
 
 
 class MovingSurfaceLoad:

@@ -64,6 +64,18 @@ def _source_dofs(mesh, dofmap, source, plane_strain) -> tuple[np.ndarray, np.nda
     return np.concatenate(dofs), np.concatenate(amps)
 
 
+def _point_forces(mesh, dofmap, source, plane_strain, rows, dt, shape):
+    """``prescribed(n)``: ``source``'s forces on this rank's rows times ``shape(n dt)``."""
+    src_dofs, src_amp = _source_dofs(mesh, dofmap, source, plane_strain)
+    mine = (src_dofs >= rows[0]) & (src_dofs < rows[1])
+    own_src, own_amp = src_dofs[mine], src_amp[mine]
+
+    def prescribed(n):
+        return own_src, own_amp * float(shape(n * dt))
+
+    return prescribed
+
+
 def serial_layer(mesh, faces: dict[str, str], *extra: str):
     """The :class:`~railvib_hpc.transient.pml.PmlLayer` of ``mesh`` with ``faces``
     (others fixed) on one rank, and its DOF count (the layer's unit tests)."""
@@ -146,7 +158,7 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
             t_end: float, f0: float, comm, plane_strain: bool = False,
             extra: tuple = (), courant: float | None = None, record_energy: bool = False,
             implicit: np.ndarray | None = None, direct: float | None = None,
-            history=None, progress=None):
+            history=None, progress=None, load=None):
     """Step ``mesh`` with the given face types and a Ricker point force.
 
     Parameters
@@ -188,6 +200,11 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         ``f0``; a history other than a Ricker must start at zero too).
     progress
         Called as ``progress(step, steps)`` after every step (a bench's progress line).
+    load
+        ``load(mesh, dofmap, dt, steps) -> prescribed``, ``prescribed(n) -> (dofs,
+        values)``: the forces of every step (global DOFs, -1 for none) instead of
+        ``source``'s Ricker (explicit engine only; e.g. a
+        :class:`~railvib_hpc.transient.surface_load.MovingSurfaceLoad`).
 
     Returns
     -------
@@ -226,16 +243,14 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     system, dt = _system(mesh, problem, dofmap, comm, (K, M, full), layer, implicit, direct,
                          courant)
     r0, r1 = rows
-    src_dofs, src_amp = _source_dofs(mesh, dofmap, source, plane_strain)
-    mine = (src_dofs >= r0) & (src_dofs < r1)
-    own_src, own_amp = src_dofs[mine], src_amp[mine]
+    steps = int(math.ceil(t_end / dt))
+    if load is None:
+        prescribed = _point_forces(mesh, dofmap, source, plane_strain, rows, dt,
+                                   history or (lambda t: ricker(t, f0)))
+    else:
+        prescribed = load(mesh, dofmap, dt, steps)
     rec = np.array([int(np.argmin(((mesh.points - p) ** 2).sum(axis=1))) for p in receivers])
     rdofs = dofmap.index[rec, :3]
-
-    shape = history or (lambda t: ricker(t, f0))
-
-    def prescribed(n):
-        return own_src, own_amp * float(shape(n * dt))
 
     def sample(x):
         out = np.zeros(rdofs.shape)
@@ -254,7 +269,6 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
         # at rest with the load's first value zero (the Ricker's start): a_0 = 0
         solver = DirectSolver(system, prescribed)
         solver.start(st)
-    steps = int(math.ceil(t_end / dt))
     u, v, energy = [sample(st.u)], [sample(st.v)], []
     t0 = time.perf_counter()
     for k in range(steps):

@@ -89,3 +89,18 @@ def test_one_and_two_ranks_agree():
     assert scale > 0
     assert world["dt"] == pytest.approx(alone["dt"], rel=1e-6)
     assert np.abs(world["v"] - alone["v"]).max() < 1e-9 * scale
+
+
+def test_a_harmonic_load_varies_as_a_cosine_after_its_switch_on():
+    """``frequency``: every step's nodal forces sum to ``-P s(t) cos(2 pi f t)``."""
+    from dataclasses import replace
+
+    mesh, path, _ = _load(0.0, offsets=(0.0,))
+    path = replace(path, frequency=3.0)
+    load = MovingSurfaceLoad(mesh, np.arange(mesh.n_nodes * 3).reshape(-1, 3), path, 0.025, 40)
+    t = np.arange(41) * 0.025
+    expected = -10.0 * ramp(t, 0.2) * np.cos(2 * np.pi * 3.0 * t)
+    on = path.positions(t)[:, 0] <= 8.0
+    sums = np.array([load(n)[1][load(n)[0] >= 0].sum() for n in range(41)])
+    np.testing.assert_allclose(sums[on], expected[on], atol=1e-12)
+    assert np.ptp(np.sign(expected[on])) == 2                  # it changes sign

@@ -248,6 +248,11 @@ def test_the_surface_load_case_runs_and_is_assessed(tmp_path, capsys):
                                                         "on the soil"),
     (["track.count=0", "load.force=1e5", "load.x_start=10", "load.x_end=5"],
      "load.x_end = 5.0: must lie beyond the last load's start 10 m"),
+    (["track.count=0", "load.force=1e5", "load.frequency=100"],
+     "load.frequency = 100.0: must be <= transient.f_max = 80 Hz"),
+    (["track.count=0", "load.force=1e5", "load.frequency=-1"], "load.frequency = -1"),
+    (["load.frequency=5"], "load.frequency = 5.0: applies to the moving load on the bare "
+                           "soil only"),
     (["track.count=0", "load.force=1e5", "load.speed=250"],
      "load.speed = 250.0: is at or above the ground's Rayleigh speed"),
     (["track.count=0", "load.force=1e5", "vehicle.speed=40"],
@@ -287,6 +292,22 @@ def test_the_api_refuses_the_modal_stages_of_the_bare_soil(tmp_path):
     with pytest.raises(CaseError, match="railvib mbs needs a track"):
         pipe.run_stages(["mesh", "mbs"])
     assert not (tmp_path / "o" / "mesh.h5").exists()
+
+
+@pytest.mark.skipif(comm.size > 1, reason="one rank")
+def test_the_load_frequency_reaches_the_load_and_the_check_line(monkeypatch, capsys):
+    """``load.frequency`` goes to the load's path (:func:`surface_load`) and into
+    ``railvib check``'s description of the load."""
+    from railvib_hpc.transient import surface_case
+
+    seen = {}
+    monkeypatch.setattr(surface_case, "MovingSurfaceLoad",
+                        lambda mesh, index, path, dt, nt, ground: seen.setdefault("p", path))
+    case = load_case(BASELINE, [*LOAD, "load.frequency=12.5"])
+    surface_case.surface_load(case, None, None, 1e-3, 10)
+    assert seen["p"].frequency == 12.5
+    assert run(["check", str(BASELINE), *_sets(*LOAD, "load.frequency=12.5")]) == 0
+    assert "harmonic at 12.5 Hz" in capsys.readouterr().out
 
 
 def test_the_keys_of_load_leave_the_digests_of_other_cases_alone():

@@ -56,6 +56,18 @@ def test_at_rest_the_far_field_is_lambs_rayleigh_pole():
     np.testing.assert_allclose(w_back, w[:5], rtol=0, atol=1e-7 * np.abs(w).max())
 
 
+def test_a_hysteretic_soil_damps_the_rayleigh_wave():
+    """With a loss factor ``eta`` the Rayleigh wave's wavenumber is ``k_R (1 - i eta / 2)``
+    to first order: far from the load the field falls as ``exp(-eta k_R xi / 2)`` against
+    the undamped one (measured: within 0.2 % at 10 and 20 wavelengths, ``eta = 0.01``)."""
+    xi = np.array([160.0, 320.0])
+    k_r = 2 * math.pi * F0 / C_R
+    damped, _ = hl.moving_harmonic_line_load(xi, P, MU, NU, C_S, 0.0, F0, A, loss=0.01)
+    elastic, _ = hl.moving_harmonic_line_load(xi, P, MU, NU, C_S, 0.0, F0, A)
+    np.testing.assert_allclose(np.abs(damped / elastic), np.exp(-0.01 * k_r * xi / 2),
+                               rtol=5e-3)
+
+
 def test_a_constant_moving_load_is_cole_and_huths():
     xi = np.array([20.0, 50.0, -50.0, 100.0])
     _, v = hl.moving_harmonic_line_load(xi, P, MU, NU, C_S, SPEED, 0.0, A)

@@ -590,8 +590,9 @@ def _s_ratio(epw: float, direction: str, nu: float, mass: str, scheme: str, cour
 
 
 def elements_needed(limit: float, wavelengths: float, lo: float = 2.0, hi: float = 200.0,
-                    **kw) -> float:
-    """Fewest elements per S wavelength with :func:`worst_peak_error` below ``limit``
+                    worst=None, **kw) -> float:
+    """Fewest elements per wavelength with ``worst`` (default :func:`worst_peak_error`; the
+    mesh check gives :func:`~.dispersion_rayleigh.worst_surface_error`) below ``limit``
     (``kw`` as :func:`worst_peak_error`; a callable ``schemes(epw)`` gives step-dependent
     schemes), to 0.2 %: the bracket ``[lo, hi]`` is narrowed from ``lo`` up by doubling, then
     bisected. ``inf`` when even ``hi`` is not enough.
@@ -600,10 +601,11 @@ def elements_needed(limit: float, wavelengths: float, lo: float = 2.0, hi: float
     20.7
     """
     schemes = kw.pop("schemes", (("none", 0.0),))
+    worst = worst or worst_peak_error
 
     def ok(n: float) -> bool:
         s = schemes(n) if callable(schemes) else schemes
-        return worst_peak_error(n, wavelengths, schemes=s, **kw)[0] < limit
+        return worst(n, wavelengths, schemes=s, **kw)[0] < limit
 
     top = lo
     while not ok(top):

@@ -27,17 +27,26 @@ At 64 elements per wavelength the lumped grid's Rayleigh speed is within 0.04 % 
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.linalg import eigh
+from scipy.linalg import solve_banded
 from scipy.optimize import brentq
 
-from .dispersion import _CUBE, MASSES, _cp_over_cs, _element, time_frequency
+from .dispersion import (
+    _CUBE,
+    MASSES,
+    _cp_over_cs,
+    _damping,
+    _element,
+    _harmonic,
+    time_frequency,
+)
 from .halfspace import rayleigh_mach_limit
 
 __all__ = ["DEPTH_WAVELENGTHS", "SURFACE_DIRECTIONS", "rayleigh_frequency",
-           "rayleigh_wavenumber_ratio"]
+           "rayleigh_wavenumber_ratio", "worst_surface_error"]
 
 #: Depth of the column in wavelengths (its base changes the result by < 1e-8 from 4 to 6).
 DEPTH_WAVELENGTHS = 4.0
@@ -92,20 +101,68 @@ def rayleigh_frequency(kh: float, nu: float = 0.3, mass: str = "consistent",
         raise ValueError(f"mass must be one of {MASSES}, got {mass!r}")
     n_el = depth or int(math.ceil(DEPTH_WAVELENGTHS * 2.0 * math.pi / kh))
     Ke, me = _column_blocks(kh, direction, nu, mass, formulation)
-    n = n_el + 1
-    K = np.zeros((n, 3, n, 3), complex)
-    M = np.zeros((n, n), complex)
-    low = np.arange(n_el)
-    for p, rows in ((0, low), (1, low + 1)):                  # the two levels of each element
-        for q, cols in ((0, low), (1, low + 1)):
-            K[rows, :, cols, :] += Ke[p, :, q, :]
-            M[rows, cols] += me[p, q]
-    keep = np.arange(3, 3 * n)                                # the base fixed
-    Kr = K.reshape(3 * n, 3 * n)[np.ix_(keep, keep)]
-    Mr = np.kron(M, np.eye(3))[np.ix_(keep, keep)]
-    lam = eigh(0.5 * (Kr + Kr.conj().T), 0.5 * (Mr + Mr.conj().T), eigvals_only=True,
-               subset_by_index=[0, 0])[0]
-    return math.sqrt(max(float(lam.real), 0.0))
+    K, M = _banded(Ke, me, n_el)
+    return math.sqrt(_lowest(K, M, rayleigh_mach_limit(nu) * kh))
+
+
+#: Half-bandwidth of the column's matrices: three displacements per level, neighbours only.
+_BAND = 5
+#: Inverse iterations at the fixed shift, then Rayleigh-quotient iterations (cubic).
+_INVERSE_STEPS, _RQI_STEPS = 8, 4
+
+
+def _banded(Ke: np.ndarray, me: np.ndarray, n_el: int) -> tuple[np.ndarray, np.ndarray]:
+    """The column's K and M in LAPACK's general band storage (``ab[u + i - j, j]``),
+    levels 1..n (the base, level 0, fixed), ``u = l = 5``."""
+    n = 3 * n_el
+    blocks_k = np.zeros((2, 2, 3, 3), complex)
+    blocks_k[:] = Ke.transpose(0, 2, 1, 3)                     # (p, q, i, j)
+    blocks_m = me[:, :, None, None] * np.eye(3)[None, None]
+    out = []
+    for blocks in (blocks_k, blocks_m):
+        ab = np.zeros((2 * _BAND + 1, n), complex)
+        for p in (0, 1):
+            for q in (0, 1):
+                # element e couples levels e + p and e + q; unknown index (level - 1) * 3 + c
+                lev_r, lev_c = np.arange(n_el) + p, np.arange(n_el) + q
+                ok = (lev_r >= 1) & (lev_c >= 1)
+                for i in range(3):
+                    for j in range(3):
+                        r = 3 * (lev_r[ok] - 1) + i
+                        c = 3 * (lev_c[ok] - 1) + j
+                        np.add.at(ab, (_BAND + r - c, c), blocks[p, q, i, j])
+        out.append(ab)
+    return out[0], out[1]
+
+
+def _band_matvec(ab: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``A x`` of a band-stored matrix."""
+    n = x.size
+    y = np.zeros(n, complex)
+    for d in range(-_BAND, _BAND + 1):                         # diagonal i - j = d
+        row = ab[_BAND + d]
+        if d >= 0:
+            y[d:] += row[:n - d] * x[:n - d]
+        else:
+            y[:n + d] += row[-d:] * x[-d:]
+    return y
+
+
+def _lowest(K: np.ndarray, M: np.ndarray, omega_guess: float) -> float:
+    """The lowest eigenvalue of ``K x = lambda M x`` (Hermitian, M positive definite):
+    inverse iteration shifted below it (half the continuum's ``omega^2``), then
+    Rayleigh-quotient iteration."""
+    n = K.shape[1]
+    x = np.ones(n, complex)
+    sigma = 0.5 * omega_guess ** 2
+    lam = sigma
+    for step in range(_INVERSE_STEPS + _RQI_STEPS):
+        y = solve_banded((_BAND, _BAND), K - sigma * M, _band_matvec(M, x))
+        x = y / math.sqrt(abs(np.vdot(y, _band_matvec(M, y))))
+        lam = float(np.vdot(x, _band_matvec(K, x)).real)
+        if step >= _INVERSE_STEPS - 1:
+            sigma = lam
+    return max(lam, 0.0)
 
 
 def rayleigh_wavenumber_ratio(epw: ArrayLike, nu: float = 0.3, mass: str = "consistent",
@@ -148,7 +205,57 @@ def rayleigh_wavenumber_ratio(epw: ArrayLike, nu: float = 0.3, mass: str = "cons
     out = []
     for e in np.atleast_1d(np.asarray(epw, dtype=float)):
         k = 2.0 * math.pi / e
-        kh = brentq(lambda q, k=k: stepped(q) - c_r * k, 0.5 * k, min(2.0 * k, 0.99 * math.pi),
-                    xtol=1e-14 * k)
+        try:
+            kh = brentq(lambda q, k=k: stepped(q) - c_r * k, 0.5 * k,
+                        min(2.0 * k, 0.99 * math.pi), xtol=1e-12 * k)
+        except ValueError:           # beyond the grid's cut-off (or the scheme's limit)
+            kh = math.nan
         out.append(kh / k)
     return np.array(out)
+
+
+@lru_cache(maxsize=4096)
+def _ratio(epw: float, direction: str, nu: float, mass: str, scheme: str, courant: float,
+           rho_inf: float, formulation: str) -> float:
+    """:func:`rayleigh_wavenumber_ratio` for one size (cached: the mesh check asks for the
+    phase and the peak error of the same grids)."""
+    return float(rayleigh_wavenumber_ratio(epw, nu, mass, scheme, courant, rho_inf,
+                                           formulation, direction)[0])
+
+
+def worst_surface_error(epw: float, wavelengths: float, nu: float = 0.3,
+                        mass: str = "consistent",
+                        schemes: tuple[tuple[str, float], ...] = (("none", 0.0),),
+                        rho_inf: float = 1.0, formulation: str = "bbar",
+                        measure: str = "peak") -> tuple[float, str]:
+    """:func:`~.dispersion.worst_peak_error` of the grid's Rayleigh wave: the largest
+    harmonic bound (``"peak"``) or ``|`` phase lag ``|`` in periods (``"phase"``; inf beyond
+    the cut-off) over :data:`SURFACE_DIRECTIONS` and the time schemes ``(scheme, courant)``
+    (``courant = c_P dt / h``).
+
+    Returns
+    -------
+    error, where : float, str
+        The error and the direction and scheme that give it.
+
+    >>> e, where = worst_surface_error(16.0, 10.0, nu=0.25, mass="lumped")
+    >>> round(e, 3), where
+    (0.244, 'face_diagonal, none')
+    """
+    if measure not in ("peak", "phase"):
+        raise ValueError(f"measure must be 'peak' or 'phase', got {measure!r}")
+    best = (-1.0, "")
+    for direction in SURFACE_DIRECTIONS:
+        for scheme, courant in schemes:
+            ratio = _ratio(float(epw), direction, float(nu), mass, scheme, float(courant),
+                           float(rho_inf), formulation)
+            phase = wavelengths * (ratio - 1.0)
+            if measure == "peak":
+                xi = float(_damping(epw, "S", nu=nu, scheme=scheme, courant=courant,
+                                    rho_inf=rho_inf))
+                e = float(_harmonic(np.asarray(phase), xi, wavelengths))
+            else:
+                e = abs(phase) if np.isfinite(phase) else np.inf
+            if e > best[0]:
+                best = (e, f"{direction}, {scheme}")
+    return best

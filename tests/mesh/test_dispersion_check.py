@@ -12,7 +12,7 @@ from railvib_hpc.cli import run
 from railvib_hpc.config import Case
 from railvib_hpc.errors import CaseError, MeshError, UserError
 from railvib_hpc.fem.boundary import wave_speeds
-from railvib_hpc.fem.dispersion import worst_peak_error
+from railvib_hpc.fem.dispersion_rayleigh import worst_surface_error
 from railvib_hpc.mesh.dispersion_check import (
     EXPLICIT_STEP_SAFETY,
     UNRESOLVED_PHASE,
@@ -76,8 +76,8 @@ def test_the_explicit_engines_safety_factor_is_the_engines():
 
 
 def test_report_line_is_the_rayleigh_wave_in_the_worst_direction():
-    """The predicted error is the S-wave relation at the Rayleigh wavelength over the
-    distance in Rayleigh wavelengths, the worst direction and time step end."""
+    """The predicted error is the grid's Rayleigh relation over the distance in Rayleigh
+    wavelengths, the worst direction and time step end."""
     case = _case()
     c_s, nu = _subgrade(case)
     f, h = 30.0, _edge(case, 20.0)
@@ -85,8 +85,8 @@ def test_report_line_is_the_rayleigh_wave_in_the_worst_direction():
     c_r = rayleigh_ratio(nu) * c_s
     dt = 1.0 / (case["transient.steps_per_period"] * case["transient.f_max"])
     c_p = float(wave_speeds(*(case["materials.subgrade"][k] for k in ("E", "nu", "rho")))[0])
-    expected = worst_peak_error(c_r / (f * h), 25.0 * f / c_r, nu, "consistent",
-                                (("none", 0.0), ("generalized_alpha", c_p * dt / h)))[0]
+    expected = worst_surface_error(c_r / (f * h), 25.0 * f / c_r, nu, "consistent",
+                                   (("none", 0.0), ("generalized_alpha", c_p * dt / h)))[0]
     assert rep["probe"] == "far" and rep["part"] == "subgrade"
     assert rep["error"] == pytest.approx(expected, rel=1e-12)
     assert rep["parts"]["subgrade"]["epw"] == pytest.approx(20.0)
@@ -144,7 +144,7 @@ def test_the_explicit_engine_is_bounded_by_its_semidiscretisation():
     c_s, nu = _subgrade(case)
     c_r = rayleigh_ratio(nu) * c_s
     h = _edge(case, 20.0)
-    semi = worst_peak_error(c_r / (30.0 * h), 25.0 * 30.0 / c_r, nu, "lumped")[0]
+    semi = worst_surface_error(c_r / (30.0 * h), 25.0 * 30.0 / c_r, nu, "lumped")[0]
     assert rep["error"] == pytest.approx(semi, rel=1e-12)
     assert "none" in rep["line"]
 

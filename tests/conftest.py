@@ -92,6 +92,60 @@ def shared_tmp():
 
 
 @pytest.fixture(scope="session")
+def serial_refs(request):
+    """The serial references of the selected N-rank tests, ``{name: folder}``: each computed
+    once per session on one rank alone (``MPI.COMM_SELF``), the ranks side by side.
+
+    A test module lists its references in ``SERIAL_REFERENCES = {name: (seconds, build)}``
+    (``build(folder)`` computes one into ``folder`` on ``MPI.COMM_SELF``; ``seconds``, what
+    it took on one rank, orders them). The N-rank tests used to rerun their reference on
+    rank 0 after their own run while the other ranks waited at a barrier; here the
+    references of every selected test that asks for this fixture are handed out longest
+    first, each to the rank with the fewest seconds so far, so that N ranks compute N of
+    them at a time. A reference is the same computation on any rank (one process,
+    ``MPI.COMM_SELF``). A failure on any rank fails the fixture on every rank (none waits in
+    a collective)."""
+    import time
+    import traceback
+
+    from mpi4py import MPI
+
+    from railvib_hpc.petsc_env import init_petsc
+
+    comm = MPI.COMM_WORLD
+    refs: dict = {}
+    for item in request.session.items:
+        if "serial_refs" in getattr(item, "fixturenames", ()):
+            refs.update(getattr(item.module, "SERIAL_REFERENCES", {}))
+    root = tempfile.mkdtemp(prefix="railvib-serial-") if comm.rank == 0 else None
+    root = Path(comm.bcast(root, root=0))
+    init_petsc([])                  # collective: before the ranks work alone on COMM_SELF
+    load = [0.0] * comm.size
+    failures, timings = [], []
+    for name, (seconds, build) in sorted(refs.items(), key=lambda kv: (-kv[1][0], kv[0])):
+        rank = load.index(min(load))
+        load[rank] += seconds
+        if rank != comm.rank or failures:
+            continue
+        t0 = time.perf_counter()
+        try:
+            build(root / name)
+        except Exception:                     # re-raised below on every rank
+            failures.append(f"serial reference {name} (rank {comm.rank}):\n"
+                            f"{traceback.format_exc()}")
+        timings.append(f"serial reference {name}: {time.perf_counter() - t0:.1f} s "
+                       f"on rank {comm.rank}")
+    print("\n".join(line for lines in comm.allgather(timings) for line in lines))
+    failures = [f for lines in comm.allgather(failures) for f in lines]
+    if failures:
+        raise RuntimeError("\n".join(failures))
+    yield {name: root / name for name in refs}
+    comm.Barrier()
+    if comm.rank == 0:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+@pytest.fixture(scope="session")
 def baseline_mesh():
     """The thesis baseline mesh at refinement 1 (built once per session) and its report."""
     from railvib_hpc.mesh.stage import make_mesh

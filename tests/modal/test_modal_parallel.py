@@ -168,9 +168,26 @@ def _assert_equal_serial(case, mesh):
     assert assert_same_subspaces(K1, M1, lam, serial.phi, phi_n, rtol) >= 15
 
 
+def _serial_modal(folder) -> None:
+    """A builder of ``serial_refs`` (tests/conftest.py): the modal stage of the command's
+    case alone on ``MPI.COMM_SELF``."""
+    from railvib_hpc.log import Reporter
+    from railvib_hpc.modal.stage import run_modal_stage
+
+    case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.n_modes=20"])
+    run_modal_stage(case, folder, MPI.COMM_SELF, Reporter(1))
+
+
+#: The serial run test_modal_command_writes_the_same_modes_on_all_rank_counts compares with
+#: (tests/conftest.py: ``serial_refs``, computed side by side with the other modules'
+#: references): seconds on one rank, builder.
+SERIAL_REFERENCES = {"modal_coarse_20_modes": (12.0, _serial_modal)}
+
+
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coarse):
+def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coarse,
+                                                                serial_refs):
     import h5py
 
     from railvib_hpc.cli import run
@@ -188,12 +205,12 @@ def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coar
     if comm.rank == 0:
         (out / "modes.h5").rename(out / "modes_parallel.h5")
     comm.Barrier()
-    # serial reference computed on rank 0 alone, in this process; a failed check there is
+    # against the serial run (serial_refs), checked on rank 0; a failed check there is
     # broadcast so that the other ranks fail too instead of waiting at the barrier
     failure = None
     if comm.rank == 0:
         try:
-            _compare_with_serial(coarse, shared_tmp, out, freq)
+            _compare_with_serial(coarse, serial_refs["modal_coarse_20_modes"], out, freq)
         except Exception as exc:                        # re-raised below on every rank
             failure = exc
     failure = comm.bcast(failure, root=0)
@@ -201,26 +218,24 @@ def test_modal_command_writes_the_same_modes_on_all_rank_counts(shared_tmp, coar
         raise failure
 
 
-def _compare_with_serial(coarse, shared_tmp, out, freq):
-    """Serial run of the same case; frequencies, mode subspaces and strain energies agree."""
+def _compare_with_serial(coarse, serial, out, freq):
+    """The serial run of the same case (in ``serial``): frequencies, mode subspaces and
+    strain energies agree."""
     import h5py
 
-    from railvib_hpc.log import Reporter
     from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.energy import material_groups
     from railvib_hpc.modal.petsc import assemble
-    from railvib_hpc.modal.stage import run_modal_stage
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.n_modes=20"])
-    run_modal_stage(case, shared_tmp / "serial", MPI.COMM_SELF, Reporter(1))
     _, mesh = coarse
     dofmap = build_dofmap(mesh, 1)
-    lam, phi_1, e_1 = modes_from_file(shared_tmp / "serial" / "modes.h5", dofmap)
+    lam, phi_1, e_1 = modes_from_file(serial / "modes.h5", dofmap)
     lam_n, phi_n, e_n = modes_from_file(out / "modes_parallel.h5", dofmap)
     K, M, _ = assemble(mesh, Problem.from_case(case), dofmap, MPI.COMM_SELF)
     rtol = eigen_rtol(K, M, lam, solver_tol=case["modal.tol"], phi=phi_1)
     assert np.all(np.abs(lam_n / lam - 1) <= rtol)
-    with h5py.File(shared_tmp / "serial" / "modes.h5", "r") as f:
+    with h5py.File(serial / "modes.h5", "r") as f:
         assert np.all(np.abs(freq / f["modes/frequency_hz"][()] - 1) <= rtol)
     # mode shapes: the same subspace for every cluster of eigenvalues
     assert assert_same_subspaces(K, M, lam, phi_1, phi_n, rtol) >= 15

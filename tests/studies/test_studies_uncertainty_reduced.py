@@ -77,25 +77,37 @@ def test_a_random_field_is_judged_by_its_residual(tmp_path):
             assert "random field is not represented" in red["reason"]
 
 
+def _one_check():
+    """The case of the 1-and-2-rank comparison: one full-solve check."""
+    args = _args("unused", "--set", "uncertainty.reduced_tol=1", "--set",
+                 "uncertainty.reduced_checks=1")
+    return load_case(BASELINE, [args[i + 1] for i, a in enumerate(args) if a == "--set"])
+
+
+def _serial_study(folder) -> None:
+    """A builder of ``serial_refs`` (tests/conftest.py): the study alone on
+    ``MPI.COMM_SELF``."""
+    execute_study("uncertainty", _one_check(), folder, MPI.COMM_SELF, Reporter(0))
+
+
+#: The serial study the 2-rank test compares with (tests/conftest.py: ``serial_refs``,
+#: computed side by side with the other modules' references): seconds on one rank, builder.
+SERIAL_REFERENCES = {"uncertainty_reduced_one_check": (35.0, _serial_study)}
+
+
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_same_reduced_model_on_one_and_two_ranks(shared_tmp):
-    from railvib_hpc.petsc_env import init_petsc
-
-    init_petsc([])
-    args = _args(shared_tmp, "--set", "uncertainty.reduced_tol=1", "--set",
-                 "uncertainty.reduced_checks=1")
-    sets = [args[i + 1] for i, a in enumerate(args) if a == "--set"]
-    case = load_case(BASELINE, sets)
-    if comm.rank == 0:
-        execute_study("uncertainty", case, shared_tmp / "serial", MPI.COMM_SELF, Reporter(0))
-    comm.Barrier()
-    execute_study("uncertainty", case, shared_tmp / "parallel", comm, Reporter(comm.rank))
+def test_same_reduced_model_on_one_and_two_ranks(shared_tmp, serial_refs):
+    """The reduced study on ``comm.size`` ranks and alone on ``MPI.COMM_SELF``
+    (``serial_refs``): the same reduced model and samples."""
+    execute_study("uncertainty", _one_check(), shared_tmp / "parallel", comm,
+                  Reporter(comm.rank))
     if comm.rank == 0:
         for k in range(4):
-            one, two = (json.loads((shared_tmp / d / "uncertainty" / f"s{k:04d}" /
+            one, two = (json.loads((d / "uncertainty" / f"s{k:04d}" /
                                     "result.json").read_text())
-                        for d in ("serial", "parallel"))
+                        for d in (serial_refs["uncertainty_reduced_one_check"],
+                                  shared_tmp / "parallel"))
             assert two["ranks"] == 2
             r1, r2 = one["model"]["modal"]["reduced"], two["model"]["modal"]["reduced"]
             assert r1["used"] and r2["used"]

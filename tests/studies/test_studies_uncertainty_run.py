@@ -77,23 +77,34 @@ def test_sobol_study_as_array_tasks_then_merge(tmp_path, capsys):
     assert "finished earlier" not in capsys.readouterr().out
 
 
+def _three_samples():
+    """The case of the 1-and-2-rank comparison: three samples."""
+    args = _args("unused", "--set", "uncertainty.samples=3")
+    return load_case(BASELINE, [args[i + 1] for i, a in enumerate(args) if a == "--set"])
+
+
+def _serial_study(folder) -> None:
+    """A builder of ``serial_refs`` (tests/conftest.py): the study alone on
+    ``MPI.COMM_SELF``."""
+    execute_study("uncertainty", _three_samples(), folder, MPI.COMM_SELF, Reporter(0))
+
+
+#: The serial study the 2-rank test compares with (tests/conftest.py: ``serial_refs``,
+#: computed side by side with the other modules' references): seconds on one rank, builder.
+SERIAL_REFERENCES = {"uncertainty_three_samples": (39.0, _serial_study)}
+
+
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_same_statistics_on_one_and_two_ranks(shared_tmp):
-    from railvib_hpc.petsc_env import init_petsc
-
-    init_petsc([])                      # collective: before rank 0 works alone
-    args = _args(shared_tmp, "--set", "uncertainty.samples=3")
-    sets = [args[i + 1] for i, a in enumerate(args) if a == "--set"]
-    case = load_case(BASELINE, sets)
+def test_same_statistics_on_one_and_two_ranks(shared_tmp, serial_refs):
+    """The study on ``comm.size`` ranks and alone on ``MPI.COMM_SELF`` (``serial_refs``):
+    the same design and statistics."""
+    execute_study("uncertainty", _three_samples(), shared_tmp / "parallel", comm,
+                  Reporter(comm.rank))
     if comm.rank == 0:
-        execute_study("uncertainty", case, shared_tmp / "serial", MPI.COMM_SELF,
-                      Reporter(0))
-    comm.Barrier()
-    execute_study("uncertainty", case, shared_tmp / "parallel", comm, Reporter(comm.rank))
-    if comm.rank == 0:
-        one, two = (json.loads((shared_tmp / d / "uncertainty" / "report.json").read_text())
-                    for d in ("serial", "parallel"))
+        one, two = (json.loads((d / "uncertainty" / "report.json").read_text())
+                    for d in (serial_refs["uncertainty_three_samples"],
+                              shared_tmp / "parallel"))
         assert one["analysis"]["design"] == two["analysis"]["design"]
         for r1, r2 in zip(one["analysis"]["rows"], two["analysis"]["rows"]):
             assert (r1["probe"], r1["standard"]) == (r2["probe"], r2["standard"])

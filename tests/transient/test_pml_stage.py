@@ -162,6 +162,28 @@ def test_the_pml_job_runs_end_to_end_and_is_assessed(tmp_path, capsys):
     assert {"footing", "slab1", "slab2"} <= set(report["results"])
 
 
+#: The imex engine's short run with the layers.
+IMEX = [*SHORT, *LAYERS, "transient.engine=imex"]
+
+
+def _serial(overrides: list[str]):
+    """A builder of ``serial_refs`` (tests/conftest.py): the short run with ``overrides``
+    alone on ``MPI.COMM_SELF``."""
+    def build(folder) -> None:
+        from railvib_hpc.log import Reporter
+        from railvib_hpc.transient.stage import run_transient_stage
+
+        run_transient_stage(load_case(BASELINE, overrides), folder, MPI.COMM_SELF, Reporter(0))
+    return build
+
+
+#: The serial references the 2-rank tests below compare with (tests/conftest.py:
+#: ``serial_refs``, computed side by side with the other modules'): name -> (seconds on one
+#: rank, measured; builder).
+SERIAL_REFERENCES = {"pml_explicit": (25.0, _serial([*SHORT, *LAYERS])),
+                     "pml_imex": (8.0, _serial(IMEX))} if comm.size > 1 else {}
+
+
 def _probes(folder) -> dict[str, np.ndarray]:
     with h5py.File(folder / "probes.h5", "r") as f:
         return {str(g.attrs["name"]): g["velocity"][()] for g in f["probes"].values()}
@@ -170,15 +192,15 @@ def _probes(folder) -> dict[str, np.ndarray]:
 @pytest.mark.slow
 @pytest.mark.mpi
 def test_the_imex_engine_runs_the_thesis_model_with_layers_on_1_and_2_ranks(shared_tmp,
+                                                                           serial_refs,
                                                                            capsys):
     """The same short run with the imex engine (the track and the building implicit): the
     layers' M_e1 is named among the implicit terms, the step is the explicit soil's
     (measured: 3.33e-4 s, 20 steps, against the explicit engine's ~2e-6 s for the rail),
-    the probes are finite, and on 2 ranks they equal rank 0's rerun alone on COMM_SELF
-    within 1e-9 of their peak."""
-    imex = [*SHORT, *LAYERS, "transient.engine=imex"]
+    the probes are finite, and on 2 ranks they equal the same run alone on COMM_SELF
+    (``serial_refs``) within 1e-9 of their peak."""
     out = shared_tmp / f"pml_imex_{comm.size}"
-    assert run(["transient", str(BASELINE), "--out", str(out), *_sets(*imex)]) == 0
+    assert run(["transient", str(BASELINE), "--out", str(out), *_sets(*IMEX)]) == 0
     text = capsys.readouterr().out
     if comm.rank == 0:
         assert "the layers M_e1; explicit part stable up to" in text
@@ -189,12 +211,7 @@ def test_the_imex_engine_runs_the_thesis_model_with_layers_on_1_and_2_ranks(shar
         velocities = _probes(out)
         assert all(np.isfinite(v).all() for v in velocities.values())
         if comm.size > 1:
-            from railvib_hpc.log import Reporter
-            from railvib_hpc.transient.stage import run_transient_stage
-
-            serial = shared_tmp / "serial_imex"
-            run_transient_stage(load_case(BASELINE, imex), serial, MPI.COMM_SELF, Reporter(0))
-            alone = _probes(serial)
+            alone = _probes(serial_refs["pml_imex"])
             for name, v in velocities.items():
                 scale = max(np.abs(alone[name]).max(), 1e-30)
                 assert np.abs(v - alone[name]).max() < 1e-9 * scale, name
@@ -203,12 +220,13 @@ def test_the_imex_engine_runs_the_thesis_model_with_layers_on_1_and_2_ranks(shar
 
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_the_thesis_model_with_layers_runs_and_agrees_on_1_and_2_ranks(shared_tmp, capsys):
+def test_the_thesis_model_with_layers_runs_and_agrees_on_1_and_2_ranks(shared_tmp, serial_refs,
+                                                                       capsys):
     """The short explicit run with layers on four faces: the log names them and warns of
     the thin ones (the coarse mesh: 0.6-3.8 elements across), the statistics count the
-    layer's elements; on 2 ranks the probe velocities equal rank 0's rerun alone on
-    MPI.COMM_SELF to round-off (the layer's elements at the partition are computed on
-    both ranks, their nodes' displacements gathered).
+    layer's elements; on 2 ranks the probe velocities equal the same run alone on
+    MPI.COMM_SELF (``serial_refs``) to round-off (the layer's elements at the partition are
+    computed on both ranks, their nodes' displacements gathered).
 
     Measured: 11 s of time integration on 1 rank (3112 steps), 2620 layer elements; on 2
     ranks against 1 the velocities differ by < 1e-12 of their peak."""
@@ -225,13 +243,7 @@ def test_the_thesis_model_with_layers_runs_and_agrees_on_1_and_2_ranks(shared_tm
         velocities = _probes(out)
         assert all(np.isfinite(v).all() for v in velocities.values())
         if comm.size > 1:
-            from railvib_hpc.log import Reporter
-            from railvib_hpc.transient.stage import run_transient_stage
-
-            serial = shared_tmp / "serial"
-            run_transient_stage(load_case(BASELINE, [*SHORT, *LAYERS]), serial,
-                                MPI.COMM_SELF, Reporter(0))
-            alone = _probes(serial)
+            alone = _probes(serial_refs["pml_explicit"])
             for name, v in velocities.items():
                 scale = max(np.abs(alone[name]).max(), 1e-30)
                 assert np.abs(v - alone[name]).max() < 1e-9 * scale, name

@@ -8,7 +8,8 @@
   downward force, and the ground beside the path moves.
 * Bad input: one line naming the key, the value and what is allowed, exit code 2, nothing
   written.
-* On 2 ranks the probe histories equal rank 0's rerun alone (``@pytest.mark.mpi``).
+* On 2 ranks the probe histories equal the same run alone on one rank
+  (``@pytest.mark.mpi``).
 """
 
 from __future__ import annotations
@@ -324,19 +325,22 @@ def test_the_keys_of_load_leave_the_digests_of_other_cases_alone():
     assert inputs_hash(a, "mesh.h5") == inputs_hash(b, "mesh.h5")
 
 
+#: The serial run the 2-rank test compares with (tests/conftest.py: ``serial_refs``,
+#: computed side by side with the other modules' references): seconds on one rank, builder.
+SERIAL_REFERENCES = {"surface_load": (5.0, _stage)}
+
+
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_the_surface_load_case_agrees_on_1_and_2_ranks(shared_tmp):
-    """The same case on ``comm.size`` ranks: its probe histories equal rank 0's rerun
-    alone on MPI.COMM_SELF to round-off (measured on 2 ranks: 14 s, the two runs; they
-    differ by 3.6e-18 of the peak)."""
+def test_the_surface_load_case_agrees_on_1_and_2_ranks(shared_tmp, serial_refs):
+    """The same case on ``comm.size`` ranks: its probe histories equal the same run alone
+    on MPI.COMM_SELF (``serial_refs``) to round-off (measured on 2 ranks: 14 s, the two
+    runs; they differ by 3.6e-18 of the peak)."""
     out = shared_tmp / f"surface_load_{comm.size}"
     _stage(out, comm)
     if comm.rank == 0:
         velocities = _probes(out)
-        serial = shared_tmp / "surface_load_serial"
-        _stage(serial)
-        alone = _probes(serial)
+        alone = _probes(serial_refs["surface_load"])
         assert set(velocities) == set(alone)
         peak = max(np.abs(v).max() for v in alone.values())
         assert peak > 0

@@ -98,21 +98,26 @@ def test_interrupted_run_resumes_to_the_same_answer(reference, tmp_path):
         np.testing.assert_array_equal(new[k], ref[k], err_msg=k)
 
 
+#: The serial run both 2-rank tests below compare with, computed once (tests/conftest.py:
+#: ``serial_refs``, side by side with the other modules' references): seconds on one rank,
+#: builder.
+SERIAL_REFERENCES = {"transient_tiny": (9.0, lambda folder: _run(tiny_case(), folder))}
+
+
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_two_ranks_give_the_serial_answer(tmp_path_factory):
-    init_petsc([])                 # collective: before rank 0 works alone on COMM_SELF
+def test_two_ranks_give_the_serial_answer(tmp_path_factory, serial_refs):
+    """The tiny run on ``comm.size`` ranks equals the one alone on ``MPI.COMM_SELF``
+    (``serial_refs``)."""
+    init_petsc([])
     base = tmp_path_factory.mktemp("ranks") if comm.rank == 0 else None
     base = comm.bcast(str(base) if base else None, root=0)
     from pathlib import Path
 
     base = Path(base)
-    if comm.rank == 0:
-        _run(tiny_case(), base / "serial")
-    comm.Barrier()
     _run(tiny_case(), base / "parallel", comm)
     if comm.rank == 0:
-        a, b = _histories(base / "serial"), _histories(base / "parallel")
+        a, b = _histories(serial_refs["transient_tiny"]), _histories(base / "parallel")
         for k in a:
             scale = np.abs(a[k]).max()
             # K and M agree to their kernels' round-off (test_boundary) and MUMPS orders
@@ -122,10 +127,11 @@ def test_two_ranks_give_the_serial_answer(tmp_path_factory):
 
 @pytest.mark.slow
 @pytest.mark.mpi
-def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factory):
+def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factory,
+                                                                serial_refs):
     """The checkpoint is written collectively (mpio) by global DOF: a run interrupted on 2
-    ranks resumes on 2 ranks, or on 1, to the uninterrupted answer (to the round-off of the
-    2-rank factorization)."""
+    ranks resumes on 2 ranks, or on 1, to the uninterrupted answer (the serial run of
+    ``serial_refs``; to the round-off of the 2-rank factorization)."""
     import shutil
     from pathlib import Path
 
@@ -134,9 +140,6 @@ def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factor
     init_petsc([])
     base = tmp_path_factory.mktemp("resume2") if comm.rank == 0 else None
     base = Path(comm.bcast(str(base) if base else None, root=0))
-    if comm.rank == 0:
-        _run(tiny_case(), base / "serial")
-    comm.Barrier()
     with pytest.raises(Interrupted):
         _run(tiny_case(), base / "parallel", comm, checkpoint_steps=30, stop_after=60)
     if comm.rank == 0:
@@ -149,7 +152,7 @@ def test_two_ranks_resume_an_interrupted_run_on_two_ranks_or_one(tmp_path_factor
     if comm.rank == 0:
         one = _run(tiny_case(), base / "one")
         assert 0 < one["steps_run"] < one["n_steps"]
-        ref = _histories(base / "serial")
+        ref = _histories(serial_refs["transient_tiny"])
         for folder in ("parallel", "one"):
             new = _histories(base / folder)
             for k in ref:

@@ -83,6 +83,7 @@ __all__ = [
     "pulse_peak_error",
     "time_frequency",
     "wavenumber_ratio",
+    "worst_of",
     "worst_peak_error",
 ]
 
@@ -561,14 +562,26 @@ def worst_peak_error(epw: float, wavelengths: float, nu: float = 0.3,
     >>> round(e, 3), where
     (0.054, 'axis, none')
     """
+    def ratio(direction: str, scheme: str, courant: float) -> float:
+        return _s_ratio(float(epw), direction, float(nu), mass, scheme, float(courant),
+                        float(rho_inf), formulation)
+
+    return worst_of(ratio, DIRECTIONS, epw, wavelengths, nu, schemes, rho_inf, measure)
+
+
+def worst_of(ratio, directions, epw: float, wavelengths: float, nu: float,
+             schemes: tuple[tuple[str, float], ...], rho_inf: float,
+             measure: str = "peak") -> tuple[float, str]:
+    """The largest harmonic bound (``"peak"``) or ``|`` phase lag ``|`` (``"phase"``) over
+    ``directions`` and ``schemes``, from ``ratio(direction, scheme, courant) = k_h / k``
+    (:func:`worst_peak_error`'s S waves, or the Rayleigh wave's
+    :func:`~.dispersion_rayleigh.worst_surface_error`); ``(error, "direction, scheme")``."""
     if measure not in ("peak", "phase"):
         raise ValueError(f"measure must be 'peak' or 'phase', got {measure!r}")
     best = (-1.0, "")
-    for direction in DIRECTIONS:
+    for direction in directions:
         for scheme, courant in schemes:
-            args = (float(epw), direction, float(nu), mass, scheme, float(courant),
-                    float(rho_inf), formulation)
-            phase = wavelengths * (_s_ratio(*args) - 1.0)
+            phase = wavelengths * (ratio(direction, scheme, courant) - 1.0)
             if measure == "peak":
                 xi = float(_damping(epw, "S", nu=nu, scheme=scheme, courant=courant,
                                     rho_inf=rho_inf))

@@ -38,10 +38,9 @@ from .dispersion import (
     _CUBE,
     MASSES,
     _cp_over_cs,
-    _damping,
     _element,
-    _harmonic,
     time_frequency,
+    worst_of,
 )
 from .halfspace import rayleigh_mach_limit
 
@@ -242,20 +241,8 @@ def worst_surface_error(epw: float, wavelengths: float, nu: float = 0.3,
     >>> round(e, 3), where
     (0.244, 'face_diagonal, none')
     """
-    if measure not in ("peak", "phase"):
-        raise ValueError(f"measure must be 'peak' or 'phase', got {measure!r}")
-    best = (-1.0, "")
-    for direction in SURFACE_DIRECTIONS:
-        for scheme, courant in schemes:
-            ratio = _ratio(float(epw), direction, float(nu), mass, scheme, float(courant),
-                           float(rho_inf), formulation)
-            phase = wavelengths * (ratio - 1.0)
-            if measure == "peak":
-                xi = float(_damping(epw, "S", nu=nu, scheme=scheme, courant=courant,
-                                    rho_inf=rho_inf))
-                e = float(_harmonic(np.asarray(phase), xi, wavelengths))
-            else:
-                e = abs(phase) if np.isfinite(phase) else np.inf
-            if e > best[0]:
-                best = (e, f"{direction}, {scheme}")
-    return best
+    def ratio(direction: str, scheme: str, courant: float) -> float:
+        return _ratio(float(epw), direction, float(nu), mass, scheme, float(courant),
+                      float(rho_inf), formulation)
+
+    return worst_of(ratio, SURFACE_DIRECTIONS, epw, wavelengths, nu, schemes, rho_inf, measure)

@@ -43,6 +43,21 @@ def test_unknown_or_non_numeric_keys_are_refused(key, hint):
     assert f"uncertainty.parameter[1].key = '{key}'" in msg and hint in msg
 
 
+@pytest.mark.parametrize("entry, needle", [
+    ({"key": "pads.kz", "distribution": "lognormal", "cov": 0.0},
+     "uncertainty.parameter[1].cov = 0.0: must be > 0"),
+    ({"key": "pads.kz", "distribution": "normal", "cov": -0.1},
+     "uncertainty.parameter[1].cov = -0.1: must be > 0"),
+    ({"key": "building.rotation", "distribution": "normal", "cov": 0.1},
+     "uncertainty.parameter[1].cov = 0.1: gives std = cov x mean = 0: the mean is 0"),
+])
+def test_a_zero_cov_names_cov(entry, needle):
+    """The red team: ``cov = 0`` was refused as '...std = 0.0: must be > 0', naming a key
+    the user did not give."""
+    msg = _refused([entry])
+    assert needle in msg and ".std" not in msg, msg
+
+
 @pytest.mark.parametrize("entry, probability", [
     ({"key": "materials.subgrade.nu", "distribution": "normal", "std": 0.1}, "0.0241"),
     ({"key": "materials.subgrade.E", "distribution": "normal", "cov": 0.3}, "0.000429"),

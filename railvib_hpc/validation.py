@@ -36,6 +36,7 @@ from .site import (
     line_probe_name,
     line_ranges,
     line_x,
+    load_path_crossing,
     placed_plan,
     quarter_turns,
     slab_bases,
@@ -436,8 +437,8 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"the building base must lie inside the subgrade: Z0 = {g['z0']:g} < ZBB < "
                     f"Z1 = {g['z1']:g} m"))
     fs, cs, wt = b["footing_size"], b["column_size"], b["wall_thickness"]
-    out.extend(_check_spans(b, "x", length, "X3 - X2"))
-    out.extend(_check_spans(b, "y", width, "YS2 - YS3"))
+    out.extend(_check_spans(case, "x", length, "X3 - X2"))
+    out.extend(_check_spans(case, "y", width, "YS2 - YS3"))
     if not cs < fs:
         out.append(("building.column_size", cs,
                     f"must be smaller than building.footing_size = {fs:g} m"))
@@ -557,6 +558,8 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     if not lo < ld["y"] < hi:
         out.append(("load.y", ld["y"], f"the path must run on the soil: {lo:g} < y < "
                     f"{hi:g} m (geometry.ys4 - domain.extra_width to geometry.ys0)"))
+    else:
+        out.extend(_load_path_problems(case))
     if ld["frequency"] > case["transient.f_max"]:
         out.append(("load.frequency", ld["frequency"], f"must be <= transient.f_max = "
                     f"{case['transient.f_max']:g} Hz (the automatic step resolves f_max; "
@@ -567,6 +570,35 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
                     f"{last:g} m (load.x_start + the smallest offset), or be 0 (the soil's "
                     "end)"))
     return out
+
+
+def _load_path_problems(case: Case) -> list[tuple[str, Any, str]]:
+    """The surface load's path on the ground: not through the building's plan (there the
+    ground is the building, its walls and basement: the load would stand in a wall, and
+    over the basement on nothing, switching off and on as a step) nor along an open
+    trench (the whole length on nothing), as the probe lines (:func:`_check_line_points`)."""
+    ld, g = case["load"], case["geometry"]
+    y = ld["y"]
+    tr = case["trench"]
+    if tr["type"] == "open" and tr["width"] > 0 and \
+            tr["distance"] < -y < tr["distance"] + tr["width"]:
+        return [("load.y", y, f"the load's path runs along the open trench (y = "
+                 f"{-tr['distance'] - tr['width']:g} to {-tr['distance']:g} m: trench.distance, "
+                 "trench.width), a void with no ground to stand on: allowed y outside it")]
+    crossing = load_path_crossing(case)
+    if crossing is None:
+        return []
+    k, rest = quarter_turns(case["building.rotation"])
+    th = math.radians(90.0 * k + rest)
+    cy = 0.5 * (g["ys2"] + g["ys3"])
+    half = (0.5 * (g["x3"] - g["x2"]) * abs(math.sin(th))
+            + 0.5 * (g["ys2"] - g["ys3"]) * abs(math.cos(th)))
+    lo, hi = round(cy - half, 6), round(cy + half, 6)
+    return [("load.y", y, f"the load's path y = {y:g} m runs through the building's plan "
+             f"(x {crossing[0]:g} to {crossing[1]:g} m, y {lo:g} to {hi:g} m: geometry.x2, "
+             "x3, ys3, ys2 and building.rotation): the load would stand in its walls and on "
+             f"nothing over the basement; allowed: load.y <= {lo:g} or >= {hi:g} m, or "
+             "load.x_start, x_end, t_after that keep the loads off the plan")]
 
 
 #: The commands that solve the model with its track (modes, the vehicle on them, what is
@@ -729,9 +761,17 @@ def _check_levels(case: Case) -> list[tuple[str, Any, str]]:
     return []
 
 
-def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[str, Any, str]]:
+#: The geometry keys that set the building's plan along each axis (its far ends).
+_PLAN_KEYS = {"x": ("geometry.x3", "geometry.x2"), "y": ("geometry.ys3", "geometry.ys2")}
+
+
+def _check_spans(case: Case, axis: str, plan: float, plan_text: str
+                 ) -> list[tuple[str, Any, str]]:
     """The building's spans along ``axis``: as many as bays, adding up to the plan between
-    the outer column lines, each wider than a footing."""
+    the outer column lines, each wider than a footing. A plan too small for the frame
+    blames the key the case gave: the plan's (``geometry.*``) when it gives the plan and
+    not the frame, else the footings."""
+    b, given = case["building"], case.given or {}
     fs, bays, spans = b["footing_size"], b[f"bays_{axis}"], list(b[f"spans_{axis}"])
     inner = plan - fs
     if spans:
@@ -745,13 +785,27 @@ def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[
                      f"lines sit footing_size/2 inside the plan); they add up to "
                      f"{sum(spans):g} m")]
     span = min(spans) if spans else inner / bays
-    if not fs < span:
-        key = f"building.spans_{axis}" if spans else "building.footing_size"
-        return [(key, b[key.split(".")[1]],
-                 f"the footings must fit between the column lines: footing_size = {fs:g} m must "
-                 f"be < the smallest span along {axis}, {span:g} m ({plan_text} = {plan:g} m, "
-                 f"{bays} bay{'s' if bays > 1 else ''})")]
-    return []
+    if fs < span:
+        return []
+    if spans:
+        return [(f"building.spans_{axis}", spans,
+                 f"the footings must fit between the column lines: every span must be > "
+                 f"building.footing_size = {fs:g} m")]
+    # what the case changed (a file may list every key at its default: the baseline)
+    touched = {k for k in given if k in ALL_KEYS and case[k] != ALL_KEYS[k].default}
+    frame = {"building.footing_size", f"building.bays_{axis}"}
+    plan_keys = [k for k in _PLAN_KEYS[axis] if k in touched]
+    if plan_keys and not frame & touched:
+        return [(plan_keys[0], case[plan_keys[0]],
+                 f"makes the building's plan {plan_text} = {plan:g} m, too small for its "
+                 f"frame: it must be > {(bays + 1) * fs:g} m ({bays + 1} column lines, "
+                 f"building.bays_{axis} = {bays}, with footings of building.footing_size = "
+                 f"{fs:g} m and a span wider than a footing between them)")]
+    return [("building.footing_size", fs,
+             f"the footings must fit between the column lines: must be < ({plan_text}) / "
+             f"(bays_{axis} + 1) = {plan / (bays + 1):g} m ({plan_text} = {plan:g} m, "
+             f"{bays} bay{'s' if bays > 1 else ''}: a span wider than a footing between "
+             "them)")]
 
 
 def _sizes_given(case: Case, section: str, keys: Sequence[str]) -> list[tuple[str, Any, str]]:

@@ -9,9 +9,10 @@ raising, so that :func:`railvib_hpc.config.build_case` reports them all in one
 
 from __future__ import annotations
 
+import copy
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from .schema import (
     MAX_SOIL_LAYERS,
     MIN_SOIL_LAYER_THICKNESS,
     PARTS,
+    PRESETS,
     PROBE_LINE_KEYS,
     PROBE_LINE_SIDES,
     SOIL_LAYER_KEYS,
@@ -385,6 +387,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
           "Z0 < Z1 < Z2 < Z3 < Z4")
     if out:
         return out
+    out.extend(feature_key_problems(case))
 
     # track
     if not _close(g["x1"] - g["x0"], t["rigid_length"]):
@@ -462,14 +465,6 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("mesh.file", m["file"], f"file not found (looked for {f})"))
         elif f.suffix != ".msh":
             out.append(("mesh.file", m["file"], "must be a gmsh .msh file"))
-    if m["layout"] == "thesis" and not m["file"]:
-        for leaf in ("size_far", "size_deep", "layer_elements"):
-            default = ALL_KEYS[f"mesh.{leaf}"].default
-            if m[leaf] != default:
-                out.append((f"mesh.{leaf}", m[leaf],
-                            f"applies to mesh.layout = 'refined' only; the 'thesis' layout "
-                            f"uses the APDL script's divisions (leave it at {default!r} or set "
-                            "mesh.layout = 'refined')"))
     if m["refinement"] > 6:
         out.append(("mesh.refinement", m["refinement"],
                     "must be <= 6 (refinement 3 is already ~1.5M nodes)"))
@@ -492,6 +487,83 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _baseline(case: Any, key: str) -> Any:
+    """The default of ``key``: the case's preset's value, else the schema's."""
+    return PRESETS.get(case["case.preset"], {}).get(key, ALL_KEYS[key].default)
+
+
+def _at_default(case: Any, key: str, value: Any) -> bool:
+    """Whether ``value`` is a default of ``key``: the preset's or the schema's (a file that
+    lists every key at the APDL values, with the preset ``table1``, sets them unused)."""
+    return value == _baseline(case, key) or value == ALL_KEYS[key].default
+
+
+def _off_text(condition: Any, case: Any, default: Any) -> str:
+    part = condition.failing(case)
+    return (f"applies to {part.text} only; here {part.here(case)}: leave it at its "
+            f"default {default!r} (or leave it out)")
+
+
+def feature_key_problems(case: Case) -> list[tuple[str, Any, str]]:
+    """The one rule of the keys that belong to a feature (:attr:`Param.applies
+    <railvib_hpc.schema.Param>`): where the feature is off, the key keeps its default.
+
+    A key set to its default (the schema's, or its preset's) where its feature is off is
+    accepted (a file may list every key, as ``jobs/thesis_baseline.toml`` does); any other
+    value is refused, naming the
+    condition that does not hold and the value that breaks it. The entries of
+    ``train2.vehicle`` follow the rule of their ``[vehicle]`` key (its cars' keys apply
+    to cars only). Derived keys are not checked (their value follows from others).
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case
+    >>> feature_key_problems(Case.defaults()) == []
+    True
+    """
+    out: list[tuple[str, Any, str]] = []
+    for key, param in ALL_KEYS.items():
+        condition = param.applies
+        if condition is None or param.derived:
+            continue
+        value, default = case[key], _baseline(case, key)
+        if _at_default(case, key, value):
+            continue
+        if not condition.holds(case):
+            out.append((key, value, _off_text(condition, case, default)))
+        elif param.kind == "vehicle":
+            for name, entry in value.items():
+                inner = ALL_KEYS[f"vehicle.{name}"].applies
+                if inner is not None and not inner.holds(case):
+                    out.append((f"{key}.{name}", entry, _off_text(inner, case, "not given")))
+    return out
+
+
+def switched_off(case: Case, changes: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys whose feature ``changes`` (``{dotted key: value}``, e.g. a study variant's
+    overrides) switch off while the case sets them: ``{key: default}`` to reset, so that
+    a variant that replaces, say, the case's pml faces by rollers does not carry the
+    layer's keys into a case that would refuse them. Keys that ``changes`` set themselves
+    stay as given (the rule judges them)."""
+    values = {k: case[k] for k in ALL_KEYS}
+    values.update({k: v for k, v in changes.items() if k in values})
+    out = {}
+    for key, param in ALL_KEYS.items():
+        condition = param.applies
+        if condition is None or param.derived or key in changes:
+            continue
+        default = _baseline(case, key)
+        if _at_default(case, key, values[key]) or not condition.holds(case):
+            continue
+        try:
+            off = not condition.holds(values)
+        except (TypeError, KeyError):      # a badly typed change: build_case names it
+            continue
+        if off:
+            out[key] = copy.deepcopy(default)
+    return out
+
+
 def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     """A second track: its sleepers clear of the first's and inside the soil; the
     ``[train2]`` keys only with it."""
@@ -499,10 +571,8 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     if t["count"] > 2:
         return [("track.count", t["count"], "must be 1 or 2, or 0 (no track: the moving load "
                  "of [load] on the bare soil)")]
-    if t["count"] < 2:
-        return [(f"train2.{k}", v, "applies to a second track only: set track.count = 2 (or "
-                 "leave it out)")
-                for k, v in case["train2"].items() if v != ALL_KEYS[f"train2.{k}"].default]
+    if t["count"] < 2:               # ([train2] applies to a second track only: Param.applies)
+        return []
     out = []
     own = case["train2.vehicle"]
     if own:
@@ -527,26 +597,13 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     """``track.count = 0`` (the bare soil) goes with the moving surface load of ``[load]``
     and nothing of the track or the vehicle; ``[load]`` goes with it only."""
     t, ld = case["track"], case["load"]
-    if t["count"] != 0:
-        return [(f"load.{k}", v, "applies to the moving load on the bare soil only: set "
-                 "track.count = 0 (or leave [load] out)")
-                for k, v in ld.items() if v != ALL_KEYS[f"load.{k}"].default]
+    if t["count"] != 0:          # ([load] applies to the bare soil only: Param.applies)
+        return []
     if not ld["force"] > 0:
         return [("track.count", 0, "0 (no track) needs the moving surface load: set "
                  "load.force > 0 ([load]); with a track: 1 or 2")]
     out: list[tuple[str, Any, str]] = []
     bare = "with track.count = 0 (no track: the moving load of [load] on the bare soil)"
-    # the train's keys: a file that lists them at their defaults (the baseline) is fine
-    given = sorted(k for k in (case.given or {})
-                   if k.split(".", 1)[0] in ("vehicle", "irregularity", "train2")
-                   and k in ALL_KEYS and case[k] != ALL_KEYS[k].default
-                   and k != "vehicle.supercritical")       # (the load's speed check too)
-    out.extend((k, case[k], f"applies to the train; {bare} leave it at its default "
-                f"{ALL_KEYS[k].default!r} (the load's keys are load.*)") for k in given)
-    for key, allowed in (("track.embankment_height", 0.0), ("track.ends", "rigid")):
-        if case[key] != allowed:
-            out.append((key, case[key], f"belongs to the track; {bare} leave it at "
-                        f"{allowed!r}"))
     if case["mesh.file"]:
         out.append(("mesh.file", case["mesh.file"], f"{bare} the mesh is the generated one "
                     "(its soil without the track bed): leave mesh.file out"))
@@ -734,13 +791,6 @@ def _check_levels(case: Case) -> list[tuple[str, Any, str]]:
     if own and len(b["slab_bases"]) != b["storeys"]:
         return [("building.slab_bases", b["slab_bases"],
                  f"one slab per storey: {b['storeys']} entries (building.storeys)")]
-    if own:
-        given = [k for k in ("z_slab1_base", "z_slab2_base")
-                 if b[k] != ALL_KEYS[f"building.{k}"].default]
-        if given:
-            return [(f"building.{given[0]}", b[given[0]],
-                     "building.slab_bases gives every slab's level: leave z_slab1_base and "
-                     "z_slab2_base out (or slab_bases empty)")]
     levels = [("building.footing_height", b["footing_height"], "footing top"),
               ("building.beam_depth", b["footing_height"] + b["beam_depth"], "grade-beam top"),
               ("geometry.zbb", g["z1"] - g["zbb"], "ground level (Z1 - ZBB)")]
@@ -929,15 +979,11 @@ def _check_bands(case: Case) -> list[tuple[str, Any, str]]:
     out: list[tuple[str, Any, str]] = []
     md = case["modal"]
     edges = list(md["bands"])
-    if edges:
-        if md["f_max"] <= 0:
-            out.append(("modal.bands", edges, "needs modal.f_max > 0 (the top of the last band)"))
-        elif any(not 0 < e < md["f_max"] for e in edges) or \
-                any(b <= a for a, b in zip(edges, edges[1:])):
-            out.append(("modal.bands", edges, f"must be strictly ascending inside (0, "
-                                              f"modal.f_max = {md['f_max']!r})"))
-    if md["band_only"] and md["f_max"] <= 0:
-        out.append(("modal.band_only", md["band_only"], "needs modal.f_max > 0"))
+    # (modal.f_max = 0: the rule of Param.applies refuses the bands)
+    if edges and md["f_max"] > 0 and (any(not 0 < e < md["f_max"] for e in edges) or
+                                      any(b <= a for a, b in zip(edges, edges[1:]))):
+        out.append(("modal.bands", edges, f"must be strictly ascending inside (0, "
+                                          f"modal.f_max = {md['f_max']!r})"))
     if (md["bands"] or md["band_only"] or md["band_groups"] > 1) and \
             md["method"] != "block_lanczos":
         out.append(("modal.method", md["method"], "band settings need 'block_lanczos'"))
@@ -1064,10 +1110,6 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     v, irr, mbs = case["vehicle"], case["irregularity"], case["mbs"]
     out.extend(_vehicle_problems(v, case["track.gauge"], "vehicle"))
     out.extend(_speed_problems(case))
-    if v["drop_height"] > 0 and v["type"] == "moving_force":
-        out.append(("vehicle.drop_height", v["drop_height"],
-                    "a drop needs a vehicle with masses: vehicle.type = 'wheelset' or "
-                    "'vehicle' (moving forces have no initial condition)"))
     if v["x_end"] and v["x_end"] <= v["x_start"]:
         out.append(("vehicle.x_end", v["x_end"],
                     f"must be 0 (end of the rigid exit rail) or > vehicle.x_start = "

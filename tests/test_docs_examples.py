@@ -15,8 +15,10 @@ import pytest
 MODULES = [
     "railvib_hpc",
     "railvib_hpc.api",
+    "railvib_hpc.applies",
     "railvib_hpc.config",
     "railvib_hpc.site",
+    "railvib_hpc.validation",
     "railvib_hpc.pipeline",
     "railvib_hpc.petsc_env",
     "railvib_hpc.sections",

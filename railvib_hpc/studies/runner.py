@@ -222,6 +222,8 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     analysis = _annotate(mod.analyse(plan, shown, settings), entries, coverage)
     if coverage["warning"]:
         rep.info(f"WARNING: {coverage['warning']}")
+    for warning in analysis.get("warnings", []):        # e.g. Sobol' indices left out
+        rep.info(f"WARNING: {warning}")
     results = shown
     fig_dir = root / "figures"
     if kind == "reflection":

@@ -213,6 +213,33 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
                      shared_overrides=shared if reduced else None)
 
 
+def listing_columns(plan_: StudyPlan, case: Case, entries: list[dict]
+                    ) -> tuple[list[str], list[str], list[list[str]]]:
+    """``--list``'s columns: one per sampled parameter (its value in the sample), the field
+    realisation with random fields, and which sample a reference solve checks; the lines
+    above the table name each parameter's key and distribution (the design's own keys,
+    :data:`DESIGN_RESET`, are left out: every sample has them)."""
+    names = _names(plan_)
+    keys = {m.name: (m.key, m.distribution) for m in marginals(case)}
+    notes = [f"{len(_samples(plan_))} samples (method {plan_.info['method']}) of "
+             f"{len(names)} parameter{'s' if len(names) != 1 else ''}:"]
+    notes += [f"  {n}: {keys[n][0]}, {keys[n][1]}" if n in keys else f"  {n}" for n in names]
+    fields = bool(case["uncertainty.field"])
+    refs = {r: s for r, s in (plan_.info.get("reduced") or {}).get("references", {}).items()}
+    head = [*names, *(["realisation"] if fields else []), *(["checks"] if refs else [])]
+    by_name = {v.name: v for v in plan_.variants}
+    cells = []
+    for e in entries:
+        par = by_name[e["name"]].parameter
+        row = [f"{par[n]:.6g}" for n in names]
+        if fields:
+            row.append(str(par["sample"] + 1))
+        if refs:
+            row.append(f"full solve of {refs[e['name']]}" if e["name"] in refs else "")
+        cells.append(row)
+    return notes, head, cells
+
+
 def _names(plan_: StudyPlan) -> list[str]:
     return list(plan_.info.get("parameters") or [])
 

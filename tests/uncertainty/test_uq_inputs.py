@@ -153,3 +153,23 @@ def test_a_grown_design_keeps_its_first_samples(method, first, more):
     one = variant_case(c1, small.variants[0].overrides)
     assert one["uncertainty.parameter"] == [] and one.digest() == \
         variant_case(c2, big.variants[0].overrides).digest()
+
+
+def test_the_listing_shows_the_sampled_values_in_columns(capsys, tmp_path):
+    """The red team: ``--list`` printed ~500 characters per row, four of them the design's
+    own keys (``uncertainty.parameter=[] ...``) on every row. Now one column per
+    parameter, one row per sample, the keys named once above."""
+    assert run(["study", "uncertainty", "jobs/uncertainty_study.toml", "--list", "--out",
+                str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    head = next(ln for ln in lines if ln.startswith("index"))
+    assert head.split() == ["index", "variant", "c_S", "layer", "1", "c_S", "layer", "2",
+                            "damping", "layer", "1", "pad", "stiffness", "speed", "status"]
+    assert "  c_S layer 1: soil.layers[1].c_s, lognormal" in lines
+    assert "  speed: vehicle.speed, uniform" in lines
+    rows = [ln for ln in lines if ln.split()[:2] and ln.split()[1].startswith("s0")]
+    assert len(rows) == 28 and rows[0].split()[:2] == ["0", "s0000"]
+    assert max(map(len, lines)) < 100 and "uncertainty.parameter=[]" not in out
+    speed = float(rows[0].split()[-2])
+    assert 20.0 <= speed <= 40.0

@@ -24,6 +24,7 @@ MODULES = [
     "railvib_hpc.sections",
     "railvib_hpc.io.run_record",
     "railvib_hpc.io.digests",
+    "railvib_hpc.io.out_folder",
     "railvib_hpc.io.products",
     "railvib_hpc.io.stage_protocol",
     "railvib_hpc.io.stage_outputs",

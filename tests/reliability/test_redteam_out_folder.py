@@ -101,3 +101,22 @@ def test_folders_a_user_expects_to_work(tmp_path):
     assert output_folder_problem(made) is None
     if checkout_root() is not None:
         assert output_folder_problem(ROOT / "results" / "x") is None       # the default
+
+
+@pytest.mark.mpi
+@pytest.mark.skipif(checkout_root() is None, reason="not a source checkout")
+def test_the_refusals_are_collective(capsys):
+    """On every rank the same exit code, no rank left waiting, nothing written: the
+    project's docs/ as --out, and (validated on rank 0, broadcast) a load path through
+    the building."""
+    comm = MPI.COMM_WORLD
+    never = ROOT / "results" / "never-written"
+    codes = [run(["transient", B, *COARSE, "--out", str(ROOT / "docs")]),
+             run(["transient", B, *COARSE, "--set", "track.count=0", "--set",
+                  "load.force=1e5", "--set", "load.y=-13", "--out", str(never)])]
+    assert codes == [2, 2] and comm.allgather(codes) == [codes] * comm.size
+    err = capsys.readouterr().err
+    if comm.rank == 0:
+        assert "is inside railvib's own project folder docs/" in err
+        assert "load.y = -13.0: the load's path y = -13 m runs through the building's" in err
+    assert not never.exists() and not (ROOT / "docs" / ".railvib").exists()

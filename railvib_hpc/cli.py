@@ -224,6 +224,11 @@ def run(argv: list[str] | None = None) -> int:
         if problems:                  # before anything is written: one line, exit 2
             raise CaseError(problems)
         out = _out_dir(args, case, rep)
+        if args.command != "check" and not getattr(args, "list", False):
+            from .io.out_folder import refuse_foreign_folder
+
+            # a study adds out/<kind>/ and overwrites nothing in out itself
+            on_root(lambda: refuse_foreign_folder(out, own_only=args.command == "study"))
         code, unused = _dispatch(args, case, out, comm, rep, petsc_options, command)
         if unused:
             _warn(comm, f"railvib {args.command}: warning: PETSc options after '--' that "

@@ -187,6 +187,9 @@ class Case:
         ------
         CaseError
             Naming every invalid key and value.
+            A key given twice with different values (``{"vehicle.speed": 20.0,
+            "vehicle": {"speed": 25.0}}``, or in ``changes`` and a keyword) is refused,
+            naming both spellings.
         TypeError
             When ``changes`` is not a mapping, e.g. another :class:`Case` (which has no
             "changes": use it as it is, or pass ``other.given``, the entries it sets).
@@ -197,9 +200,25 @@ class Case:
             raise TypeError("Case.replace takes {dotted key: value} changes, not "
                             f"{type(changes).__name__}{also}")
         flat = dict(self.given) if self.given is not None else flat_case(self.data)
-        merged = flat_case({**dict(changes or {}), **sections})
-        flat.update(merged)
+        flat.update(flat_entries(dict(changes or {}), sections))
         return build_case(flat, None, self.path)
+
+    def __hash__(self) -> int:
+        """The hash of the case's digest (with its path and notes), consistent with
+        ``==``, which compares the values, the path and the notes: a case can be a dict
+        key or a set member.
+
+        Examples
+        --------
+        >>> a, b = Case.defaults(), Case.defaults()
+        >>> a == b and hash(a) == hash(b) and len({a, b, a.replace({"vehicle.speed": 20})})
+        2
+        """
+        cached = self.__dict__.get("_hash")
+        if cached is None:
+            cached = hash((digest(self.data), self.path, self.notes))
+            object.__setattr__(self, "_hash", cached)      # frozen: computed once
+        return cached
 
     # --------------------------------------------------------------- reading
     def __getitem__(self, dotted: str) -> Any:
@@ -336,6 +355,65 @@ def toml_value(raw: str) -> Any:
     return raw
 
 
+def _spelling(path: tuple[str, ...]) -> str:
+    """How a key was written in a mapping: ``'vehicle.speed'`` or ``'vehicle' -> 'speed'``."""
+    return " -> ".join(repr(p) for p in path)
+
+
+def flat_entries(*mappings: Mapping[str, Any]) -> dict[str, Any]:
+    """The entries of (nested or dotted-key) mappings as ``{dotted key: value}``.
+
+    A key given twice with different values, in two spellings (``{"vehicle.speed": 20.0,
+    "vehicle": {"speed": 25.0}}``) or in two of the mappings, is refused (the same value
+    twice is accepted: nothing is ambiguous).
+
+    Raises
+    ------
+    CaseError
+        One line per such key, naming both spellings and their values.
+
+    Examples
+    --------
+    >>> flat_entries({"vehicle.speed": 20.0, "vehicle": {"type": "wheelset"}})
+    {'vehicle.speed': 20.0, 'vehicle.type': 'wheelset'}
+    >>> flat_entries({"vehicle.speed": 20.0, "vehicle": {"speed": 25.0}})
+    Traceback (most recent call last):
+    ...
+    railvib_hpc.errors.CaseError: invalid case file: vehicle.speed = 20.0: given twice ...
+    """
+    out: dict[str, Any] = {}
+    spelled: dict[str, tuple[str, ...]] = {}
+    problems: list[tuple[str, Any, str]] = []
+
+    def walk(node: Mapping[str, Any], path: tuple[str, ...]) -> None:
+        for k, v in node.items():
+            here = (*path, str(k))
+            if isinstance(v, Mapping):
+                walk(v, here)
+                continue
+            key = ".".join(here)
+            if key in out and not _same(out[key], v):
+                problems.append((key, out[key], f"given twice with different values, as "
+                                 f"{_spelling(spelled[key])} = {out[key]!r} and as "
+                                 f"{_spelling(here)} = {v!r}: give it once"))
+                continue
+            out[key], spelled[key] = v, here
+
+    for mapping in mappings:
+        walk(mapping, ())
+    if problems:
+        raise CaseError(problems)
+    return out
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal values (numbers by value, 20 == 20.0; anything uncomparable differs)."""
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):                   # e.g. numpy arrays
+        return False
+
+
 def _group_tables(flat: dict[str, Any]) -> None:
     """Gather the dotted keys of a table-valued key (``train2.vehicle.car_mass``) into it."""
     for key, param in ALL_KEYS.items():
@@ -358,7 +436,7 @@ def build_case(raw: dict[str, Any], overrides: list[str] | None = None,
         With every problem found.
     """
     problems: list[tuple[str, Any, str]] = []
-    flat = flat_case(raw)          # values made plain by check_value (_plain)
+    flat = flat_entries(raw)       # values made plain by check_value (_plain)
     for text in overrides or []:
         key, value = parse_override(text)
         flat[key] = value

@@ -54,6 +54,9 @@ def case_reference_markdown() -> str:
             extra = f" Allowed: {', '.join(p.choices)}." if p.choices else ""
             if p.derived:
                 extra += f" Derived when not given: `{p.derived}` (a given value must agree)."
+            if p.applies is not None:
+                extra += (f" Applies only with {p.applies.text}; elsewhere it keeps its "
+                          "default.")
             src = source(f"{sec}.{leaf}").replace("|", "/")
             out.append(f"| `{leaf}` | `{_fmt(p.default)}` | {p.unit} | {p.doc}.{extra} | "
                        f"{src} |")
@@ -78,7 +81,8 @@ def default_case_toml() -> str:
         "# --set modal.f_max=57.87 (all modes below 57.87 Hz; see docs/thesis.md).",
         "# Units are SI (m, kg, s, N, Pa). Building coordinates are relative to (xbb, ybb, zbb).",
         "# Keys commented out are derived from others (docs/sites.md); giving one is allowed",
-        "# when it agrees.",
+        "# when it agrees. A key that applies only with a feature (its comment says which)",
+        "# keeps its default where the feature is off: another value there is refused.",
         "",
     ]
 
@@ -91,7 +95,9 @@ def default_case_toml() -> str:
                 src = source(f"{path}.{k}")
                 lines.append(("# " if p.derived else "") + f"{k} = {_fmt(p.default)}  # "
                              + (f"derived: {p.derived}; " if p.derived else "")
-                             + f"{p.doc}{unit}" + (f" (source: {src})" if src else ""))
+                             + f"{p.doc}{unit}" + (f" (source: {src})" if src else "")
+                             + (f" (applies only with {p.applies.text})"
+                                if p.applies is not None else ""))
             lines.append("")
         for k, v in tree.items():
             if not isinstance(v, Param):

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
+from .applies import Condition, above, all_of, any_of, includes, is_, is_not, not_empty
 from .assess.standards import BUILDING_USES, FTA_EVENTS, PERIODS, STANDARDS
 from .sections import APDL_RAIL, APDL_SLEEPER, SectionProperties
 from .uncertainty.reduced import MODELS as UQ_MODELS
@@ -66,6 +67,11 @@ class Param:
         How the value follows from other keys when the case does not give it (``""``: it
         does not; :func:`railvib_hpc.site.derive_keys` computes it; a given value must
         agree). The baseline case lists such a key commented out.
+    applies
+        The condition under which the key's feature is on (:mod:`railvib_hpc.applies`;
+        ``None``: always). Where it does not hold, the key must keep its default (the
+        preset's value): :func:`railvib_hpc.validation.feature_key_problems` refuses any
+        other with "applies to ... only", the one rule every key obeys.
     """
 
     default: Any
@@ -78,6 +84,7 @@ class Param:
     maximum: float | None = None
     source: str = ""
     derived: str = ""
+    applies: Condition | None = None
 
 
 _APDL = "thesis App. A (APDL)"
@@ -110,17 +117,22 @@ def _study_solver(what: str) -> Param:
 
 
 def _mat(e: float, nu: float, rho: float, what: str, source: str | tuple[str, str, str],
-         damping_source: str = _THESIS_DAMPING) -> dict[str, Param]:
-    """``materials.<name>``: ``source`` of E, nu and rho (one for all three, or each its own)."""
+         damping_source: str = _THESIS_DAMPING, applies: Condition | None = None
+         ) -> dict[str, Param]:
+    """``materials.<name>``: ``source`` of E, nu and rho (one for all three, or each its
+    own); ``applies``: when the material is in the model (all four keys)."""
     e_src, nu_src, rho_src = (source,) * 3 if isinstance(source, str) else source
     return {
-        "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos", source=e_src),
+        "E": Param(e, "float", "Pa", f"Young's modulus of the {what}", "pos", source=e_src,
+                   applies=applies),
         "nu": Param(nu, "float", "-", f"Poisson's ratio of the {what}", "poisson",
-                    source=nu_src),
-        "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos", source=rho_src),
+                    source=nu_src, applies=applies),
+        "rho": Param(rho, "float", "kg/m^3", f"density of the {what}", "pos", source=rho_src,
+                     applies=applies),
         "damping_ratio": Param(0.03, "float", "-",
                                f"damping ratio of the {what}, used when modal.damping = "
-                               "'strain_energy'", "fraction", source=damping_source),
+                               "'strain_energy'", "fraction", source=damping_source,
+                               applies=applies),
     }
 
 
@@ -132,8 +144,16 @@ def _mp(number: int, ex: str, prxy: str, dens: str) -> tuple[str, str, str]:
 
 def _section(section: SectionProperties, what: str, horizontal: str,
              secdata: str) -> dict[str, Param]:
-    """``sections.<name>``: the APDL section's properties, each citing its ``SECDATA``."""
+    """``sections.<name>``: the APDL section's properties, each citing its ``SECDATA``
+    (the track's: they apply with a track only)."""
     src = f"{secdata} (railvib_hpc.sections)"
+    return {key: Param(p.default, p.kind, p.unit, p.doc, p.check, source=p.source,
+                       applies=ON_TRACK)
+            for key, p in _section_params(section, what, horizontal, src).items()}
+
+
+def _section_params(section: SectionProperties, what: str, horizontal: str,
+                    src: str) -> dict[str, Param]:
     return {
         "area": Param(section.area, "float", "m^2", f"{what} cross-section area", "pos",
                       source=src),
@@ -264,6 +284,72 @@ def _face(default: str, where: str) -> Param:
                  "the mesh, boundary.pml_*; railvib transient only, any engine)",
                  choices=BOUNDARY_TYPES)
 
+# The features keys belong to (Param.applies, railvib_hpc.applies): where one is off, its
+# keys keep their defaults (railvib_hpc.validation.feature_key_problems).
+#: The track and the train on it (track.count = 0: the bare soil with the load of [load]).
+ON_TRACK = above("track.count", 0, what="a case with a track")
+#: The moving surface load of [load] on the bare soil.
+BARE_SOIL = is_("track.count", 0, what="the moving load on the bare soil")
+SECOND_TRACK = is_("track.count", 2, what="a second track")
+SECOND_TRAIN = all_of(SECOND_TRACK, is_("train2.enabled", True, what="a second train"))
+SECOND_TRAIN_CARS = all_of(SECOND_TRAIN, is_("vehicle.type", "vehicle"))
+#: The vehicle models: moving forces have no wheels (no contact, no irregularity).
+MOVING_FORCES = all_of(ON_TRACK, is_("vehicle.type", "moving_force"))
+WHEELS = all_of(ON_TRACK, is_not("vehicle.type", "moving_force",
+                                 what="wheels on the rails"))
+WHEELSET = all_of(ON_TRACK, is_("vehicle.type", "wheelset"))
+CARS = all_of(ON_TRACK, is_("vehicle.type", "vehicle"))
+#: The wheelset's mass: its own, and the moving forces' default (mass g / 2).
+WHEELSET_MASS = all_of(ON_TRACK, any_of(
+    is_("vehicle.type", "wheelset"),
+    all_of(is_("vehicle.type", "moving_force"), is_("vehicle.force", 0.0)),
+    what="vehicle.type = 'wheelset', or 'moving_force' with vehicle.force = 0"))
+PROFILE_FILE = all_of(WHEELS, is_("irregularity.type", "file"))
+RANDOM_PROFILE = all_of(WHEELS, is_("irregularity.type", "fra", "iso8608"))
+WHEEL_FLATS = all_of(WHEELS, above("irregularity.flat_depth", 0))
+SUPPORTED_ENDS = all_of(ON_TRACK, is_("track.ends", "supported"))
+EMBANKMENT = all_of(ON_TRACK, above("track.embankment_height", 0))
+OWN_HEIGHTS_NOT_GIVEN = is_("building.slab_bases", [], what="storeys of one height")
+STOREY_2 = all_of(OWN_HEIGHTS_NOT_GIVEN, above("building.storeys", 2, inclusive=True))
+REFINED_LAYOUT = is_("mesh.layout", "refined")
+#: A trench's or a block's lines are in the mesh with a type, or a width (its reference).
+TRENCH = any_of(is_not("trench.type", "none"), above("trench.width", 0))
+FILLED_TRENCH = is_("trench.type", "filled")
+WIB = any_of(is_not("wib.type", "none"), above("wib.width", 0))
+WIB_BLOCK = is_("wib.type", "block")
+USP = all_of(ON_TRACK, above("usp.modulus", 0))
+BALLAST_MAT = all_of(ON_TRACK, above("ballast_mat.modulus", 0))
+ISOLATION = above("isolation.modulus", 0)
+
+
+def _faces(kind: str, what: str, study: bool = False) -> Condition:
+    """A truncation face of type ``kind`` (or, with ``study``, the reflection study's
+    variants of that type, whose faces it sets)."""
+    faces = [is_(f"boundary.{f}", kind) for f in BOUNDARY_FACES]
+    text = f"{what} (boundary.x_min, x_max, y_min, y_max or base = {kind!r}"
+    if study:
+        faces.append(includes("study.reflection.boundaries", kind))
+        text += f", or study.reflection.boundaries with {kind!r}"
+    return any_of(*faces, what=text + ")")
+
+
+ABSORBING_FACES = _faces("absorbing", "an absorbing face", study=True)
+CAUGHEY_FACES = _faces("caughey", "a caughey face")
+PML_FACES = _faces("pml", "a perfectly matched layer", study=True)
+LAYER_FACES = any_of(CAUGHEY_FACES, _faces("pml", "a perfectly matched layer"),
+                     what="a caughey or pml face (boundary.x_min, x_max, y_min, y_max or "
+                          "base)")
+BAND_SLICED = above("modal.f_max", 0, what="the band-sliced eigensolve")
+BLOCK_LANCZOS = is_("modal.method", "block_lanczos")
+STATIC_CORRECTION = is_("mbs.static_correction", True)
+DIRECT_ENGINE = is_("transient.engine", "direct")
+IMEX_ENGINE = is_("transient.engine", "imex")
+FTA = includes("assessment.standards", "fta")
+DIN4150_2 = includes("assessment.standards", "din4150-2")
+REDUCED_MODEL = is_("uncertainty.model", "reduced")
+REDUCED_BASIS = not_empty("uncertainty.basis", what="a reduced basis")
+RANDOM_FIELDS = not_empty("uncertainty.field", what="random fields")
+
 SCHEMA: dict[str, dict[str, Any]] = {
     "case": {
         "name": Param("thesis_baseline", "str", "-", "name of the case (used in reports)"),
@@ -349,7 +435,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "box, trains of any length pass; the modal path needs modal.damping = "
                       "'full', which projects the supports' dashpots on the modes)",
                       choices=("rigid", "supported"),
-                      source=f"{_APDL}: rigid rail sections (Rigid=3)"),
+                      source=f"{_APDL}: rigid rail sections (Rigid=3)", applies=ON_TRACK),
         "end_stiffness": Param(0.0, "float", "N/m",
                                "track.ends = 'supported': vertical spring per rail at each "
                                "support (the longitudinal and lateral ones in the pads' "
@@ -358,7 +444,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                "receptance at its middle (one static solve)", "nonneg",
                                source="not in the thesis (rigid ends): the model's own static "
                                       "receptance, beam on an elastic foundation (Hetenyi "
-                                      "1946)"),
+                                      "1946)", applies=SUPPORTED_ENDS),
         "end_damping": Param(1.0, "float", "-",
                              "track.ends = 'supported': damping ratio of the supports at the far "
                              "ends, relative to critical (2 sqrt(k m) with the rail mass of a "
@@ -366,7 +452,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "(zero at the box): an absorbing track end; 0: no dashpots",
                              "nonneg",
                              source="not in the thesis (rigid ends): critical damping at the "
-                                    "far end, graded as a quadratic sponge layer"),
+                                    "far end, graded as a quadratic sponge layer",
+                             applies=SUPPORTED_ENDS),
         "rail_length": Param(21.6, "float", "m", "length of the flexible rail", "pos",
                              source=f"{_APDL}: Rail_length=21.6; {_T1}"),
         "gauge": Param(1.5113, "float", "m", "distance between the rail axes (2 x 0.75565)", "pos",
@@ -384,12 +471,13 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "z4) by this height (0: the thesis's track bed directly on "
                                    "the ground, a track at grade)", "nonneg",
                                    source=f"{_APDL}: the track bed on the ground (Z1 = top of the "
-                                          "subgrade), no fill"),
+                                          "subgrade), no fill", applies=ON_TRACK),
         "embankment_slope": Param(1.5, "float", "-",
                                   "horizontal run of the fill's side slopes per unit height "
                                   "(1.5: 1V:1.5H); the fill's top is the subballast's base "
                                   "(half-width |YS1|)", "pos",
-                                  source="not in the thesis: 1V:1.5H, the usual fill slope"),
+                                  source="not in the thesis: 1V:1.5H, the usual fill slope",
+                                  applies=EMBANKMENT),
         "count": Param(1, "int", "-",
                        "tracks on the embankment: 1, or 2 (the second one track.spacing further "
                        "from the building, on the same embankment), or 0: no track, no "
@@ -401,7 +489,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                          "distance between the two tracks' centre lines (track.count = 2)",
                          "pos",
                          source="not in the thesis (one track): 4.0 m, the usual track centre "
-                                "distance of European main lines (DB Ril 800.0130: >= 4.0 m)"),
+                                "distance of European main lines (DB Ril 800.0130: >= 4.0 m)",
+                         applies=SECOND_TRACK),
     },
     "building": {
         "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos",
@@ -419,11 +508,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "wall_thickness": Param(0.3, "float", "m", "WALL_WIDTH: basement wall thickness", "pos",
                                 source=f"{_APDL}: WALL_WIDTH=0.3"),
         "z_slab1_base": Param(4.2, "float", "m", "Z_SLAB1_BASE: underside of slab 1 above ZBB",
-                              "pos", source=f"{_APDL}: Z_SLAB1_BASE=4.2"),
+                              "pos", source=f"{_APDL}: Z_SLAB1_BASE=4.2",
+                              applies=OWN_HEIGHTS_NOT_GIVEN),
         "z_slab2_base": Param(8.0, "float", "m",
                               "Z_SLAB2_BASE: underside of slab 2 above ZBB (each storey above "
                               "repeats storey 2's height)", "pos",
-                              source=f"{_APDL}: Z_SLAB2_BASE=8"),
+                              source=f"{_APDL}: Z_SLAB2_BASE=8", applies=STOREY_2),
         "storeys": Param(2, "int", "-",
                          f"storeys above the basement, one slab on top of each; at most "
                          f"{MAX_STOREYS}, a program limit",
@@ -460,26 +550,30 @@ SCHEMA: dict[str, dict[str, Any]] = {
                           source=f"{_APDL}: the walls are parallel to the track (no rotation)"),
     },
     "materials": {
-        "rail": _mat(210e9, 0.30, 7700.0, "flexible rail", _mp(1, "210e9", "0.30", "7700")),
+        "rail": _mat(210e9, 0.30, 7700.0, "flexible rail", _mp(1, "210e9", "0.30", "7700"),
+                     applies=ON_TRACK),
         "rigid_rail": _mat(210e10, 0.30, 7700.0, "rigid rail (its DOFs are fixed)",
-                           _mp(2, "210e10", "0.30", "7700")),
-        "sleeper": _mat(64e9, 0.25, 2570.0, "sleepers", _mp(3, "64e9", "0.25", "2570")),
-        "ballast": _mat(260e6, 0.25, 1800.0, "ballast", _mp(4, "260e6", "0.25", "1800")),
+                           _mp(2, "210e10", "0.30", "7700"), applies=ON_TRACK),
+        "sleeper": _mat(64e9, 0.25, 2570.0, "sleepers", _mp(3, "64e9", "0.25", "2570"),
+                        applies=ON_TRACK),
+        "ballast": _mat(260e6, 0.25, 1800.0, "ballast", _mp(4, "260e6", "0.25", "1800"),
+                        applies=ON_TRACK),
         "subballast": _mat(200e6, 0.20, 1850.0, "subballast",
-                           _mp(5, "200e06", "0.2", "1850")),
+                           _mp(5, "200e06", "0.2", "1850"), applies=ON_TRACK),
         "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade", _mp(6, "200e6", "0.2", "1850")),
         "concrete": _mat(31e9, 0.25, 2500.0, "concrete building",
                          _mp(10, "31e9", "0.25", "2500")),
         # mitigation materials: not in the thesis (its future work); typical values
         "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')",
                             "not in the thesis: EPS geofoam EPS 20 (EN 14933, E 3-8 MPa, "
-                            "rho ~20 kg/m^3), the usual soft trench fill", _OTHER_DAMPING),
+                            "rho ~20 kg/m^3), the usual soft trench fill", _OTHER_DAMPING,
+                            FILLED_TRENCH),
         "wib": _mat(2e9, 0.25, 2100.0, "wave-impeding block ([wib])",
                     "not in the thesis: jet-grouted / cement-stabilised soil (E 0.5-5 GPa, "
-                    "rho 2000-2200 kg/m^3)", _OTHER_DAMPING),
+                    "rho 2000-2200 kg/m^3)", _OTHER_DAMPING, WIB_BLOCK),
         "fill": _mat(1.5e8, 0.30, 1900.0, "embankment fill (track.embankment_height)",
                      "not in the thesis: compacted granular embankment fill (E 50-200 MPa, "
-                     "rho 1800-2000 kg/m^3)", _OTHER_DAMPING),
+                     "rho 1800-2000 kg/m^3)", _OTHER_DAMPING, EMBANKMENT),
     },
     "sections": {
         "rail": _section(APDL_RAIL, "rail", "lateral", _RAIL_SEC),
@@ -487,17 +581,17 @@ SCHEMA: dict[str, dict[str, Any]] = {
     },
     "pads": {
         "kx": Param(70e8, "float", "N/m", "rail pad stiffness along the track", "pos",
-                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)"),
+                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)", applies=ON_TRACK),
         "ky": Param(70e8, "float", "N/m", "rail pad stiffness across the track", "pos",
-                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)"),
+                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)", applies=ON_TRACK),
         "kz": Param(70e8, "float", "N/m", "rail pad stiffness, vertical", "pos",
-                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)"),
+                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)", applies=ON_TRACK),
         "cx": Param(5e5, "float", "N s/m", "rail pad damping along the track", "nonneg",
-                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)"),
+                    source=f"{_APDL}: R,7,70e8,5e5 (COMBIN14 KEYOPT(2)=1)", applies=ON_TRACK),
         "cy": Param(5e5, "float", "N s/m", "rail pad damping across the track", "nonneg",
-                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)"),
+                    source=f"{_APDL}: R,8,70e8,5e5 (COMBIN14 KEYOPT(2)=2)", applies=ON_TRACK),
         "cz": Param(5e5, "float", "N s/m", "rail pad damping, vertical", "nonneg",
-                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)"),
+                    source=f"{_APDL}: R,9,70e8,5e5 (COMBIN14 KEYOPT(2)=3)", applies=ON_TRACK),
     },
     "mesh": {
         "layout": Param("thesis", "str", "-",
@@ -515,7 +609,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                       "use this gmsh .msh (same physical-group names) instead of generating; "
                       "relative to the case file"),
         "rail_elements_per_bay": Param(5, "int", "-", "rail beam elements between sleepers",
-                                       "pos", source=f"{_APDL}: No_rail_ele_betwn_sleeper=5"),
+                                       "pos", source=f"{_APDL}: No_rail_ele_betwn_sleeper=5",
+                                       applies=ON_TRACK),
         "soil_elements_per_bay": Param(2, "int", "-",
                                        "soil elements along x per sleeper bay, away from building",
                                        "pos", source=f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2"),
@@ -525,17 +620,17 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                                 source=f"{_APDL}: No_soil_ele_betwn_sleeper_B=4"),
         "sleeper_outer_elements": Param(2, "int", "-",
                                         "sleeper elements between its end and the rail", "pos",
-                                        source=f"{_APDL}: SLP_OUT_ELE=2"),
+                                        source=f"{_APDL}: SLP_OUT_ELE=2", applies=ON_TRACK),
         "sleeper_middle_elements": Param(4, "int", "-", "sleeper elements between the rails",
-                                         "pos", source=f"{_APDL}: SLP_MID_ELE=4"),
+                                         "pos", source=f"{_APDL}: SLP_MID_ELE=4", applies=ON_TRACK),
         "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos",
                                    source=f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)"),
         "size_far": Param(0.6, "float", "m",
                           "layout 'refined': element size across the track in the far field",
-                          "pos"),
+                          "pos", applies=REFINED_LAYOUT),
         "size_deep": Param(0.8, "float", "m",
                            "layout 'refined': vertical element size below the building base",
-                           "pos"),
+                           "pos", applies=REFINED_LAYOUT),
         "size_building_y": Param(0.3, "float", "m",
                                  "building and soil element size across the track in line with "
                                  "the building", "pos",
@@ -545,7 +640,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                         "walls 0.6 m"),
         "layer_elements": Param(1, "int", "-",
                                 "layout 'refined': elements through each of the ballast and "
-                                "subballast layers", "pos"),
+                                "subballast layers", "pos", applies=REFINED_LAYOUT),
         "elements_per_wavelength": Param(0.0, "float", "-",
                                          "if > 0: soil element sizes at most c_S / (f n) "
                                          "(f = mesh.wavelength_hz, which must then be > 0; "
@@ -598,10 +693,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "distance": Param(0.0, "float", "m",
                           "distance from the track centreline (y = 0) to the trench's near "
                           "face, towards the building (beyond the embankment toe |YS1|, before "
-                          "the building face |YS2|)", "nonneg"),
+                          "the building face |YS2|)", "nonneg", applies=TRENCH),
         "width": Param(0.0, "float", "m", "trench width across the track", "nonneg"),
         "depth": Param(0.0, "float", "m", "trench depth below the ground (geometry.z1)",
-                       "nonneg"),
+                       "nonneg", applies=TRENCH),
     },
     "wib": {
         "type": Param("none", "str", "-",
@@ -613,39 +708,39 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "block width across the track, centred on it (at most the embankment "
                        "base, 2 |YS1|)", "nonneg"),
         "depth": Param(0.0, "float", "m", "depth of the block's top below the ground",
-                       "nonneg"),
-        "thickness": Param(0.0, "float", "m", "block thickness", "nonneg"),
+                       "nonneg", applies=WIB),
+        "thickness": Param(0.0, "float", "m", "block thickness", "nonneg", applies=WIB),
     },
     "usp": {
         "modulus": Param(0.0, "float", "N/m^3",
                          "under-sleeper pads: bedding modulus, vertical stiffness per unit area of"
                          " the sleeper's bearing (EN 16730: soft 0.05-0.1e9, medium 0.1-0.2e9, "
-                         "stiff 0.2-0.3e9) (0: none)", "nonneg"),
+                         "stiff 0.2-0.3e9) (0: none)", "nonneg", applies=ON_TRACK),
         "shear_ratio": Param(0.3, "float", "-",
                              "stiffness along x and y over the vertical one (an elastomer's "
                              "shear stiffness is a fraction of its compression stiffness)",
-                             "pos"),
+                             "pos", applies=USP),
         "loss_factor": Param(0.1, "float", "-",
                              "loss factor eta of the pads: damping ratio eta/2 of its strain "
                              "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
-                             "elastomers", "fraction"),
+                             "elastomers", "fraction", applies=USP),
         "width": Param(0.27, "float", "m",
                        "bearing width of the sleeper on the pads (its underside; less than "
                        "track.sleeper_spacing)", "pos",
-                       source=f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m"),
+                       source=f"{_SLP_SEC}: the trapezoid's base, 2 x 0.135 m", applies=USP),
     },
     "ballast_mat": {
         "modulus": Param(0.0, "float", "N/m^3",
                          "ballast mat under the ballast (on the subballast, z = Z2): bedding "
-                         "modulus (typical 0.02-0.1e9) (0: none)", "nonneg"),
+                         "modulus (typical 0.02-0.1e9) (0: none)", "nonneg", applies=ON_TRACK),
         "shear_ratio": Param(0.3, "float", "-",
                              "stiffness along x and y over the vertical one (an elastomer's "
                              "shear stiffness is a fraction of its compression stiffness)",
-                             "pos"),
+                             "pos", applies=BALLAST_MAT),
         "loss_factor": Param(0.1, "float", "-",
                              "loss factor eta of the mat: damping ratio eta/2 of its strain "
                              "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
-                             "elastomers", "fraction"),
+                             "elastomers", "fraction", applies=BALLAST_MAT),
     },
     "isolation": {
         "modulus": Param(0.0, "float", "N/m^3",
@@ -655,16 +750,16 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "shear_ratio": Param(0.3, "float", "-",
                              "stiffness along x and y over the vertical one (an elastomer's "
                              "shear stiffness is a fraction of its compression stiffness)",
-                             "pos"),
+                             "pos", applies=ISOLATION),
         "loss_factor": Param(0.1, "float", "-",
                              "loss factor eta of the bearings: damping ratio eta/2 of its strain "
                              "energy (modal.damping = 'strain_energy'); 0.1 is typical of "
-                             "elastomers", "fraction"),
+                             "elastomers", "fraction", applies=ISOLATION),
         "level": Param("ground", "str", "-",
                        "where the bearings are: 'ground' (on top of the basement, under the "
                        "ground-floor columns, Z1) or 'footings' (under everything of the "
                        "building at its base ZBB; the basement walls stay bonded to the soil "
-                       "beside them)", choices=("ground", "footings")),
+                       "beside them)", choices=("ground", "footings"), applies=ISOLATION),
     },
     "domain": {
         "extra_depth": Param(0.0, "float", "m", "extra subgrade depth below Z0", "nonneg"),
@@ -691,32 +786,33 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "a static load). For a static load the half-space's "
                                    "compliance needs t of 1.5-2.3 times the distance from the "
                                    "load to the faces (bench/spring_static_study.py, "
-                                   "docs/verification.md)", "nonneg"),
+                                   "docs/verification.md)", "nonneg", applies=ABSORBING_FACES),
         "layer_thickness": Param(0.0, "float", "m",
                                  "caughey and pml faces: thickness of the absorbing layer, "
                                  "measured "
                                  "into the mesh from the face (part of the model: enlarge the "
-                                 "domain by it, [domain])", "nonneg"),
+                                 "domain by it, [domain])", "nonneg", applies=LAYER_FACES),
         "layer_damping": Param(0.3, "float", "-",
                                "caughey faces: Rayleigh damping ratio at the face (at "
                                "damping.f1 and f2), decreasing quadratically to 0 at the inner "
-                               "edge of the layer", "fraction"),
+                               "edge of the layer", "fraction", applies=CAUGHEY_FACES),
         "pml_reflection": Param(1e-4, "float", "-",
                                 "pml faces: target reflection coefficient R of the continuous "
                                 "layer for a P wave at normal incidence; sets the profile's "
                                 "largest damping d_max = (p + 1) c_P ln(1 / R) / (2 L) "
-                                "(Collino & Tsogka 2001)", "fraction"),
+                                "(Collino & Tsogka 2001)", "fraction", applies=PML_FACES),
         "pml_power": Param(2.0, "float", "-",
                            "pml faces: exponent p of the damping profile d = d_max (xi / L)^p "
                            "over the depth xi into the layer (2 to 3: Collino & Tsogka 2001)",
-                           "pos"),
+                           "pos", applies=PML_FACES),
         "pml_alpha": Param(PML_ALPHA, "float", "1/s",
                            "pml faces: frequency shift alpha of the stretching 1 + d / (i omega "
                            "+ alpha) (complex frequency shifted PML, Kuzuoglu & Mittra 1996): "
                            "no memory grows under a static or slowly varying load; waves "
                            "below alpha / (2 pi) are absorbed less (default pi 1/s: 0.5 Hz, "
                            "half the lowest assessed band, where the attenuation is 89 % of "
-                           "the classical layer's); 0: the classical PML", "nonneg"),
+                           "the classical layer's); 0: the classical PML", "nonneg",
+                           applies=PML_FACES),
     },
     "damping": {
         "model": Param("rayleigh", "str", "-",
@@ -735,7 +831,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                     "damping grows in proportion to the frequency)", "pos"),
         "pads": Param(False, "bool", "-",
                       "add the rail pads' dashpots (pads.cx, cy, cz) to C (the thesis's 3 % "
-                      "modal damping does not use them)"),
+                      "modal damping does not use them)", applies=ON_TRACK),
     },
     "modal": {
         "n_modes": Param(300, "int", "-", "number of modes to extract", "pos",
@@ -746,17 +842,19 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "missed; krylovschur: SLEPc spectrum slicing)", "nonneg"),
         "bands": Param([], "floats", "Hz",
                        "f_max: inner band edges, ascending in (0, f_max); [] = automatic split "
-                       "from the inertia count at f_max (about modal.band_modes per band)"),
+                       "from the inertia count at f_max (about modal.band_modes per band)",
+                       applies=BAND_SLICED),
         "band_modes": Param(250, "int", "-",
-                            "f_max, automatic split: target number of modes per band", "pos"),
+                            "f_max, automatic split: target number of modes per band", "pos",
+                            applies=BAND_SLICED),
         "band_groups": Param(1, "int", "-",
                              "f_max: bands solved concurrently, each on its own sub-communicator "
                              "of size ranks / band_groups (1: one band after the other on all "
-                             "ranks)", "pos"),
+                             "ranks)", "pos", applies=BAND_SLICED),
         "band_only": Param(0, "int", "-",
                            "f_max, array jobs: compute only band k (1-based) into <out>/bands/ "
                            "and stop; a run with 0 merges the cached bands (computing the "
-                           "missing ones)", "nonneg"),
+                           "missing ones)", "nonneg", applies=BAND_SLICED),
         "damping_ratio": Param(0.03, "float", "-",
                                "modal damping ratio for all modes (modal.damping = 'uniform'; "
                                "with 'strain_energy': the rail pads' share)", "fraction",
@@ -785,7 +883,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "per MUMPS solve) or SLEPc Krylov-Schur (with f_max: SLEPc spectrum "
                         "slicing)", choices=("block_lanczos", "krylovschur"),
                         source=f"{_APDL}: MODOPT,LANB (block Lanczos)"),
-        "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos"),
+        "block_size": Param(32, "int", "-", "block Lanczos: right-hand sides per solve", "pos",
+                            applies=BLOCK_LANCZOS),
         "out_of_core": Param("auto", "str", "-",
                              "MUMPS factor on disk (ICNTL(22)): auto = only when the in-core "
                              "factor would not fit in the available memory but the out-of-core "
@@ -793,7 +892,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "stops with a clear message)", choices=("auto", "always", "never")),
         "max_basis": Param(0, "int", "-",
                            "block Lanczos: basis size before a thick restart (0: 3 n_modes, "
-                           "capped at 4 GB of basis vectors)", "nonneg"),
+                           "capped at 4 GB of basis vectors)", "nonneg", applies=BLOCK_LANCZOS),
         "shift_hz": Param(0.0, "float", "Hz",
                           "shift of the spectral transformation (modes nearest to it)",
                           "nonneg"),
@@ -801,75 +900,83 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "max_restarts": Param(100, "int", "-", "maximum restarts of the eigensolver", "pos"),
         "fix_sleeper_rotations": Param(True, "bool", "-",
                                        "fix all rotations of sleeper nodes (thesis, App. A)",
-                                       source=f"{_APDL}: ESEL,S,MAT,,3 / D,ALL,ROTX..ROTZ,0"),
+                                       source=f"{_APDL}: ESEL,S,MAT,,3 / D,ALL,ROTX..ROTZ,0",
+                                       applies=ON_TRACK),
         "fix_rail_rotations_at_pads": Param(True, "bool", "-",
                                             "fix all rotations of rail nodes above the pads "
                                             "(thesis, App. A)",
-                                            source=f"{_APDL}: NSEL,S,NODE,,7,177,5 / D,ALL,ROT*,0"),
+                                            source=f"{_APDL}: NSEL,S,NODE,,7,177,5 / D,ALL,ROT*,0",
+                                            applies=ON_TRACK),
     },
     "vehicle": {
         "type": Param("wheelset", "str", "-",
                       "load model: constant moving forces, the thesis's suspended wheelset "
                       "(Table II), or cars with 2 bogies and 4 wheelsets each",
                       choices=("moving_force", "wheelset", "vehicle"),
-                      source="thesis §4.4: suspended wheelset (SAMS)"),
+                      source="thesis §4.4: suspended wheelset (SAMS)", applies=ON_TRACK),
         "speed": Param(30.0, "float", "m/s", "running speed", "pos",
-                       source="thesis §4.4: 30 m/s (67 mph)"),
+                       source="thesis §4.4: 30 m/s (67 mph)", applies=ON_TRACK),
         "x_start": Param(0.0, "float", "m",
                          "position of the leading wheel at t = 0 (on the rigid entry rail; 0: "
                          "its start, the thesis's time origin)",
-                         source="thesis §2.2 and §6.6: wheel starts at x = 0 on the rigid rail"),
+                         source="thesis §2.2 and §6.6: wheel starts at x = 0 on the rigid rail",
+                         applies=ON_TRACK),
         "x_end": Param(0.0, "float", "m",
                        "the run ends when the last wheel reaches this position (0: the end of "
-                       "the rigid exit rail)", "nonneg"),
+                       "the rigid exit rail)", "nonneg", applies=ON_TRACK),
         "t_after": Param(0.0, "float", "s",
-                         "extra time simulated after the last wheel reaches x_end", "nonneg"),
+                         "extra time simulated after the last wheel reaches x_end", "nonneg",
+                         applies=ON_TRACK),
         "force": Param(0.0, "float", "N",
                        "moving_force: force per wheel (0: the wheelset's static wheel load, "
-                       "mass * g / 2)", "nonneg"),
+                       "mass * g / 2)", "nonneg", applies=MOVING_FORCES),
         "axle_offsets": Param([0.0], "floats", "m",
                               "moving_force: axle positions relative to the leading axle "
-                              "(<= 0, one force per rail and axle)"),
+                              "(<= 0, one force per rail and axle)", applies=MOVING_FORCES),
         "wheelset_mass": Param(1568.0, "float", "kg", "wheelset mass (thesis Table II)", "pos",
-                               source=f"{_T2}: mass 1568 kg"),
+                               source=f"{_T2}: mass 1568 kg", applies=WHEELSET_MASS),
         "wheelset_roll_inertia": Param(656.0, "float", "kg m^2",
                                        "wheelset roll inertia Ixx (thesis Table II)", "pos",
-                                       source=f"{_T2}: Ixx 656 kg m^2"),
+                                       source=f"{_T2}: Ixx 656 kg m^2", applies=WHEELSET),
         "wheel_radius": Param(0.46, "float", "m", "wheel rolling radius (Hertz constant)", "pos",
-                              source="Jenkins et al. (1974) / benchmarks.md: R = 0.46 m"),
+                              source="Jenkins et al. (1974) / benchmarks.md: R = 0.46 m",
+                              applies=WHEELS),
         "contact_span": Param(1.5, "float", "m",
-                              "lateral distance of the two wheel-rail contact points", "pos"),
+                              "lateral distance of the two wheel-rail contact points", "pos",
+                              applies=WHEELS),
         "suspension_span": Param(2.0, "float", "m",
                                  "wheelset: lateral distance of the two suspension springs",
-                                 "pos"),
+                                 "pos", applies=WHEELSET),
         "k_suspension": Param(25_000.0, "float", "N/m",
                               "wheelset: suspension stiffness per side (thesis Table II)",
                               "nonneg",
-                              source=f"{_T2}: K_l1 = k_l2 = 25000 (read as vertical, per side)"),
+                              source=f"{_T2}: K_l1 = k_l2 = 25000 (read as vertical, per side)",
+                              applies=WHEELSET),
         "c_suspension": Param(1_000.0, "float", "N s/m",
                               "wheelset: suspension damping per side (thesis Table II)",
                               "nonneg",
                               source=f"{_T2}: K_t1 = k_t2 = 1000 N.s/m (read as damping, per side; "
-                                     "see docs/thesis.md for the other reading)"),
+                                     "see docs/thesis.md for the other reading)", applies=WHEELSET),
         "preload": Param(0.0, "float", "N",
                          "wheelset: static downward force of the frame per side (share of a "
-                         "car body; 0 in the thesis)", "nonneg"),
+                         "car body; 0 in the thesis)", "nonneg", applies=WHEELSET),
         "k_lateral": Param(25_000.0, "float", "N/m",
                            "wheelset: lateral suspension stiffness (not in Table II: the vertical "
-                           "value)", "nonneg"),
+                           "value)", "nonneg", applies=WHEELSET),
         "c_lateral": Param(1_000.0, "float", "N s/m", "wheelset: lateral suspension damping",
-                           "nonneg"),
+                           "nonneg", applies=WHEELSET),
         "conicity": Param(0.025, "float", "-",
                           "wheelset: equivalent tread conicity (UIC 1:40); the contact normals "
                           "lean inwards and couple lateral motion and the rails' lateral modes",
-                          "nonneg", source="UIC 1:40 tread inclination"),
+                          "nonneg", source="UIC 1:40 tread inclination", applies=WHEELSET),
         "k_hertz": Param(0.0, "float", "N/m^1.5",
-                         "Hertz constant K_H (0: Jenkins' formula from wheel_radius)", "nonneg"),
+                         "Hertz constant K_H (0: Jenkins' formula from wheel_radius)", "nonneg",
+                         applies=WHEELS),
         "contact_damping": Param(0.0, "float", "N s/m^2",
                                  "Hertz contact damping C in F = K_H d^1.5 - C d' |d| (the "
                                  "thesis's formula; it gives no value)", "nonneg",
                                  source="thesis §4.2 formula F = K_H d^1.5 + C d' |d|; C not "
-                                        "given"),
+                                        "given", applies=WHEELS),
         "supercritical": Param(False, "bool", "-",
                                "accept a train at or above the ground's Rayleigh speed "
                                "(the critical speed of a track on soft soil: the response "
@@ -884,100 +991,112 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "that the wheels are this far above the rail (the thesis's "
                              "wheelset is 'dropped from a small distance', unspecified)",
                              "nonneg",
-                             source="thesis §2.2: 'dropped from a small distance'; not given"),
-        "n_cars": Param(1, "int", "-", "vehicle: number of coupled cars in the train", "pos"),
+                             source="thesis §2.2: 'dropped from a small distance'; not given",
+                             applies=WHEELS),
+        "n_cars": Param(1, "int", "-", "vehicle: number of coupled cars in the train", "pos",
+                        applies=CARS),
         "car_mass": Param(32_000.0, "float", "kg", "vehicle: car body mass (defaults: Manchester "
-                          "Benchmark passenger coach, Iwnicki 1998)", "pos", source=_MANCHESTER),
+                          "Benchmark passenger coach, Iwnicki 1998)", "pos", source=_MANCHESTER,
+                          applies=CARS),
         "car_pitch_inertia": Param(1.97e6, "float", "kg m^2", "vehicle: car body pitch inertia",
-                                   "pos", source=_MANCHESTER),
+                                   "pos", source=_MANCHESTER, applies=CARS),
         "car_roll_inertia": Param(5.68e4, "float", "kg m^2", "vehicle: car body roll inertia",
-                                  "pos", source=_MANCHESTER),
+                                  "pos", source=_MANCHESTER, applies=CARS),
         "bogie_mass": Param(2_615.0, "float", "kg", "vehicle: bogie frame mass", "pos",
-                            source=_MANCHESTER),
+                            source=_MANCHESTER, applies=CARS),
         "bogie_pitch_inertia": Param(1_476.0, "float", "kg m^2", "vehicle: bogie pitch inertia",
-                                     "pos", source=_MANCHESTER),
+                                     "pos", source=_MANCHESTER, applies=CARS),
         "bogie_roll_inertia": Param(1_722.0, "float", "kg m^2", "vehicle: bogie roll inertia",
-                                    "pos", source=_MANCHESTER),
+                                    "pos", source=_MANCHESTER, applies=CARS),
         "car_wheelset_mass": Param(1_813.0, "float", "kg", "vehicle: wheelset mass", "pos",
-                                   source=_MANCHESTER),
+                                   source=_MANCHESTER, applies=CARS),
         "car_wheelset_roll_inertia": Param(1_120.0, "float", "kg m^2",
                                            "vehicle: wheelset roll inertia", "pos",
-                                           source=_MANCHESTER),
+                                           source=_MANCHESTER, applies=CARS),
         "k_primary": Param(1.22e6, "float", "N/m",
                            "vehicle: primary suspension stiffness per axle box", "nonneg",
                            source=f"{_MANCHESTER}: 1.22 MN/m per axle box (TTB-2D, "
                                   "github.com/DanielCanteroNTNU/TTB-2D "
-                                  "TrainProp_Manchester_BenchMark.m, uses 1.20 MN/m)"),
+                                  "TrainProp_Manchester_BenchMark.m, uses 1.20 MN/m)",
+                           applies=CARS),
         "c_primary": Param(4.0e3, "float", "N s/m",
                            "vehicle: primary suspension damping per axle box", "nonneg",
-                           source=_MANCHESTER),
+                           source=_MANCHESTER, applies=CARS),
         "k_secondary": Param(4.3e5, "float", "N/m",
                              "vehicle: secondary suspension stiffness per side", "nonneg",
-                             source=_MANCHESTER),
+                             source=_MANCHESTER, applies=CARS),
         "c_secondary": Param(2.0e4, "float", "N s/m",
                              "vehicle: secondary suspension damping per side", "nonneg",
-                             source=_MANCHESTER),
+                             source=_MANCHESTER, applies=CARS),
         "k_antiroll": Param(940e3, "float", "N m/rad",
                             "vehicle: anti-roll bar stiffness per bogie (roll moment between "
                             "car body and bogie frame per radian of relative roll)", "nonneg",
-                            source=f"{_MANCHESTER}: anti-roll bar 940 kN m/rad per bogie"),
+                            source=f"{_MANCHESTER}: anti-roll bar 940 kN m/rad per bogie",
+                            applies=CARS),
         "primary_span": Param(2.0, "float", "m",
                               "vehicle: lateral distance of the primary springs", "pos",
-                              source=_MANCHESTER),
+                              source=_MANCHESTER, applies=CARS),
         "secondary_span": Param(2.0, "float", "m",
                                 "vehicle: lateral distance of the secondary springs", "pos",
-                                source=_MANCHESTER),
+                                source=_MANCHESTER, applies=CARS),
         "bogie_spacing": Param(19.0, "float", "m", "vehicle: distance between the bogie centres",
-                               "pos", source=_MANCHESTER),
+                               "pos", source=_MANCHESTER, applies=CARS),
         "wheelbase": Param(2.56, "float", "m", "vehicle: axle distance within a bogie", "pos",
-                           source=_MANCHESTER),
+                           source=_MANCHESTER, applies=CARS),
         "car_length": Param(26.4, "float", "m",
                             "vehicle: length over couplers (distance of successive cars)", "pos",
-                            source="UIC-Z coach length over couplers (not in the benchmark)"),
+                            source="UIC-Z coach length over couplers (not in the benchmark)",
+                            applies=CARS),
         "coupler_stiffness": Param(0.0, "float", "N/m",
                                    "vehicle: vertical stiffness coupling successive car ends",
-                                   "nonneg"),
+                                   "nonneg", applies=CARS),
     },
     "train2": {
         "enabled": Param(True, "bool", "-",
                          "with track.count = 2: a second train runs on track 2 (false: the "
-                         "track is there, unloaded)"),
+                         "track is there, unloaded)", applies=SECOND_TRACK),
         "direction": Param("opposite", "str", "-",
                            "the second train's direction: 'same' as [vehicle] (+x) or "
                            "'opposite' (-x, from the far end of the rigid exit rail)",
-                           choices=("same", "opposite")),
+                           choices=("same", "opposite"), applies=SECOND_TRAIN),
         "t_start": Param(0.0, "float", "s",
                          "delay of the second train: it is where [vehicle]'s train would be "
-                         "at t = 0 (mirrored for 'opposite') t_start later", "nonneg"),
+                         "at t = 0 (mirrored for 'opposite') t_start later", "nonneg",
+                         applies=SECOND_TRAIN),
         "speed": Param(0.0, "float", "m/s", "the second train's speed (0: vehicle.speed)",
-                       "nonneg"),
+                       "nonneg", applies=SECOND_TRAIN),
         "n_cars": Param(0, "int", "-",
                         "vehicle.type = 'vehicle': the second train's cars (0: vehicle.n_cars)",
-                        "nonneg"),
+                        "nonneg", applies=SECOND_TRAIN_CARS),
     },
     "irregularity": {
         "type": Param("none", "str", "-",
                       "vertical rail irregularity: none, a profile file, or a seeded random "
                       "profile from the FRA or ISO 8608 spectrum",
-                      choices=("none", "file", "fra", "iso8608")),
+                      choices=("none", "file", "fra", "iso8608"), applies=WHEELS),
         "file": Param("", "str", "-",
                       "profile file: columns x z, or x z_rail0 z_rail1 [m] (relative to the case "
-                      "file)"),
+                      "file)", applies=PROFILE_FILE),
         "track_class": Param("6", "str", "-",
                              "FRA class 1..6 or ISO 8608 class A..H",
                              choices=("1", "2", "3", "4", "5", "6",
-                                      "A", "B", "C", "D", "E", "F", "G", "H")),
-        "seed": Param(1, "int", "-", "random seed of the profile", "nonneg"),
+                                      "A", "B", "C", "D", "E", "F", "G", "H"),
+                                      applies=RANDOM_PROFILE),
+        "seed": Param(1, "int", "-", "random seed of the profile", "nonneg",
+                      applies=RANDOM_PROFILE),
         "wavelength_min": Param(1.524, "float", "m",
                                 "shortest wavelength of the random profile (the FRA spectra are "
                                 "fitted to 1.524-304.8 m, i.e. 5-1000 ft)", "pos",
                                 source="FRA spectra fitted to 5-1000 ft (Hamid et al., "
-                                       "FRA/ORD-80/28, 1980; 1.524 m = 5 ft)"),
+                                       "FRA/ORD-80/28, 1980; 1.524 m = 5 ft)",
+                                applies=RANDOM_PROFILE),
         "wavelength_max": Param(30.0, "float", "m", "longest wavelength of the random profile",
-                                "pos"),
-        "flat_depth": Param(0.0, "float", "m", "wheel flat depth (0: no flat)", "nonneg"),
-        "flat_length": Param(0.05, "float", "m", "wheel flat length", "pos"),
-        "flat_wheels": Param([0.0], "floats", "-", "indices of the wheels with a flat"),
+                                "pos", applies=RANDOM_PROFILE),
+        "flat_depth": Param(0.0, "float", "m", "wheel flat depth (0: no flat)", "nonneg",
+                            applies=WHEELS),
+        "flat_length": Param(0.05, "float", "m", "wheel flat length", "pos", applies=WHEEL_FLATS),
+        "flat_wheels": Param([0.0], "floats", "-", "indices of the wheels with a flat",
+                             applies=WHEEL_FLATS),
     },
     "mbs": {
         "n_modes": Param(0, "int", "-", "modes used (0: all modes in modes.h5)", "nonneg"),
@@ -1004,42 +1123,46 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "the bare soil surface (0: no surface load; STEM's 'moving load on "
                        "soil', the verification against the steady state of a load moving "
                        "over an elastic half-space, railvib_hpc.fem.halfspace)", "nonneg",
-                       source="issue 28 item 5: a verification load, no default model"),
+                       source="issue 28 item 5: a verification load, no default model",
+                       applies=BARE_SOIL),
         "speed": Param(30.0, "float", "m/s",
                        "the surface load's speed along +x (at or above the ground's Rayleigh "
                        "speed only with vehicle.supercritical = true)", "pos",
-                       source="vehicle.speed's default"),
+                       source="vehicle.speed's default", applies=BARE_SOIL),
         "y": Param(0.0, "float", "m",
                    "lateral position of the load's path on the ground (the line y = load.y, "
-                   "z = geometry.z1); it must cross the soil"),
+                   "z = geometry.z1); it must cross the soil", applies=BARE_SOIL),
         "x_start": Param(0.0, "float", "m",
                          "position of the leading load at t = 0 (a load off the soil's ground "
-                         "is off)"),
+                         "is off)", applies=BARE_SOIL),
         "x_end": Param(0.0, "float", "m",
                        "the run ends when the last load reaches this position (0: the soil's "
-                       "end along x, geometry.x4 + domain.extra_length)", "nonneg"),
+                       "end along x, geometry.x4 + domain.extra_length)", "nonneg",
+                       applies=BARE_SOIL),
         "t_after": Param(0.0, "float", "s",
                          "extra time simulated after the last load reaches load.x_end",
-                         "nonneg"),
+                         "nonneg", applies=BARE_SOIL),
         "offsets": Param([0.0], "floats", "m",
                          "positions of the loads along x relative to the leading one "
-                         "(<= 0; one load of load.force each)"),
+                         "(<= 0; one load of load.force each)", applies=BARE_SOIL),
         "ramp_time": Param(0.0, "float", "s",
                            "switch-on: the loads grow as sin^2(pi t / (2 ramp_time)) over "
                            "this time, then stay (0: a step at t = 0, which radiates a "
-                           "pulse)", "nonneg"),
+                           "pulse)", "nonneg", applies=BARE_SOIL),
         "half_width": Param(0.0, "float", "m",
                             "half-width a of each load's spreading along x, (1 + cos(pi s / "
                             "a)) / (2 a) over |s| <= a (0: a point load, the consistent load "
                             "of the element under it; a >= 2 element sizes keeps a point "
-                            "load's grid pulses at speed / element size small)", "nonneg"),
+                            "load's grid pulses at speed / element size small)", "nonneg",
+                            applies=BARE_SOIL),
         "frequency": Param(0.0, "float", "Hz",
                            "each load varies as cos(2 pi frequency t) after its switch-on (0: "
                            "constant): the moving harmonic load, which radiates Rayleigh "
                            "waves of wavelength (c_R -/+ speed) / frequency ahead of and "
                            "behind it (its plane-strain reference: "
                            "railvib_hpc.fem.halfspace_line); at most transient.f_max",
-                           "nonneg", source="issue 28 item 7: a verification load"),
+                           "nonneg", source="issue 28 item 7: a verification load",
+                           applies=BARE_SOIL),
     },
     "transient": {
         "dt": Param(0.0, "float", "s",
@@ -1063,7 +1186,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                          "numerical damping, energy conserving), < 1 damps the highest "
                          "frequencies (0.8: period error 0.86 % instead of 0.82 % at 20 steps "
                          "per period)",
-                         "unit"),
+                         "unit", applies=DIRECT_ENGINE),
         "engine": Param("direct", "str", "-",
                         "time integration of the full-order model: 'direct' (generalized-"
                         "alpha, one MUMPS factor of K_eff: unconditionally stable, memory "
@@ -1087,7 +1210,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                    "heavily damped elements of the soil no longer set the "
                                    "step of the whole model",
                                    choices=("parts", "auto"),
-                                   source="issue 28: element-wise stable steps"),
+                                   source="issue 28: element-wise stable steps",
+                                   applies=IMEX_ENGINE),
         "implicit_parts": Param(["track", "building"], "strs", "-",
                                 "transient.engine = 'imex': the parts integrated implicitly "
                                 "(part names, or the groups 'track' = rails, sleepers, pads, "
@@ -1095,7 +1219,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                 "building's parts and its base isolation); every other "
                                 "element is explicit and sets the stable step",
                                 source="issue 28: the stiff, small track and building "
-                                       "implicit, the soil explicit"),
+                                       "implicit, the soil explicit", applies=IMEX_ENGINE),
         "checkpoint_interval": Param(120.0, "float", "s",
                                      "wall-clock time between checkpoints of the state (an "
                                      "interrupted run resumes from the last one; 0: none)",
@@ -1124,7 +1248,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                          "the classical mode-acceleration method, displacements "
                                          "and stresses corrected, velocities and accelerations "
                                          "from the modes (R g'' carries the node-to-node "
-                                         "stepping of the moving load far above the modal band)"),
+                                         "stepping of the moving load far above the modal band)",
+                                         applies=STATIC_CORRECTION),
     },
     "probes": {
         "line": Param([], "probe_lines", "-",
@@ -1143,11 +1268,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
                               "DIN 4150-3 line", choices=tuple(BUILDING_USES)),
         "period": Param("day", "str", "-", "assessment period (ISO 10137, DIN 4150-2)",
                         choices=PERIODS),
-        "fta_events": Param("frequent", "str", "-", "FTA event frequency", choices=FTA_EVENTS),
+        "fta_events": Param("frequent", "str", "-", "FTA event frequency", choices=FTA_EVENTS,
+                            applies=FTA),
         "din4150_2_events": Param(0, "int", "-",
                                   "train passages per assessment period for DIN 4150-2 KB_FTr "
                                   "(0: not given; the middle band stays undetermined)",
-                                  "nonneg"),
+                                  "nonneg", applies=DIN4150_2),
         "wave_threshold": Param(0.1, "float", "-",
                                 "wave arrival: first time the acceleration magnitude exceeds "
                                 "this fraction of its peak", "fraction"),
@@ -1179,7 +1305,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                        "[m], nu (Matern smoothness, default 1.5)"),
         "realisation": Param(0, "int", "-", "realisation of the random fields the model "
                              "uses: 0 none (the nominal layers), k >= 1 the k-th (seeded by "
-                             "uncertainty.seed and k; the study sets it per sample)", "nonneg"),
+                             "uncertainty.seed and k; the study sets it per sample)", "nonneg",
+                             applies=RANDOM_FIELDS),
         "model": Param("full", "str", "-",
                        "how each sample is solved: full (its own mesh and eigensolve) or "
                        "reduced (the parametric reduced model on the nominal mesh, with "
@@ -1190,17 +1317,19 @@ SCHEMA: dict[str, dict[str, Any]] = {
                              "of a reduced mode; a sample above it gets the full eigensolve "
                              "(on the nominal mesh)", "pos",
                              source="docs/uncertainty.md, 'The reduced model' (measured on "
-                                    "the coarse thesis model)"),
+                                    "the coarse thesis model)", applies=REDUCED_MODEL),
         "reduced_checks": Param(2, "int", "-",
                                 "reference samples of the reduced model: drawn at random "
                                 "(uncertainty.seed), each also solved in full and compared",
-                                "nonneg"),
+                                "nonneg", applies=REDUCED_MODEL),
         "basis": Param("", "str", "-",
                        "the reduced basis a sample's modes come from (set by railvib study "
-                       "uncertainty with model = 'reduced'; empty: a plain model)"),
+                       "uncertainty with model = 'reduced'; empty: a plain model)",
+                       applies=REDUCED_MODEL),
         "reference": Param(False, "bool", "-",
                            "with uncertainty.basis: solve in full too and record the reduced "
-                           "model's error (set by the study on its reference samples)"),
+                           "model's error (set by the study on its reference samples)",
+                           applies=REDUCED_BASIS),
     },
     # Settings of `railvib study KIND`: one table per study (``[study.convergence]``, ...);
     # ``--study-set key=value`` sets ``study.KIND.key``. Defaults chosen for the thesis model.
@@ -1339,7 +1468,8 @@ SCHEMA["train2"]["vehicle"] = Param(
     "the second train's own vehicle, of [vehicle]'s type: a [train2.vehicle] table of the "
     "[vehicle] keys that differ (masses, inertias, suspension, spacings, axle_offsets, "
     "force); {} = [vehicle]'s vehicle",
-    choices=tuple(k for k in SCHEMA["vehicle"] if k not in TRAIN2_SHARED_VEHICLE_KEYS))
+    choices=tuple(k for k in SCHEMA["vehicle"] if k not in TRAIN2_SHARED_VEHICLE_KEYS),
+    applies=SECOND_TRAIN)
 
 
 class PresetValue(NamedTuple):

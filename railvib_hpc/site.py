@@ -309,6 +309,45 @@ def _close(a: float, b: float, tol: float = 1e-6) -> bool:
     return abs(a - b) <= tol * max(1.0, abs(a), abs(b))
 
 
+def frame_problems(values: Mapping[str, Any], axis: str, key: str, plan: float
+                   ) -> list[Problem]:
+    """Whether the building's frame fits a plan ``plan`` m long along ``axis`` (``x``:
+    along the track, ``y``: across it), for the problems of the key ``key`` that sets it.
+
+    The column lines sit ``footing_size / 2`` inside the plan; the spans between them are
+    ``building.spans_<axis>`` (their sum plus a footing is the plan) or ``bays`` equal ones,
+    each wider than a footing: the plan must exceed ``(bays + 1) x footing_size``.
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import defaults
+    >>> from railvib_hpc.io.products import flat_case
+    >>> [(key, value, text)] = frame_problems(flat_case(defaults()), "y",
+    ...                                       "site.building_width", 0.01)
+    >>> print(key, value, text[:60])
+    site.building_width 0.01 must be > 2.4 m: the building's frame across the track needs
+    """
+    fs, bays = values["building.footing_size"], values[f"building.bays_{axis}"]
+    spans = list(values[f"building.spans_{axis}"])
+    where = "along the track" if axis == "x" else "across the track"
+    if spans:
+        need = sum(spans) + fs
+        if _close(plan, need):
+            return []
+        return [(key, plan, f"must be {need:g} m: building.spans_{axis} add up to "
+                 f"{sum(spans):g} m between the outer column lines, which sit footing_size/2 "
+                 f"= {fs / 2:g} m inside the plan (or leave building.spans_{axis} empty for "
+                 "equal spans)")]
+    need = (bays + 1) * fs
+    if plan > need:
+        return []
+    return [(key, plan, f"must be > {need:g} m: the building's frame {where} needs "
+             f"{bays + 1} column lines (building.bays_{axis} = {bays} bay"
+             f"{'s' if bays > 1 else ''}) with footings of building.footing_size = {fs:g} m "
+             f"and a span wider than a footing between them; allowed: > {need:g} m, or "
+             "fewer bays or smaller footings")]
+
+
 def _site_y(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[dict, list]:
     """ys2, ys3, ybb, ys4 of ``site.building_distance`` / ``building_width``."""
     out: dict[str, float] = {}
@@ -326,6 +365,8 @@ def _site_y(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[
                          f"must be > {toe:g} m, the embankment toe (|geometry.ys1| + "
                          "track.embankment_slope x track.embankment_height): the building "
                          "stands beside the embankment"))
+    if "site.building_width" in active:
+        problems.extend(frame_problems(values, "y", "site.building_width", width))
     if dist is not None:
         out["geometry.ys2"] = _round(ys2)
     out.update({"geometry.ys3": _round(ys2 - width), "geometry.ybb": _round(ys2 - width / 2),
@@ -348,6 +389,10 @@ def _site_x(values: Mapping[str, Any], active: dict[str, float], base,
     x2 = x1 + sp * round((centre - length / 2 - x1) / sp)
     out = {"geometry.x2": _round(x2), "geometry.x3": _round(x2 + length),
            "geometry.xbb": _round(x2 + length / 2)}
+    if "site.building_length" in active:
+        frame = frame_problems(values, "x", "site.building_length", length)
+        if frame:
+            return out, frame
     if not (x2 > x1 and x2 + length < x1 + rail_length):
         key = "site.track_length" if track is not None else "site.building_length"
         return out, [(key, active[key],
@@ -520,25 +565,69 @@ def line_probes(case: Case) -> dict[str, LineProbe]:
     return out
 
 
-def _footprint(case: Case, x: float) -> tuple[float, float] | None:
-    """The open interval of distances (building side, y = -d) where the line at ``x`` runs
-    through the building's plan ``[X2, X3] x [YS3, YS2]`` turned by ``building.rotation``
-    about its centre; None where it passes by."""
-    g = case["geometry"]
+def _plan_chord(case: Case, point: tuple[float, float], direction: tuple[float, float]
+                ) -> tuple[float, float] | None:
+    """The open interval of ``t`` where the line ``point + t direction`` runs through the
+    building's plan ``[X2, X3] x [YS3, YS2]`` turned by ``building.rotation`` about its
+    centre; None where it passes by (the case read by dotted keys: a flat mapping will do)."""
+    g = {k: case[f"geometry.{k}"] for k in ("x2", "x3", "ys2", "ys3")}
     cx, cy = 0.5 * (g["x2"] + g["x3"]), 0.5 * (g["ys2"] + g["ys3"])
     hx, hy = 0.5 * (g["x3"] - g["x2"]), 0.5 * (g["ys2"] - g["ys3"])
     th = math.radians(case["building.rotation"])
     c, s = math.cos(th), math.sin(th)
+    px, py = point[0] - cx, point[1] - cy
+    dx, dy = direction
     lo, hi = -math.inf, math.inf
-    # the point (x, -d) in the building's own frame: q = R(-th) (p - centre), affine in d
-    for a, b, h in ((c * (x - cx) - s * cy, -s, hx), (-s * (x - cx) - c * cy, -c, hy)):
+    # the line in the building's own frame: q = R(-th) (p - centre), affine in t
+    for a, b, h in ((c * px + s * py, c * dx + s * dy, hx),
+                    (-s * px + c * py, -s * dx + c * dy, hy)):
         if abs(b) < 1e-12:
-            if not abs(a) < h:
+            if not abs(a) < h - 1e-9 * max(h, 1.0):      # on a face: beside the plan
                 return None
             continue
-        d0, d1 = sorted(((-h - a) / b, (h - a) / b))
-        lo, hi = max(lo, d0), min(hi, d1)
+        t0, t1 = sorted(((-h - a) / b, (h - a) / b))
+        lo, hi = max(lo, t0), min(hi, t1)
     return (lo, hi) if lo < hi else None
+
+
+def _footprint(case: Case, x: float) -> tuple[float, float] | None:
+    """The open interval of distances (building side, y = -d) where the line at ``x`` runs
+    through the building's plan (turned by ``building.rotation``); None where it passes
+    by."""
+    return _plan_chord(case, (x, 0.0), (0.0, -1.0))
+
+
+def load_path_crossing(case: Case) -> tuple[float, float] | None:
+    """Where the moving surface load's path (``track.count = 0``: the line ``y = load.y``
+    on the ground) runs through the building's plan: the interval of x [m] that the loads
+    pass over there (their spreading ``load.half_width`` included), None where they never
+    reach it.
+
+    The loads cover x from the last one's start (``load.x_start`` + the smallest offset)
+    to where the leading one is at the end of the run (``load.x_end``, 0: the soil's end,
+    plus the offsets' length and ``load.speed`` x ``load.t_after``).
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case
+    >>> flat = Case.defaults().flat()            # (the case refuses such a path)
+    >>> load_path_crossing({**flat, "track.count": 0, "load.y": -13.0})
+    (12.6, 19.8)
+    >>> print(load_path_crossing({**flat, "track.count": 0, "load.y": -13.0,
+    ...                           "load.x_end": 10.0}))
+    None
+    """
+    ld = {k: case[f"load.{k}"] for k in ("y", "offsets", "x_start", "x_end", "half_width",
+                                          "speed", "t_after")}
+    chord = _plan_chord(case, (0.0, ld["y"]), (1.0, 0.0))
+    if chord is None:
+        return None
+    first = min(ld["offsets"] or [0.0])
+    x_end = ld["x_end"] or case["geometry.x4"] + case["domain.extra_length"]
+    lo = ld["x_start"] + first - ld["half_width"]
+    hi = x_end - first + ld["speed"] * ld["t_after"] + ld["half_width"]
+    a, b = max(lo, chord[0]), min(hi, chord[1])
+    return (_round(chord[0]), _round(chord[1])) if a < b else None
 
 
 def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:

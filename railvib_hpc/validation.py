@@ -9,9 +9,10 @@ raising, so that :func:`railvib_hpc.config.build_case` reports them all in one
 
 from __future__ import annotations
 
+import copy
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -22,6 +23,7 @@ from .schema import (
     MAX_SOIL_LAYERS,
     MIN_SOIL_LAYER_THICKNESS,
     PARTS,
+    PRESETS,
     PROBE_LINE_KEYS,
     PROBE_LINE_SIDES,
     SOIL_LAYER_KEYS,
@@ -36,6 +38,7 @@ from .site import (
     line_probe_name,
     line_ranges,
     line_x,
+    load_path_crossing,
     placed_plan,
     quarter_turns,
     slab_bases,
@@ -384,6 +387,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
           "Z0 < Z1 < Z2 < Z3 < Z4")
     if out:
         return out
+    out.extend(feature_key_problems(case))
 
     # track
     if not _close(g["x1"] - g["x0"], t["rigid_length"]):
@@ -436,8 +440,8 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"the building base must lie inside the subgrade: Z0 = {g['z0']:g} < ZBB < "
                     f"Z1 = {g['z1']:g} m"))
     fs, cs, wt = b["footing_size"], b["column_size"], b["wall_thickness"]
-    out.extend(_check_spans(b, "x", length, "X3 - X2"))
-    out.extend(_check_spans(b, "y", width, "YS2 - YS3"))
+    out.extend(_check_spans(case, "x", length, "X3 - X2"))
+    out.extend(_check_spans(case, "y", width, "YS2 - YS3"))
     if not cs < fs:
         out.append(("building.column_size", cs,
                     f"must be smaller than building.footing_size = {fs:g} m"))
@@ -461,14 +465,6 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("mesh.file", m["file"], f"file not found (looked for {f})"))
         elif f.suffix != ".msh":
             out.append(("mesh.file", m["file"], "must be a gmsh .msh file"))
-    if m["layout"] == "thesis" and not m["file"]:
-        for leaf in ("size_far", "size_deep", "layer_elements"):
-            default = ALL_KEYS[f"mesh.{leaf}"].default
-            if m[leaf] != default:
-                out.append((f"mesh.{leaf}", m[leaf],
-                            f"applies to mesh.layout = 'refined' only; the 'thesis' layout "
-                            f"uses the APDL script's divisions (leave it at {default!r} or set "
-                            "mesh.layout = 'refined')"))
     if m["refinement"] > 6:
         out.append(("mesh.refinement", m["refinement"],
                     "must be <= 6 (refinement 3 is already ~1.5M nodes)"))
@@ -491,6 +487,83 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _baseline(case: Any, key: str) -> Any:
+    """The default of ``key``: the case's preset's value, else the schema's."""
+    return PRESETS.get(case["case.preset"], {}).get(key, ALL_KEYS[key].default)
+
+
+def _at_default(case: Any, key: str, value: Any) -> bool:
+    """Whether ``value`` is a default of ``key``: the preset's or the schema's (a file that
+    lists every key at the APDL values, with the preset ``table1``, sets them unused)."""
+    return value == _baseline(case, key) or value == ALL_KEYS[key].default
+
+
+def _off_text(condition: Any, case: Any, default: Any) -> str:
+    part = condition.failing(case)
+    return (f"applies to {part.text} only; here {part.here(case)}: leave it at its "
+            f"default {default!r} (or leave it out)")
+
+
+def feature_key_problems(case: Case) -> list[tuple[str, Any, str]]:
+    """The one rule of the keys that belong to a feature (:attr:`Param.applies
+    <railvib_hpc.schema.Param>`): where the feature is off, the key keeps its default.
+
+    A key set to its default (the schema's, or its preset's) where its feature is off is
+    accepted (a file may list every key, as ``jobs/thesis_baseline.toml`` does); any other
+    value is refused, naming the
+    condition that does not hold and the value that breaks it. The entries of
+    ``train2.vehicle`` follow the rule of their ``[vehicle]`` key (its cars' keys apply
+    to cars only). Derived keys are not checked (their value follows from others).
+
+    Examples
+    --------
+    >>> from railvib_hpc.config import Case
+    >>> feature_key_problems(Case.defaults()) == []
+    True
+    """
+    out: list[tuple[str, Any, str]] = []
+    for key, param in ALL_KEYS.items():
+        condition = param.applies
+        if condition is None or param.derived:
+            continue
+        value, default = case[key], _baseline(case, key)
+        if _at_default(case, key, value):
+            continue
+        if not condition.holds(case):
+            out.append((key, value, _off_text(condition, case, default)))
+        elif param.kind == "vehicle":
+            for name, entry in value.items():
+                inner = ALL_KEYS[f"vehicle.{name}"].applies
+                if inner is not None and not inner.holds(case):
+                    out.append((f"{key}.{name}", entry, _off_text(inner, case, "not given")))
+    return out
+
+
+def switched_off(case: Case, changes: Mapping[str, Any]) -> dict[str, Any]:
+    """The keys whose feature ``changes`` (``{dotted key: value}``, e.g. a study variant's
+    overrides) switch off while the case sets them: ``{key: default}`` to reset, so that
+    a variant that replaces, say, the case's pml faces by rollers does not carry the
+    layer's keys into a case that would refuse them. Keys that ``changes`` set themselves
+    stay as given (the rule judges them)."""
+    values = {k: case[k] for k in ALL_KEYS}
+    values.update({k: v for k, v in changes.items() if k in values})
+    out = {}
+    for key, param in ALL_KEYS.items():
+        condition = param.applies
+        if condition is None or param.derived or key in changes:
+            continue
+        default = _baseline(case, key)
+        if _at_default(case, key, values[key]) or not condition.holds(case):
+            continue
+        try:
+            off = not condition.holds(values)
+        except (TypeError, KeyError):      # a badly typed change: build_case names it
+            continue
+        if off:
+            out[key] = copy.deepcopy(default)
+    return out
+
+
 def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     """A second track: its sleepers clear of the first's and inside the soil; the
     ``[train2]`` keys only with it."""
@@ -498,10 +571,8 @@ def _check_tracks(case: Case) -> list[tuple[str, Any, str]]:
     if t["count"] > 2:
         return [("track.count", t["count"], "must be 1 or 2, or 0 (no track: the moving load "
                  "of [load] on the bare soil)")]
-    if t["count"] < 2:
-        return [(f"train2.{k}", v, "applies to a second track only: set track.count = 2 (or "
-                 "leave it out)")
-                for k, v in case["train2"].items() if v != ALL_KEYS[f"train2.{k}"].default]
+    if t["count"] < 2:               # ([train2] applies to a second track only: Param.applies)
+        return []
     out = []
     own = case["train2.vehicle"]
     if own:
@@ -526,26 +597,13 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     """``track.count = 0`` (the bare soil) goes with the moving surface load of ``[load]``
     and nothing of the track or the vehicle; ``[load]`` goes with it only."""
     t, ld = case["track"], case["load"]
-    if t["count"] != 0:
-        return [(f"load.{k}", v, "applies to the moving load on the bare soil only: set "
-                 "track.count = 0 (or leave [load] out)")
-                for k, v in ld.items() if v != ALL_KEYS[f"load.{k}"].default]
+    if t["count"] != 0:          # ([load] applies to the bare soil only: Param.applies)
+        return []
     if not ld["force"] > 0:
         return [("track.count", 0, "0 (no track) needs the moving surface load: set "
                  "load.force > 0 ([load]); with a track: 1 or 2")]
     out: list[tuple[str, Any, str]] = []
     bare = "with track.count = 0 (no track: the moving load of [load] on the bare soil)"
-    # the train's keys: a file that lists them at their defaults (the baseline) is fine
-    given = sorted(k for k in (case.given or {})
-                   if k.split(".", 1)[0] in ("vehicle", "irregularity", "train2")
-                   and k in ALL_KEYS and case[k] != ALL_KEYS[k].default
-                   and k != "vehicle.supercritical")       # (the load's speed check too)
-    out.extend((k, case[k], f"applies to the train; {bare} leave it at its default "
-                f"{ALL_KEYS[k].default!r} (the load's keys are load.*)") for k in given)
-    for key, allowed in (("track.embankment_height", 0.0), ("track.ends", "rigid")):
-        if case[key] != allowed:
-            out.append((key, case[key], f"belongs to the track; {bare} leave it at "
-                        f"{allowed!r}"))
     if case["mesh.file"]:
         out.append(("mesh.file", case["mesh.file"], f"{bare} the mesh is the generated one "
                     "(its soil without the track bed): leave mesh.file out"))
@@ -557,6 +615,8 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     if not lo < ld["y"] < hi:
         out.append(("load.y", ld["y"], f"the path must run on the soil: {lo:g} < y < "
                     f"{hi:g} m (geometry.ys4 - domain.extra_width to geometry.ys0)"))
+    else:
+        out.extend(_load_path_problems(case))
     if ld["frequency"] > case["transient.f_max"]:
         out.append(("load.frequency", ld["frequency"], f"must be <= transient.f_max = "
                     f"{case['transient.f_max']:g} Hz (the automatic step resolves f_max; "
@@ -567,6 +627,35 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
                     f"{last:g} m (load.x_start + the smallest offset), or be 0 (the soil's "
                     "end)"))
     return out
+
+
+def _load_path_problems(case: Case) -> list[tuple[str, Any, str]]:
+    """The surface load's path on the ground: not through the building's plan (there the
+    ground is the building, its walls and basement: the load would stand in a wall, and
+    over the basement on nothing, switching off and on as a step) nor along an open
+    trench (the whole length on nothing), as the probe lines (:func:`_check_line_points`)."""
+    ld, g = case["load"], case["geometry"]
+    y = ld["y"]
+    tr = case["trench"]
+    if tr["type"] == "open" and tr["width"] > 0 and \
+            tr["distance"] < -y < tr["distance"] + tr["width"]:
+        return [("load.y", y, f"the load's path runs along the open trench (y = "
+                 f"{-tr['distance'] - tr['width']:g} to {-tr['distance']:g} m: trench.distance, "
+                 "trench.width), a void with no ground to stand on: allowed y outside it")]
+    crossing = load_path_crossing(case)
+    if crossing is None:
+        return []
+    k, rest = quarter_turns(case["building.rotation"])
+    th = math.radians(90.0 * k + rest)
+    cy = 0.5 * (g["ys2"] + g["ys3"])
+    half = (0.5 * (g["x3"] - g["x2"]) * abs(math.sin(th))
+            + 0.5 * (g["ys2"] - g["ys3"]) * abs(math.cos(th)))
+    lo, hi = round(cy - half, 6), round(cy + half, 6)
+    return [("load.y", y, f"the load's path y = {y:g} m runs through the building's plan "
+             f"(x {crossing[0]:g} to {crossing[1]:g} m, y {lo:g} to {hi:g} m: geometry.x2, "
+             "x3, ys3, ys2 and building.rotation): the load would stand in its walls and on "
+             f"nothing over the basement; allowed: load.y <= {lo:g} or >= {hi:g} m, or "
+             "load.x_start, x_end, t_after that keep the loads off the plan")]
 
 
 #: The commands that solve the model with its track (modes, the vehicle on them, what is
@@ -702,13 +791,6 @@ def _check_levels(case: Case) -> list[tuple[str, Any, str]]:
     if own and len(b["slab_bases"]) != b["storeys"]:
         return [("building.slab_bases", b["slab_bases"],
                  f"one slab per storey: {b['storeys']} entries (building.storeys)")]
-    if own:
-        given = [k for k in ("z_slab1_base", "z_slab2_base")
-                 if b[k] != ALL_KEYS[f"building.{k}"].default]
-        if given:
-            return [(f"building.{given[0]}", b[given[0]],
-                     "building.slab_bases gives every slab's level: leave z_slab1_base and "
-                     "z_slab2_base out (or slab_bases empty)")]
     levels = [("building.footing_height", b["footing_height"], "footing top"),
               ("building.beam_depth", b["footing_height"] + b["beam_depth"], "grade-beam top"),
               ("geometry.zbb", g["z1"] - g["zbb"], "ground level (Z1 - ZBB)")]
@@ -729,9 +811,17 @@ def _check_levels(case: Case) -> list[tuple[str, Any, str]]:
     return []
 
 
-def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[str, Any, str]]:
+#: The geometry keys that set the building's plan along each axis (its far ends).
+_PLAN_KEYS = {"x": ("geometry.x3", "geometry.x2"), "y": ("geometry.ys3", "geometry.ys2")}
+
+
+def _check_spans(case: Case, axis: str, plan: float, plan_text: str
+                 ) -> list[tuple[str, Any, str]]:
     """The building's spans along ``axis``: as many as bays, adding up to the plan between
-    the outer column lines, each wider than a footing."""
+    the outer column lines, each wider than a footing. A plan too small for the frame
+    blames the key the case gave: the plan's (``geometry.*``) when it gives the plan and
+    not the frame, else the footings."""
+    b, given = case["building"], case.given or {}
     fs, bays, spans = b["footing_size"], b[f"bays_{axis}"], list(b[f"spans_{axis}"])
     inner = plan - fs
     if spans:
@@ -745,13 +835,27 @@ def _check_spans(b: dict, axis: str, plan: float, plan_text: str) -> list[tuple[
                      f"lines sit footing_size/2 inside the plan); they add up to "
                      f"{sum(spans):g} m")]
     span = min(spans) if spans else inner / bays
-    if not fs < span:
-        key = f"building.spans_{axis}" if spans else "building.footing_size"
-        return [(key, b[key.split(".")[1]],
-                 f"the footings must fit between the column lines: footing_size = {fs:g} m must "
-                 f"be < the smallest span along {axis}, {span:g} m ({plan_text} = {plan:g} m, "
-                 f"{bays} bay{'s' if bays > 1 else ''})")]
-    return []
+    if fs < span:
+        return []
+    if spans:
+        return [(f"building.spans_{axis}", spans,
+                 f"the footings must fit between the column lines: every span must be > "
+                 f"building.footing_size = {fs:g} m")]
+    # what the case changed (a file may list every key at its default: the baseline)
+    touched = {k for k in given if k in ALL_KEYS and case[k] != ALL_KEYS[k].default}
+    frame = {"building.footing_size", f"building.bays_{axis}"}
+    plan_keys = [k for k in _PLAN_KEYS[axis] if k in touched]
+    if plan_keys and not frame & touched:
+        return [(plan_keys[0], case[plan_keys[0]],
+                 f"makes the building's plan {plan_text} = {plan:g} m, too small for its "
+                 f"frame: it must be > {(bays + 1) * fs:g} m ({bays + 1} column lines, "
+                 f"building.bays_{axis} = {bays}, with footings of building.footing_size = "
+                 f"{fs:g} m and a span wider than a footing between them)")]
+    return [("building.footing_size", fs,
+             f"the footings must fit between the column lines: must be < ({plan_text}) / "
+             f"(bays_{axis} + 1) = {plan / (bays + 1):g} m ({plan_text} = {plan:g} m, "
+             f"{bays} bay{'s' if bays > 1 else ''}: a span wider than a footing between "
+             "them)")]
 
 
 def _sizes_given(case: Case, section: str, keys: Sequence[str]) -> list[tuple[str, Any, str]]:
@@ -875,15 +979,11 @@ def _check_bands(case: Case) -> list[tuple[str, Any, str]]:
     out: list[tuple[str, Any, str]] = []
     md = case["modal"]
     edges = list(md["bands"])
-    if edges:
-        if md["f_max"] <= 0:
-            out.append(("modal.bands", edges, "needs modal.f_max > 0 (the top of the last band)"))
-        elif any(not 0 < e < md["f_max"] for e in edges) or \
-                any(b <= a for a, b in zip(edges, edges[1:])):
-            out.append(("modal.bands", edges, f"must be strictly ascending inside (0, "
-                                              f"modal.f_max = {md['f_max']!r})"))
-    if md["band_only"] and md["f_max"] <= 0:
-        out.append(("modal.band_only", md["band_only"], "needs modal.f_max > 0"))
+    # (modal.f_max = 0: the rule of Param.applies refuses the bands)
+    if edges and md["f_max"] > 0 and (any(not 0 < e < md["f_max"] for e in edges) or
+                                      any(b <= a for a, b in zip(edges, edges[1:]))):
+        out.append(("modal.bands", edges, f"must be strictly ascending inside (0, "
+                                          f"modal.f_max = {md['f_max']!r})"))
     if (md["bands"] or md["band_only"] or md["band_groups"] > 1) and \
             md["method"] != "block_lanczos":
         out.append(("modal.method", md["method"], "band settings need 'block_lanczos'"))
@@ -1010,10 +1110,6 @@ def _check_mbs(case: Case) -> list[tuple[str, Any, str]]:
     v, irr, mbs = case["vehicle"], case["irregularity"], case["mbs"]
     out.extend(_vehicle_problems(v, case["track.gauge"], "vehicle"))
     out.extend(_speed_problems(case))
-    if v["drop_height"] > 0 and v["type"] == "moving_force":
-        out.append(("vehicle.drop_height", v["drop_height"],
-                    "a drop needs a vehicle with masses: vehicle.type = 'wheelset' or "
-                    "'vehicle' (moving forces have no initial condition)"))
     if v["x_end"] and v["x_end"] <= v["x_start"]:
         out.append(("vehicle.x_end", v["x_end"],
                     f"must be 0 (end of the rigid exit rail) or > vehicle.x_start = "

@@ -81,3 +81,13 @@ RESULT_JSON = "result.json"
 #: ``railvib study uncertainty``: the design and the outputs per sample.
 UNCERTAINTY_H5 = "uncertainty.h5"
 FAILED_JSON = "failed.json"
+
+#: Every file railvib writes at the top of an output folder (or of a study's variant
+#: folder): a folder without railvib's record (:data:`RECORD_DIR`) that holds one of them
+#: holds someone else's file, which a run would overwrite
+#: (:func:`railvib_hpc.io.out_folder.output_folder_problem`).
+OUTPUT_NAMES = (MESH_MSH, MESH_H5, MESH_XDMF, MESH_REPORT_JSON, MODES_H5, MODES_XDMF,
+                STATIC_H5, MODAL_DAMPING_H5, MBS_H5, FIELDS_H5, FIELDS_XDMF, STRESS_XDMF,
+                PROBES_H5, ASSESSMENT_JSON, REPORT_MD, REPORT_HTML, REPORT_JSON, RUN_FILE,
+                TRANSIENT_H5, TRANSIENT_CHECKPOINT_H5, RESULT_JSON, UNCERTAINTY_H5,
+                FAILED_JSON)

@@ -32,6 +32,7 @@ from ..errors import OutputError, OutputLockedError, os_error_text
 from .atomic import size_text
 from .digests import utc_now
 from .files import LOCK_FILE, RECORD_DIR
+from .out_folder import refuse_foreign_folder
 from .temp_names import remove_stale_temps
 
 #: (fd None while the owning thread is still taking the file lock; holder: who, in
@@ -100,7 +101,11 @@ def acquire_lock(out_dir: Path, command: str, wait: bool = False,
         When another process or thread holds it and ``wait`` is False.
     OutputError
         When the folder cannot be created or used.
+    OutputFolderError
+        When railvib must not write there: its own source tree, or a folder of someone
+        else's files of railvib's names (:mod:`.out_folder`).
     """
+    refuse_foreign_folder(out_dir)            # its own source tree, someone else's files
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         key = os.path.realpath(out_dir)

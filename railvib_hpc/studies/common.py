@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import __version__
-from ..config import Case, build_case
+from ..config import Case, build_case, parse_override
 from ..errors import UserError
 from ..io.atomic import copy_file, write_json, write_text
 from ..io.digests import digest, file_digest
@@ -82,6 +82,7 @@ from ..io.stage_protocol import StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..pipeline import run_stage
+from ..validation import switched_off
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -149,8 +150,25 @@ class StudyPlan:
 
 
 def variant_case(case: Case, overrides: Sequence[str]) -> Case:
-    """The study's case with a variant's overrides (validated like ``--set``)."""
-    return build_case(json.loads(json.dumps(case.data)), list(overrides), case.path)
+    """The study's case with a variant's overrides (validated like ``--set``).
+
+    A variant that switches a feature of the case off (the reflection study's rollers in
+    place of the case's pml faces) resets the keys of that feature to their defaults
+    (:func:`~railvib_hpc.validation.switched_off`): they no longer apply, and the case
+    rule refuses them where they do not (:func:`~railvib_hpc.validation.feature_key_problems`).
+    """
+    data = json.loads(json.dumps(case.data))
+    changes = {}
+    for text in overrides:
+        key, value = parse_override(text)
+        changes[key] = value
+    for key, default in switched_off(case, changes).items():
+        node = data
+        *sections, leaf = key.split(".")
+        for part in sections:
+            node = node[part]
+        node[leaf] = default
+    return build_case(data, list(overrides), case.path)
 
 
 def variant_digest(kind: str, vcase: Case, settings: dict[str, Any]) -> str:

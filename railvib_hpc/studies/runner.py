@@ -222,6 +222,8 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
     analysis = _annotate(mod.analyse(plan, shown, settings), entries, coverage)
     if coverage["warning"]:
         rep.info(f"WARNING: {coverage['warning']}")
+    for warning in analysis.get("warnings", []):        # e.g. Sobol' indices left out
+        rep.info(f"WARNING: {warning}")
     results = shown
     fig_dir = root / "figures"
     if kind == "reflection":
@@ -306,6 +308,34 @@ def _annotate(analysis: dict, entries: list[dict], coverage: dict) -> dict:
     return analysis
 
 
+def listing(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict) -> str:
+    """What ``--list`` prints: the folder, then one row per variant (its index, name, what
+    sets it apart, status).
+
+    The overrides every variant shares are printed once above the table, each row shows
+    only its own; a study module with a ``listing_columns(plan, case, entries)`` hook
+    shows columns of its own instead (the uncertainty study: one column per sampled
+    parameter).
+    """
+    entries, _ = status(plan, case, root, settings)
+    lines = [f"{kind} study, folder {root}" + (f" (shared model in {root / SHARED_DIR})"
+                                               if plan.shared_overrides is not None else "")]
+    hook = getattr(STUDY_MODULES[kind], "listing_columns", None)
+    if hook is not None:
+        notes, head, cells = hook(plan, case, entries)
+        lines += notes
+        rows = [[str(i), e["name"], *c, e["status"]] for i, (e, c) in
+                enumerate(zip(entries, cells))]
+        return "\n".join([*lines, text_table(["index", "variant", *head, "status"], rows)])
+    shared = [o for o in entries[0]["overrides"]
+              if all(o in e["overrides"] for e in entries)] if len(entries) > 1 else []
+    if shared:
+        lines.append("every variant: " + " ".join(shared))
+    rows = [[str(i), e["name"], " ".join(o for o in e["overrides"] if o not in shared),
+             e["status"]] for i, e in enumerate(entries)]
+    return "\n".join([*lines, text_table(["index", "variant", "overrides", "status"], rows)])
+
+
 def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporter, *,
                   variants: Sequence[str] = (), merge_only: bool = False,
                   prepare: bool = False, list_only: bool = False,
@@ -363,16 +393,7 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
     plan = on_root(lambda: make_plan(kind, case, cfg, root), comm)
     chosen = on_root(lambda: select(plan, variants), comm) if variants else []
     if list_only:
-        def show() -> None:
-            entries, _ = status(plan, case, root, cfg)
-            rows = [[str(i), e["name"], " ".join(e["overrides"]), e["status"]]
-                    for i, e in enumerate(entries)]
-            rep.info(f"{kind} study, folder {root}"
-                     + (f" (shared model in {root / SHARED_DIR})"
-                        if plan.shared_overrides is not None else ""))
-            rep.info(text_table(["index", "variant", "overrides", "status"], rows))
-
-        on_root(show, comm)
+        on_root(lambda: rep.info(listing(kind, plan, case, root, cfg)), comm)
         return _summary(kind, plan, case, root, cfg, comm, t0, [], [], None)
     failed: list[str] = []
     computed: list[str] = []

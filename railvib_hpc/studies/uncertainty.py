@@ -40,7 +40,14 @@ from ..config import Case
 from ..io.digests import digest
 from ..uncertain_inputs import LAYER_KEY, marginals
 from ..uncertainty.sampling import saltelli_base_rows, sample_values
-from ..uncertainty.statistics import convergence, exceedance, percentiles, sobol_indices
+from ..uncertainty.statistics import (
+    MIN_SOBOL_BASE_SAMPLES,
+    convergence,
+    exceedance,
+    percentiles,
+    sobol_doubts,
+    sobol_indices,
+)
 from .common import StudyPlan, Variant
 from .report import figure, fmt, pct, save
 
@@ -206,6 +213,33 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
                      shared_overrides=shared if reduced else None)
 
 
+def listing_columns(plan_: StudyPlan, case: Case, entries: list[dict]
+                    ) -> tuple[list[str], list[str], list[list[str]]]:
+    """``--list``'s columns: one per sampled parameter (its value in the sample), the field
+    realisation with random fields, and which sample a reference solve checks; the lines
+    above the table name each parameter's key and distribution (the design's own keys,
+    :data:`DESIGN_RESET`, are left out: every sample has them)."""
+    names = _names(plan_)
+    keys = {m.name: (m.key, m.distribution) for m in marginals(case)}
+    notes = [f"{len(_samples(plan_))} samples (method {plan_.info['method']}) of "
+             f"{len(names)} parameter{'s' if len(names) != 1 else ''}:"]
+    notes += [f"  {n}: {keys[n][0]}, {keys[n][1]}" if n in keys else f"  {n}" for n in names]
+    fields = bool(case["uncertainty.field"])
+    refs = {r: s for r, s in (plan_.info.get("reduced") or {}).get("references", {}).items()}
+    head = [*names, *(["realisation"] if fields else []), *(["checks"] if refs else [])]
+    by_name = {v.name: v for v in plan_.variants}
+    cells = []
+    for e in entries:
+        par = by_name[e["name"]].parameter
+        row = [f"{par[n]:.6g}" for n in names]
+        if fields:
+            row.append(str(par["sample"] + 1))
+        if refs:
+            row.append(f"full solve of {refs[e['name']]}" if e["name"] in refs else "")
+        cells.append(row)
+    return notes, head, cells
+
+
 def _names(plan_: StudyPlan) -> list[str]:
     return list(plan_.info.get("parameters") or [])
 
@@ -280,14 +314,28 @@ def analyse(plan_: StudyPlan, results: dict[str, dict], settings: dict[str, Any]
                                "limit": lim[0] if len(lim) == 1 else lim,
                                "comparison_only": e["comparison_only"]})
     sobol = _sobol(plan_, out, probes, conf, len(done)) if method == "sobol" else {}
+    n_base = len(_samples(plan_)) // (len(_names(plan_)) + 2)
+    doubts = {p: {q: d for q, idx in by_q.items() if (d := sobol_doubts(idx, n_base))}
+              for p, by_q in sobol.items()}
+    shown = {p: {q: idx for q, idx in by_q.items() if q not in doubts[p]}
+             for p, by_q in sobol.items()}
     conv = {p: convergence(out[p]["max utilisation"][rows_idx], 1.0, conf) for p in probes}
-    tables = _tables(stats_rows, sobol, conv, conf, method, len(done), len(_samples(plan_)))
+    tables = _tables(stats_rows, shown, conv, conf, method, len(done), len(_samples(plan_)))
+    warnings = []
+    if any(doubts.values()):
+        tables.insert(2, _doubts_table(doubts, n_base))
+        warnings.append(f"Sobol' indices left out of the report for "
+                        f"{sum(map(len, doubts.values()))} of {sum(map(len, sobol.values()))} "
+                        "outputs: " + next(d for by_q in doubts.values() for d in by_q.values())[0]
+                        + f" (the rule: docs/uncertainty.md; at least {MIN_SOBOL_BASE_SAMPLES} "
+                        "base points, every index in [0, 1] within its interval)")
     rom = reduced_report(plan_, results, probes) if plan_.info.get("reduced") else None
     if rom is not None:
         tables += rom.pop("tables")
-    verdict = _verdict(stats_rows, sobol, len(done), conf)
+    verdict = _verdict(stats_rows, shown, len(done), conf)
     return {"title": TITLE, "verdict": verdict, "tables": tables, "rows": stats_rows,
-            "sobol": sobol, "convergence": conv, "method": method,
+            "sobol": sobol, "sobol_doubts": doubts, "sobol_base_points": n_base,
+            "warnings": warnings, "convergence": conv, "method": method,
             "bands": _band_percentiles(done, results, probes, rows_idx, plan_),
             "vc_class": plan_.info.get("vc_class"),
             "parameters": _names(plan_), "samples_finished": len(done),
@@ -410,6 +458,19 @@ def _sobol(plan_: StudyPlan, out: dict, probes: list[str], conf: float, n_done: 
             if np.isfinite(y).all() and np.ptp(y) > 0:
                 res[p][q] = sobol_indices(names, y, conf)
     return res
+
+
+def _doubts_table(doubts: dict, n_base: int) -> dict:
+    """The outputs whose Sobol' indices are left out, and why (:func:`sobol_doubts`)."""
+    rows = [[p, q, "; ".join(d)] for p, by_q in doubts.items() for q, d in by_q.items()]
+    return {"title": "Sobol' indices left out",
+            "head": ["probe", "output", "why"], "rows": rows,
+            "note": f"Not estimates: the indices of a Saltelli design are shown only with at "
+                    f"least {MIN_SOBOL_BASE_SAMPLES} base points (this design: {n_base}) and "
+                    "when every index lies in [0, 1] within its bootstrap interval (Saltelli "
+                    "et al. 2010 use 10^2 to 10^4 base points; docs/uncertainty.md). Run "
+                    "more base points (uncertainty.samples, a power of 2); the raw numbers "
+                    "stay in report.json (analysis.sobol) for inspection, not for decisions."}
 
 
 def _interval(e: dict, digits: int = 3) -> str:

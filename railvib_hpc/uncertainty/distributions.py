@@ -141,7 +141,17 @@ def make_marginal(where: str, entry: Mapping[str, Any], nominal: float | None,
                              f"give exactly one of std and cov for the {dist} distribution"))
             return None
         if "cov" in params:
-            params["std"] = abs(params.pop("cov") * params["mean"])
+            cov = params.pop("cov")
+            if not cov > 0:                      # the key the user gave, not the std
+                problems.append((f"{where}.cov", cov, "must be > 0 (the coefficient of "
+                                 "variation, std / mean; a fixed value is no uncertain "
+                                 "parameter: leave the table out)"))
+                return None
+            if params["mean"] == 0:
+                problems.append((f"{where}.cov", cov, "gives std = cov x mean = 0: the "
+                                 "mean is 0; give std instead"))
+                return None
+            params["std"] = abs(cov * params["mean"])
         if not params["std"] > 0:
             problems.append((f"{where}.std", params["std"], "must be > 0"))
             return None

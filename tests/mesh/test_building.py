@@ -154,7 +154,7 @@ def test_unequal_spans_place_the_column_lines():
     ({"building.slab_bases": [4.2, 4.5]}, "building.slab_bases",
      "storey-2 beam underside (3.9 m above ZBB) must be above slab 1 top (4.4 m)"),
     ({"building.slab_bases": [4.2, 8.0], "building.z_slab2_base": 9.0},
-     "building.z_slab2_base", "leave z_slab1_base and z_slab2_base out"),
+     "building.z_slab2_base", "applies to storeys of one height (building.slab_bases = [])"),
     ({"building.z_slab2_base": 4.5}, "building.z_slab2_base", "storey-2 beam underside"),
 ])
 def test_bad_buildings_get_one_clear_line(changes, key, words):
@@ -165,8 +165,14 @@ def test_bad_buildings_get_one_clear_line(changes, key, words):
     assert "\n" not in text.strip()
 
 
-def test_one_storey_ignores_the_second_slab():
-    case = thesis_case().replace({"building.storeys": 1, "building.z_slab2_base": 1.0})
+def test_one_storey_has_no_second_slab():
+    """One storey has no slab 2: its level ``z_slab2_base`` applies from two storeys on
+    (one line when given), and the layout has no ``slab2``."""
+    with pytest.raises(CaseError, match=r"building\.z_slab2_base = 1\.0: applies to "
+                                        r"building\.storeys >= 2 only; here building\.storeys "
+                                        r"= 1"):
+        thesis_case().replace({"building.storeys": 1, "building.z_slab2_base": 1.0})
+    case = thesis_case().replace({"building.storeys": 1})
     lay = build_layout(case)
     assert "slab2" not in lay.probes and "slab1" in lay.probes
     assert Building.of_case(case).top == pytest.approx(case["geometry.zbb"] + 4.2 + 0.2)

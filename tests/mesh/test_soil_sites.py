@@ -236,8 +236,11 @@ def test_trench_and_block_take_their_volume_from_the_soil():
     assert filled["subgrade"] == pytest.approx(open_["subgrade"], rel=1e-12)
     wib = _parts(build_layout(case.replace({"wib.type": "block", **WIB})))
     assert wib["wib"] == pytest.approx(length * 6.0 * 1.0, rel=1e-12)
-    # without a width the thesis mesh is untouched; type 'none' keeps only the lines
-    assert predicted_hexes(build_layout(case.replace({"trench.depth": 3.0}))) == 41_880
+    # type 'none' keeps only the lines; without a width there are none, and the trench's
+    # other sizes do not apply (refused, not ignored)
+    with pytest.raises(CaseError, match=r"trench\.depth = 3\.0: applies to trench\.type != "
+                                        r"'none' or trench\.width > 0 only"):
+        case.replace({"trench.depth": 3.0})
 
 
 def test_a_probe_in_the_trench_moves_in_front_of_it_on_both_meshes():

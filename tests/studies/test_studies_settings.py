@@ -222,6 +222,10 @@ def test_cli_study_errors_and_list(capsys, tmp_path):
     assert run(["study", "modes", str(BASELINE), "--list", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "n300_corrected" in out and "pending" in out and "shared model" in out
+    # the overrides all variants share once above the table, each row its own
+    assert "every variant: modal.n_modes=300 modal.f_max=0.0" in out
+    row = next(ln for ln in out.splitlines() if " n50_modal " in ln)
+    assert "mbs.n_modes=50" in row and "modal.f_max" not in row
 
 
 def test_thesis_study_plan_and_table(case):

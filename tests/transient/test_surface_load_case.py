@@ -238,7 +238,7 @@ def test_the_surface_load_case_runs_and_is_assessed(tmp_path, capsys):
 @pytest.mark.parametrize(("overrides", "needle"), [
     (["track.count=0"], "track.count = 0: 0 (no track) needs the moving surface load"),
     (["load.force=1e5"], "load.force = 100000.0: applies to the moving load on the bare "
-                         "soil only: set track.count = 0"),
+                         "soil (track.count = 0) only; here track.count = 1"),
     (["track.count=3"], "track.count = 3: must be 1 or 2, or 0 (no track"),
     (["track.count=-1"], "track.count = -1: must be >= 0"),
     (["track.count=0", "load.force=1e5", "load.speed=0"], "load.speed = 0"),
@@ -253,15 +253,15 @@ def test_the_surface_load_case_runs_and_is_assessed(tmp_path, capsys):
      "load.frequency = 100.0: must be <= transient.f_max = 80 Hz"),
     (["track.count=0", "load.force=1e5", "load.frequency=-1"], "load.frequency = -1"),
     (["load.frequency=5"], "load.frequency = 5.0: applies to the moving load on the bare "
-                           "soil only"),
+                           "soil (track.count = 0) only"),
     (["track.count=0", "load.force=1e5", "load.speed=250"],
      "load.speed = 250.0: is at or above the ground's Rayleigh speed"),
     (["track.count=0", "load.force=1e5", "vehicle.speed=40"],
-     "vehicle.speed = 40.0: applies to the train"),
+     "vehicle.speed = 40.0: applies to a case with a track (track.count > 0) only"),
     (["track.count=0", "load.force=1e5", "track.embankment_height=3"],
-     "track.embankment_height = 3.0: belongs to the track"),
+     "track.embankment_height = 3.0: applies to a case with a track"),
     (["track.count=0", "load.force=1e5", "track.ends=supported"],
-     "track.ends = 'supported': belongs to the track"),
+     "track.ends = 'supported': applies to a case with a track"),
 ])
 def test_bad_surface_load_input_is_one_line(tmp_path, one_line_refusal, overrides, needle):
     out = tmp_path / "o"

@@ -43,6 +43,21 @@ def test_unknown_or_non_numeric_keys_are_refused(key, hint):
     assert f"uncertainty.parameter[1].key = '{key}'" in msg and hint in msg
 
 
+@pytest.mark.parametrize("entry, needle", [
+    ({"key": "pads.kz", "distribution": "lognormal", "cov": 0.0},
+     "uncertainty.parameter[1].cov = 0.0: must be > 0"),
+    ({"key": "pads.kz", "distribution": "normal", "cov": -0.1},
+     "uncertainty.parameter[1].cov = -0.1: must be > 0"),
+    ({"key": "building.rotation", "distribution": "normal", "cov": 0.1},
+     "uncertainty.parameter[1].cov = 0.1: gives std = cov x mean = 0: the mean is 0"),
+])
+def test_a_zero_cov_names_cov(entry, needle):
+    """The red team: ``cov = 0`` was refused as '...std = 0.0: must be > 0', naming a key
+    the user did not give."""
+    msg = _refused([entry])
+    assert needle in msg and ".std" not in msg, msg
+
+
 @pytest.mark.parametrize("entry, probability", [
     ({"key": "materials.subgrade.nu", "distribution": "normal", "std": 0.1}, "0.0241"),
     ({"key": "materials.subgrade.E", "distribution": "normal", "cov": 0.3}, "0.000429"),
@@ -138,3 +153,23 @@ def test_a_grown_design_keeps_its_first_samples(method, first, more):
     one = variant_case(c1, small.variants[0].overrides)
     assert one["uncertainty.parameter"] == [] and one.digest() == \
         variant_case(c2, big.variants[0].overrides).digest()
+
+
+def test_the_listing_shows_the_sampled_values_in_columns(capsys, tmp_path):
+    """The red team: ``--list`` printed ~500 characters per row, four of them the design's
+    own keys (``uncertainty.parameter=[] ...``) on every row. Now one column per
+    parameter, one row per sample, the keys named once above."""
+    assert run(["study", "uncertainty", "jobs/uncertainty_study.toml", "--list", "--out",
+                str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    head = next(ln for ln in lines if ln.startswith("index"))
+    assert head.split() == ["index", "variant", "c_S", "layer", "1", "c_S", "layer", "2",
+                            "damping", "layer", "1", "pad", "stiffness", "speed", "status"]
+    assert "  c_S layer 1: soil.layers[1].c_s, lognormal" in lines
+    assert "  speed: vehicle.speed, uniform" in lines
+    rows = [ln for ln in lines if ln.split()[:2] and ln.split()[1].startswith("s0")]
+    assert len(rows) == 28 and rows[0].split()[:2] == ["0", "s0000"]
+    assert max(map(len, lines)) < 100 and "uncertainty.parameter=[]" not in out
+    speed = float(rows[0].split()[-2])
+    assert 20.0 <= speed <= 40.0

@@ -508,6 +508,8 @@ def compute(ctx: StageContext) -> TransientOutput:
     had been killed).
     """
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    # the cheap checks first: the reuse checks solve for the static wheel loads
+    on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
     old = on_root(lambda: previous_results(ctx), comm)
     if old is not None:
         rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
@@ -584,7 +586,6 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                stop_after: int | None) -> dict:
     t_wall = time.perf_counter()
     ctx = StageContext(case, out_dir, comm, rep)
-    on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
     init = _setup(ctx)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]

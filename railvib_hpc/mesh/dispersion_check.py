@@ -345,8 +345,8 @@ def _advice(need: float, key: str = "mesh.wavelength_hz", f: float = 0.0) -> str
     """What makes the error small enough (``key``: the band's key, ``f`` its value; NaN
     ``need``: not computed)."""
     if math.isnan(need):
-        return (f"mesh with mesh.wavelength_hz = {f:g} (mesh.elements_per_wavelength "
-                f"elements per S wavelength) or lower {key}")
+        return (f"mesh with mesh.wavelength_hz = {f:g} and enough "
+                f"mesh.elements_per_wavelength, or lower {key}")
     if np.isfinite(need):
         per = f"mesh.elements_per_wavelength >= {np.ceil(need * 10) / 10:g}"
         if key == "mesh.wavelength_hz":

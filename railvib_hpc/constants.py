@@ -18,3 +18,7 @@ BYTES_PER_GB = 1e9
 
 #: Metres per inch (exact, international yard and pound agreement, 1959).
 METRES_PER_INCH = 0.0254
+
+#: Preferred (nominal) mantissas of the base-10 one-third-octave band centres: ISO 266:1997
+#: (the R10 preferred numbers), as IEC 61260-1:2014 labels the bands.
+THIRD_OCTAVE_MANTISSAS = (1.0, 1.25, 1.6, 2.0, 2.5, 3.15, 4.0, 5.0, 6.3, 8.0)

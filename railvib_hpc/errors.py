@@ -3,9 +3,10 @@
 User and environment errors (bad case files, bad overrides, missing, stale or
 corrupt files, a full disk, a locked output folder) derive from
 :class:`UserError`; the CLI prints them as one line without a traceback and
-exits with code 2, on every MPI rank together. Everything else is a bug: the
-CLI prints one "please report" line naming a log file with the traceback and
-exits with code 1.
+exits with code 2, on every MPI rank together. A time integration that grew without
+bound (:class:`DivergenceError`, a :class:`UserError` too) exits with code 3: the input
+was accepted, but the run is not a result. Everything else is a bug: the CLI prints one
+"please report" line naming a log file with the traceback and exits with code 1.
 """
 
 from __future__ import annotations
@@ -89,6 +90,14 @@ def exception_text(exc: BaseException) -> str:
         return os_error_text(exc)
     text = (str(exc).splitlines() or [""])[0]
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+class DivergenceError(UserError):
+    """A time integration whose energy grew past what its loads can have put in (the
+    divergence guard of :mod:`railvib_hpc.transient.guard`): stopped, nothing written as a
+    result; exit code 3, apart from the input errors' 2."""
+
+    exit_code = 3
 
 
 class DataError(UserError):

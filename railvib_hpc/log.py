@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from contextlib import contextmanager
@@ -48,13 +49,15 @@ class Reporter:
             self.info(f"[{name}] {'failed after' if failed else 'done in'} {dt:.2f} s")
 
     def progress(self, label: str, done: int, total: int, t_start: float) -> None:
-        """One progress line: percent and ETA."""
+        """One progress line: percent and ETA (``ETA --`` until something is done: no rate
+        to extrapolate yet)."""
         if self.rank != 0 or total <= 0:
             return
         frac = done / total
         elapsed = time.perf_counter() - t_start
-        eta = elapsed * (1 - frac) / frac if frac > 0 else float("nan")
-        print(f"  {label}: {100 * frac:5.1f} %  elapsed {elapsed:6.1f} s  ETA {eta:6.1f} s",
+        eta = (f"{elapsed * (1 - frac) / frac:6.1f} s" if frac > 0 and math.isfinite(elapsed)
+               else "    --")
+        print(f"  {label}: {100 * frac:5.1f} %  elapsed {elapsed:6.1f} s  ETA {eta}",
               file=self.stream, flush=True)
 
     def timing_table(self) -> str:

@@ -112,7 +112,8 @@ def _study_solver(what: str) -> Param:
     """``study.<kind>.solver`` of the studies that can run their variants either way."""
     return Param("modal", "str", "-",
                  "modal (modes + mbs, the thesis's method) or direct (railvib transient: the "
-                 f"full model in the time domain, causal, resolved up to transient.f_max; {what})",
+                 "full model in the time domain, causal, resolved up to transient.f_max where "
+                 f"the mesh resolves it, else less, as its dispersion check says; {what})",
                  choices=("modal", "direct"))
 
 
@@ -665,10 +666,12 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                       "peak-velocity error at the farthest probe (numerical "
                                       "dispersion of the soil grid over the distance from the "
                                       "track, a conservative bound) the mesh stage accepts, "
-                                      "e.g. 0.05; 0: no limit. The prediction is reported, "
-                                      "warned about above 5 %, and a band the mesh cannot "
-                                      "resolve there (the wave half a period off) is refused "
-                                      "whatever this value",
+                                      "e.g. 0.05, and railvib transient at transient.f_max "
+                                      "(its own check, always run); 0: no limit. The "
+                                      "prediction is reported, warned about above 5 %, and a "
+                                      "band the mesh cannot resolve there (the wave half a "
+                                      "period off) is refused at mesh.wavelength_hz whatever "
+                                      "this value (warned about at transient.f_max)",
                                       "unit",
                                       source="issue 28, item 2: accuracy that holds over "
                                              "distance (docs/transient.md, numerical "

@@ -61,6 +61,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.fft import irfft, next_fast_len, rfft, rfftfreq
 
+from ..constants import THIRD_OCTAVE_MANTISSAS
+
 __all__ = [
     "KB_F0",
     "KB_F_HIGH",
@@ -100,7 +102,7 @@ KB_F_LOW = 1.0
 KB_F_HIGH = 80.0
 
 #: Preferred (nominal) mantissas of the base-10 one-third-octave centres.
-_NOMINAL_MANTISSA = np.array([1.0, 1.25, 1.6, 2.0, 2.5, 3.15, 4.0, 5.0, 6.3, 8.0])
+_NOMINAL_MANTISSA = np.array(THIRD_OCTAVE_MANTISSAS)
 
 Response = Callable[[np.ndarray], np.ndarray]
 

@@ -32,12 +32,14 @@ on a reused mesh it runs again (``output.probes`` and the limits are not mesh in
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from ..config import Case
+from ..constants import THIRD_OCTAVE_MANTISSAS
 from ..errors import MeshError
 from ..fem.boundary import wave_speeds
 from ..fem.dispersion import critical_courant, elements_needed
@@ -104,24 +106,30 @@ def farthest_probe(case: Case, probes: Mapping[str, Any]) -> tuple[str, float, i
     return best
 
 
-def _schemes(case: Case, c_p: float, c_r: float, f: float, nu: float
-             ) -> Callable[[float], tuple[tuple[str, float], ...]]:
+def _schemes(case: Case, c_p: float, c_r: float, f: float, nu: float,
+             dt: float | None = None) -> Callable[[float], tuple[tuple[str, float], ...]]:
     """The ``(scheme, courant)`` ends of the step range, as a function of the elements per
-    Rayleigh wavelength ``n`` (the element edge is ``c_R / (f n)``)."""
+    Rayleigh wavelength ``n`` (the element edge is ``c_R / (f n)``); ``dt``: the run's own
+    step (the transient stage's check), else its bound from the case."""
     engine = case["transient.engine"]
     if engine in EXPLICIT_ENGINES:
         cc = EXPLICIT_STEP_SAFETY * critical_courant(nu, case["modal.hex_formulation"])
+        if dt is not None:
+            return lambda n: (("none", 0.0), ("central", min(c_p * dt * f * n / c_r, cc)))
         return lambda n: (("none", 0.0), ("central", cc))
     if engine == "direct":
-        dt = case["transient.dt"] or 1.0 / (case["transient.steps_per_period"]
-                                            * case["transient.f_max"])
+        if dt is None:
+            dt = case["transient.dt"] or 1.0 / (case["transient.steps_per_period"]
+                                                * case["transient.f_max"])
         return lambda n: (("none", 0.0), ("generalized_alpha", c_p * dt * f * n / c_r))
     return lambda n: (("none", 0.0),)
 
 
-def part_error(case: Case, part: str, h: float, f: float, distance: float) -> dict | None:
-    """The predicted error of the whole path in ground part ``part`` (edge ``h``); None for a
-    part the case does not give."""
+def part_error(case: Case, part: str, h: float, f: float, distance: float,
+               dt: float | None = None, phase: bool = True) -> dict | None:
+    """The predicted error of the whole path in ground part ``part`` (edge ``h``; ``dt``:
+    the run's step, :func:`_schemes`; ``phase = False``: the peak error alone, the phase
+    left NaN); None for a part the case does not give."""
     from ..site import solid_material
 
     try:
@@ -132,11 +140,11 @@ def part_error(case: Case, part: str, h: float, f: float, distance: float) -> di
     c_r = rayleigh_ratio(mat["nu"]) * c_s
     n_r = c_r / (f * h)
     wavelengths = distance * f / c_r
-    schemes = _schemes(case, c_p, c_r, f, mat["nu"])
+    schemes = _schemes(case, c_p, c_r, f, mat["nu"], dt)
     args = (n_r, wavelengths, mat["nu"], _mass(case), schemes(n_r), case["transient.rho_inf"],
             case["modal.hex_formulation"])
     err, where = worst_surface_error(*args)
-    phase, _ = worst_surface_error(*args, measure="phase")
+    phase = worst_surface_error(*args, measure="phase")[0] if phase else float("nan")
     return {"h": h, "c_s": c_s, "nu": float(mat["nu"]), "epw": c_s / (f * h),
             "epw_rayleigh": n_r, "wavelengths": wavelengths, "error": err, "where": where,
             "phase": phase, "schemes": schemes}
@@ -176,7 +184,23 @@ def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> d
         :data:`UNRESOLVED_PHASE` or more, or beyond the grid's cut-off), or the error reaches
         ``mesh.max_dispersion_error`` (> 0).
     """
-    f = case["mesh.wavelength_hz"]
+    return band_report(quality, case, probes, case["mesh.wavelength_hz"],
+                       "mesh.wavelength_hz")
+
+
+def band_report(quality: dict, case: Case, probes: Mapping[str, Any], f: float, key: str,
+                dt: float | None = None, refuse: bool = True, advise: bool = True
+                ) -> dict | None:
+    """:func:`dispersion_report` at the band ``f`` of the key ``key`` (``mesh.wavelength_hz``,
+    or ``transient.f_max`` for the transient stage's own check at its step ``dt``); None
+    when ``f`` is 0 or no ground part lies between the track and a probe.
+
+    ``refuse = False``: an unresolved band is a warning, not a :class:`DispersionError`
+    (the transient stage's default band, :func:`transient_band_check`); an error at or
+    above ``mesh.max_dispersion_error`` is refused either way. ``advise = False``: the
+    warnings leave out the elements per wavelength needed (each a root search over the
+    grid's dispersion, seconds).
+    """
     if f <= 0:
         return None
     name, distance, track = farthest_probe(case, probes)
@@ -184,7 +208,7 @@ def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> d
     parts = {}
     for part in GROUND_PARTS:
         if part in edges and distance > 0:
-            p = part_error(case, part, edges[part], f, distance)
+            p = part_error(case, part, edges[part], f, distance, dt)
             if p is not None:
                 parts[part] = p
     if not parts:
@@ -196,8 +220,9 @@ def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> d
            "warnings": [],
            "parts": {k: {**{key: v[key] for key in ("h", "c_s", "epw", "wavelengths", "error")},
                          "phase_periods": _finite(v["phase"])} for k, v in parts.items()}}
+    out["key"] = key
     head = (f"numerical dispersion at the farthest probe, {name} ({distance:.3g} m from "
-            f"track {track}'s centre line): at mesh.wavelength_hz = {f:g} Hz {worst} has "
+            f"track {track}'s centre line): at {key} = {f:g} Hz {worst} has "
             f"{p['epw']:.3g} elements per S wavelength ({p['h']:.3g} m edges, c_S "
             f"{p['c_s']:.4g} m/s, {p['wavelengths']:.3g} Rayleigh wavelengths to the probe)")
     out["line"] = (f"{head}: phase off by {p['phase']:.2g} period, predicted peak-velocity "
@@ -205,36 +230,110 @@ def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> d
                    f"{p['where']}; the whole path in the worst ground part, a conservative "
                    "bound)")
     if p["error"] > DISPERSION_TARGET:
-        target = _needed(case, p, DISPERSION_TARGET)
+        target = _needed(case, p, DISPERSION_TARGET) if advise else math.nan
         out["needed"] = target if np.isfinite(target) else None
         out["warnings"].append(
             f"{head}: predicted peak-velocity error {100 * p['error']:.3g} % > "
-            f"{100 * DISPERSION_TARGET:g} %; {_advice(target)}")
-    _refuse(case, out, p)
+            f"{100 * DISPERSION_TARGET:g} %; {_advice(target, key, f)}")
+    _refuse(case, out, p, refuse, advise)
     return out
 
 
-def _refuse(case: Case, out: dict, p: dict) -> None:
+def _refuse(case: Case, out: dict, p: dict, refuse: bool = True, advise: bool = True
+            ) -> None:
     """Refuse a band the mesh cannot resolve at the farthest probe (a phase error of
-    :data:`UNRESOLVED_PHASE` or beyond the cut-off), or an error at or above
-    ``mesh.max_dispersion_error`` (> 0)."""
+    :data:`UNRESOLVED_PHASE` or beyond the cut-off; only a warning with ``refuse =
+    False``, added to ``out["warnings"]`` with ``out["unresolved"]``), or an error at or
+    above ``mesh.max_dispersion_error`` (> 0)."""
     limit = case["mesh.max_dispersion_error"]
-    where = (f"mesh.wavelength_hz = {out['frequency_hz']:g}: at the farthest probe "
+    key = out["key"]
+    where = (f"{key} = {out['frequency_hz']:g}: at the farthest probe "
              f"{out['probe']} ({out['distance_m']:.3g} m from track {out['track']}) "
              f"{out['part']} has {p['epw']:.3g} elements per S wavelength")
-    if p["phase"] >= UNRESOLVED_PHASE:
+    unresolved = p["phase"] >= UNRESOLVED_PHASE
+    if unresolved:
         off = ("beyond the grid's cut-off" if not np.isfinite(p["phase"]) else
                f"{p['phase']:.2g} period off")
-        need = _needed(case, p, UNRESOLVED_PHASE, "phase")
-        raise DispersionError(
-            f"{where}: the mesh cannot resolve the band there (the wave arrives {off}; "
-            f"allowed: less than {UNRESOLVED_PHASE:g} period); {_advice(need)}")
+        need = _needed(case, p, UNRESOLVED_PHASE, "phase") if advise else math.nan
+        text = (f"{where}: the mesh cannot resolve the band there (the wave arrives {off}; "
+                f"allowed: less than {UNRESOLVED_PHASE:g} period); "
+                f"{_advice(need, key, out['frequency_hz'])}")
+        if refuse:
+            raise DispersionError(text)
     if limit > 0 and p["error"] >= limit:
-        need = _needed(case, p, limit)
+        need = _needed(case, p, limit) if advise or refuse else math.nan
         raise DispersionError(
             f"{where}: predicted peak-velocity error {100 * p['error']:.3g} % >= "
-            f"mesh.max_dispersion_error = {limit:g}; {_advice(need)}, or raise "
+            f"mesh.max_dispersion_error = {limit:g}; "
+            f"{_advice(need, key, out['frequency_hz'])}, or raise "
             "mesh.max_dispersion_error (0: no limit)")
+    if unresolved:
+        out["unresolved"] = True
+        out["warnings"].append(text)
+
+
+def transient_band_check(quality: dict, case: Case, probes: Mapping[str, Any],
+                         dt: float) -> dict | None:
+    """The ``transient`` stage's check at its own band, ``transient.f_max``, for its mass
+    (``modal.lumped_mass``) and step ``dt`` (:func:`band_report`): the line, the warnings
+    (an unresolved band is one: the default band of 80 Hz would refuse every run of a
+    mesh sized for a lower band; ``mesh.wavelength_hz = transient.f_max`` refuses it) and
+    ``resolved_up_to_hz``, the highest frequency whose predicted error at the farthest
+    probe is at most :data:`DISPERSION_TARGET` (:func:`resolved_band`): what the run
+    resolves, reported instead of ``transient.f_max``. None without a ground part between
+    the track and a probe. An error at or above ``mesh.max_dispersion_error`` (> 0) is
+    refused, as by the mesh check.
+    """
+    f_max = case["transient.f_max"]
+    out = band_report(quality, case, probes, f_max, "transient.f_max", dt, refuse=False,
+                      advise=False)
+    if out is None:
+        return None
+    out["resolved_up_to_hz"] = (f_max if out["error"] <= DISPERSION_TARGET else
+                                resolved_band(quality, case, probes, f_max, dt))
+    return out
+
+
+def resolved_band(quality: dict, case: Case, probes: Mapping[str, Any], f_max: float,
+                  dt: float | None = None) -> float:
+    """The highest one-third-octave nominal centre from 1 Hz up to ``f_max`` at which the
+    predicted peak-velocity error at the farthest probe (the worst ground part) is at most
+    :data:`DISPERSION_TARGET`, ``f_max`` itself when it is resolved, 0 when not even 1 Hz
+    is (the bands the assessment reports, :func:`~railvib_hpc.assess.weighting.
+    third_octave_bands`; the error grows with the frequency, so a binary search over
+    them: five evaluations for 1-80 Hz)."""
+    _, distance, _ = farthest_probe(case, probes)
+    edges = quality.get("max_edge_per_soil_part", {})
+
+    def resolved(f: float) -> bool:
+        errs = [p["error"] for part in GROUND_PARTS if part in edges
+                for p in [part_error(case, part, edges[part], f, distance, dt, False)]
+                if p is not None]
+        return max(errs, default=0.0) <= DISPERSION_TARGET
+
+    candidates = third_octave_centres(f_max)
+    if f_max not in candidates:
+        candidates.append(float(f_max))
+    lo, hi = -1, len(candidates)          # candidates[lo] resolved, candidates[hi] not
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        lo, hi = (mid, hi) if resolved(candidates[mid]) else (lo, mid)
+    return candidates[lo] if lo >= 0 else 0.0
+
+
+def third_octave_centres(f_max: float) -> list[float]:
+    """The nominal one-third-octave centres from 1 Hz up to ``f_max`` (ISO 266, the bands of
+    :func:`~railvib_hpc.assess.weighting.third_octave_bands`).
+
+    >>> third_octave_centres(5.0)
+    [1.0, 1.25, 1.6, 2.0, 2.5, 3.15, 4.0, 5.0]
+    """
+    out, decade = [], 1.0
+    while decade <= f_max * (1 + 1e-9):
+        out += [round(m * decade, 6) for m in THIRD_OCTAVE_MANTISSAS
+                if m * decade <= f_max * (1 + 1e-9)]
+        decade *= 10.0
+    return out
 
 
 def _finite(x: float) -> float | None:
@@ -242,11 +341,16 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _advice(need: float) -> str:
-    """What makes the error small enough."""
+def _advice(need: float, key: str = "mesh.wavelength_hz", f: float = 0.0) -> str:
+    """What makes the error small enough (``key``: the band's key, ``f`` its value; NaN
+    ``need``: not computed)."""
+    if math.isnan(need):
+        return (f"mesh with mesh.wavelength_hz = {f:g} and enough "
+                f"mesh.elements_per_wavelength, or lower {key}")
     if np.isfinite(need):
-        return (f"raise mesh.elements_per_wavelength to >= {np.ceil(need * 10) / 10:g} or "
-                "lower mesh.wavelength_hz")
+        per = f"mesh.elements_per_wavelength >= {np.ceil(need * 10) / 10:g}"
+        if key == "mesh.wavelength_hz":
+            return f"raise {per.replace('>=', 'to >=')} or lower mesh.wavelength_hz"
+        return f"mesh with mesh.wavelength_hz = {f:g} and {per}, or lower {key}"
     return ("no element size suffices at this time step (the time scheme's own error): "
-            "lower transient.dt or raise transient.steps_per_period, or lower "
-            "mesh.wavelength_hz")
+            f"lower transient.dt or raise transient.steps_per_period, or lower {key}")

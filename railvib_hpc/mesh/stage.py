@@ -84,18 +84,21 @@ def quality_warnings(quality: dict, tol: float) -> list[str]:
     return out
 
 
-def wavelength_warnings(quality: dict, case: Case) -> list[str]:
+def wavelength_warnings(quality: dict, case: Case, band: tuple[float, str] | None = None
+                        ) -> list[str]:
     """One warning per soil part whose longest element edge resolves the shear wavelength at
-    :func:`~railvib_hpc.mesh.layout.resolved_frequency` with fewer than
+    :func:`~railvib_hpc.mesh.layout.resolved_frequency` (or ``band = (frequency, key)``,
+    the transient stage's ``transient.f_max``) with fewer than
     ``mesh.min_elements_per_wavelength`` elements (none when no frequency is set)."""
     from ..site import solid_material
     from .layout import resolved_frequency, shear_wave_speed
 
-    f = resolved_frequency(case)
+    f = resolved_frequency(case) if band is None else band[0]
     need = case["mesh.min_elements_per_wavelength"]
     if f <= 0:
         return []
-    key = "mesh.wavelength_hz" if case["mesh.wavelength_hz"] else "modal.f_max"
+    key = ("mesh.wavelength_hz" if case["mesh.wavelength_hz"] else "modal.f_max") \
+        if band is None else band[1]
     out = []
     for part, h in quality.get("max_edge_per_soil_part", {}).items():
         try:

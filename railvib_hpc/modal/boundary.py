@@ -22,7 +22,8 @@ Each face is
   :func:`~.petsc.assemble_damping`). The building, the track bed (ballast, subballast,
   embankment fill) and the mitigation measures are never damped by a layer, however thick;
   a layer that holds no ground element is refused (:func:`check_layers`): the face would
-  be a plain fixed face.
+  be a plain fixed face; so is a layer that reaches the building, which would damp the
+  ground under and beside it.
 
 The thesis defaults (rollers, fixed base) give exactly the constraint rules of
 :data:`railvib_hpc.modal.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
@@ -40,7 +41,14 @@ from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
 from ..problem import Problem
-from ..schema import BOUNDARY_FACES, PART_ID, PARTS, SOIL_LAYER_PARTS, SOIL_PARTS
+from ..schema import (
+    BOUNDARY_FACES,
+    BUILDING_PARTS,
+    PART_ID,
+    PARTS,
+    SOIL_LAYER_PARTS,
+    SOIL_PARTS,
+)
 from .dofmap import COMPONENTS
 from .elements import SOLID_MATERIAL
 
@@ -374,10 +382,15 @@ def check_layers(mesh: Mesh, problem: Problem) -> dict[str, dict]:
     BoundaryError
         A layer that holds no ground element (its centroids all lie at least
         ``boundary.layer_thickness`` from the face): the face would silently act as a
-        fixed one. Names the thickness that reaches the first element layer.
+        fixed one. Names the thickness that reaches the first element layer. Or a layer
+        that reaches the building (a building element's centroid within the thickness):
+        it would damp the ground under and beside the building, the response the model
+        is for, as the perfectly matched layers refuse the like
+        (:func:`~railvib_hpc.transient.pml.pml_geometry`). Names the thickness allowed.
     """
     thickness = problem.boundary.layer_thickness
     ground = np.isin(mesh.hex_part, [PART_ID[p] for p in LAYER_PARTS])
+    building = np.isin(mesh.hex_part, [PART_ID[p] for p in BUILDING_PARTS])
     out = {}
     for face, d in _layer_distances(mesh, problem, None).items():
         inside = d < thickness
@@ -393,6 +406,17 @@ def check_layers(mesh: Mesh, problem: Problem) -> dict[str, dict]:
                 f"{nearest:.4g} m from the face), so the face would act as a plain fixed "
                 f"face; allowed: more than {nearest:.4g} m (several element layers absorb "
                 "better), or another face type")
+        near = inside & building
+        if near.any():
+            gap = float(d[building].min())
+            raise BoundaryError(
+                f"boundary.layer_thickness = {thickness:g}: the Caughey layer of "
+                f"boundary.{face} reaches the building (its nearest element's centroid lies "
+                f"{gap:.4g} m from the face), so it would damp the ground under and beside "
+                f"the building ({int((inside & ground).sum())} of {int(ground.sum())} ground "
+                f"elements); a layer stands in for the ground beyond the model; allowed: "
+                f"0 < boundary.layer_thickness < {gap:.4g} m, or a larger domain "
+                "(domain.extra_length, domain.extra_width, domain.extra_depth)")
         skipped = {PARTS[int(p) - 1]: int(c) for p, c in
                    zip(*np.unique(mesh.hex_part[inside & ~ground], return_counts=True))}
         out[face] = {"elements": int((inside & ground).sum()), "skipped": skipped}

@@ -557,7 +557,11 @@ def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
             timings["total"] = time.perf_counter() - t_start
             model = {"n_nodes": stats.n_nodes, "n_dofs": stats.n_dofs,
                      "n_hexes": None, "modes_in_file": None, "modes_used": None,
-                     "frequencies_hz": [None], "f_max_hz": vcase["transient.f_max"],
+                     "frequencies_hz": [None],
+                     # what the mesh resolves at the farthest probe (the transient stage's
+                     # dispersion check), at most transient.f_max
+                     "f_max_hz": stats.summary.get("resolved_up_to_hz",
+                                                   vcase["transient.f_max"]),
                      "solver": "direct", "engine": stats.engine,
                      "dt": stats.dt, "n_steps": stats.n_steps,
                      "time_integration": stats.time_integration,
@@ -622,7 +626,9 @@ def band_resolved(nominal_hz: float, f_max_hz: float | None) -> bool:
 
 def resolved_up_to(result: dict) -> float | None:
     """The highest frequency a variant's solution resolves [Hz]: its highest mode used
-    (modal), ``transient.f_max`` (``solver = direct``); None when unknown."""
+    (modal), ``transient.f_max`` or less where the mesh does not resolve it at the
+    farthest probe (``solver = direct``: the transient stage's dispersion check); None
+    when unknown."""
     f = (result.get("model") or {}).get("f_max_hz")
     return float(f) if f is not None else None
 

@@ -113,6 +113,7 @@ def explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: Ra
     band's step ``dt_band`` or the limit, whichever is smaller, divided into ``output.dt``.
     """
     from .explicit import (
+        STEP_SAFETY,
         ExplicitSystem,
         contact_frequency,
         critical_step,
@@ -147,6 +148,7 @@ def explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: Ra
         system.destroy()
         raise
     system.dt = float(dt)
+    system.allowed_step = STEP_SAFETY * critical
     return system, dt, text
 
 
@@ -238,7 +240,8 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
                     dt_band: float, pml: tuple | None = None) -> tuple:
     """The IMEX engine's implicit partition ``(K_I, C_I)``, its step, a line on the
     explicit part's stability limit (:func:`~.explicit.stability_limit` of ``K - K_I,
-    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`) and the
+    C - C_I``; the implicit elements do not limit the step, :mod:`.imex`), the largest
+    step it allows (:data:`~.explicit.STEP_SAFETY` of the critical one) and the
     perfectly matched layers (None without ``pml``, the setup's
     :func:`~.pml.pml_geometry`; their ``M_e2`` is in the limit, their hexahedra take the
     full formulation in the partition as in K)."""
@@ -284,7 +287,7 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
             else "")
     text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
             f"dashpots{', the layers M_e1' if layer is not None else ''}; explicit part {text}")
-    return (K_I, C_I), dt, text, layer
+    return (K_I, C_I), dt, text, layer, STEP_SAFETY * lim.dt_critical
 
 
 def _MPI_MIN():

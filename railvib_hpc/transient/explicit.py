@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .guard import sparse_dot
 from .integrate import SparseLoad, State, StepInfo, VehicleDriver, add_sparse, gather_values
 
 #: Options prefix of the largest-frequency eigensolve (``-railvib_cd_eps_...``).
@@ -421,6 +422,10 @@ class ExplicitSystem:
     conserved: it absorbs).
     """
 
+    #: The loads' work in this scheme's energy balance is ``dt f_n^T v_n`` (:mod:`.guard`)
+    LOAD_WORK = "velocity"
+    #: The largest step the stability limit allows (set by the stage's setup; None before)
+    allowed_step: float | None = None
     #: No factor: what the run statistics report of the direct path's
     time_factorization = 0.0
     factor_memory_gb = 0.0
@@ -662,6 +667,10 @@ class ExplicitSolver:
         self.driver = driver
         self.time_contact = 0.0
         self.time_pml = 0.0
+        #: The loads' work on this rank's rows so far, ``sum dt f_n^T v_n``: the exact change
+        #: of the discrete energy (:meth:`ExplicitSystem.scheme_energy`; :mod:`.guard`)
+        self.work = 0.0
+        self._loads: list[SparseLoad] = []
         if driver is not None:
             nm = driver.newmark
             self._mv_inv = np.linalg.inv(nm.mv)
@@ -679,9 +688,10 @@ class ExplicitSolver:
             t0 = time.perf_counter()
             rhs -= sys_.pml.force(u, sys_.dt)
             self.time_pml += time.perf_counter() - t0
-        for load in ((None if self.prescribed is None else self.prescribed(n)), contact):
-            if load is not None:
-                add_sparse(rhs, sys_.r0, load[0], load[1])
+        loads = ((None if self.prescribed is None else self.prescribed(n)), contact)
+        self._loads = [load for load in loads if load is not None]
+        for load in self._loads:
+            add_sparse(rhs, sys_.r0, load[0], load[1])
         return sys_.accelerate(rhs, v_half)
 
     def step(self, st: State) -> StepInfo:
@@ -696,6 +706,7 @@ class ExplicitSolver:
             contact = self._contact(st, n1, u1, info)
         a1 = self.acceleration(n1, u1, v_half, contact)
         st.u[:], st.v[:], st.a[:] = u1, v_half + (0.5 * dt) * a1, a1
+        self.work += dt * sum(sparse_dot(load, self.system.r0, st.v) for load in self._loads)
         st.step = n1
         return info
 

@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..resources import release_memory
+from .guard import sparse_dot
 from .petsc import TransientSystem
 from .rail import RailDofs, WheelCoupling
 
@@ -310,6 +311,12 @@ class DirectSolver:
         self._rhs, self._uhat = system.vector(self._rhs_arr), system.vector(self._uhat_arr)
         self._contact_load: SparseLoad | None = None
         self.time_contact = 0.0
+        #: The loads' work on this rank's rows so far, in the scheme's energy balance
+        #: (:mod:`.guard`): ``f_{n+1-alpha_f}^T (u_{n+1} - u_n)`` per step, or ``dt
+        #: f_{n+1}^T v_{n+1}`` for a leapfrog system (``system.LOAD_WORK = "velocity"``,
+        #: the IMEX engine's)
+        self.work = 0.0
+        self._work_velocity = getattr(system, "LOAD_WORK", "displacement") == "velocity"
 
     # ---------------------------------------------------------------- helpers
     def _prescribed(self, n: int) -> SparseLoad | None:
@@ -335,8 +342,9 @@ class DirectSolver:
         self._u[:], self._v[:], self._a[:] = st.u, st.v, st.a
         sys_.history_rhs(*self._vecs, self._rhs)
         rhs = self._rhs_arr
-        for load, w in ((self._prescribed(st.step), wf0), (self._prescribed(n1), wf1),
-                        (self._contact_load, wf0)):
+        loads = ((self._prescribed(st.step), wf0), (self._prescribed(n1), wf1),
+                 (self._contact_load, wf0))
+        for load, w in loads:
             if load is not None:
                 add_sparse(rhs, r0, load[0], load[1], w)
         sys_.solve(self._rhs, self._uhat)
@@ -348,6 +356,10 @@ class DirectSolver:
         if end_step is not None:
             end_step(u_new)                     # the layers' memory (petsc.TransientSystem)
         v_new, a_new = self.scheme.update(u_new, st.u, st.v, st.a)
+        if self.driver is not None:                  # the contact force at t_{n+1}
+            loads = (*loads, (self._contact_load, wf1))
+        moved = self.scheme.dt * v_new if self._work_velocity else u_new - st.u
+        self.work += sum(w * sparse_dot(load, r0, moved) for load, w in loads if w != 0.0)
         st.u[:], st.v[:], st.a[:] = u_new, v_new, a_new
         st.step = n1
         return info

@@ -56,6 +56,7 @@ t = 0 and says why.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
@@ -508,6 +509,8 @@ def compute(ctx: StageContext) -> TransientOutput:
     had been killed).
     """
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    # the cheap checks first: the reuse checks solve for the static wheel loads
+    on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
     old = on_root(lambda: previous_results(ctx), comm)
     if old is not None:
         rep.info(f"reusing the transient results in {out_dir} (same model, loads and "
@@ -584,7 +587,6 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                stop_after: int | None) -> dict:
     t_wall = time.perf_counter()
     ctx = StageContext(case, out_dir, comm, rep)
-    on_root(lambda: precheck_size(case), comm)       # before the mesh: one line, exit 2
     init = _setup(ctx)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
@@ -628,6 +630,7 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
                          resume=resume_ok, block=FIELD_BLOCK,
                          extra_bytes=_stress_bytes(case, len(mesh.hexes)))
     solver.start(state)
+    guard = make_guard(init, case, state)
     probes, rails_s = init["probe_sampler"], init["rail_sampler"]
 
     def record(n: int, info=None) -> None:
@@ -666,9 +669,11 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     t_run = time.perf_counter()
     last_progress = last_ckpt = t_run
     first_step = state.step
-    with rep.stage("transient: time integration"):
+    with rep.stage("transient: time integration"), _discard_on_divergence(ctx, writer):
         while state.step < nt:
             info = solver.step(state)
+            if guard.due(state.step, state.step == nt):
+                guard.check(state)             # before anything of this step is kept
             record(state.step, info)
             now = time.perf_counter()
             if comm.rank == 0 and (now - last_progress >= 2.0 or state.step == nt):
@@ -705,6 +710,9 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     rss = comm.allgather(peak_memory_gb())
     stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
                    recorder, nt - first_step, comm)
+    stats["guard"] = guard.stats(dofmap.n_dofs)
+    stats["resolved_up_to_hz"] = init["resolved_up_to_hz"]
+    rep.info(guard.summary(dofmap.n_dofs))
     with rep.stage("transient: probes, histories"):
         def write_rank0() -> None:
             _write_probes(out_dir, init, recorder, case, ctx.provenance(PROBES, upstream))
@@ -725,6 +733,27 @@ def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps:
     rep.info(f"wrote {out_dir / FIELDS_H5}, {out_dir / PROBES_H5}, "
              f"{out_dir / TRANSIENT_H5}")
     return {**stats, "reused": False}
+
+
+@contextlib.contextmanager
+def _discard_on_divergence(ctx: StageContext, writer: FieldWriter):
+    """On a :class:`~railvib_hpc.errors.DivergenceError` (raised on every rank
+    together): close and delete the partial ``fields.h5`` and the checkpoint, so that
+    nothing of the diverged run looks like a result or is resumed by a rerun."""
+    from ..errors import DivergenceError
+
+    try:
+        yield
+    except DivergenceError:
+        writer.pending = []                # (the checked steps only; nothing more to write)
+        writer.close()
+
+        def remove() -> None:
+            writer.path.unlink(missing_ok=True)
+            ctx.discard(ctx.out_dir / CHECKPOINT)
+
+        on_root(remove, ctx.comm)
+        raise
 
 
 def _passage(case: Case, mesh, dofmap) -> tuple:
@@ -791,9 +820,12 @@ def _setup(ctx: StageContext) -> dict:
             if explicit:
                 system, dt, limit = explicit_system(ctx, mesh, dofmap, problem, rails,
                                                      vehicle, (K, M, C, dashpots), dt, pml)
+                allowed = system.allowed_step
             else:
-                partition, dt, limit, layer = imex_partition(ctx, mesh, dofmap, problem, K,
-                                                              M, C, dt, pml)
+                partition, dt, limit, layer, allowed = imex_partition(ctx, mesh, dofmap,
+                                                                       problem, K, M, C, dt,
+                                                                       pml)
+        dt = _inject_step(dt, system if explicit else None)
     how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
            else f"the automatic step {dt:.3g} s")
     # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
@@ -806,6 +838,7 @@ def _setup(ctx: StageContext) -> dict:
     if surface:
         x = x[:, :0]                     # no wheel: the loads' positions are the case's
     steps_out = output_steps(case, dt, nt)
+    resolved = on_root(lambda: band_check(case, mesh, dt, rep), comm)
     if case["output.stress_times"]:
         _check_stress_times(case, steps_out * dt)
     scheme_text = (f"generalized-alpha rho_inf = {case['transient.rho_inf']:g}"
@@ -826,6 +859,8 @@ def _setup(ctx: StageContext) -> dict:
         if engine == "direct":
             K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
             layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
+            _inject_damping(C)
+            allowed = None                     # unconditionally stable
         with rep.stage("transient: factorization"):
             if engine == "direct":
                 scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
@@ -885,7 +920,85 @@ def _setup(ctx: StageContext) -> dict:
             "n_dof": 0 if vehicle is None else vehicle.n_dof,
             "probe_names": names, "probe_coords": coords,
             "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),
-            "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme}
+            "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme,
+            "pml": pml, "allowed_step": allowed, "resolved_up_to_hz": resolved}
+
+
+def band_check(case: Case, mesh, dt: float, rep: Reporter) -> float:
+    """The mesh's dispersion at the stage's own band, ``transient.f_max``, for its mass and
+    step (:func:`~railvib_hpc.mesh.dispersion_check.transient_band_check`, and the
+    elements-per-wavelength warnings of the mesh check at that band): its lines, and the
+    frequency the run resolves at the farthest probe (``transient.f_max`` when it does;
+    rank 0). Raises :class:`~railvib_hpc.mesh.dispersion_check.DispersionError` as the
+    mesh check does, at ``mesh.max_dispersion_error``."""
+    from ..mesh.dispersion_check import transient_band_check
+    from ..mesh.stage import max_edge_per_soil_part, wavelength_warnings
+
+    f_max = case["transient.f_max"]
+    quality = {"max_edge_per_soil_part": max_edge_per_soil_part(mesh)}
+    for line in wavelength_warnings(quality, case, (f_max, "transient.f_max")):
+        rep.info(f"warning: {line}")
+    found = transient_band_check(quality, case, mesh.probes, dt)
+    if found is None:
+        return float(f_max)
+    rep.info(f"  {found['line']}")
+    for line in found["warnings"]:
+        rep.info(f"warning: {line}")
+    top = found["resolved_up_to_hz"]
+    if top < f_max:
+        rep.info(f"warning: the results are resolved up to {top:g} Hz at the farthest probe "
+                 f"(predicted peak-velocity error <= 5 %), not up to transient.f_max = "
+                 f"{f_max:g} Hz: the studies leave out the one-third-octave bands above it")
+    return float(top)
+
+
+def _inject_step(dt: float, system) -> float:
+    """The step, times the factor of a ``"step"`` :data:`~.guard.TEST_INJECTION` (the
+    explicit engines' test hook: past the pre-checked limit; ``system``: the explicit
+    engine's, whose own step follows)."""
+    from . import guard
+
+    inject = guard.TEST_INJECTION
+    if inject is None or inject.kind != "step":
+        return dt
+    dt = float(dt * inject.factor)
+    if system is not None:
+        system.dt = dt
+    return dt
+
+
+def _inject_damping(C) -> None:
+    """``C`` times ``-factor`` for a ``"negative_damping"`` :data:`~.guard.TEST_INJECTION`
+    (the direct engine's test hook)."""
+    from . import guard
+
+    inject = guard.TEST_INJECTION
+    if inject is not None and inject.kind == "negative_damping" and C is not None:
+        C.scale(-inject.factor)
+
+
+def make_guard(init: dict, case: Case, state: State):
+    """The run's :class:`~.guard.DivergenceGuard`, started from ``state``: the regions of
+    this rank's rows (parts and perfectly matched layers), checked every output stride of
+    steps at first (collective)."""
+    from .guard import DivergenceGuard, dof_regions, node_regions
+
+    mesh, dofmap, system = init["mesh"], init["dofmap"], init["system"]
+    layers = []
+    if init["pml"] is not None:
+        centres = mesh.points[mesh.hexes].mean(axis=1)
+        thickness = case["boundary.layer_thickness"]
+        for face in init["pml"][0]:
+            layers.append((face.face, np.abs(centres[:, face.axis] - face.plane) < thickness))
+    region, names = node_regions(mesh, layers)
+    r0, r1 = system.r0, system.r1
+    rows = dof_regions(region, dofmap.index, r0, r1)
+    steps = init["steps_out"]
+    stride = int(steps[1] - steps[0]) if steps.size > 1 else init["nt"]
+    guard = DivergenceGuard(system, init["solver"], rows, names, mesh.points, dofmap.index,
+                            init["dt"], init["engine"], init["allowed_step"], stride)
+    guard.start(state)
+    return guard
 
 
 #: Fraction of the ground's Rayleigh speed from which a train's speed is warned about: the

@@ -47,13 +47,16 @@ class Result:
 
     @property
     def outcome(self) -> str:
-        """``hang``, ``traceback``, ``clear error``, ``internal error``, ``ok`` or ``unclear``."""
+        """``hang``, ``traceback``, ``clear error`` (exit 2, or 3 for a diverged run, with one
+        error line), ``internal error``, ``ok`` or ``unclear``."""
         if self.timed_out:
             return "hang"
         if "Traceback" in self.err or "Traceback" in self.out:
             return "traceback"
         if self.code == 2 and len(self.error_lines) == 1:
             return "clear error"
+        if self.code == 3 and len(self.error_lines) == 1 and "diverged" in self.err:
+            return "clear error"       # a diverged time integration, stopped in one line
         if self.code == 1 and "please report" in self.err:
             return "internal error"
         if self.code == 0:

@@ -78,7 +78,9 @@ def _transient(capsys, meshed: Path, out: Path, *overrides: str) -> tuple[int, s
 # --------------------------------------------------------------------------- item 1
 def test_caughey_layer_damps_the_ground_only(mesh, tally):
     """100 m reaches every element: only the subgrade gets a weight, not the building
-    (0.87-0.95 before) nor the ballast and subballast; 3 m does not reach the footings."""
+    (0.87-0.95 before) nor the ballast and subballast (such a layer is refused by
+    :func:`check_layers`, since it reaches the building; the weights alone are checked
+    here); 3 m does not reach the footings, and its line names the parts left undamped."""
     from railvib_hpc.modal.boundary import LAYER_PARTS, layer_line, layer_weights
     from railvib_hpc.schema import PART_ID
 
@@ -88,17 +90,43 @@ def test_caughey_layer_damps_the_ground_only(mesh, tally):
     ground = np.isin(mesh.hex_part, [PART_ID[p] for p in LAYER_PARTS])
     others = {p: float(w[mesh.hex_part == PART_ID[p]].max(initial=0.0))
               for p in ("footing", "column", "slab", "wall", "ballast", "subballast")}
-    line = layer_line(mesh, Problem.from_case(case))
     ok = all(v == 0.0 for v in others.values()) and bool(np.all(w[ground] > 0))
     tally.add("transient: caughey base layer 100 m over the building and the track bed",
-              "correct" if ok else "silent wrong", line)
+              "correct" if ok else "silent wrong", str(others))
     assert ok, others
-    assert line.startswith("Caughey layers (100 m): base ")
-    assert "ballast" in line and "footing" in line and "are not damped" in line
+    side = load_case(ABSORBING, [*COARSE_SETS, "boundary.y_max=caughey",
+                                 "boundary.layer_thickness=8"])
+    line = layer_line(mesh, Problem.from_case(side))
+    assert line.startswith("Caughey layers (8 m): y_max ")
+    assert "ballast" in line and "are not damped" in line
     thin = load_case(ABSORBING, [*COARSE_SETS, "boundary.base=caughey",
                                  "boundary.layer_thickness=3"])
     weights = layer_weights(mesh, Problem.from_case(thin))
     assert weights[mesh.hex_part == PART_ID["footing"]].max() == 0.0
+
+
+def test_caughey_layer_reaching_the_building_is_refused(mesh, meshed, tmp_path, capsys,
+                                                        tally):
+    """A base layer 20 x thicker than the 4.8 m of soil damped every ground element
+    (about 27 % at the ground) with an info line; now it is refused in one line (exit 2)
+    naming the key, the value and the range allowed, as the perfectly matched layers
+    refuse a layer that reaches the building; a 1.5 m layer is accepted."""
+    from railvib_hpc.modal.boundary import check_layers
+
+    code, out, err = _transient(capsys, meshed, tmp_path / "out", "boundary.base=caughey",
+                                "boundary.layer_thickness=96")
+    line = _one_error(code, err)
+    tally.add("transient: caughey base layer 20 x the soil's depth, through the building",
+              "clear error" if line else "silent wrong" if code == 0 else "unclear",
+              line or err[-300:])
+    assert line is not None, (code, err)
+    assert line.startswith("railvib transient: error: boundary.layer_thickness = 96: the "
+                           "Caughey layer of boundary.base reaches the building"), line
+    assert "allowed: 0 < boundary.layer_thickness < " in line
+    assert "[transient: assembly]" not in out
+    thin = load_case(ABSORBING, [*COARSE_SETS, "boundary.base=caughey",
+                                 "boundary.layer_thickness=1.5"])
+    assert check_layers(mesh, Problem.from_case(thin))["base"]["elements"] > 0
 
 
 # --------------------------------------------------------------------------- item 2

@@ -80,9 +80,12 @@ def strip_mesh(nx: int, length: float, width: float, thickness: float,
 
 
 def to_scipy(A):
-    """A serial PETSc AIJ matrix as scipy CSR (for reference computations)."""
+    """A serial PETSc AIJ matrix as scipy CSR (for reference computations); a scipy sparse
+    matrix as it is (CSR)."""
     import scipy.sparse as sp
 
+    if sp.issparse(A):
+        return sp.csr_matrix(A)
     ip, ix, v = A.getValuesCSR()
     n, m = A.getSize()
     return sp.csr_matrix((v, ix, ip), shape=(n, m))

@@ -14,7 +14,7 @@ export OMPI_ALLOW_RUN_AS_ROOT_CONFIRM := 1
 # Oversubscription keeps `-n 2` working on 1-core CI machines.
 MPIRUN  ?= mpirun --oversubscribe -n $(NP)
 
-.PHONY: setup setup-test run thesis test test-slow test-all test-serial test-mpi lint bench clean docs
+.PHONY: setup setup-test run thesis test test-slow test-kernels test-all test-serial test-mpi lint bench clean docs
 
 setup:
 	@bash tools/setup.sh
@@ -69,7 +69,39 @@ test-serial: setup-test
 test-mpi: setup
 	$(WORKERS) $(MPIRUN) $(PYTEST) -m "mpi and not slow" -p no:cacheprovider
 
-test-all: test test-slow
+# The numerically sensitive files (eigensolvers and their verdicts, derived tolerances,
+# dispersion relations, stability limits, factorisations, the modal reductions) under the
+# BLAS kernels of other CPUs: Debian's OpenBLAS picks its kernel per CPU and
+# OPENBLAS_CORETYPE runs another's here (tools/test_kernels.sh: the CPU's own kernel, and
+# one it cannot run, are skipped with a line saying so). Their quick tier, in NP workers,
+# once per kernel: 341 tests, 56 s of CPU per kernel in one process (measured). CI
+# (.ci/run) runs it after the two tiers (docs/verification.md).
+KERNELS ?= SkylakeX Haswell Sandybridge
+KERNEL_TESTS ?= tests/modal/test_bands.py tests/modal/test_modal_energy.py \
+  tests/modal/test_modal_honesty.py tests/modal/test_modal_verification.py \
+  tests/modal/test_partial_mesh.py tests/test_tolerances.py \
+  tests/fem/test_fem_modes.py tests/fem/test_fem_beam_modes.py tests/fem/test_fem_soil_column.py \
+  tests/fem/test_fem_hex8.py tests/fem/test_fem_beam_element.py tests/fem/test_dispersion.py \
+  tests/fem/test_dispersion_rayleigh.py tests/fem/test_matrix_free.py \
+  tests/fem/test_fem_assemble.py tests/fem/test_fem_spring.py tests/fem/test_fem_winkler.py \
+  tests/fem/test_fem_track_receptance.py tests/fem/test_halfspace.py tests/fem/test_pml_kernel.py \
+  tests/mesh/test_dispersion_check.py tests/mesh/test_mesh_checks.py \
+  tests/transient/test_explicit.py tests/transient/test_imex.py \
+  tests/transient/test_verification.py tests/transient/test_engine_energy.py \
+  tests/transient/test_dispersion_engines.py tests/transient/test_modal_full_damping.py \
+  tests/transient/test_damping_operator.py tests/transient/test_static_start.py \
+  tests/mbs/test_mbs_static_correction.py tests/mbs/test_mbs_modal_input.py \
+  tests/mbs/test_mbs_coupling.py tests/mbs/test_mbs_contact.py tests/mbs/test_mbs_wheelset.py \
+  tests/reliability/test_redteam_modal.py tests/uncertainty/test_reduced_model.py \
+  tests/reconstruct/test_reconstruct_stress.py tests/studies/test_studies_richardson.py \
+  tests/assess/test_assess_metrics.py tests/assess/test_assess_weighting.py \
+  tests/assess/test_assess_standards.py
+
+test-kernels: setup-test
+	KERNELS="$(KERNELS)" $(WORKERS) bash tools/test_kernels.sh $(PY) -q $(PYTEST_ARGS) $(XDIST) \
+	  -- $(KERNEL_TESTS)
+
+test-all: test test-slow test-kernels
 
 # ruff, then the layer order and the ban on import cycles (.importlinter), then no function
 # over 150 lines unless listed with its reason (tools/code_rules.py), then no stage module

@@ -175,7 +175,11 @@ PY
 echo "[setup] installing railvib-hpc (editable) and gmsh wheel into $VENV" \
      "(keeping $(tr '\n' ' ' < "$CONSTRAINTS"| sed 's/ $//'))"
 "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" --upgrade pip >/dev/null
-"$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e ".[test]" ruff
+# setuptools' editable build prints an information-only "Editable installation" notice
+# (careful with folders named like the package) as a warning on every install: not shown
+# (it was most of the first screen of `make run` on a fresh clone)
+PYTHONWARNINGS="${PYTHONWARNINGS:+$PYTHONWARNINGS,}ignore:Editable installation:Warning" \
+  "$VENV/bin/python" -m pip install -q -c "$CONSTRAINTS" -e ".[test]" ruff
 "$VENV/bin/python" - <<'PY'
 import os
 os.environ["H5PY_ALWAYS_USE_MPI"] = "1"   # Debian's h5py: its MPI build, if installed

@@ -289,12 +289,13 @@ def probes_inside(mesh: Mesh, probes: dict) -> tuple[dict, dict]:
 def format_report(report: dict) -> str:
     """Human-readable quality report."""
     q = report["quality"]
-    lines = [f"{'part':<12} {'elements':>9} {'nodes':>9} {'volume [m3]':>12}"]
-    for p in PARTS:
-        if p not in report["elements_per_part"]:       # a soil layer the model does not have
-            continue
+    # the parts the model has (mesh_report.json lists every part, the empty ones with 0)
+    parts = [p for p in PARTS if report["elements_per_part"].get(p, 0) > 0]
+    width = max([12, *map(len, parts)])
+    lines = [f"{'part':<{width}} {'elements':>9} {'nodes':>9} {'volume [m3]':>12}"]
+    for p in parts:
         vol = report["volume_per_part"].get(p)
-        lines.append(f"{p:<12} {report['elements_per_part'][p]:>9d} "
+        lines.append(f"{p:<{width}} {report['elements_per_part'][p]:>9d} "
                      f"{report['nodes_per_part'][p]:>9d} "
                      f"{'' if vol is None else f'{vol:12.4f}':>12}")
     lines += [

@@ -188,7 +188,7 @@ class ModalSolver:
         ------
         EigenSolveError
             When fewer than the requested modes converged, or when a mode's true relative
-            residual is above ``tol`` (and above its round-off floor, or above
+            residual is above ``tol`` (by more than its round-off floor, or above
             ``sqrt(tol)``): see :func:`convergence_verdict`. Round-off-limited modes come
             back with ``Eigenpairs.warnings``.
         """

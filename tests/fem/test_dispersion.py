@@ -117,6 +117,27 @@ def test_time_frequency_against_the_schemes():
     assert np.isnan(D.time_frequency(2.01, "central")[0])
 
 
+def test_generalized_alpha_at_low_frequency_does_not_depend_on_the_eigensolver():
+    """Near ``omega_h dt = 0`` the principal pair of the amplification matrix is a double
+    root that a dense eigensolver resolves only to ~sqrt(u): at the grid's zero wavenumber
+    (round-off ``w`` ~ 1e-8) OpenBLAS's Sandybridge kernel returned it as two real roots,
+    the spurious one was taken (``Omega dt = pi``) and the dispersion relation's table broke.
+    Below :data:`~railvib_hpc.fem.dispersion.ALPHA_SERIES_BELOW` the scheme's expansion
+    holds (``Omega dt = w (1 + O(w^2))``, ``xi = O(w^3)``): equal to the eigenvalue path just
+    above the switch to its period error (0.46 w^2 at rho_inf = 0, the largest) plus that
+    path's rounding, ``u / w^2`` for a pair split by ``2 w`` (measured 6.6e-9 with the
+    SkylakeX kernel)."""
+    ws = D.ALPHA_SERIES_BELOW
+    w = np.array([0.0, 7.3e-9, 1e-6, 0.99 * ws, 1.01 * ws])
+    for rho in (0.8, 0.5, 0.0):
+        om, xi = D.time_frequency(w, "generalized_alpha", rho)
+        assert om[0] == 0.0 and xi[0] == 0.0
+        rtol = 0.5 * ws**2 + np.finfo(float).eps / ws**2
+        np.testing.assert_allclose(om[1:], w[1:], rtol=rtol, atol=0)
+        # (the eigenvalue path's damping just above: rounding, measured <= 3.3e-12)
+        assert np.all(np.abs(xi) <= 0.5 * ws**3 + 1e-11)
+
+
 def test_signs_and_the_explicit_engines_partial_cancellation():
     """Consistent mass: early arrival; lumped: late; central differences at the engine's
     step reduce the lumped lag, the trapezoidal rule reduces the consistent lead."""

@@ -10,7 +10,6 @@ measured residuals. Orthonormality: the issue's target, max |Phi^T M Phi - I| <=
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import h5py
@@ -18,11 +17,13 @@ import numpy as np
 import pytest
 from modal_cases import (
     assert_same_subspaces,
+    assert_within_roundoff_of_tol,
     beam_mesh,
     block_mesh,
     column_mesh,
     copies,
     eigen_rtol,
+    residual_floors,
     soil_case,
     solve,
     solve_banded,
@@ -47,14 +48,16 @@ def _cut(f: np.ndarray, n: int) -> tuple[int, float]:
     return n, 0.5 * (f[n - 1] + f[n])
 
 
-def _same_residuals(rho: np.ndarray, res) -> None:
+def _same_residuals(rho: np.ndarray, res, K, M) -> None:
     """``rho`` (scipy's relative residuals of ``res``'s vectors) and ``res.residuals`` agree
-    within 10 %, or, for a pair below its round-off floor (``res.residual_floors``: the
-    bound of either evaluation's rounding), within twice the floor: there both evaluations
-    are rounding noise (measured 5-11 % apart at a floor 85 times the residual)."""
-    limited = res.residuals <= res.residual_floors
-    np.testing.assert_allclose(rho[~limited], res.residuals[~limited], rtol=0.1, atol=1e-14)
-    assert np.all(np.abs(rho - res.residuals)[limited] <= 2 * res.residual_floors[limited])
+    within three round-off floors of each mode (:func:`modal_cases.residual_floors`, every
+    mode's): one for each evaluation and one for the rounding of the vectors after it (their
+    scaling to unit modal mass). Was "within 10 %, or twice the floor where the solver
+    formed one": a residual below the tolerance has no floor formed, and one near its floor
+    differs between the two evaluations by that floor's rounding, whatever the tolerance."""
+    floors = residual_floors(K, M, res.phi, res.eigenvalues)
+    diff = np.abs(rho - res.residuals)
+    assert np.all(diff <= 3 * floors), (np.flatnonzero(diff > 3 * floors), diff, floors)
 
 
 def _same_modes(res, ref, K, M, n: int, clusters_min: int) -> None:
@@ -540,7 +543,7 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
         _same_modes(res, ref, K, M, n, 12)
         assert res.stats["n_bands"] == 1
         # (this column at tol = 1e-10: some modes sit at their round-off floor, warned)
-        assert np.all(res.residuals <= np.maximum(1e-10, res.residual_floors))
+        assert_within_roundoff_of_tol(res)
         runs[name] = res
     st = {k: r.stats for k, r in runs.items()}
     assert [st["solved"]["bands"][0].get("reused"), st["cached"]["bands"][0]["reused"]] == \
@@ -555,25 +558,44 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
         rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
         assert np.all(np.abs(runs[name].eigenvalues / lam - 1) <= rtol)
         # the same verdicts (the residuals at the round-off floor differ by rounding)
-        _same_verdicts(runs[name].warnings, runs["solved"].warnings)
+        _same_verdicts(runs[name], runs["solved"], K, M)
 
 
-def _same_verdicts(warnings: list[str], reference: list[str]) -> None:
-    """The same kinds of warning, with counts within one mode: a mode whose residual sits
-    at its round-off floor may count as "limited by round-off" in one merge and not in the
-    other (measured: 7 against 6 of 31 modes in a fresh-clone CI run, the residuals equal
-    to rounding)."""
-    def parts(ws):
-        heads = [w.split(":")[0] for w in ws]
-        return ([re.sub(r"\d+", "#", h) for h in heads],
-                [[int(x) for x in re.findall(r"\d+", h)] for h in heads])
+TOL = 1e-10                                          # solve_banded's and solve's modal.tol
 
-    kinds, counts = parts(warnings)
-    ref_kinds, ref_counts = parts(reference)
-    assert kinds == ref_kinds, (warnings, reference)
-    for c, r in zip(counts, ref_counts):
-        assert len(c) == len(r) and all(abs(a - b) <= 1 for a, b in zip(c, r)), \
-            (warnings, reference)
+
+def _verdict_classes(res, tol: float = TOL) -> np.ndarray:
+    """Each mode's class by :func:`railvib_hpc.modal.ritz.convergence_verdict`'s rule:
+    0 converged (``rho <= tol``), 1 limited by round-off (``rho <= tol + floor``), 2 above
+    ``tol`` beyond its round-off floor."""
+    rho, floor = res.residuals, res.residual_floors
+    return np.where(rho <= tol, 0, np.where(rho <= tol + floor, 1, 2))
+
+
+def _same_verdicts(res, ref, K, M, tol: float = TOL) -> None:
+    """Both results' warnings say exactly what their residuals show (the count of each
+    class, :func:`_verdict_classes`), and every mode whose residual is clear of ``tol`` in
+    both, by more than three of its round-off floors (:func:`_same_residuals`), is in the
+    same class in both. A mode within round-off of ``tol`` may be converged in one and
+    limited by round-off in the other (both accepted): which one is the rounding of its
+    evaluation, different on another CPU kernel (measured: 7 against 6 of 31 modes in a
+    fresh-clone CI run; 8 against 7 with OpenBLAS's SkylakeX kernel)."""
+    classes = []
+    for r in (res, ref):
+        c = _verdict_classes(r, tol)
+        m = len(c)
+        expected = [f"{n} of {m} modes {text}" for n, text in (
+            (int((c == 1).sum()), "are limited by round-off"),
+            (int((c == 2).sum()), "end with a relative residual above")) if n]
+        assert len(r.warnings) == len(expected), (r.warnings, expected)
+        assert all(w.startswith(e) for w, e in zip(r.warnings, expected)), (r.warnings,
+                                                                              expected)
+        classes.append(c)
+    clear = np.ones(len(classes[0]), dtype=bool)
+    for r in (res, ref):
+        floors = residual_floors(K, M, r.phi, r.eigenvalues)
+        clear &= np.abs(r.residuals - tol) > 3 * floors
+    assert np.array_equal(classes[0][clear], classes[1][clear]), (classes, clear)
 
 
 def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
@@ -589,7 +611,7 @@ def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
         res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=12)
         _same_modes(res, ref, K, M, n, 12)
         assert res.stats["n_bands"] >= 2
-        assert np.all(res.residuals <= np.maximum(1e-10, res.residual_floors))
+        assert_within_roundoff_of_tol(res)
         runs[name] = res
     assert runs["solved"].stats["merge_gram"].startswith("cross-band blocks")
     assert runs["cached"].stats["merge_gram"] == "full"
@@ -597,7 +619,7 @@ def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
     rtol = eigen_rtol(K, M, lam, phi=runs["solved"].phi)
     assert np.all(np.abs(runs["cached"].eigenvalues / lam - 1) <= rtol)
     assert runs["solved"].stats["max_orthonormality_error"] <= 1e-12
-    _same_verdicts(runs["cached"].warnings, runs["solved"].warnings)
+    _same_verdicts(runs["cached"], runs["solved"], K, M)
 
 
 def test_the_checks_reuse_of_k_phi_equals_a_fresh_product():
@@ -647,8 +669,8 @@ def test_the_merge_keeps_the_bands_modes_only_where_the_measured_grams_allow(tmp
     gram = np.abs(phi.T @ (Ms @ phi) - np.eye(n)).max()
     assert gram == pytest.approx(kept.stats["max_orthonormality_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
-    _same_residuals(rho, kept)
-    assert np.all(kept.residuals <= np.maximum(1e-10, kept.residual_floors))
+    _same_residuals(rho, kept, K, M)
+    assert_within_roundoff_of_tol(kept)
 
 
 def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
@@ -657,16 +679,43 @@ def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
     above them (and those the step couples anew) and checks only the rotated ones afresh.
     Against the full merge (forced by making every pair coupled): the same modes, the same
     verdicts, and what it reports (orthonormality, K-orthogonality, residuals) is what scipy
-    measures of the returned vectors."""
-    import railvib_hpc.modal.band_solve as band_solve
+    measures of the returned vectors.
 
+    The branch is forced, not left to the default bounds: on this column the bands' modes
+    overlap by round-off only (measured max |(Phi^T M Phi - I)_ij| 8.3e-14 with OpenBLAS's
+    SkylakeX kernel, 1.2e-13 with Haswell and Zen, 1.4e-13 with Sandybridge, against
+    RAW_RITZ_GRAM = 1e-13), so whether the default keeps them as they are or rotates 2 or 4
+    of them is the kernel's rounding, and either is right (both are checked against the
+    full merge here and in the test above). The merge as they are is refused, and the
+    coupling bound put between the two largest measured M-overlaps, so that exactly the pair
+    of the largest one is coupled to start with, whatever the kernel."""
+    import railvib_hpc.modal.band_solve as band_solve
+    from railvib_hpc.modal import ritz
+
+    real_coupled_set = band_solve._coupled_set
+
+    def largest_overlap_coupled(GK, GM, lam, tol):
+        m = np.abs(GM - np.eye(len(lam)))[np.triu_indices(len(lam), 1)]
+        top = np.sort(m)[::-1][:2]
+        bounds = ritz.RAW_RITZ_GRAM, ritz.RAW_RITZ_STIFF
+        ritz.RAW_RITZ_GRAM, ritz.RAW_RITZ_STIFF = float(np.sqrt(top[0] * top[1])), np.inf
+        try:
+            return real_coupled_set(GK, GM, lam, tol)
+        finally:
+            ritz.RAW_RITZ_GRAM, ritz.RAW_RITZ_STIFF = bounds
+
+    def refused(*args):
+        args[-2]["merge_as_they_are"] = "no: refused by the test"
+        return None
+
+    monkeypatch.setattr(band_solve, "_merge_as_they_are", refused)
     mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
     ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
     n, f_max = _cut(ref.frequencies_hz, 30)
     runs = {}
     for name in ("coupled", "full"):
-        if name == "full":
-            monkeypatch.setattr(band_solve, "_coupled_set", lambda *a: None)
+        monkeypatch.setattr(band_solve, "_coupled_set", largest_overlap_coupled
+                            if name == "coupled" else lambda *a: None)
         runs[name], *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path / name,
                                       band_modes=12)
         _same_modes(runs[name], ref, K, M, n, 12)
@@ -685,6 +734,6 @@ def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
     stiff = np.abs(phi.T @ (Ks @ phi) - np.diag(lam)).max() / lam.max()
     assert stiff == pytest.approx(part.stats["max_stiffness_diag_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
-    _same_residuals(rho, part)
-    assert np.all(part.residuals <= np.maximum(1e-10, part.residual_floors))
-    _same_verdicts(part.warnings, full.warnings)
+    _same_residuals(rho, part, K, M)
+    assert_within_roundoff_of_tol(part)
+    _same_verdicts(part, full, K, M)

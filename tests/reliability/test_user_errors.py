@@ -8,11 +8,14 @@ from __future__ import annotations
 import os
 import shutil
 import stat
+import subprocess
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
-from faults import BASELINE, COARSE, cli, copy_results, serial_only
+from faults import BASELINE, COARSE, ENV, Result, cli, copy_results, serial_only
 
 from railvib_hpc.cli import run
 
@@ -63,23 +66,54 @@ def test_unreadable_case_file_in_process(tmp_path, capsys, tally, monkeypatch):
                      "cannot be read (Permission denied)")
 
 
+def _as_nobody(folder: Path) -> tuple[list[str], object]:
+    """The interpreter and ``preexec_fn`` that run the CLI as ``nobody`` from ``folder``.
+
+    ``nobody`` may not enter the clone (a clone in a folder only root can enter, as
+    ``mktemp -d`` makes one): the package is copied into ``folder`` (world-readable; ``-m``
+    puts the working folder first on ``sys.path``) and the base interpreter is run
+    (``/usr/bin/python3``, not the clone's ``.venv/bin/python``). The check of a case file
+    imports the package and the system's numpy, scipy and mpi4py only."""
+    import railvib_hpc
+
+    shutil.copytree(Path(railvib_hpc.__file__).parent, folder / "railvib_hpc",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    for path in (folder, *folder.rglob("*")):
+        os.chmod(path, 0o755 if path.is_dir() else 0o644)
+
+    def preexec():
+        os.setgid(65534)
+        os.setuid(65534)
+
+    return [os.path.realpath(sys.executable)], preexec
+
+
 @serial_only
 def test_unreadable_case_file_for_real(tally):
     """With a real permission error: as a normal user (chmod 000), or as root by dropping
-    to ``nobody`` for the subprocess."""
+    to ``nobody`` for the subprocess (which then runs a readable copy of the package:
+    :func:`_as_nobody`)."""
     folder = Path(tempfile.mkdtemp(prefix="railvib-perm-"))
     try:
         os.chmod(folder, 0o755)
         case = folder / "case.toml"
         case.write_text("[case]\nname = 'x'\n")
-        os.chmod(case, 0)
-        preexec = None
+        python, preexec, cwd = [sys.executable], None, None
         if os.geteuid() == 0:
-            def preexec():
-                os.setgid(65534)
-                os.setuid(65534)
-        res = tally.result("unreadable case file (real)", cli(["check", case], preexec=preexec,
-                                                             timeout=120))
+            python, preexec = _as_nobody(folder)
+            cwd = folder
+        os.chmod(case, 0)
+        env = {k: v for k, v in ENV.items() if k not in ("PYTHONPATH", "PYTHONHOME")}
+        t0 = time.perf_counter()
+        try:
+            p = subprocess.run([*python, "-m", "railvib_hpc", "check", str(case)],
+                               capture_output=True, text=True, timeout=120, cwd=cwd,
+                               env=env, preexec_fn=preexec)
+        except PermissionError as exc:              # (the interpreter itself unreachable)
+            pytest.skip(f"nobody cannot run {python[0]}: {exc}")
+        res = tally.result("unreadable case file (real)",
+                           Result(p.returncode, p.stdout, p.stderr,
+                                  time.perf_counter() - t0, False))
         assert res.outcome == "clear error", res.err
         assert "cannot be read (Permission denied)" in res.error_lines[0]
     finally:

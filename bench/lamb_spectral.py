@@ -32,14 +32,16 @@ the error the dispersion analysis predicts (the harmonic bound of
 
 Usage::
 
-    python bench/lamb_spectral.py                       # order 6, 1.6 elements (9.6 points)
-    python bench/lamb_spectral.py --order 4 --epw 2.4   # order 4, 9.6 points
+    python bench/lamb_spectral.py                       # order 6, 1.5 elements (9 points)
+    python bench/lamb_spectral.py --order 4 --epw 4     # order 4, 16 points
 
-Measured (2026-12-07, shared 2-core machine; ``docs/spectral.md``): order 6 at 9.6 points
-per wavelength, 193,125 DOFs: +1.92 / +0.75 / +0.79 % at 2 / 5 / 10 wavelengths; order 4
-at 9.6 points, 165,375 DOFs: -1.25 / -1.77 / +1.47 %. The sin^4 pulse carries energy to
-about twice ``f_v``, so the peak needs ~10 points per wavelength at ``f_v`` even where the
-dispersion at ``f_v`` alone predicts < 0.2 %.
+Measured (2026-12-07, shared 2-core machine; ``docs/spectral.md``): order 6 at 9 points per
+wavelength, 225,525 DOFs: +2.08 / +1.47 / +1.44 % at 2 / 5 / 10 wavelengths; order 4 at 16
+points, 872,439 DOFs: -0.06 / -0.02 / +0.42 %. The sin^4 pulse carries energy to about twice
+``f_v``, so the peak needs ~10 points per wavelength at ``f_v`` even where the dispersion at
+``f_v`` alone predicts < 0.2 %. The grading matters: layers growing by 2 from one wavelength
+down put order 4 at 16 points 4.8 % off at 5 wavelengths (the coarse layers reflect); by 1.5
+from 1.5 wavelengths, as by default, it is the uniform mesh's answer.
 """
 
 from __future__ import annotations
@@ -234,13 +236,13 @@ def predicted(args, r: float) -> float:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--order", type=int, default=6)
-    ap.add_argument("--epw", type=float, default=1.6, help="elements per Rayleigh wavelength")
+    ap.add_argument("--epw", type=float, default=1.5, help="elements per Rayleigh wavelength")
     ap.add_argument("--wavelength", type=float, default=10.0, help="lambda_R [m]")
     ap.add_argument("--width", type=float, default=2.5, help="box half-width [wavelengths]")
     ap.add_argument("--depth", type=float, default=3.5, help="box depth [wavelengths]")
-    ap.add_argument("--fine-depth", type=float, default=1.0,
+    ap.add_argument("--fine-depth", type=float, default=1.5,
                     help="depth of the uniform elements [wavelengths]")
-    ap.add_argument("--growth", type=float, default=2.0,
+    ap.add_argument("--growth", type=float, default=1.5,
                     help="growth of the element layers below it (1: uniform)")
     ap.add_argument("--x-beyond", type=float, default=0.6, help="beyond the last receiver")
     ap.add_argument("--after", type=float, default=1.5, help="run on [pulse lengths]")

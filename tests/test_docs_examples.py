@@ -33,6 +33,9 @@ MODULES = [
     "railvib_hpc.modal.block_lanczos",
     "railvib_hpc.fem.pml",
     "railvib_hpc.fem.pml_kernel",
+    "railvib_hpc.fem.gll",
+    "railvib_hpc.fem.spectral_mesh",
+    "railvib_hpc.fem.spectral_kernel",
 ]
 
 

@@ -137,11 +137,11 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
         rep.info(f"  tracks: {tracks}")
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
-    from .mesh.building import Building
+    from .mesh.building import building_line
     from .mesh.interfaces import site_line
     from .site import soil_layers
 
-    rep.info(f"  building: {Building.of_case(case).describe()}")
+    rep.info(f"  building: {building_line(case)}")
     from .mesh.turn import turn_line
 
     turned = turn_line(case)

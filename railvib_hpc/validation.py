@@ -366,7 +366,6 @@ def _close(a: float, b: float, tol: float = 1e-6) -> bool:
 def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     """Geometric and cross-key checks; returns the list of problems."""
     g, t, b = case["geometry"], case["track"], case["building"]
-    m = case["mesh"]
     out: list[tuple[str, Any, str]] = []
 
     def order(keys: list[str], values: list[float], what: str) -> None:
@@ -374,10 +373,14 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
             if not v0 < v1:
                 out.append((f"geometry.{k1}", v1, f"must be greater than {k0} = {v0} ({what})"))
 
-    order(["x0", "x1", "x2", "x3", "x4"], [g[k] for k in ("x0", "x1", "x2", "x3", "x4")],
-          "X0 < X1 < X2 < X3 < X4")
-    order(["ys4", "ys3", "ys2", "ys1"], [g[k] for k in ("ys4", "ys3", "ys2", "ys1")],
-          "YS4 < YS3 < YS2 < YS1 < 0 < YS0")
+    if b["present"]:
+        order(["x0", "x1", "x2", "x3", "x4"], [g[k] for k in ("x0", "x1", "x2", "x3", "x4")],
+              "X0 < X1 < X2 < X3 < X4")
+        order(["ys4", "ys3", "ys2", "ys1"], [g[k] for k in ("ys4", "ys3", "ys2", "ys1")],
+              "YS4 < YS3 < YS2 < YS1 < 0 < YS0")
+    else:                          # no building: its lines do not apply
+        order(["x0", "x1", "x4"], [g[k] for k in ("x0", "x1", "x4")], "X0 < X1 < X4")
+        order(["ys4", "ys1"], [g[k] for k in ("ys4", "ys1")], "YS4 < YS1 < 0 < YS0")
     if not g["ys1"] < 0:
         out.append(("geometry.ys1", g["ys1"], "must be < 0 (embankment toe on the building side)"))
     if not g["ys0"] > -g["ys1"]:
@@ -424,7 +427,22 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     out.extend(_check_track_ends(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
-    out.extend(_check_rotation(case))
+    if b["present"]:
+        out.extend(_check_building(case))
+    out.extend(_check_mesh_keys(case))
+    out.extend(check_studies(case["study"]))
+    out.extend(_check_dynamics(case))
+    out.extend(_check_soil(case))
+    out.extend(_check_measures(case))
+    out.extend(_check_line_points(case))
+    out.extend(check_uncertainty(case))
+    return out
+
+
+def _check_building(case: Case) -> list[tuple[str, Any, str]]:
+    """The building's turn, plan, frame and levels (``building.present``)."""
+    g, b = case["geometry"], case["building"]
+    out = _check_rotation(case)
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
@@ -457,8 +475,13 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("geometry.x2", g["x2"], "the building must lie inside the soil (X1 < X2, "
                     "X3 < X4)"))
     out.extend(_check_turned_plan(case))
+    return out
 
-    # mesh
+
+def _check_mesh_keys(case: Case) -> list[tuple[str, Any, str]]:
+    """The mesh file, the refinement and the modal settings."""
+    m = case["mesh"]
+    out: list[tuple[str, Any, str]] = []
     if m["file"]:
         f = case.resolve(m["file"])
         if not f.is_file():
@@ -478,12 +501,6 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must be 0 (automatic) or at least modal.n_modes + 2 modal.block_size = "
                     f"{need} (the Lanczos basis holds the wanted modes and two blocks)"))
     out.extend(_check_mbs(case))
-    out.extend(check_studies(case["study"]))
-    out.extend(_check_dynamics(case))
-    out.extend(_check_soil(case))
-    out.extend(_check_measures(case))
-    out.extend(_check_line_points(case))
-    out.extend(check_uncertainty(case))
     return out
 
 
@@ -694,7 +711,15 @@ def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
     g, h = case["geometry"], track_lift(case)
     if h == 0 or case["track.count"] == 0:              # (no track: _check_surface_load)
         return []
-    toe, face = embankment_toe(case), -placed_plan(case)[3]
+    toe = embankment_toe(case)
+    if not case["building.present"]:
+        edge = -(g["ys4"] - case["domain.extra_width"])
+        if not toe < edge:
+            return [("track.embankment_height", h,
+                     f"the embankment's toe ({toe:g} m from the track centre) reaches the "
+                     f"soil's edge {edge:g} m from it (|YS4| + domain.extra_width); lower it "
+                     "or widen the domain")]
+    face = -placed_plan(case)[3] if case["building.present"] else math.inf
     if not toe < face:
         return [("track.embankment_height", h,
                  f"the embankment's toe ({toe:g} m from the track centre: |YS1| + "
@@ -871,7 +896,9 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     embankment and the building."""
     out: list[tuple[str, Any, str]] = []
     g = case["geometry"]
-    toe, face = embankment_toe(case), -placed_plan(case)[3]
+    building = case["building.present"]
+    toe = embankment_toe(case)
+    face = -placed_plan(case)[3] if building else -(g["ys4"] - case["domain.extra_width"])
     soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
     tr = case["trench"]
     if tr["type"] != "none" or tr["width"] > 0:
@@ -882,11 +909,13 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
                         f"({toe:g} m from the track centreline: |geometry.ys1| plus a "
                         "fill's slope)"))
         elif tr["distance"] + tr["width"] > face + 1e-9:
+            where = ("would cut through the building: its face is {:g} m from the track "
+                     "(|geometry.ys2|, turned with building.rotation)" if building else
+                     "would reach past the soil's edge {:g} m from the track "
+                     "(|geometry.ys4| + domain.extra_width)")
             out.append(("trench.width", tr["width"],
                         f"the trench (from {tr['distance']:g} to "
-                        f"{tr['distance'] + tr['width']:g} m) would cut through the building: "
-                        f"its face is {face:g} m from the track (|geometry.ys2|, turned with "
-                        "building.rotation)"))
+                        f"{tr['distance'] + tr['width']:g} m) " + where.format(face)))
         if tr["depth"] >= soil_depth - 1e-9:
             out.append(("trench.depth", tr["depth"],
                         f"must be less than the soil depth ({soil_depth:g} m to the base)"))

@@ -1184,10 +1184,25 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "offsets": Param([0.0], "floats", "m",
                          "positions of the loads along x relative to the leading one "
                          "(<= 0; one load of load.force each)", applies=BARE_SOIL),
+        "start": Param("ramp", "str", "-",
+                       "how the loads start at t = 0: 'ramp' (the soil at rest, the forces "
+                       "switched on over load.ramp_time while the loads move at load.speed; "
+                       "0: a step, which radiates a pulse) or 'static' (the soil at rest in "
+                       "static equilibrium under the full forces at their start positions, "
+                       "K u0 = f0, velocities zero; the loads then run up to load.speed "
+                       "over load.ramp_time, 0: at once, which radiates the moving field's "
+                       "difference from the static one as a pulse; needs the box held "
+                       "statically: a fixed, roller, caughey or pml face, or absorbing "
+                       "faces with boundary.virtual_thickness > 0)",
+                       choices=("ramp", "static"),
+                       source="'ramp': the surface load's start before 'static' existed "
+                              "(the results of earlier cases unchanged)", applies=BARE_SOIL),
         "ramp_time": Param(0.0, "float", "s",
-                           "switch-on: the loads grow as sin^2(pi t / (2 ramp_time)) over "
-                           "this time, then stay (0: a step at t = 0, which radiates a "
-                           "pulse)", "nonneg", applies=BARE_SOIL),
+                           "load.start = 'ramp': the forces grow as sin^2(pi t / (2 "
+                           "ramp_time)) over this time, then stay (0: a step at t = 0, which "
+                           "radiates a pulse); load.start = 'static': the loads' speed grows "
+                           "so from 0 to load.speed (they cover load.speed x ramp_time / 2 in "
+                           "it)", "nonneg", applies=BARE_SOIL),
         "half_width": Param(0.0, "float", "m",
                             "half-width a of each load's spreading along x, (1 + cos(pi s / "
                             "a)) / (2 a) over |s| <= a (0: a point load, the consistent load "

@@ -424,6 +424,7 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
     out.extend(_check_surface_load(case))
+    out.extend(_check_static_start(case))
     out.extend(_check_track_ends(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
@@ -644,6 +645,61 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
                     f"{last:g} m (load.x_start + the smallest offset), or be 0 (the soil's "
                     "end)"))
     return out
+
+
+#: The truncation faces of the soil box: the axis of their normal and whether they lie at
+#: its upper end (``[boundary]``).
+_FACE_PLANES = {"x_min": (0, False), "x_max": (0, True), "y_min": (1, False),
+                "y_max": (1, True), "base": (2, False)}
+
+
+def _statically_held(case: Case, face: str) -> tuple[int, ...]:
+    """The displacement components a face holds against a static load: fixed, caughey
+    and pml faces all three, a roller its normal one, an absorbing face all three with
+    its springs (``boundary.virtual_thickness > 0``) and none on dashpots alone (they
+    hold no static load), a free face none."""
+    kind = case[f"boundary.{face}"]
+    if kind in ("fixed", "caughey", "pml") or (
+            kind == "absorbing" and case["boundary.virtual_thickness"] > 0):
+        return (0, 1, 2)
+    return (_FACE_PLANES[face][0],) if kind == "roller" else ()
+
+
+def _check_static_start(case: Case) -> list[tuple[str, Any, str]]:
+    """``load.start = 'static'`` solves ``K u0 = f0``: the faces must hold the soil box
+    against every rigid-body motion (else K is singular). The box's faces are planes, so
+    their corners decide (a rigid-body motion is linear in the position)."""
+    if case["track.count"] != 0 or case["load.start"] != "static":
+        return []
+    g, d = case["geometry"], case["domain"]
+    lo = np.array([g["x1"] - d["extra_length"], g["ys4"] - d["extra_width"],
+                   g["z0"] - d["extra_depth"]])
+    hi = np.array([g["x4"] + d["extra_length"], g["ys0"], g["z1"]])
+    centre, scale = 0.5 * (lo + hi), float(np.max(hi - lo))
+    rows = []
+    for face, (axis, upper) in _FACE_PLANES.items():
+        others = [a for a in range(3) if a != axis]
+        for c0 in (lo[others[0]], hi[others[0]]):
+            for c1 in (lo[others[1]], hi[others[1]]):
+                p = np.empty(3)
+                p[axis], p[others[0]], p[others[1]] = (hi if upper else lo)[axis], c0, c1
+                p = (p - centre) / scale
+                for c in _statically_held(case, face):
+                    # the motion t + w x p, its component c: t_c + (w x p)_c
+                    row = np.zeros(6)
+                    row[c] = 1.0
+                    row[3:] = np.cross(p, np.eye(3)[c])      # (w x p)_c = w . (p x e_c)
+                    rows.append(row)
+    if rows and np.linalg.matrix_rank(np.array(rows), tol=1e-9) == 6:
+        return []
+    faces = ", ".join(f"{f} {case[f'boundary.{f}']}" for f in _FACE_PLANES)
+    return [("load.start", "static",
+             f"solves K u0 = f0 at t = 0 and needs the soil box held statically, which "
+             f"its faces do not do ([boundary]: {faces}, virtual_thickness = "
+             f"{case['boundary.virtual_thickness']:g} m: absorbing faces hold no static "
+             "load on their dashpots alone); allowed: boundary.virtual_thickness > 0 "
+             "(the absorbing faces' springs), a fixed or roller base, or load.start = "
+             "'ramp'")]
 
 
 def _load_path_problems(case: Case) -> list[tuple[str, Any, str]]:

@@ -127,8 +127,9 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
         ld = case["load"]
         rep.info(f"  track: none (track.count = 0): the bare soil under {len(ld['offsets'])} "
                  f"moving load(s) of {ld['force']:g} N at {ld['speed']:g} m/s on y = "
-                 f"{ld['y']:g} m from x = {ld['x_start']:g} m (ramp {ld['ramp_time']:g} s, "
-                 f"half-width {ld['half_width']:g} m"
+                 f"{ld['y']:g} m from x = {ld['x_start']:g} m ("
+                 + (f"static start, run-up {ld['ramp_time']:g} s" if ld["start"] == "static"
+                    else f"ramp {ld['ramp_time']:g} s") + f", half-width {ld['half_width']:g} m"
                  + (f", harmonic at {ld['frequency']:g} Hz" if ld["frequency"] else "") + ")")
     from .mbs.case_vehicle import tracks_line
 
@@ -137,11 +138,11 @@ def _cmd_check(case: Case, rep: Reporter) -> int:
         rep.info(f"  tracks: {tracks}")
     rep.info(f"  mesh: {len(lay.blocks)} structured blocks, refinement {case['mesh.refinement']:g}"
              + (f", from file {case['mesh.file']}" if case["mesh.file"] else ""))
-    from .mesh.building import Building
+    from .mesh.building import building_line
     from .mesh.interfaces import site_line
     from .site import soil_layers
 
-    rep.info(f"  building: {Building.of_case(case).describe()}")
+    rep.info(f"  building: {building_line(case)}")
     from .mesh.turn import turn_line
 
     turned = turn_line(case)

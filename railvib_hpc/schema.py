@@ -19,7 +19,7 @@ Conventions
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, NamedTuple
 
 from .applies import Condition, above, all_of, any_of, includes, is_, is_not, not_empty
@@ -172,9 +172,11 @@ def _section_params(section: SectionProperties, what: str, horizontal: str,
     }
 
 
-def _apdl_coordinate(name: str, value: float, what: str) -> Param:
+def _apdl_coordinate(name: str, value: float, what: str,
+                     applies: Condition | None = None) -> Param:
     """``geometry.<name>``: the APDL script's coordinate ``name`` (cited with its value)."""
-    return Param(value, "float", "m", f"{name}: {what}", source=f"{_APDL}: {name}={value:g}")
+    return Param(value, "float", "m", f"{name}: {what}", source=f"{_APDL}: {name}={value:g}",
+                 applies=applies)
 
 
 #: Most soil layers a case may give (``[[soil.layers]]``); each is a part of its own.
@@ -310,9 +312,13 @@ RANDOM_PROFILE = all_of(WHEELS, is_("irregularity.type", "fra", "iso8608"))
 WHEEL_FLATS = all_of(WHEELS, above("irregularity.flat_depth", 0))
 SUPPORTED_ENDS = all_of(ON_TRACK, is_("track.ends", "supported"))
 EMBANKMENT = all_of(ON_TRACK, above("track.embankment_height", 0))
+#: The building of the site (building.present = false: the free field alone).
+BUILDING = is_("building.present", True, what="a building")
 OWN_HEIGHTS_NOT_GIVEN = is_("building.slab_bases", [], what="storeys of one height")
 STOREY_2 = all_of(OWN_HEIGHTS_NOT_GIVEN, above("building.storeys", 2, inclusive=True))
 REFINED_LAYOUT = is_("mesh.layout", "refined")
+#: The embankment's layers in the refined layout (their elements: mesh.layer_elements).
+REFINED_TRACK_BED = all_of(ON_TRACK, REFINED_LAYOUT)
 #: A trench's or a block's lines are in the mesh with a type, or a width (its reference).
 TRENCH = any_of(is_not("trench.type", "none"), above("trench.width", 0))
 FILLED_TRENCH = is_("trench.type", "filled")
@@ -320,7 +326,15 @@ WIB = any_of(is_not("wib.type", "none"), above("wib.width", 0))
 WIB_BLOCK = is_("wib.type", "block")
 USP = all_of(ON_TRACK, above("usp.modulus", 0))
 BALLAST_MAT = all_of(ON_TRACK, above("ballast_mat.modulus", 0))
-ISOLATION = above("isolation.modulus", 0)
+ISOLATION = all_of(BUILDING, above("isolation.modulus", 0))
+
+
+def in_building(params: dict[str, Param]) -> dict[str, Param]:
+    """``params`` that belong to the building: each applies with it (and its own
+    condition, if any)."""
+    return {key: replace(p, applies=BUILDING if p.applies is None else all_of(BUILDING,
+                                                                                p.applies))
+            for key, p in params.items()}
 
 
 def _faces(kind: str, what: str, study: bool = False) -> Condition:
@@ -368,22 +382,22 @@ SCHEMA: dict[str, dict[str, Any]] = {
             0.0, "float", "m",
             "distance from the centreline of track 1 to the building's near face; sets "
             "geometry.ys2 = -distance and moves ys3, ybb, ys4 with it (0: not given)",
-            "nonneg"),
+            "nonneg", applies=BUILDING),
         "building_width": Param(
             0.0, "float", "m",
             "building plan across the track, near face to far face; sets geometry.ys3, ybb "
             "and ys4 (the soil beyond the building stays 12 m wide: more with "
-            "domain.extra_width) (0: not given)", "nonneg"),
+            "domain.extra_width) (0: not given)", "nonneg", applies=BUILDING),
         "building_length": Param(
             0.0, "float", "m",
             "building plan along the track; sets geometry.x2, x3 and xbb about the building's "
             "centre (the middle of the track with site.track_length), its start on a sleeper "
-            "(0: not given)", "nonneg"),
+            "(0: not given)", "nonneg", applies=BUILDING),
         "track_length": Param(
             0.0, "float", "m",
             "length of the flexible track (and of the soil along it), a whole number of "
             "sleeper bays; sets track.rail_length, geometry.x4 and centres the building along "
-            "it (geometry.x2, x3, xbb) (0: not given)", "nonneg"),
+            "it (geometry.x2, x3, xbb, with a building) (0: not given)", "nonneg"),
         "soil_depth": Param(
             0.0, "float", "m",
             "depth of the soil below the ground level (geometry.z1) down to the base; sets "
@@ -393,17 +407,20 @@ SCHEMA: dict[str, dict[str, Any]] = {
     "geometry": {
         "x0": _apdl_coordinate("X0", 0.0, "start of the first rigid rail"),
         "x1": _apdl_coordinate("X1", 3.0, "start of the flexible rail and of the soil"),
-        "x2": _apdl_coordinate("X2", 12.6, "building (and its excavation) starts"),
-        "x3": _apdl_coordinate("X3", 19.8, "building ends"),
+        "x2": _apdl_coordinate("X2", 12.6, "building (and its excavation) starts",
+                              BUILDING),
+        "x3": _apdl_coordinate("X3", 19.8, "building ends", BUILDING),
         "x4": Param(24.6, "float", "m", "X4: end of the flexible rail and of the soil",
                     source=f"{_APDL}: X4=24.6", derived="geometry.x1 + track.rail_length"),
         "ys0": Param(8.25, "float", "m", "YS0: soil edge on the side away from the building",
                      source=f"{_APDL}: YSO=8.25"),
         "ys1": _apdl_coordinate("YS1", -4.25,
                                 "toe of the embankment (subballast base half-width is |YS1|)"),
-        "ys2": _apdl_coordinate("YS2", -9.9, "building face nearest the track"),
-        "ys3": _apdl_coordinate("YS3", -17.1, "building face farthest from the track"),
-        "ys4": _apdl_coordinate("YS4", -29.1, "soil edge beyond the building"),
+        "ys2": _apdl_coordinate("YS2", -9.9, "building face nearest the track", BUILDING),
+        "ys3": _apdl_coordinate("YS3", -17.1, "building face farthest from the track",
+                               BUILDING),
+        "ys4": _apdl_coordinate("YS4", -29.1, "soil edge beyond the building (without one: "
+                               "the soil edge on the side y < 0)"),
         "z0": _apdl_coordinate("Z0", 0.0, "bottom of the subgrade (fixed base)"),
         "z1": _apdl_coordinate("Z1", 4.8, "top of the subgrade = ground level"),
         "z2": _apdl_coordinate("Z2", 5.3, "top of the subballast"),
@@ -413,7 +430,8 @@ SCHEMA: dict[str, dict[str, Any]] = {
                      source=f"{_APDL}: XBB=16.2", derived="(geometry.x2 + geometry.x3) / 2"),
         "ybb": Param(-13.5, "float", "m", "YBB: y of the building base point (centre of its plan)",
                      source=f"{_APDL}: YBB=-13.5", derived="(geometry.ys2 + geometry.ys3) / 2"),
-        "zbb": _apdl_coordinate("ZBB", 2.4, "z of the building base (underside of footings)"),
+        "zbb": _apdl_coordinate("ZBB", 2.4, "z of the building base (underside of footings)",
+                               BUILDING),
         "ballast_top_half_width": Param(3.25, "float", "m",
                                         "half-width of the ballast crest (top of the shoulder)",
                                         "pos", source=f"{_APDL}: K,KP_SLP_END+9,X1,3.25,Z3"),
@@ -494,6 +512,16 @@ SCHEMA: dict[str, dict[str, Any]] = {
                          applies=SECOND_TRACK),
     },
     "building": {
+        "present": Param(True, "bool", "-",
+                         "a building on the site (the parametric frame of the building.* "
+                         "keys in its excavation geometry.x2..x3 x ys3..ys2); false: no "
+                         "building, the free field alone (the ground probes and "
+                         "[[probes.line]]): its keys (building.*, materials.concrete, "
+                         "geometry.x2, x3, ys2, ys3, zbb, site.building_*, "
+                         "mesh.size_building_*, mesh.soil_elements_per_bay_building, "
+                         "[isolation]) do not apply",
+                         source=f"{_APDL}: one building (local system 11)"),
+        **in_building({
         "footing_size": Param(1.2, "float", "m", "plan size of the square corner footings", "pos",
                               source=f"{_APDL}: FX1=2.4, FX4=3.6 (local system 11)"),
         "footing_height": Param(0.6, "float", "m", "HSF: footing height", "pos",
@@ -549,6 +577,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                           f"track-parallel mesh beyond whole quarter turns (docs/sites.md)",
                           "angle",
                           source=f"{_APDL}: the walls are parallel to the track (no rotation)"),
+        }),
     },
     "materials": {
         "rail": _mat(210e9, 0.30, 7700.0, "flexible rail", _mp(1, "210e9", "0.30", "7700"),
@@ -563,7 +592,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                            _mp(5, "200e06", "0.2", "1850"), applies=ON_TRACK),
         "subgrade": _mat(200e6, 0.20, 1850.0, "subgrade", _mp(6, "200e6", "0.2", "1850")),
         "concrete": _mat(31e9, 0.25, 2500.0, "concrete building",
-                         _mp(10, "31e9", "0.25", "2500")),
+                         _mp(10, "31e9", "0.25", "2500"), applies=BUILDING),
         # mitigation materials: not in the thesis (its future work); typical values
         "trench_fill": _mat(5e6, 0.10, 20.0, "in-filled trench ([trench], type = 'filled')",
                             "not in the thesis: EPS geofoam EPS 20 (EN 14933, E 3-8 MPa, "
@@ -613,35 +642,45 @@ SCHEMA: dict[str, dict[str, Any]] = {
                                        "pos", source=f"{_APDL}: No_rail_ele_betwn_sleeper=5",
                                        applies=ON_TRACK),
         "soil_elements_per_bay": Param(2, "int", "-",
-                                       "soil elements along x per sleeper bay, away from building",
-                                       "pos", source=f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2"),
+                                       "soil elements along x per sleeper bay, away from "
+                                       "building (without a track the soil's grid is its own: "
+                                       "mesh.size_far, or 0.6 m cubes in the thesis layout)",
+                                       "pos", source=f"{_APDL}: No_soil_ele_betwn_sleeper_NB=2",
+                                       applies=ON_TRACK),
         "soil_elements_per_bay_building": Param(4, "int", "-",
                                                 "soil elements along x per bay in line with the "
                                                 "building", "pos",
-                                                source=f"{_APDL}: No_soil_ele_betwn_sleeper_B=4"),
+                                                source=f"{_APDL}: No_soil_ele_betwn_sleeper_B=4",
+                                                applies=BUILDING),
         "sleeper_outer_elements": Param(2, "int", "-",
                                         "sleeper elements between its end and the rail", "pos",
                                         source=f"{_APDL}: SLP_OUT_ELE=2", applies=ON_TRACK),
         "sleeper_middle_elements": Param(4, "int", "-", "sleeper elements between the rails",
                                          "pos", source=f"{_APDL}: SLP_MID_ELE=4", applies=ON_TRACK),
         "shoulder_elements": Param(3, "int", "-", "elements across each ballast shoulder", "pos",
-                                   source=f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)"),
+                                   source=f"{_APDL}: LESIZE,ALL,,,3 (shoulder lines at X1)",
+                                   applies=ON_TRACK),
         "size_far": Param(0.6, "float", "m",
-                          "layout 'refined': element size across the track in the far field",
-                          "pos", applies=REFINED_LAYOUT),
+                          "layout 'refined': element size across the track in the far field "
+                          "(without a track: the soil's size along x and y, a grid sized by "
+                          "the soil alone)", "pos", applies=REFINED_LAYOUT),
         "size_deep": Param(0.8, "float", "m",
-                           "layout 'refined': vertical element size below the building base",
+                           "layout 'refined': vertical element size below the building base "
+                           "(without a building: of the whole soil)",
                            "pos", applies=REFINED_LAYOUT),
         "size_building_y": Param(0.3, "float", "m",
                                  "building and soil element size across the track in line with "
                                  "the building", "pos",
-                                 source=f"{_APDL}: LESIZE,ALL,0.3 (building and soil across)"),
-        "size_building_z": Param(0.6, "float", "m", "building element size vertically", "pos",
+                                 source=f"{_APDL}: LESIZE,ALL,0.3 (building and soil across)",
+                                 applies=BUILDING),
+        "size_building_z": Param(0.6, "float", "m",
+                                 "building element size vertically (layout 'refined': also "
+                                 "of the soil above the building base)", "pos",
                                  source=f"{_APDL}: EXTOPT,ESIZE,6 over 3.6 m (columns), "
-                                        "walls 0.6 m"),
+                                        "walls 0.6 m", applies=BUILDING),
         "layer_elements": Param(1, "int", "-",
                                 "layout 'refined': elements through each of the ballast and "
-                                "subballast layers", "pos", applies=REFINED_LAYOUT),
+                                "subballast layers", "pos", applies=REFINED_TRACK_BED),
         "elements_per_wavelength": Param(0.0, "float", "-",
                                          "if > 0: soil element sizes at most c_S / (f n) "
                                          "(f = mesh.wavelength_hz, which must then be > 0; "
@@ -749,7 +788,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "modulus": Param(0.0, "float", "N/m^3",
                          "base isolation of the building: bedding modulus of the bearings over the"
                          " area they carry (a vertical building frequency f needs about m (2 pi "
-                         "f)^2 / area) (0: none)", "nonneg"),
+                         "f)^2 / area) (0: none)", "nonneg", applies=BUILDING),
         "shear_ratio": Param(0.3, "float", "-",
                              "stiffness along x and y over the vertical one (an elastomer's "
                              "shear stiffness is a fraction of its compression stiffness)",
@@ -1148,10 +1187,25 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "offsets": Param([0.0], "floats", "m",
                          "positions of the loads along x relative to the leading one "
                          "(<= 0; one load of load.force each)", applies=BARE_SOIL),
+        "start": Param("ramp", "str", "-",
+                       "how the loads start at t = 0: 'ramp' (the soil at rest, the forces "
+                       "switched on over load.ramp_time while the loads move at load.speed; "
+                       "0: a step, which radiates a pulse) or 'static' (the soil at rest in "
+                       "static equilibrium under the full forces at their start positions, "
+                       "K u0 = f0, velocities zero; the loads then run up to load.speed "
+                       "over load.ramp_time, 0: at once, which radiates the moving field's "
+                       "difference from the static one as a pulse; needs the box held "
+                       "statically: a fixed, roller, caughey or pml face, or absorbing "
+                       "faces with boundary.virtual_thickness > 0)",
+                       choices=("ramp", "static"),
+                       source="'ramp': the surface load's start before 'static' existed "
+                              "(the results of earlier cases unchanged)", applies=BARE_SOIL),
         "ramp_time": Param(0.0, "float", "s",
-                           "switch-on: the loads grow as sin^2(pi t / (2 ramp_time)) over "
-                           "this time, then stay (0: a step at t = 0, which radiates a "
-                           "pulse)", "nonneg", applies=BARE_SOIL),
+                           "load.start = 'ramp': the forces grow as sin^2(pi t / (2 "
+                           "ramp_time)) over this time, then stay (0: a step at t = 0, which "
+                           "radiates a pulse); load.start = 'static': the loads' speed grows "
+                           "so from 0 to load.speed (they cover load.speed x ramp_time / 2 in "
+                           "it)", "nonneg", applies=BARE_SOIL),
         "half_width": Param(0.0, "float", "m",
                             "half-width a of each load's spreading along x, (1 + cos(pi s / "
                             "a)) / (2 a) over |s| <= a (0: a point load, the consistent load "

@@ -297,6 +297,9 @@ SITE_SETS: dict[str, tuple[str, ...]] = {
     "site.soil_depth": ("geometry.z0", "domain.extra_depth"),
 }
 _DEFAULTS = {key: param.default for key, param in iter_params()}
+#: The geometry keys of the building's plan (set by the site keys only with a building).
+BUILDING_KEYS = ("geometry.x2", "geometry.x3", "geometry.xbb", "geometry.ys2", "geometry.ys3",
+                 "geometry.ybb")
 
 Problem = tuple[str, Any, str]
 
@@ -353,8 +356,8 @@ def _site_y(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[
     out: dict[str, float] = {}
     problems: list[Problem] = []
     dist, width = active.get("site.building_distance"), active.get("site.building_width")
-    if dist is None and width is None:
-        return out, problems
+    if (dist is None and width is None) or not values["building.present"]:
+        return out, problems           # (no building: its site keys are refused as off)
     ys2 = -dist if dist is not None else base("geometry.ys2")
     if width is None:
         width = base("geometry.ys2") - base("geometry.ys3")
@@ -380,8 +383,8 @@ def _site_x(values: Mapping[str, Any], active: dict[str, float], base,
     the track with the latter), its start on a sleeper."""
     out: dict[str, float] = {}
     track, length = active.get("site.track_length"), active.get("site.building_length")
-    if track is None and length is None:
-        return out, []
+    if (track is None and length is None) or not values["building.present"]:
+        return out, []                  # (no building: site.track_length sets the soil only)
     x1, sp = values["geometry.x1"], values["track.sleeper_spacing"]
     if length is None:
         length = base("geometry.x3") - base("geometry.x2")
@@ -413,7 +416,7 @@ def _site_z(values: Mapping[str, Any], active: dict[str, float], base) -> tuple[
     out = ({"geometry.z0": z0, "domain.extra_depth": _round(depth - (z1 - z0))}
            if depth >= z1 - z0 else {"geometry.z0": _round(z1 - depth), "domain.extra_depth": 0.0})
     basement = z1 - values["geometry.zbb"]
-    if not depth > basement:
+    if values["building.present"] and not depth > basement:
         return out, [("site.soil_depth", depth,
                       f"must be > {basement:g} m, the depth of the building's base below the "
                       "ground (geometry.z1 - geometry.zbb)")]
@@ -617,6 +620,8 @@ def load_path_crossing(case: Case) -> tuple[float, float] | None:
     ...                           "load.x_end": 10.0}))
     None
     """
+    if not case["building.present"]:
+        return None
     ld = {k: case[f"load.{k}"] for k in ("y", "offsets", "x_start", "x_end", "half_width",
                                           "speed", "t_after")}
     chord = _plan_chord(case, (0.0, ld["y"]), (1.0, 0.0))
@@ -649,7 +654,7 @@ def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:
         return [(near, case["geometry.ys0"])] if near < case["geometry.ys0"] else []
     out = [(toe, -(case["geometry.ys4"] - case["domain.extra_width"]))]
     tr = case["trench"]
-    holes = [_footprint(case, x)]
+    holes = [_footprint(case, x) if case["building.present"] else None]
     if tr["type"] == "open" and tr["width"] > 0:
         holes.append((tr["distance"], tr["distance"] + tr["width"]))
     for hole in holes:
@@ -679,7 +684,8 @@ def site_lines(case: Case) -> list[str]:
     out = []
     given = [s for s in SITE_SETS if case[s] > 0]
     if given:
-        keys = list(dict.fromkeys(k for s in given for k in SITE_SETS[s]))
+        keys = list(dict.fromkeys(k for s in given for k in SITE_SETS[s]
+                                  if case["building.present"] or k not in BUILDING_KEYS))
         out.append("site: " + ", ".join(f"{s.split('.')[1]} {case[s]:g}" for s in given)
                    + " m -> " + ", ".join(f"{k.split('.')[1]} {case[k]:g}" for k in keys)
                    + " m")

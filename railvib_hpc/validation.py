@@ -366,7 +366,6 @@ def _close(a: float, b: float, tol: float = 1e-6) -> bool:
 def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
     """Geometric and cross-key checks; returns the list of problems."""
     g, t, b = case["geometry"], case["track"], case["building"]
-    m = case["mesh"]
     out: list[tuple[str, Any, str]] = []
 
     def order(keys: list[str], values: list[float], what: str) -> None:
@@ -374,10 +373,14 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
             if not v0 < v1:
                 out.append((f"geometry.{k1}", v1, f"must be greater than {k0} = {v0} ({what})"))
 
-    order(["x0", "x1", "x2", "x3", "x4"], [g[k] for k in ("x0", "x1", "x2", "x3", "x4")],
-          "X0 < X1 < X2 < X3 < X4")
-    order(["ys4", "ys3", "ys2", "ys1"], [g[k] for k in ("ys4", "ys3", "ys2", "ys1")],
-          "YS4 < YS3 < YS2 < YS1 < 0 < YS0")
+    if b["present"]:
+        order(["x0", "x1", "x2", "x3", "x4"], [g[k] for k in ("x0", "x1", "x2", "x3", "x4")],
+              "X0 < X1 < X2 < X3 < X4")
+        order(["ys4", "ys3", "ys2", "ys1"], [g[k] for k in ("ys4", "ys3", "ys2", "ys1")],
+              "YS4 < YS3 < YS2 < YS1 < 0 < YS0")
+    else:                          # no building: its lines do not apply
+        order(["x0", "x1", "x4"], [g[k] for k in ("x0", "x1", "x4")], "X0 < X1 < X4")
+        order(["ys4", "ys1"], [g[k] for k in ("ys4", "ys1")], "YS4 < YS1 < 0 < YS0")
     if not g["ys1"] < 0:
         out.append(("geometry.ys1", g["ys1"], "must be < 0 (embankment toe on the building side)"))
     if not g["ys0"] > -g["ys1"]:
@@ -421,10 +424,26 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"and |YS1| = {-g['ys1']:g} m (sloped shoulders)"))
     out.extend(_check_tracks(case))
     out.extend(_check_surface_load(case))
+    out.extend(_check_static_start(case))
     out.extend(_check_track_ends(case))
     out.extend(_check_embankment(case))
     out.extend(_check_interfaces(case))
-    out.extend(_check_rotation(case))
+    if b["present"]:
+        out.extend(_check_building(case))
+    out.extend(_check_mesh_keys(case))
+    out.extend(check_studies(case["study"]))
+    out.extend(_check_dynamics(case))
+    out.extend(_check_soil(case))
+    out.extend(_check_measures(case))
+    out.extend(_check_line_points(case))
+    out.extend(check_uncertainty(case))
+    return out
+
+
+def _check_building(case: Case) -> list[tuple[str, Any, str]]:
+    """The building's turn, plan, frame and levels (``building.present``)."""
+    g, b = case["geometry"], case["building"]
+    out = _check_rotation(case)
     # building: its plan is the excavation [X2, X3] x [YS3, YS2]
     length, width = g["x3"] - g["x2"], g["ys2"] - g["ys3"]
     if not _close(g["xbb"], 0.5 * (g["x2"] + g["x3"])):
@@ -457,8 +476,13 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
         out.append(("geometry.x2", g["x2"], "the building must lie inside the soil (X1 < X2, "
                     "X3 < X4)"))
     out.extend(_check_turned_plan(case))
+    return out
 
-    # mesh
+
+def _check_mesh_keys(case: Case) -> list[tuple[str, Any, str]]:
+    """The mesh file, the refinement and the modal settings."""
+    m = case["mesh"]
+    out: list[tuple[str, Any, str]] = []
     if m["file"]:
         f = case.resolve(m["file"])
         if not f.is_file():
@@ -478,12 +502,6 @@ def check_consistency(case: Case) -> list[tuple[str, Any, str]]:
                     f"must be 0 (automatic) or at least modal.n_modes + 2 modal.block_size = "
                     f"{need} (the Lanczos basis holds the wanted modes and two blocks)"))
     out.extend(_check_mbs(case))
-    out.extend(check_studies(case["study"]))
-    out.extend(_check_dynamics(case))
-    out.extend(_check_soil(case))
-    out.extend(_check_measures(case))
-    out.extend(_check_line_points(case))
-    out.extend(check_uncertainty(case))
     return out
 
 
@@ -629,6 +647,61 @@ def _check_surface_load(case: Case) -> list[tuple[str, Any, str]]:
     return out
 
 
+#: The truncation faces of the soil box: the axis of their normal and whether they lie at
+#: its upper end (``[boundary]``).
+_FACE_PLANES = {"x_min": (0, False), "x_max": (0, True), "y_min": (1, False),
+                "y_max": (1, True), "base": (2, False)}
+
+
+def _statically_held(case: Case, face: str) -> tuple[int, ...]:
+    """The displacement components a face holds against a static load: fixed, caughey
+    and pml faces all three, a roller its normal one, an absorbing face all three with
+    its springs (``boundary.virtual_thickness > 0``) and none on dashpots alone (they
+    hold no static load), a free face none."""
+    kind = case[f"boundary.{face}"]
+    if kind in ("fixed", "caughey", "pml") or (
+            kind == "absorbing" and case["boundary.virtual_thickness"] > 0):
+        return (0, 1, 2)
+    return (_FACE_PLANES[face][0],) if kind == "roller" else ()
+
+
+def _check_static_start(case: Case) -> list[tuple[str, Any, str]]:
+    """``load.start = 'static'`` solves ``K u0 = f0``: the faces must hold the soil box
+    against every rigid-body motion (else K is singular). The box's faces are planes, so
+    their corners decide (a rigid-body motion is linear in the position)."""
+    if case["track.count"] != 0 or case["load.start"] != "static":
+        return []
+    g, d = case["geometry"], case["domain"]
+    lo = np.array([g["x1"] - d["extra_length"], g["ys4"] - d["extra_width"],
+                   g["z0"] - d["extra_depth"]])
+    hi = np.array([g["x4"] + d["extra_length"], g["ys0"], g["z1"]])
+    centre, scale = 0.5 * (lo + hi), float(np.max(hi - lo))
+    rows = []
+    for face, (axis, upper) in _FACE_PLANES.items():
+        others = [a for a in range(3) if a != axis]
+        for c0 in (lo[others[0]], hi[others[0]]):
+            for c1 in (lo[others[1]], hi[others[1]]):
+                p = np.empty(3)
+                p[axis], p[others[0]], p[others[1]] = (hi if upper else lo)[axis], c0, c1
+                p = (p - centre) / scale
+                for c in _statically_held(case, face):
+                    # the motion t + w x p, its component c: t_c + (w x p)_c
+                    row = np.zeros(6)
+                    row[c] = 1.0
+                    row[3:] = np.cross(p, np.eye(3)[c])      # (w x p)_c = w . (p x e_c)
+                    rows.append(row)
+    if rows and np.linalg.matrix_rank(np.array(rows), tol=1e-9) == 6:
+        return []
+    faces = ", ".join(f"{f} {case[f'boundary.{f}']}" for f in _FACE_PLANES)
+    return [("load.start", "static",
+             f"solves K u0 = f0 at t = 0 and needs the soil box held statically, which "
+             f"its faces do not do ([boundary]: {faces}, virtual_thickness = "
+             f"{case['boundary.virtual_thickness']:g} m: absorbing faces hold no static "
+             "load on their dashpots alone); allowed: boundary.virtual_thickness > 0 "
+             "(the absorbing faces' springs), a fixed or roller base, or load.start = "
+             "'ramp'")]
+
+
 def _load_path_problems(case: Case) -> list[tuple[str, Any, str]]:
     """The surface load's path on the ground: not through the building's plan (there the
     ground is the building, its walls and basement: the load would stand in a wall, and
@@ -694,7 +767,15 @@ def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:
     g, h = case["geometry"], track_lift(case)
     if h == 0 or case["track.count"] == 0:              # (no track: _check_surface_load)
         return []
-    toe, face = embankment_toe(case), -placed_plan(case)[3]
+    toe = embankment_toe(case)
+    if not case["building.present"]:
+        edge = -(g["ys4"] - case["domain.extra_width"])
+        if not toe < edge:
+            return [("track.embankment_height", h,
+                     f"the embankment's toe ({toe:g} m from the track centre) reaches the "
+                     f"soil's edge {edge:g} m from it (|YS4| + domain.extra_width); lower it "
+                     "or widen the domain")]
+    face = -placed_plan(case)[3] if case["building.present"] else math.inf
     if not toe < face:
         return [("track.embankment_height", h,
                  f"the embankment's toe ({toe:g} m from the track centre: |YS1| + "
@@ -871,7 +952,9 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
     embankment and the building."""
     out: list[tuple[str, Any, str]] = []
     g = case["geometry"]
-    toe, face = embankment_toe(case), -placed_plan(case)[3]
+    building = case["building.present"]
+    toe = embankment_toe(case)
+    face = -placed_plan(case)[3] if building else -(g["ys4"] - case["domain.extra_width"])
     soil_depth = g["z1"] - (g["z0"] - case["domain.extra_depth"])
     tr = case["trench"]
     if tr["type"] != "none" or tr["width"] > 0:
@@ -882,11 +965,13 @@ def _check_measures(case: Case) -> list[tuple[str, Any, str]]:
                         f"({toe:g} m from the track centreline: |geometry.ys1| plus a "
                         "fill's slope)"))
         elif tr["distance"] + tr["width"] > face + 1e-9:
+            where = ("would cut through the building: its face is {:g} m from the track "
+                     "(|geometry.ys2|, turned with building.rotation)" if building else
+                     "would reach past the soil's edge {:g} m from the track "
+                     "(|geometry.ys4| + domain.extra_width)")
             out.append(("trench.width", tr["width"],
                         f"the trench (from {tr['distance']:g} to "
-                        f"{tr['distance'] + tr['width']:g} m) would cut through the building: "
-                        f"its face is {face:g} m from the track (|geometry.ys2|, turned with "
-                        "building.rotation)"))
+                        f"{tr['distance'] + tr['width']:g} m) " + where.format(face)))
         if tr["depth"] >= soil_depth - 1e-9:
             out.append(("trench.depth", tr["depth"],
                         f"must be less than the soil depth ({soil_depth:g} m to the base)"))

@@ -278,14 +278,15 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                           "after_entry": t_det - t_entry,
                           "p_analytic": r / c_p, "s_analytic": r / c_s,
                           "apparent_speed": r / (t_det - t_entry) if t_det > t_entry else None}
-    # the bare soil under a surface load (track.count = 0) is no thesis model: no thesis
-    # comparison, no thesis table
+    # the bare soil under a surface load (track.count = 0), or a site without a building,
+    # is no thesis model: no thesis comparison, no thesis table
     has_track = bool(case["track.count"])
-    ours = _thesis_comparison(hist, out_dir / FIELDS_H5) if has_track else {}
+    thesis_site = has_track and bool(case["building.present"])
+    ours = _thesis_comparison(hist, out_dir / FIELDS_H5) if thesis_site else {}
     comparison = {k: {"thesis": v, "railvib": ours.get(k)} for k, v in THESIS.items()
-                  if has_track and not k.endswith("arrival_basement_wall")}
+                  if thesis_site and not k.endswith("arrival_basement_wall")}
     # arrivals on the thesis's clock (t = 0 with the wheel at x = 0) at the wall's far end
-    arrival = thesis_clock_arrival(case, hist) if has_track else None
+    arrival = thesis_clock_arrival(case, hist) if thesis_site else None
     if arrival is not None:
         for key, c in (("p_wave_arrival_basement_wall", c_p),
                        ("s_wave_arrival_basement_wall", c_s)):
@@ -293,7 +294,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
                                "railvib": arrival["detected"] if key[0] == "p" else None,
                                "analytic": arrival["t_entry"] + arrival["distance"] / c}
     rows = (thesis_rows(case, out_dir, hist, ours, arrival, modal=solver == "modal")
-            if has_track else [])
+            if thesis_site else [])
     origin = ("the first wheel enters the flexible rail" if has_track
               else "the surface load enters the soil")
     x, force = _contact(out_dir, solver)
@@ -416,10 +417,10 @@ def model_summary(case: Case, out_dir: Path, solver: str = "modal") -> str:
 def _site_summary(case: Case) -> list[str]:
     """The building and the tracks in one line each."""
     from ..mbs.case_vehicle import tracks_line
-    from ..mesh.building import Building
+    from ..mesh.building import building_line
     from ..mesh.interfaces import site_line
 
-    out = [f"building             {Building.of_case(case).describe()}"]
+    out = [f"building             {building_line(case)}"]
     out.append("track bed            " + site_line(case))
     tracks = tracks_line(case)
     if tracks:

@@ -319,11 +319,13 @@ def external_files(case, keys: Sequence[str]) -> dict[str, str]:
 #: Keys that enter a digest only when they differ from their default: added after the
 #: products of the defaults were recorded, they leave those products current (their
 #: default is the model that was there before them: issue 28's rigid track ends; issue
-#: 29's layer parameters, which act on pml faces only).
+#: 29's layer parameters, which act on pml faces only; the building, present by default).
 NEUTRAL_AT_DEFAULT_KEYS = ("track.ends", "track.end_stiffness", "track.end_damping",
                            # issue 29: the perfectly matched layers' parameters
                            "boundary.pml_reflection", "boundary.pml_power",
-                           "boundary.pml_alpha")
+                           "boundary.pml_alpha",
+                           # the optional building: its default is the site there was
+                           "building.present")
 
 _NEUTRAL_DEFAULTS = {key: param.default for key, param in iter_params()
                      if key.split(".", 1)[0] in DIGEST_NEUTRAL_SECTIONS

@@ -255,6 +255,14 @@ class Building:
         return out
 
 
+def building_line(case: Case) -> str:
+    """What the building is, in one line (:meth:`Building.describe`), or that there is none
+    (``building.present = false``)."""
+    if not case["building.present"]:
+        return "none (building.present = false: the free field alone)"
+    return Building.of_case(case).describe()
+
+
 def storey_of_probe(name: str) -> int | None:
     """The storey of a building floor probe named ``slab<k>...`` (None for other names)."""
     import re

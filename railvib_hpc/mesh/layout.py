@@ -49,6 +49,9 @@ from ..site import (
 from .building import Building
 
 _TOL = 1e-9
+#: The plan ``(x_lo, x_hi, y_lo, y_hi)`` of a site without a building: empty (no interval
+#: lies inside it, every one beside it).
+NO_PLAN = (math.inf, -math.inf, -math.inf, -math.inf)
 
 
 def _merge(values: list[float]) -> np.ndarray:
@@ -192,7 +195,8 @@ THESIS_DIVISIONS: dict[str, float] = {
 class _CrossSection:
     """The track across y: the track centre lines (track 1 at y = 0, track 2 track.spacing
     further from the building), half the sleeper length and the gauge, the embankment's toes
-    on the ground (near side ``-toe``, far side ``toe_far``) and the fill's lift."""
+    on the ground (near side ``-toe``, far side ``toe_far``) and the fill's lift; without a
+    track (``track.count = 0``) no centre line and no toe."""
 
     centres: tuple[float, ...]
     half_sleeper: float
@@ -206,6 +210,8 @@ class _CrossSection:
         t = case["track"]
         # one embankment carries both tracks; a fill (track.embankment_height) lifts the
         # track bed by lift, its sides sloping in to the subballast's base half-width |YS1|
+        if not t["count"]:             # the bare soil: no track, no embankment
+            return cls((), t["sleeper_length"] / 2, t["gauge"] / 2, 0.0, 0.0, 0.0)
         centres = (0.0,) + ((t["spacing"],) if t["count"] == 2 else ())
         lift = track_lift(case)
         toe = embankment_toe(case)
@@ -229,9 +235,10 @@ def build_layout(case: Case) -> Layout:
     g, t, m, d = (case[s] for s in ("geometry", "track", "mesh", "domain"))
     r = m["refinement"]
     # the building's lines: footing, column and wall faces (mesh.building), and its plan,
-    # both turned by building.rotation's whole quarter turns
-    bldg = Building.of_case(case)
-    plan = placed_plan(case)
+    # both turned by building.rotation's whole quarter turns (building.present = false:
+    # none, the free field alone)
+    bldg = Building.of_case(case) if case["building.present"] else None
+    plan = placed_plan(case) if bldg is not None else NO_PLAN
     cross = _CrossSection.of_case(case)
     bounds = (g["x1"] - d["extra_length"], g["x4"] + d["extra_length"],
               g["ys4"] - d["extra_width"], g["ys0"], g["z0"] - d["extra_depth"], g["z1"])
@@ -243,10 +250,10 @@ def build_layout(case: Case) -> Layout:
     levels = _levels(case, bldg, layers, cross.lift, bounds[4])
     zdiv = _vertical_divisions(case, levels, layers)
     blocks = _blocks(case, bldg, plan, xb, yb, levels, cross, layers)
-    probes, probe_roles = _named_probes(case, bldg, plan, cross, bounds[2])
-    # track.count = 0: the bare soil (no rails, sleepers, pads); the track's grid lines stay
-    # (a finer grid along the notional track, where the surface load usually runs)
-    centres = cross.centres if t["count"] else ()
+    probes, probe_roles = _named_probes(case, bldg, plan, cross, bounds)
+    # track.count = 0: the bare soil (no rails, sleepers, pads, and none of their grid
+    # lines: the grid is the soil's, _lines)
+    centres = cross.centres
     hs, hg, lift = cross.half_sleeper, cross.half_gauge, cross.lift
     rail_div = max(1, round(m["rail_elements_per_bay"] * r))
     end_div = (rail_div * max(1, round(t["rigid_length"] / sp))
@@ -256,27 +263,75 @@ def build_layout(case: Case) -> Layout:
         rail_y=tuple(c + s * hg for c in centres for s in (-1, 1)), rail_z=g["z4"] + lift,
         rail_div=rail_div, rigid_ends=(g["x0"], g["x4"] + t["rigid_length"]),
         sleeper_y=np.array([[c - hs, c - hg, c + hg, c + hs] for c in centres]).reshape(-1, 4),
-        sleeper_z=g["z3"] + lift, end_div=end_div, deform=_shoulder_slopes(g, yb, cross),
+        sleeper_z=g["z3"] + lift, end_div=end_div,
+        deform=_shoulder_slopes(g, yb, cross) if centres else {},
         bounds=bounds, probes=probes, probe_roles=probe_roles)
 
 
-def _lines(case: Case, bldg: Building, cross: _CrossSection, sleeper_x: np.ndarray,
+def _lines(case: Case, bldg: Building | None, cross: _CrossSection, sleeper_x: np.ndarray,
            bounds: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The breakpoints along x (domain ends, sleepers, building) and y (domain edges,
-    embankment toes, sleeper ends and rails of every track, building, the measures' faces)."""
+    embankment toes, sleeper ends and rails of every track, building, the measures' faces);
+    without a track no sleeper, rail or toe line, but the load's path and the probe lines
+    (:func:`_bare_soil_lines`)."""
     g = case["geometry"]
     xmin, xmax, ymin = bounds[:3]
-    xb = _merge([xmin, xmax, *sleeper_x, *bldg.x_lines()])
+    track = bool(cross.centres)
+    own_x = bldg.x_lines() if bldg is not None else []
+    own_y = bldg.y_lines() if bldg is not None else []
     tr, wib = case["trench"], case["wib"]
     measure_y = []
     if tr["width"] > 0:            # the trench's faces (also with type 'none': same mesh)
         measure_y += [-tr["distance"], -tr["distance"] - tr["width"]]
     if wib["width"] > 0:
         measure_y += [-wib["width"] / 2, wib["width"] / 2]
+    if not track:
+        xb = _merge([xmin, xmax, *own_x])
+        yb = _merge([ymin, g["ys0"], *own_y, *measure_y])
+        return _bare_soil_lines(case, xb, yb)
     track_y = [c + s * w for c in cross.centres for w in (cross.half_sleeper, cross.half_gauge)
                for s in (-1, 1)]
-    yb = _merge([ymin, g["ys0"], -cross.toe, cross.toe_far, *track_y, *bldg.y_lines(),
-                 *measure_y])
+    xb = _merge([xmin, xmax, *sleeper_x, *own_x])
+    yb = _merge([ymin, g["ys0"], -cross.toe, cross.toe_far, *track_y, *own_y, *measure_y])
+    return xb, yb
+
+
+#: Smallest distance, in soil element sizes, between a line the bare soil's grid adds for
+#: the load's path or a probe line and the grid's other lines: a closer one would make an
+#: element shorter than half the size, which halves the explicit engines' stable step
+#: (a point left off the lines is interpolated in its element, as every probe can be).
+MIN_LINE_GAP = 0.5
+
+
+def bare_soil_size(case: Case) -> float:
+    """The horizontal element size of the bare soil's grid (``track.count = 0``) outside the
+    building [m], before ``mesh.refinement``: ``mesh.size_far`` (layout 'refined') or the
+    thesis layout's soil size between the track and the building (:data:`THESIS_DIVISIONS`,
+    'toe_to_building'); the wavelength sizing may refine it."""
+    if case["mesh.layout"] == "refined":
+        return float(case["mesh.size_far"])
+    return THESIS_DIVISIONS["vertical_soil"]
+
+
+def _bare_soil_lines(case: Case, xb: np.ndarray, yb: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The soil's own lines and, where they keep :data:`MIN_LINE_GAP` from them, the load's
+    path (``load.y``) and the probe lines' positions (x, and y of every point), so that the
+    load runs on a line of nodes and the probes sit on nodes."""
+    from ..site import line_probes
+
+    gap = MIN_LINE_GAP * bare_soil_size(case) / case["mesh.refinement"]
+    points = list(line_probes(case).values())
+    for axis, lines, wanted in ((0, xb, [p.point[0] for p in points]),
+                                (1, yb, [case["load.y"], *(p.point[1] for p in points)])):
+        keep = list(lines)
+        for v in wanted:
+            if lines[0] < v < lines[-1] and min(abs(v - w) for w in keep) >= gap - _TOL:
+                keep.append(float(v))
+        if axis == 0:
+            xb = _merge(keep)
+        else:
+            yb = _merge(keep)
     return xb, yb
 
 
@@ -317,25 +372,33 @@ def _y_divisions_thesis(m: dict, y0: float, y1: float, plan: tuple[float, float,
 def _horizontal_divisions(case: Case, xb: np.ndarray, yb: np.ndarray,
                           plan: tuple[float, float, float, float], cross: _CrossSection,
                           layers: list[dict]) -> tuple[np.ndarray, np.ndarray]:
-    """The element divisions of every x and y interval: the layout's sizes, refined for the
-    softest soil's wavelength and across the soil twisted round a turned building."""
+    """The element divisions of every x and y interval: the layout's sizes (without a track
+    the soil's, :func:`bare_soil_size`), refined for the softest soil's wavelength and
+    across the soil twisted round a turned building."""
     m = case["mesh"]
     r = m["refinement"]
     sp = case["track.sleeper_spacing"]
-    plan_x2, plan_x3 = plan[:2]
-    h_track = sp / m["soil_elements_per_bay"]
+    plan_x2, plan_x3, plan_ys3, plan_ys2 = plan
     h_bldg = sp / m["soil_elements_per_bay_building"]
+    if cross.centres:
+        h_track = sp / m["soil_elements_per_bay"]
+        ydiv = _y_divisions_thesis if m["layout"] == "thesis" else _y_divisions
+        ny = np.array([ydiv(m, y0, y1, plan, cross) for y0, y1 in zip(yb[:-1], yb[1:])])
+    else:                         # the bare soil: a grid of the soil's own size
+        h_track = bare_soil_size(case)
+        ny = np.array([_ndiv(y1 - y0, m["size_building_y"] if (
+            y0 >= plan_ys3 - _TOL and y1 <= plan_ys2 + _TOL) else h_track, r)
+            for y0, y1 in zip(yb[:-1], yb[1:])])
     nx = np.array([
         _ndiv(x1 - x0, h_bldg if (x0 >= plan_x2 - _TOL and x1 <= plan_x3 + _TOL) else h_track, r)
         for x0, x1 in zip(xb[:-1], xb[1:])])
-    ydiv = _y_divisions_thesis if m["layout"] == "thesis" else _y_divisions
-    ny = np.array([ydiv(m, y0, y1, plan, cross) for y0, y1 in zip(yb[:-1], yb[1:])])
 
     # wavelength sizing (mesh.elements_per_wavelength), horizontally: the softest soil (one
     # grid for all layers)
     soils = [x["part"] for x in layers] or ["subgrade"]
-    h_soft = min(wavelength_size(case, name) for name in
-                 (*soils, "ballast", "subballast", *(("fill",) if cross.lift > 0 else ())))
+    bed = ("ballast", "subballast", *(("fill",) if cross.lift > 0 else ())) \
+        if cross.centres else ()
+    h_soft = min(wavelength_size(case, name) for name in (*soils, *bed))
     nx = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(nx, np.diff(xb))])
     ny = np.array([_resolving_divisions(n, ln, h_soft, r) for n, ln in zip(ny, np.diff(yb))])
     # a twisted building (building.rotation beyond whole quarter turns): the soil across
@@ -374,7 +437,7 @@ def _ground_part(case: Case, layers: list[dict], y: float, z: float) -> str | No
     return _soil_part(layers, z)
 
 
-def _levels(case: Case, bldg: Building, layers: list[dict], lift: float,
+def _levels(case: Case, bldg: Building | None, layers: list[dict], lift: float,
             zbot: float) -> _Levels:
     """The z levels: soil layers, measures and basement below the ground, the embankment's
     layers and the building's storeys above it."""
@@ -385,11 +448,12 @@ def _levels(case: Case, bldg: Building, layers: list[dict], lift: float,
         interfaces.append(g["z1"] - tr["depth"])
     if wib["width"] > 0:
         interfaces += [g["z1"] - wib["depth"], g["z1"] - wib["depth"] - wib["thickness"]]
-    below = _merge([zbot, g["z0"], *bldg.levels_below(), g["z1"], *interfaces])
+    own_below = bldg.levels_below() if bldg is not None else []
+    below = _merge([zbot, g["z0"], *own_below, g["z1"], *interfaces])
     below = below[(below <= g["z1"] + _TOL) & (below >= zbot - _TOL)]
     embank = [g["z1"], *([g["z1"] + lift] if lift > 0 else []), g["z2"] + lift, g["z3"] + lift]
     embank_parts = (*(("fill",) if lift > 0 else ()), "subballast", "ballast")
-    above = _merge([g["z1"], *bldg.levels_above()])
+    above = _merge([g["z1"], *(bldg.levels_above() if bldg is not None else [])])
     above = above[above >= g["z1"] - _TOL]
     return _Levels(below, embank, embank_parts, above)
 
@@ -405,7 +469,8 @@ def _vertical_divisions(case: Case, levels: _Levels,
     m = case["mesh"]
     r = m["refinement"]
     thesis = m["layout"] == "thesis"
-    zbb = case["geometry.zbb"]
+    # the soil above the building base takes the building's vertical size (refined layout)
+    zbb = case["geometry.zbb"] if case["building.present"] else math.inf
     below, embank, above = levels.below, levels.embank, levels.above
     zdiv: dict[tuple[float, float], int] = {}
     for z0, z1 in zip(below[:-1], below[1:]):
@@ -427,7 +492,7 @@ def _vertical_divisions(case: Case, levels: _Levels,
     return zdiv
 
 
-def _blocks(case: Case, bldg: Building, plan: tuple[float, float, float, float],
+def _blocks(case: Case, bldg: Building | None, plan: tuple[float, float, float, float],
             xb: np.ndarray, yb: np.ndarray, levels: _Levels, cross: _CrossSection,
             layers: list[dict]) -> list[Block]:
     """Every non-empty block, its part given by its centre."""
@@ -475,28 +540,53 @@ def _shoulder_slopes(g: dict, yb: np.ndarray,
     return deform
 
 
-def _named_probes(case: Case, bldg: Building, plan: tuple[float, float, float, float],
-                  cross: _CrossSection, ymin: float
+def _named_probes(case: Case, bldg: Building | None, plan: tuple[float, float, float, float],
+                  cross: _CrossSection, bounds: tuple[float, ...]
                   ) -> tuple[dict[str, tuple[float, float, float]], dict[str, str]]:
     """The named probes: the building's and the ground's, each point with its role
-    (:data:`railvib_hpc.schema.PROBE_ROLES`)."""
+    (:data:`railvib_hpc.schema.PROBE_ROLES`). Without a building (``building.present =
+    false``) the ground's alone, across the soil's middle (:func:`_free_field_probes`)."""
     g, tr = case["geometry"], case["trench"]
-    _, _, plan_ys3, plan_ys2 = plan
-    toe, toe_far = cross.toe, cross.toe_far
-    # the ground between the embankment and the building; with a trench's lines (any type,
-    # so that a measure and its same-mesh reference share the point) in front of the
-    # trench when the middle would fall into it
-    y_mid = 0.5 * (-toe + plan_ys2)
-    if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
-        y_mid = -0.5 * (toe + tr["distance"])
-    located = {
-        **bldg.probes(),
-        "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
-        "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
-        "ground_building": ((g["xbb"], plan_ys2, g["z1"]), "ground"),
-        "ground_far": ((g["xbb"], 0.5 * (plan_ys3 + ymin), g["z1"]), "ground"),
-        "ground_opposite": ((g["xbb"], 0.5 * (toe_far + g["ys0"]), g["z1"]), "ground"),
-    }
+    if bldg is None:
+        located = _free_field_probes(case, cross, bounds)
+    else:
+        _, _, plan_ys3, plan_ys2 = plan
+        # (without a track the ground probes stay where the track's toes would be)
+        toe, toe_far = ((cross.toe, cross.toe_far) if cross.centres
+                        else (embankment_toe(case),) * 2)
+        # the ground between the embankment and the building; with a trench's lines (any
+        # type, so that a measure and its same-mesh reference share the point) in front of
+        # the trench when the middle would fall into it
+        y_mid = 0.5 * (-toe + plan_ys2)
+        if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
+            y_mid = -0.5 * (toe + tr["distance"])
+        located = {
+            **bldg.probes(),
+            "ground_toe": ((g["xbb"], -toe, g["z1"]), "ground"),
+            "ground_mid": ((g["xbb"], y_mid, g["z1"]), "ground"),
+            "ground_building": ((g["xbb"], plan_ys2, g["z1"]), "ground"),
+            "ground_far": ((g["xbb"], 0.5 * (plan_ys3 + bounds[2]), g["z1"]), "ground"),
+            "ground_opposite": ((g["xbb"], 0.5 * (toe_far + g["ys0"]), g["z1"]), "ground"),
+        }
     probes = {name: point for name, (point, _) in located.items()}
     probe_roles = {name: role for name, (_, role) in located.items()}
     return probes, probe_roles
+
+
+def _free_field_probes(case: Case, cross: _CrossSection, bounds: tuple[float, ...]
+                       ) -> dict[str, tuple[tuple[float, float, float], str]]:
+    """The ground probes of a site without a building, at the soil's middle along x: at the
+    embankment's toe (with a track), halfway from it to the soil's edge on the side y < 0
+    (``ground_mid``) and to the edge on the other side (``ground_opposite``); a trench's
+    middle moves ``ground_mid`` in front of it, as with a building."""
+    g, tr = case["geometry"], case["trench"]
+    x = 0.5 * (bounds[0] + bounds[1])
+    z = g["z1"]
+    y_mid = 0.5 * (-cross.toe + bounds[2])
+    if tr["width"] > 0 and -tr["distance"] - tr["width"] <= y_mid <= -tr["distance"]:
+        y_mid = -0.5 * (cross.toe + tr["distance"])
+    out = {"ground_mid": ((x, y_mid, z), "ground"),
+           "ground_opposite": ((x, 0.5 * (cross.toe_far + g["ys0"]), z), "ground")}
+    if cross.centres:
+        out = {"ground_toe": ((x, -cross.toe, z), "ground"), **out}
+    return out

@@ -290,6 +290,29 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     return (K_I, C_I), dt, text, layer, STEP_SAFETY * lim.dt_critical
 
 
+def static_start(system, state: State, load: tuple, rep: Reporter) -> None:
+    """``u_0 = K^-1 f_0``: the soil at rest in static equilibrium under the prescribed
+    loads of t = 0 (``load``: their ``(dofs, values)``; the surface loads of ``load.start =
+    'static'``), velocities zero, in ``state`` (collective).
+
+    One solve with the engine's own static solver, the one a wheel resting on the flexible
+    rail takes (``system.solve_matrix``: the explicit engines' MUMPS factor of K up to
+    :data:`~.explicit.STATIC_FACTOR_MAX_DOFS`, CG + GAMG with the rigid-body near null
+    space above; the direct engine's separate factor of K). Memory: that of the solver
+    (the factor, or a few vectors and GAMG's hierarchy), freed after it; time: one solve.
+    The acceleration then follows from the equation of motion at t = 0 (zero to the
+    solve's residual without damping)."""
+    from .integrate import add_sparse
+
+    rhs = np.zeros((system.n_local, 1))
+    add_sparse(rhs[:, 0], system.r0, *load)
+    state.u[:] = system.solve_matrix(system.K, rhs)[:, 0]
+    state.v[:] = 0.0
+    how = getattr(system, "static_method", None)
+    rep.info("  static start: the soil in equilibrium under the loads at t = 0 (K u0 = f0, "
+             "v0 = 0)" + (f"; {how}" if how else ""))
+
+
 def _MPI_MIN():
     from mpi4py import MPI
 
@@ -303,7 +326,9 @@ def _MPI_LOR():
 
 
 def initial_state(init: dict, comm, rep: Reporter) -> State:
-    """At rest; a vehicle in static equilibrium on the (possibly deflected) rail."""
+    """At rest; a vehicle in static equilibrium on the (possibly deflected) rail; with
+    ``init["static_start"]`` (``load.start = 'static'``) the soil in static equilibrium
+    under the prescribed loads of t = 0 (:func:`static_start`)."""
     from ..mbs.vehicles import static_equilibrium
 
     system = init["system"]
@@ -312,12 +337,17 @@ def initial_state(init: dict, comm, rep: Reporter) -> State:
     vehicle, driver = init["vehicle"], init["driver"]
     if vehicle is None:
         if init["prescribed"] is not None:
+            load = init["prescribed"](0)
+            if init.get("static_start"):
+                static_start(system, state, load, rep)
             if init["scheme"] is None:
                 from .explicit import initial_acceleration as explicit_acceleration
 
-                explicit_acceleration(system, state, [init["prescribed"](0)])
+                explicit_acceleration(system, state, [load])    # (starts the layers)
             else:
-                initial_acceleration(system, state, [init["prescribed"](0)])
+                if getattr(system, "pml", None) is not None:
+                    system.pml.start(state.u)      # the static field: the layers' rest
+                initial_acceleration(system, state, [load])
         return state
     dofs, coef, _ = driver.coupling.at(driver.x[0])
     r = driver.heights(0)

@@ -917,6 +917,7 @@ def _setup(ctx: StageContext) -> dict:
             "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
             "columns": columns, "coupling": coupling, "forces": forces,
             "prescribed": prescribed, "n_wheels": n_wheels, "engine": engine,
+            "static_start": surface and case["load.start"] == "static",
             "n_dof": 0 if vehicle is None else vehicle.n_dof,
             "probe_names": names, "probe_coords": coords,
             "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),

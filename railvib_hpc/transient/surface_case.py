@@ -32,6 +32,13 @@ def uses_surface_load(case: Case) -> bool:
     return case["track.count"] == 0
 
 
+def run_up_time(case: Case) -> float:
+    """The loads' run-up [s]: ``load.ramp_time`` with ``load.start = 'static'`` (the loads
+    stand in static equilibrium at t = 0 and reach their speed over it), 0 otherwise (the
+    ramp switches the forces on instead)."""
+    return float(case["load.ramp_time"]) if case["load.start"] == "static" else 0.0
+
+
 def soil_end(case: Case) -> float:
     """x of the soil's end [m]: ``geometry.x4 + domain.extra_length``."""
     return float(case["geometry.x4"] + case["domain.extra_length"])
@@ -59,7 +66,9 @@ def surface_passage(case: Case) -> dict:
     ld = case["load"]
     offsets = np.asarray(ld["offsets"], dtype=float)
     x_end = ld["x_end"] or soil_end(case)
-    t_end = (x_end - ld["x_start"] - offsets.min()) / ld["speed"] + ld["t_after"]
+    # a static start's run-up (load.ramp_time) costs half its time (run_up_distance)
+    t_end = ((x_end - ld["x_start"] - offsets.min()) / ld["speed"] + ld["t_after"]
+             + 0.5 * run_up_time(case))
     return {"forces": np.full(offsets.size, float(ld["force"])), "offsets": offsets,
             "x_start": float(ld["x_start"]), "speeds": np.full(offsets.size, ld["speed"]),
             "wheel_rail": np.zeros(0, dtype=np.int64), "x_end": float(x_end),
@@ -94,7 +103,9 @@ def surface_load(case: Case, mesh: Mesh, dof_index: np.ndarray, dt: float,
     run = surface_passage(case)
     path = SurfaceLoadPath(forces=run["forces"], offsets=run["offsets"],
                            x_start=run["x_start"], y=float(ld["y"]), speed=float(ld["speed"]),
-                           ramp_time=float(ld["ramp_time"]),
+                           ramp_time=(0.0 if ld["start"] == "static"
+                                      else float(ld["ramp_time"])),
+                           run_up=run_up_time(case),
                            half_width=float(ld["half_width"]),
                            frequency=float(ld["frequency"]))
     return MovingSurfaceLoad(mesh, dof_index, path, dt, nt, ground=case["geometry.z1"])

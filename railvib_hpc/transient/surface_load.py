@@ -27,7 +27,7 @@ from ..fem.reference import hex_shape_values
 from ..mesh.model import Mesh
 from ..mesh.search import locate
 
-__all__ = ["MovingSurfaceLoad", "SurfaceLoadPath", "ramp", "spreading"]
+__all__ = ["MovingSurfaceLoad", "SurfaceLoadPath", "ramp", "run_up_distance", "spreading"]
 
 #: Largest distance between the points of a spread load, in units of the shortest element
 #: edge along x: eight points per element, so the nodal shares vary smoothly.
@@ -45,6 +45,21 @@ def ramp(t: np.ndarray, duration: float) -> np.ndarray:
         return (t >= 0).astype(float)
     return np.where(t < 0, 0.0, np.where(t < duration,
                                          np.sin(0.5 * math.pi * t / duration) ** 2, 1.0))
+
+
+def run_up_distance(t: np.ndarray, duration: float) -> np.ndarray:
+    """``int_0^t ramp(tau, T) dtau`` [s]: the distance, over the final speed, a load covers
+    by ``t`` when its speed grows as :func:`ramp` over ``T = duration`` (``t / 2 - T / (2 pi)
+    sin(pi t / T)`` during it, ``t - T / 2`` after: the run-up costs ``T / 2``).
+
+    >>> run_up_distance(np.array([0.5, 2.0]), 1.0).round(4).tolist()
+    [0.0908, 1.5]
+    """
+    t = np.maximum(np.asarray(t, dtype=float), 0.0)
+    if duration <= 0:
+        return t
+    during = 0.5 * t - duration / (2.0 * math.pi) * np.sin(math.pi * t / duration)
+    return np.where(t < duration, during, t - 0.5 * duration)
 
 
 def spreading(half_width: float, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +98,12 @@ class SurfaceLoadPath:
     speed
         Speed along +x [m/s].
     ramp_time
-        Duration of the switch-on :func:`ramp` [s].
+        Duration of the switch-on :func:`ramp` of the forces [s].
+    run_up
+        Duration of the loads' run-up [s]: their speed grows as :func:`ramp` from 0 to
+        ``speed`` over this time (0: at ``speed`` from t = 0), the start of loads standing
+        in static equilibrium at t = 0 (``load.start = 'static'``), which then accelerate
+        smoothly instead of jumping to their speed (:func:`run_up_distance`).
     half_width
         Half-width ``a`` of each load's spreading along x [m] (0: a point load): the force
         is spread as ``(1 + cos(pi s / a)) / (2 a)`` over ``|s| <= a`` (:func:`spreading`).
@@ -100,11 +120,13 @@ class SurfaceLoadPath:
     ramp_time: float
     half_width: float = 0.0
     frequency: float = 0.0
+    run_up: float = 0.0
 
     def positions(self, t: np.ndarray) -> np.ndarray:
         """(nt, n) x of every load at the times ``t``."""
         t = np.asarray(t, dtype=float)
-        return self.x_start + np.asarray(self.offsets)[None, :] + self.speed * t[:, None]
+        travelled = self.speed * run_up_distance(t, self.run_up)
+        return self.x_start + np.asarray(self.offsets)[None, :] + travelled[:, None]
 
     def amplitudes(self, t: np.ndarray) -> np.ndarray:
         """(nt, n) downward force of every load at the times ``t`` [N]."""

@@ -111,7 +111,7 @@ def _other_value(key: str, param):
 #: A case in which each declared key's feature is off (the defaults, or these changes).
 _OFF_CASES = [{}, {"track.count": 0, "load.force": 1e5},
               {"vehicle.type": "moving_force"}, {"vehicle.type": "vehicle"},
-              {"building.slab_bases": [4.2, 8.0]},
+              {"building.slab_bases": [4.2, 8.0]}, {"building.present": False},
               {"transient.engine": "imex", "modal.lumped_mass": True},
               {"assessment.standards": ["iso2631"]}, {"modal.method": "krylovschur"}]
 

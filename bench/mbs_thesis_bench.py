@@ -18,8 +18,9 @@ import time
 from pathlib import Path
 
 from railvib_hpc.config import load_case
+from railvib_hpc.io.stage_protocol import StageRunner
 from railvib_hpc.log import Reporter
-from railvib_hpc.mbs.stage import run_mbs_stage
+from railvib_hpc.mbs.stage import STAGE, simulate_case
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -43,7 +44,9 @@ def passage(src: Path, *overrides: str) -> dict:
         t0 = time.perf_counter()
         from mpi4py import MPI
 
-        stats = run_mbs_stage(case, out, MPI.COMM_SELF, _Quiet(0))   # the stage, one rank
+        # the stage's work in a context of the scratch folder (its links are no run's files)
+        ctx = StageRunner(out, MPI.COMM_SELF, _Quiet(0), command="mbs").context(case, STAGE)
+        stats = simulate_case(ctx)
         stats["wall"] = time.perf_counter() - t0
     return stats
 

@@ -18,8 +18,9 @@ import time
 from pathlib import Path
 
 from railvib_hpc.config import load_case
+from railvib_hpc.io.stage_protocol import StageRunner
 from railvib_hpc.log import Reporter
-from railvib_hpc.mbs.stage import simulate_case
+from railvib_hpc.mbs.stage import STAGE, simulate_case
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -41,7 +42,11 @@ def passage(src: Path, *overrides: str) -> dict:
             if (src / name).exists():
                 (out / name).symlink_to((src / name).resolve())
         t0 = time.perf_counter()
-        stats = simulate_case(case, out, _Quiet(0))
+        from mpi4py import MPI
+
+        # the stage's work in a context of the scratch folder (its links are no run's files)
+        ctx = StageRunner(out, MPI.COMM_SELF, _Quiet(0), command="mbs").context(case, STAGE)
+        stats = simulate_case(ctx)
         stats["wall"] = time.perf_counter() - t0
     return stats
 

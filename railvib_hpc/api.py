@@ -470,7 +470,8 @@ class Pipeline:
         return self._runner.session(command or self._label("session"))
 
     def _check_command(self, name: str) -> None:
-        """Refuse a stage the case cannot run (a case without a track and the modal path:
+        """Refuse a stage the case cannot run (what the stage declares it refuses, e.g. a
+        case without a track on the modal path:
         :func:`~railvib_hpc.validation.command_problems`), before anything is written.
 
         Raises
@@ -650,7 +651,7 @@ class StudyResult(_Frozen):
     Attributes
     ----------
     kind
-        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
+        The study (its name in :data:`railvib_hpc.studies.registry.STUDIES`).
     folder
         ``<out>/<kind>``.
     settings
@@ -717,10 +718,12 @@ def run_study(kind: str, case: Case | str | os.PathLike, out_dir: str | os.PathL
     Parameters
     ----------
     kind
-        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
+        A registered study (:data:`railvib_hpc.studies.registry.STUDIES`: ``convergence``,
+        ``modes``, ``reflection``, ``speed``, ``thesis``, ``mitigation``, ``uncertainty``,
+        or one added with one line, :func:`railvib_hpc.studies.registry.register`).
     case
         The study's base case (a :class:`Case` or a case file); its ``[study.<kind>]``
-        table holds the study's settings.
+        table holds the study's settings (those of the case schema's studies).
     out_dir
         Output folder; the study writes into ``<out_dir>/<kind>/``.
     comm
@@ -751,7 +754,9 @@ def run_study(kind: str, case: Case | str | os.PathLike, out_dir: str | os.PathL
     Raises
     ------
     UserError
-        Bad settings or variant names (one line, every rank).
+        Bad settings or variant names, an unknown study (one line, every rank), or what the
+        study cannot do with the case (a case without a track and a study on the track's
+        modes).
     """
     from .petsc_env import check_option_words, option_words, options_scope
     from .studies import execute_study

@@ -35,12 +35,14 @@ from .io.files import RECORD_DIR, TRANSIENT_DIR
 from .log import Reporter
 from .parallel import RootFailure, on_root, world
 from .pipeline import PIPELINES, single_stage_commands
+from .studies.registry import study_helps
 
 #: Exit code when the output's reader goes away (a closed pipe): the shell's 128 + SIGPIPE.
 BROKEN_PIPE_EXIT = 141
-STUDIES = ("convergence", "modes", "reflection", "speed", "thesis", "mitigation",
-           "uncertainty")
 
+
+#: The help layout of ``railvib study --help``: the studies' lines as given.
+RAW = argparse.RawDescriptionHelpFormatter
 
 #: The help lines of the commands that run a pipeline of stages (:data:`PIPELINES`).
 PIPELINE_HELPS = {
@@ -62,13 +64,20 @@ def _parser() -> argparse.ArgumentParser:
                "error (one line), 1 internal error (please report; a log file is named).")
     p.add_argument("--version", action="version", version=f"railvib-hpc {__version__}")
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    studies = study_helps()                  # the studies' registry: names and help lines
     helps = {"check": "validate a case file (no computation)", **single_stage_commands(),
-             **PIPELINE_HELPS,
-             "study": "convergence / modes / reflection / speed / thesis-comparison studies"}
+             **PIPELINE_HELPS, "study": "the studies: " + " / ".join(studies)}
+    width = max(map(len, studies), default=0)
     for name, text in helps.items():
-        sp = sub.add_parser(name, help=text, description=text)
+        if name == "study":                 # one line per study, as the registry has it
+            sp = sub.add_parser(name, help=text, formatter_class=RAW, description="\n".join(
+                ["run the variants of a study, then merge them into its report:",
+                 *(f"  {k:<{width}}  {h}" for k, h in studies.items())]))
+        else:
+            sp = sub.add_parser(name, help=text, description=text)
         if name == "study":
-            sp.add_argument("kind", choices=STUDIES, help="which study")
+            sp.add_argument("kind", choices=list(studies),
+                            help="which study: " + ", ".join(studies))
             sp.add_argument("--variant", action="append", default=[], metavar="NAME|INDEX",
                             help="compute only this variant (repeatable; 0-based index in "
                                  "--list order, e.g. an array-job task id); no report")
@@ -221,8 +230,10 @@ def run(argv: list[str] | None = None) -> int:
             rep.info(f"note: {note}")
         from .validation import command_problems
 
+        # what the command's stages refuse (their Stage.refusals), before anything is
+        # written or meshed: one line, exit 2
         problems = command_problems(case, args.command)
-        if problems:                  # before anything is written: one line, exit 2
+        if problems:
             raise CaseError(problems)
         out = _out_dir(args, case, rep)
         if args.command != "check" and not getattr(args, "list", False):

@@ -14,15 +14,24 @@ Every call goes through one :class:`~railvib_hpc.io.stage_protocol.StageRunner`:
 output folder's lock (once per command), the PETSc options' scope, ``run.json`` and the
 timings; :func:`run_stages` is the loop over a sequence.
 
+The graph of the stages is the registry's too: each stage names the stages whose products
+it reads (:attr:`~railvib_hpc.io.stage_protocol.Stage.needs`; :func:`stage_graph`
+checks that they are registered and form no cycle), and the runner hands a stage those
+products (:meth:`~railvib_hpc.io.stage_protocol.StageContext.input`), building the mesh
+on demand and verifying the rest. What a command refuses is what its stages refuse
+(:func:`refusals`, :func:`command_stages`), checked before anything runs.
+
 Example
 -------
->>> from railvib_hpc.pipeline import PIPELINES, stage
+>>> from railvib_hpc.pipeline import PIPELINES, stage, stage_graph
 >>> PIPELINES["run"]
 ('mesh', 'modal', 'mbs', 'reconstruct', 'assess')
 >>> PIPELINES["transient"]
 ('transient', 'assess')
 >>> stage("modal").products
 ('modes.h5', 'static.h5', 'modal_damping.h5', 'bands/index.json')
+>>> stage_graph()["reconstruct"]
+('modal', 'mbs')
 """
 
 from __future__ import annotations
@@ -30,7 +39,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Sequence
 
-from .io.stage_protocol import Stage, StageRun, StageRunner
+from .io.stage_protocol import Refusal, Stage, StageRun, StageRunner
 
 #: The registry: stage name -> the module declaring its ``STAGE``, in pipeline order.
 STAGES: dict[str, str] = {
@@ -85,6 +94,61 @@ def declare_products() -> None:
     for a name it lacks."""
     for module in (*STAGES.values(), *PRODUCT_WRITERS.values()):
         importlib.import_module(module)
+
+
+def stage_graph() -> dict[str, tuple[str, ...]]:
+    """Every registered stage and the stages it needs, upstream first (a topological order).
+
+    Raises
+    ------
+    ValueError
+        For a need that is not a registered stage, or a cycle of needs.
+    """
+    needs = {name: stage(name).needs for name in STAGES}
+    for name, wanted in needs.items():
+        unknown = [n for n in wanted if n not in needs]
+        if unknown:
+            raise ValueError(f"stage {name} needs {unknown[0]!r}, which is not a stage; "
+                             f"stages: {', '.join(STAGES)}")
+    order: dict[str, tuple[str, ...]] = {}
+    visiting: list[str] = []
+
+    def visit(name: str) -> None:
+        if name in order:
+            return
+        if name in visiting:
+            cycle = visiting[visiting.index(name):] + [name]
+            raise ValueError("the stages' needs form a cycle: " + " -> ".join(cycle))
+        visiting.append(name)
+        for upstream in needs[name]:
+            visit(upstream)
+        visiting.pop()
+        order[name] = needs[name]
+
+    for name in needs:
+        visit(name)
+    return order
+
+
+def command_stages(command: str) -> tuple[str, ...]:
+    """The stages a ``railvib`` command runs: a pipeline's (:data:`PIPELINES`), a stage's
+    own, none for the others (``check``; ``study``, whose studies refuse what they cannot
+    do themselves)."""
+    if command in PIPELINES:
+        return PIPELINES[command]
+    return (command,) if command in STAGES else ()
+
+
+def refusals(case, command: str) -> list[Refusal]:
+    """What ``case`` asks of ``command`` that one of its stages cannot do: the first
+    refusal, in the stages' order (one line), or nothing
+    (:meth:`~railvib_hpc.io.stage_protocol.Stage.refusals`; the sentences name
+    ``command``)."""
+    for name in command_stages(command):
+        found = stage(name).refusals(case, command)
+        if found:
+            return found[:1]
+    return []
 
 
 def single_stage_commands() -> dict[str, str]:

@@ -253,6 +253,12 @@ class Problem:
 #: Seeds of the fields of one realisation: ``uncertainty.seed + realisation * this + k``
 #: for its k-th field (distinct for up to this many fields).
 FIELD_SEED_STRIDE = 1000
+#: The case keys the random fields are made of (:func:`_fields`), as a selection of the
+#: product table (:data:`railvib_hpc.io.products.Selection`): every product computed from
+#: the element matrices (the modes, the full-order solution) depends on them; at their
+#: defaults (realisation 0: no field) they enter no digest.
+RANDOM_FIELD_KEYS = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
+                     ("uncertainty.seed", ()))
 
 
 def _fields(case: Case) -> tuple[RandomField, ...]:

@@ -10,6 +10,7 @@ raising, so that :func:`railvib_hpc.config.build_case` reports them all in one
 from __future__ import annotations
 
 import copy
+import importlib
 import math
 import re
 from collections.abc import Mapping, Sequence
@@ -731,16 +732,17 @@ def _load_path_problems(case: Case) -> list[tuple[str, Any, str]]:
              "load.x_start, x_end, t_after that keep the loads off the plan")]
 
 
-#: The commands that solve the model with its track (modes, the vehicle on them, what is
-#: rebuilt from them): a case without a track (``track.count = 0``) is for
-#: ``railvib transient`` (and ``check``, ``mesh``, ``assess`` of its results) and for
-#: ``railvib study`` with ``solver = direct`` (the study decides, knowing its settings:
-#: :func:`railvib_hpc.studies.runner.trackless_problem`).
-TRACK_COMMANDS = ("modal", "mbs", "reconstruct", "run")
-
-
 def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
     """What a case asks of a command that the command cannot do (empty: nothing).
+
+    Each stage declares its own refusals (``Stage(refuse=...)``,
+    :meth:`~railvib_hpc.io.stage_protocol.Stage.refusals`: a case without a track on the
+    modal path, ``modal.damping`` with supported track ends, a perfectly matched layer on
+    the modal path); this collects those of the stages ``command`` runs
+    (:func:`railvib_hpc.pipeline.refusals`: a pipeline's stages, a stage's own, none for
+    ``check`` and ``study``), the first one in the stages' order, so the command line and
+    the API refuse in one line before anything runs (before meshing). The registry is
+    imported by name, as the product table imports it (this layer imports no stage).
 
     Parameters
     ----------
@@ -754,12 +756,9 @@ def command_problems(case: Case, command: str) -> list[tuple[str, Any, str]]:
     list
         ``(key, value, allowed)`` problems, for :class:`~railvib_hpc.errors.CaseError`.
     """
-    if case["track.count"] == 0 and command in TRACK_COMMANDS:
-        return [("track.count", 0, f"railvib {command} needs a track (the modal path runs the "
-                 "vehicle on the track's modes): 1 or 2; the bare soil with the moving load of "
-                 "[load] runs with railvib transient (or railvib study with solver = "
-                 "direct)")]
-    return []
+    from .io.products import REGISTRY
+
+    return importlib.import_module(REGISTRY).refusals(case, command)
 
 
 def _check_embankment(case: Case) -> list[tuple[str, Any, str]]:

@@ -88,6 +88,10 @@ TRANSLATORS: dict[str, str] = {
     "mesh/turn.py": "turns the case's rotation keys into the turned building and soil",
     "mesh/interfaces.py": "turns the case's elastic interfaces into their planes",
     "mesh/dispersion_check.py": "checks the case's mesh sizes against its wavelengths",
+    "mesh/checks.py": "the mesh check's warnings (split from mesh/stage.py): the case's "
+                      "wavelength band and elements per wavelength",
+    "modal/refusals.py": "what the modal path's stages refuse of a case (their "
+                         "Stage.refuse): its track, track ends, damping and boundaries",
     "mbs/case_vehicle.py": "the case -> vehicle and passage translation",
     "transient/surface_case.py": "the case's [load] -> the moving surface load and its "
                                  "passage (track.count = 0), as mbs/case_vehicle.py the train",

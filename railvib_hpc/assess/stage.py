@@ -53,7 +53,7 @@ from ..io.files import (
     TRANSIENT_PROBES,
 )
 from ..io.formats.fields import FieldsFile
-from ..io.formats.mbs import MbsFile
+from ..io.formats.mbs import MbsFile, passage_inputs
 from ..io.formats.probes import ProbesFileError, read_probes  # read_probes re-exported
 from ..io.formats.transient import TransientFile
 from ..io.products import ALL_KEYS, StageFile
@@ -229,18 +229,20 @@ def verify_chain(ctx: StageContext, solver: str = "modal") -> dict[str, str]:
         command to run.
     """
     from ..io.products import spec
-    from ..mbs.stage import check_context
-    from ..reconstruct.stage import input_files
 
-    case, out_dir = ctx.case, ctx.out_dir
-    names = TRANSIENT_INPUTS if solver == "transient" else (*input_files(out_dir), FIELDS_H5,
-                                                             PROBES_H5)
-    digests = ctx.require(names, context=check_context(case, out_dir))
+    if solver == "transient":
+        digests = dict(ctx.input("transient", TRANSIENT_INPUTS).digests)
+    else:              # the modal solution: the modes, the passage, their reconstruction
+        passage = passage_inputs(ctx.out_dir)
+        digests = {**ctx.input("modal", passage[:-1]).digests,
+                   **ctx.input("mbs", passage[-1:]).digests,
+                   **ctx.input("reconstruct", (FIELDS_H5, PROBES_H5)).digests}
     return {spec(n).filename: sha for n, sha in digests.items()}
 
 
-def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
-    """Assess every probe of ``out_dir/probes.h5``; write the report; return the summary.
+def assess_case(ctx: StageContext) -> dict:
+    """Assess every probe of ``probes.h5`` in the context's folder; write the report; return
+    the summary (rank 0).
 
     Nothing is labelled with the case before :func:`verify_chain` confirmed that every
     input file belongs to it.
@@ -251,8 +253,7 @@ def assess_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
     from .standards import DIN4150_3_LOCATION_OF_ROLE, assess_probe, format_table
     from .thesis import format_thesis_table, thesis_clock_arrival, thesis_rows
 
-    ctx = StageContext(case, out_dir, rep=rep)
-    rep = ctx.rep
+    case, out_dir, rep = ctx.case, ctx.out_dir, ctx.rep
     solver = solver_of(out_dir)
     upstream = verify_chain(ctx, solver)
     ctx.discard(out_dir / ASSESSMENT_JSON)
@@ -460,8 +461,8 @@ def compute(ctx: StageContext) -> AssessmentOutput:
     """``railvib assess`` (collective): rank 0 verifies the inputs and assesses
     (:func:`assess_case`), every rank gets the output."""
     with ctx.rep.stage("assess"):
-        return on_root(lambda: AssessmentOutput.of_summary(
-            assess_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
+        return on_root(lambda: AssessmentOutput.of_summary(assess_case(ctx), ctx.out_dir),
+                       ctx.comm)
 
 
 #: ``assessment.json`` (with the report): the whole case; computed from the modal
@@ -474,7 +475,8 @@ ASSESSMENT_FILE = StageFile(ASSESSMENT_JSON, "assess", 2, ALL_KEYS,
 STAGE = Stage(name="assess", help="evaluate the building response against vibration "
               "standards", products=(ASSESSMENT_FILE,),
               reads=(MODES_H5, STATIC_H5, MBS_H5, FIELDS_H5, PROBES_H5,
-                     *TRANSIENT_INPUTS), compute=compute)
+                     *TRANSIENT_INPUTS), compute=compute,
+              needs=("modal", "mbs", "reconstruct", "transient"))
 
 
 def run_assess_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -9,6 +9,10 @@ name), which each file records (:mod:`railvib_hpc.io.provenance`).
 Each row (a :class:`StageFile`) is declared once, by the module of the stage that writes
 it, with that stage (its ``STAGE``'s products: e.g. :data:`railvib_hpc.mesh.stage.MESH_KEYS`
 and ``MESH_FILE``); the studies' ``result.json`` by :mod:`railvib_hpc.studies.common`.
+A row names the keys it adds and the products whose keys it takes over
+(:attr:`StageFile.extends`: ``modes.h5`` extends ``mesh.h5``, ``mbs.h5`` extends
+``modes.h5``): the cumulative selection (:attr:`StageFile.inputs`) is resolved here, by
+table name, so no stage module imports another's keys.
 This module holds only what every row shares; the table is filled as the stage modules
 are imported, and wholly (through the registry, :data:`REGISTRY`) when it is read whole or
 for a name it lacks. The rows, for reference:
@@ -139,8 +143,9 @@ class StageFile:
     version
         Format version: bumped when the layout or the meaning of the file changes; a
         file of another version is recomputed (or refused as an input).
-    inputs
-        The case keys it depends on (cumulative over its upstream files).
+    keys
+        The case keys it adds to those of :attr:`extends` (all of them when it extends
+        nothing); :attr:`inputs` is the whole selection.
     upstream
         The files it is computed from (those in parentheses in the module table are read
         only with the static correction).
@@ -155,22 +160,45 @@ class StageFile:
         Its data check (``check(path, full, context)``: a list of problems; one of
         :mod:`railvib_hpc.io.formats`), run on write and on reuse; not part of the row's
         identity.
+    extends
+        The table names of the products whose case keys it depends on too (its upstream
+        products': ``modes.h5`` extends ``mesh.h5``), so a row declares only the keys it
+        adds and no stage imports another's keys: the table resolves them
+        (:attr:`inputs`) when they are read.
+    check_context
+        ``check_context(case, out_dir) -> dict``: what its data check needs of the case
+        and the folder (``mbs.h5``: the static wheel load and the modes file), for a
+        stage that verifies it as an input
+        (:meth:`~railvib_hpc.io.stage_protocol.StageContext.require`); not part of the
+        row's identity.
     """
 
     name: str
     stage: str
     version: int
-    inputs: Selection
+    keys: Selection
     upstream: tuple[str, ...] = ()
     companions: tuple[str, ...] = ()
     input_files: tuple[str, ...] = ()
     file: str = ""
     check: Callable | None = field(default=None, compare=False, repr=False)
+    extends: tuple[str, ...] = ()
+    check_context: Callable | None = field(default=None, compare=False, repr=False)
 
     @property
     def filename(self) -> str:
         """The file name in the output folder (``file``, or the table name)."""
         return self.file or self.name
+
+    @property
+    def inputs(self) -> Selection:
+        """The case keys it depends on, cumulative: those of the products it
+        :attr:`extends` (resolved through :data:`STAGE_FILES`, recursively), then its own
+        :attr:`keys`, each entry once, in that order."""
+        out: list = []
+        for name in self.extends:
+            out += [k for k in spec(name).inputs if k not in out]
+        return tuple(out + [k for k in self.keys if k not in out])
 
 
 class ProductTable(MutableMapping):

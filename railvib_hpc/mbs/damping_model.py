@@ -13,17 +13,16 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..io.files import MODAL_DAMPING_H5, MODES_H5
-from ..io.formats.modal_damping import check_modal_damping
-from ..io.formats.modes import check_modes
-from ..io.stage_protocol import StageContext
 from ..problem import Problem
 from .case_vehicle import MBSInputError
 
 if TYPE_CHECKING:
     from ..config import Case
+    from ..io.stage_protocol import StageContext
 
 
-def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndarray:
+def modal_damping(case: Case, m: int, modes_path: Path | None = None,
+                  ctx: StageContext | None = None) -> np.ndarray:
     """(m,) damping ratios, or the (m, m) modal damping matrix, with the ``mbs.damping_*``
     overrides applied.
 
@@ -33,7 +32,8 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
     ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.modal.damping`); ``'full'``:
     the matrix ``D = Phi^T C Phi`` from ``modal_damping.h5`` next to ``modes_path``
     (:func:`railvib_hpc.modal.projection.compose_damping`), whose diagonal the overrides set
-    to ``2 zeta omega``.
+    to ``2 zeta omega``, verified through ``ctx``, the ``mbs`` stage's context
+    (:func:`damping_parts`).
 
     Raises
     ------
@@ -65,7 +65,7 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
     elif kind == "full":
         from ..modal.projection import compose_damping
 
-        d = compose_damping(Problem.from_case(case), damping_parts(case, modes_path), omega)
+        d = compose_damping(Problem.from_case(case), damping_parts(ctx, modes_path), omega)
         return _override_diagonal(case, d, omega, m)
     else:
         zeta = np.full(m, case["modal.damping_ratio"])
@@ -75,12 +75,12 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None) -> np.ndar
     return zeta
 
 
-def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
+def damping_parts(ctx: StageContext, modes_path: Path) -> dict[str, np.ndarray]:
     """The projected damping parts of ``modal_damping.h5`` next to ``modes_path`` (rank 0).
 
-    Both files are verified for the case through the stage context
-    (:meth:`~railvib_hpc.io.stage_protocol.StageContext.require`), as a stage verifies
-    what it reads.
+    Both files are verified for the case through the stage's context, as the ``modal``
+    stage's products it needs (:meth:`~railvib_hpc.io.stage_protocol.StageContext.input`),
+    as a stage verifies what it reads.
 
     Raises
     ------
@@ -89,6 +89,8 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     StaleInputError
         For a ``modes.h5`` or ``modal_damping.h5`` that is not current for the case or not
         sound.
+    ValueError
+        Without a context (``ctx`` None): the files would be read unverified.
     """
     from ..io.formats.modal_damping import read_damping_parts
 
@@ -96,9 +98,10 @@ def damping_parts(case: Case, modes_path: Path) -> dict[str, np.ndarray]:
     if not (out_dir / MODAL_DAMPING_H5).exists():
         raise MBSInputError(f"modal.damping = 'full' needs {out_dir / MODAL_DAMPING_H5}: "
                             "run 'railvib modal' with modal.damping = 'full' first")
-    StageContext(case, out_dir).require(
-        (MODES_H5, MODAL_DAMPING_H5),
-        {MODES_H5: check_modes, MODAL_DAMPING_H5: check_modal_damping})
+    if ctx is None or ctx.out_dir != out_dir:
+        raise ValueError(f"modal.damping = 'full': {out_dir / MODAL_DAMPING_H5} is read "
+                         "through the mbs stage's context of its folder (it verifies it)")
+    ctx.input("modal", (MODES_H5, MODAL_DAMPING_H5))
     return read_damping_parts(out_dir / MODAL_DAMPING_H5)
 
 
@@ -111,8 +114,8 @@ def _override_diagonal(case: Case, d: np.ndarray, omega: np.ndarray, m: int) -> 
 
 
 def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
-                     omega: np.ndarray, omega_rest: np.ndarray, modes_path: Path
-                     ) -> np.ndarray:
+                     omega: np.ndarray, omega_rest: np.ndarray, modes_path: Path,
+                     ctx: StageContext | None = None) -> np.ndarray:
     """Damping of the kept modes followed by the residual modes of the static correction.
 
     ``modal.damping = 'uniform'`` (and ``'strain_energy'``, whose per-material shares the
@@ -120,7 +123,8 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
     Rayleigh ratio at their frequencies (exact: ``[Phi, X' V]`` diagonalises K and M);
     ``'full'``: the projected parts of ``[Phi, X']`` in ``modal_damping.h5`` turned onto the
     new basis (:func:`.static_correction.residual_damping_parts`) and composed like the
-    modes' (dashpots, pads and materials couple modes and residual modes).
+    modes' (dashpots, pads and materials couple modes and residual modes), verified
+    through ``ctx`` (:func:`damping_parts`).
     """
     kind = case["modal.damping"]
     m = omega.size
@@ -129,7 +133,7 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
         from .static_correction import residual_damping_parts
 
         try:
-            parts = residual_damping_parts(damping_parts(case, modes_path), res, rest_rows,
+            parts = residual_damping_parts(damping_parts(ctx, modes_path), res, rest_rows,
                                            omega_rest, m)
         except ValueError as exc:
             raise MBSInputError(f"{Path(modes_path).with_name(MODAL_DAMPING_H5)}: {exc}; "

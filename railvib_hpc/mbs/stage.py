@@ -28,8 +28,10 @@ name, renamed when complete, reused when its inputs are unchanged; writer and re
   ...), ``complete`` and ``stats`` (JSON: time step, steps, wall time, contact-force
   summary).
 
-Before it integrates, the stage verifies its inputs (``modes.h5``, ``static.h5``: current
-for the case, unchanged, sound; otherwise it refuses naming the file and what differs),
+Before it integrates, the stage verifies its inputs, the ``modal`` stage's products it
+needs (``ctx.input("modal")``: ``modes.h5``, ``static.h5``, ``modal_damping.h5`` as the
+case uses them, current for the case, unchanged, sound; otherwise it refuses naming the
+file and what differs),
 checks that the passage is not empty, that the number of steps stays below
 :data:`MAX_MBS_STEPS` and that the histories fit in memory. The computed histories pass
 the data checks of :func:`railvib_hpc.io.formats.mbs.check_mbs_arrays` before they are
@@ -53,15 +55,12 @@ from ..errors import DataError, ResourceError
 from ..io.atomic import atomic_file, ensure_space
 from ..io.files import MBS_H5, MODAL_DAMPING_H5, MODES_H5, STATIC_H5
 from ..io.formats.mbs import MbsStatic, check_mbs, check_mbs_arrays, rail_amplitude, write_mbs_h5
-from ..io.formats.modal_damping import check_modal_damping
-from ..io.formats.modes import check_modes
-from ..io.formats.static import check_static, read_rail_statics
+from ..io.formats.static import read_rail_statics
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import PassageOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..log import Reporter
-from ..mesh.stage import MESH_KEYS
-from ..modal.stage import MODAL_SOLVER_LAYOUT, RANDOM_FIELDS, REDUCED
+from ..modal.refusals import needs_track
 from ..parallel import on_root
 from ..resources import check_memory
 from .case_vehicle import (
@@ -105,8 +104,9 @@ def input_files(case: Case) -> tuple[str, ...]:
 
 
 def verify_inputs(ctx: StageContext) -> dict[str, str]:
-    """Verify ``modes.h5`` (and ``static.h5``) for the context's case (rank 0); returns
-    their digests.
+    """Verify ``modes.h5`` (and ``static.h5``, ``modal_damping.h5``), the ``modal`` stage's
+    products, for the context's case (rank 0; ``ctx.input("modal")``); returns their
+    digests.
 
     Raises
     ------
@@ -122,8 +122,7 @@ def verify_inputs(ctx: StageContext) -> dict[str, str]:
             and not (out_dir / MODAL_DAMPING_H5).exists():
         raise MBSInputError(f"modal.damping = 'full' needs {out_dir / MODAL_DAMPING_H5}: "
                             "run 'railvib modal' with modal.damping = 'full' first")
-    return ctx.require(input_files(case), {MODES_H5: check_modes, STATIC_H5: check_static,
-                                           MODAL_DAMPING_H5: check_modal_damping})
+    return dict(ctx.input("modal", input_files(case)).digests)
 
 
 def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
@@ -162,17 +161,16 @@ def _passage_checks(case: Case, rm, vehicle, t_end: float, x_end: float, m: int,
     return dt
 
 
-def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dict:
-    """Run the multibody simulation of a case on this process (no MPI); write mbs.h5 + plots.
+def simulate_case(ctx: StageContext) -> dict:
+    """Run the multibody simulation of the context's case on this process (rank 0, numpy);
+    write mbs.h5 + plots.
 
     Parameters
     ----------
-    case
-        The validated case.
-    out_dir
-        Folder with ``modes.h5`` (and ``static.h5`` for the static correction).
-    rep
-        Progress reporter.
+    ctx
+        The stage's context (the runner's): the validated case, the folder with
+        ``modes.h5`` (and ``static.h5`` for the static correction), the reporter. From a
+        script: :func:`run_mbs_stage`.
 
     Returns
     -------
@@ -186,10 +184,8 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     from .modal_input import read_rail_modes
     from .static_correction import rail_dof_rows
 
-    rep = rep or Reporter(0)
-    out_dir = Path(out_dir)
+    case, out_dir, rep = ctx.case, ctx.out_dir, ctx.rep
     modes_path = out_dir / MODES_H5
-    ctx = StageContext(case, out_dir, rep=rep)
     upstream = verify_inputs(ctx)
     with h5py.File(modes_path, "r") as f:
         m_file = f["modes/eigenvalue"].shape[0]
@@ -204,7 +200,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
 
     t0 = time.perf_counter()
     rm = read_rail_modes(modes_path, m)
-    zeta = modal_damping(case, m, modes_path)
+    zeta = modal_damping(case, m, modes_path, ctx)
     vehicle = build_vehicle(case)
     run = passage(case, vehicle, float(max(r.x_nodes[-1] for r in rm.rails)))
     forces, offsets, wheel_rail = run["forces"], run["offsets"], run["wheel_rail"]
@@ -214,7 +210,7 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     n_r = rail_dof_rows(rm.rails).shape[1] if case["mbs.static_correction"] else 0
     res, run_modes, run_damping = None, rm, zeta
     if case["mbs.static_correction"]:
-        res, run_modes, run_damping = _with_residual_modes(case, rm, zeta, out_dir, n_r)
+        res, run_modes, run_damping = _with_residual_modes(ctx, rm, zeta, n_r)
         rep.info(f"static correction: {res.omega.size} residual modes, "
                  f"{res.omega[0] / (2 * np.pi) if res.omega.size else 0:.1f} - "
                  f"{res.omega[-1] / (2 * np.pi) if res.omega.size else 0:.4g} Hz, added to "
@@ -276,11 +272,12 @@ def simulate_case(case: Case, out_dir: Path, rep: Reporter | None = None) -> dic
     return {**stats, "reused": False}
 
 
-def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
+def _with_residual_modes(ctx: StageContext, rm, zeta, n_r: int):
     """The residual modes of the static correction, the rail modes with them appended
     and the damping of both (:mod:`.static_correction`)."""
     import h5py
 
+    case, out_dir = ctx.case, ctx.out_dir
     from .modal_input import RailModes, read_rail_modes
     from .static_correction import kept_residual_mass, rail_dof_rows, residual_modes
 
@@ -301,7 +298,7 @@ def _with_residual_modes(case: Case, rm, zeta, out_dir: Path, n_r: int):
     modes = RailModes(np.concatenate([rm.omega, res.omega]), tuple(rails), rm.rail_y,
                       rm.rail_z, lateral)
     return res, modes, residual_damping(case, zeta, res, rest_rows, rm.omega, omega_rest,
-                                        out_dir / MODES_H5)
+                                        out_dir / MODES_H5, ctx)
 
 
 def _auto_step(case: Case, rm, run_modes, vehicle) -> float:
@@ -442,24 +439,27 @@ def compute(ctx: StageContext) -> PassageOutput:
     """``railvib mbs``: rank 0 simulates (see :func:`simulate_case`), every rank gets the
     output."""
     with ctx.rep.stage("mbs"):
-        return on_root(lambda: PassageOutput.of_stats(
-            simulate_case(ctx.case, ctx.out_dir, ctx.rep), ctx.out_dir), ctx.comm)
+        return on_root(lambda: PassageOutput.of_stats(simulate_case(ctx), ctx.out_dir),
+                       ctx.comm)
 
 
-#: The passage's case keys: the model's (damping settings included, not the modal solver's
-#: layout), [damping], the vehicle, the irregularity (and its file) and [mbs].
-MBS_KEYS: Selection = MESH_KEYS + (
-    ("materials", ()), ("sections", ()), ("pads", ()), ("modal", MODAL_SOLVER_LAYOUT),
-    ("boundary", ()), ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()),
-    ("mbs", ())) + RANDOM_FIELDS + REDUCED
+#: The passage's case keys beyond the modes' (``mbs.h5`` extends ``modes.h5``: the mesh,
+#: the model and the modal solution, the random fields and the reduced model): the damping
+#: (the materials' and pads' ratios, [modal]'s damping settings, [damping]), the vehicle,
+#: the irregularity (and its file) and [mbs]; not the modal solver's layout.
+MBS_KEYS: Selection = (
+    ("materials", ()), ("pads", ()), ("modal.damping", ()), ("modal.damping_ratio", ()),
+    ("damping", ()), ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("mbs", ()))
 #: ``mbs.h5``: computed from the modes (the static fields and the projected damping when
 #: the case uses them).
 MBS_FILE = StageFile(MBS_H5, "mbs", 2, MBS_KEYS, (MODES_H5, STATIC_H5, MODAL_DAMPING_H5), (),
-                     ("mesh.file", "irregularity.file"), check=check_mbs)
+                     ("mesh.file", "irregularity.file"), check=check_mbs,
+                     extends=(MODES_H5,), check_context=check_context)
 
 STAGE = Stage(name="mbs", help="roll the vehicle over the flexible track in modal coordinates",
               products=(MBS_FILE,), reads=(MODES_H5, STATIC_H5, MODAL_DAMPING_H5),
-              compute=compute)
+              compute=compute, needs=("modal",),
+              refuse=needs_track)
 
 
 def run_mbs_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -16,11 +16,20 @@ from ..io.files import MESH_H5, MESH_MSH, MESH_REPORT_JSON, MESH_XDMF
 from ..io.formats.mesh import check_mesh, write_mesh_files
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import MeshOutput
-from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
+from ..io.stage_protocol import NotReusable, Stage, StageContext, StageInput, StageRunner
 from ..log import Reporter
 from ..parallel import on_root
 from ..resources import check_memory, release_memory
-from ..schema import PART_ID, PARTS, SOIL_PARTS, SOLID_MATERIAL
+from ..schema import PARTS
+from .checks import (  # noqa: F401 (some re-exported: the checks live in mesh.checks)
+    ASPECT_RATIO_WARNING,
+    TINY_ELEMENT_FACTOR,
+    max_edge_per_soil_part,
+    present_parts,
+    quality_warnings,
+    require_parts,
+    wavelength_warnings,
+)
 from .gmsh_model import generate, read_msh
 from .interfaces import interface_nodes, split_interfaces
 from .layout import Layout, build_layout
@@ -46,74 +55,6 @@ def predicted_hexes(layout: Layout) -> int:
     return int(sum(int(layout.nx[b.i]) * int(layout.ny[b.j])
                    * layout.zdiv[(round(b.z0, 9), round(b.z1, 9))] for b in layout.blocks))
 
-#: Aspect ratio (longest / shortest edge of a hexahedron) above which the mesh check warns:
-#: the default shape-check warning limit of ANSYS Mechanical APDL for solids (SHPP,
-#: "Aspect ratio", warning 20; error 1e6). Flat elements bend poorly (B-bar locks less but
-#: is too soft) and stiffen the eigenproblem as (aspect ratio)^2.
-ASPECT_RATIO_WARNING = 20.0
-
-#: Relative round-off of the lowest eigenvalue that a tiny element may cause, as a multiple
-#: of modal.tol. An element of size h in a model of size L (wave speed c) raises the largest
-#: eigenvalue to ~12 c^2 / h^2 against ~(c / L)^2 for the lowest, so the lowest eigenpairs
-#: carry a relative round-off ~ u 12 (L / h)^2 (railvib_hpc.tolerances, item 1): the check
-#: warns when that exceeds modal.tol, i.e. when h < L sqrt(12 u / tol) (2.6 cm for a 50 m
-#: model at tol = 1e-8).
-TINY_ELEMENT_FACTOR = 12.0
-
-
-def quality_warnings(quality: dict, tol: float) -> list[str]:
-    """Warnings of the mesh check: extreme aspect ratios and tiny elements (see
-    :data:`ASPECT_RATIO_WARNING`, :data:`TINY_ELEMENT_FACTOR`); ``tol`` is modal.tol."""
-    from ..tolerances import EPS
-
-    out = []
-    ar = quality.get("max_aspect_ratio", 1.0)
-    if ar > ASPECT_RATIO_WARNING:
-        out.append(f"max aspect ratio {ar:.3g} > {ASPECT_RATIO_WARNING:g} (ANSYS's shape-check "
-                   "warning limit): flat elements bend poorly and make the eigenproblem "
-                   "ill-conditioned; refine across the thin direction or coarsen along it")
-    h, size = quality.get("min_edge"), quality.get("model_size")
-    if h is not None and size and h > 0:
-        roundoff = EPS * TINY_ELEMENT_FACTOR * (size / h) ** 2
-        if roundoff > tol:
-            out.append(f"tiny elements: shortest edge {h:.3g} m in a {size:.3g} m model; the "
-                       f"lowest eigenpairs carry a relative round-off of ~{roundoff:.1e} > "
-                       f"modal.tol = {tol:.1e} (edges below "
-                       f"{size * (TINY_ELEMENT_FACTOR * EPS / tol) ** 0.5:.3g} m); merge or "
-                       "remove slivers")
-    return out
-
-
-def wavelength_warnings(quality: dict, case: Case, band: tuple[float, str] | None = None
-                        ) -> list[str]:
-    """One warning per soil part whose longest element edge resolves the shear wavelength at
-    :func:`~railvib_hpc.mesh.layout.resolved_frequency` (or ``band = (frequency, key)``,
-    the transient stage's ``transient.f_max``) with fewer than
-    ``mesh.min_elements_per_wavelength`` elements (none when no frequency is set)."""
-    from ..site import solid_material
-    from .layout import resolved_frequency, shear_wave_speed
-
-    f = resolved_frequency(case) if band is None else band[0]
-    need = case["mesh.min_elements_per_wavelength"]
-    if f <= 0:
-        return []
-    key = ("mesh.wavelength_hz" if case["mesh.wavelength_hz"] else "modal.f_max") \
-        if band is None else band[1]
-    out = []
-    for part, h in quality.get("max_edge_per_soil_part", {}).items():
-        try:
-            c_s = shear_wave_speed(solid_material(case, SOLID_MATERIAL[part]))
-        except KeyError:          # a layer part in a user's mesh that the case does not give
-            continue
-        per = c_s / f / h
-        if per < need:
-            out.append(f"{key} = {f:g} Hz is under-resolved in {part}: c_S {c_s:.4g} m/s, "
-                       f"wavelength {c_s / f:.3g} m, elements up to {h:.3g} m = {per:.2g} per "
-                       f"wavelength < mesh.min_elements_per_wavelength = {need:g}; refine "
-                       "(mesh.elements_per_wavelength, mesh.refinement) or lower the band")
-    return out
-
-
 def add_dispersion(report: dict, case: Case) -> None:
     """The numerical dispersion at the farthest probe into ``report`` (``dispersion``, its
     warnings; :func:`~.dispersion_check.dispersion_report`); nothing when
@@ -131,20 +72,6 @@ def add_dispersion(report: dict, case: Case) -> None:
     if found is not None:
         report["dispersion"] = found
         report["warnings"] = report["warnings"] + found["warnings"]
-
-
-def max_edge_per_soil_part(mesh: Mesh, longest: np.ndarray | None = None
-                           ) -> dict[str, float]:
-    """Longest hexahedron edge of every soil part present (m); ``longest``: each hex's
-    longest edge when already computed (:meth:`~.model.Mesh.element_measures`)."""
-    if longest is None:
-        longest = mesh.element_measures()[2]
-    out = {}
-    for part in SOIL_PARTS:
-        sel = mesh.hex_part == PART_ID[part]
-        if sel.any():
-            out[part] = float(longest[sel].max())
-    return out
 
 
 def make_mesh(case: Case, msh_path: Path | None = None) -> tuple[Mesh, dict]:
@@ -233,22 +160,6 @@ def check_quality(mesh: Mesh, timings: dict[str, float]) -> dict:
     timings.update(check_elements=t1 - t0, check_nodes=t2 - t1, check_faces=t3 - t2,
                    quality=t3 - t0)
     return quality
-
-
-def present_parts(mesh: Mesh) -> list[str]:
-    """The parts (physical groups) that have elements in ``mesh``, in schema order."""
-    ids = set(np.unique(mesh.hex_part).tolist()) | set(np.unique(mesh.line_part).tolist())
-    return [p for p in PARTS if PART_ID[p] in ids]
-
-
-def require_parts(mesh: Mesh, parts: tuple[str, ...], what: str) -> None:
-    """One clear line when a stage needs parts the (user) mesh does not have."""
-    have = present_parts(mesh)
-    missing = [p for p in parts if p not in have]
-    if missing:
-        raise MeshError(f"{what} needs the part(s) {', '.join(missing)}, which the mesh does "
-                        f"not have (it has: {', '.join(have) or 'nothing'}); use a mesh with "
-                        "them or switch that feature off")
 
 
 def complete_node_sets(mesh: Mesh, rel_tol: float = 1e-9) -> list[str]:
@@ -377,6 +288,15 @@ def build_or_reuse_mesh(ctx: StageContext) -> tuple[Mesh, dict, str]:
     return mesh, report, sha
 
 
+def provide(ctx: StageContext) -> StageInput:
+    """The mesh for a stage that needs it (``ctx.input("mesh")``; rank 0): ``mesh.h5`` of
+    the context's folder built or reused (:func:`build_or_reuse_mesh`), loaded, with its
+    digest and quality report."""
+    mesh, report, sha = build_or_reuse_mesh(ctx)
+    return StageInput("mesh", {MESH_H5: sha}, {MESH_H5: ctx.path(MESH_H5)}, value=mesh,
+                      detail=report)
+
+
 def compute(ctx: StageContext) -> MeshOutput:
     """``railvib mesh``: build or reuse ``mesh.h5`` and print the quality report (collective;
     gmsh runs on rank 0)."""
@@ -412,7 +332,7 @@ MESH_FILE = StageFile(MESH_H5, "mesh", 2, MESH_KEYS, (), (MESH_XDMF, MESH_REPORT
                       ("mesh.file",), check=check_mesh)
 
 STAGE = Stage(name="mesh", help="build the gmsh model, check its quality, write "
-              "mesh.msh/.h5/.xdmf", products=(MESH_FILE,), compute=compute)
+              "mesh.msh/.h5/.xdmf", products=(MESH_FILE,), compute=compute, provide=provide)
 
 
 def run_mesh_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,

@@ -1,4 +1,10 @@
-"""The ``modal`` stage: mesh (reused) -> DOFs -> distributed K, M -> eigensolve -> modes.h5."""
+"""The ``modal`` stage: mesh (reused) -> DOFs -> distributed K, M -> eigensolve -> modes.h5.
+
+It needs the ``mesh`` stage: the runner hands it ``mesh.h5`` built or reused
+(``ctx.input("mesh")``) when the modes are computed. It refuses a case without a track,
+supported track ends without ``modal.damping = 'full'`` and perfectly matched layers
+(:mod:`.refusals`), before anything runs.
+"""
 
 from __future__ import annotations
 
@@ -31,11 +37,9 @@ from ..io.stage_outputs import ModesOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
-from ..mesh.stage import MESH_KEYS, build_or_reuse_mesh
 from ..parallel import on_root
-from ..problem import Problem
+from ..problem import RANDOM_FIELD_KEYS, Problem
 from ..resources import peak_memory_gb
-from ..schema import BOUNDARY_FACES
 from ..uncertainty.fields import resolution_warnings
 from .boundary import problem_dofmap
 from .dofmap import NODE_ARRAY_CHUNK
@@ -45,6 +49,7 @@ from .energy import group_strain_energies
 from .factor import sparse_times_block
 from .petsc import assemble
 from .projection import project_damping_parts, read_phi_rows
+from .refusals import modal_refusals
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
 
 if TYPE_CHECKING:
@@ -113,29 +118,12 @@ class EigenProgress:
 
 def compute(ctx: StageContext) -> ModesOutput:
     """``railvib modal``: compute (or reuse) ``modes.h5`` (and ``static.h5``,
-    ``modal_damping.h5``) in the output folder (collective; the runner has started PETSc).
+    ``modal_damping.h5``) in the output folder (collective; the runner has started PETSc
+    and checked the stage's refusals).
 
-    Builds or reuses ``mesh.h5`` when the modes are recomputed. The summary holds
-    ``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics.
+    The runner hands it ``mesh.h5`` (built or reused) when the modes are recomputed. The
+    summary holds ``reused``, ``n_modes``, ``f_min``, ``f_max`` and the solver statistics.
     """
-    if ctx.case["track.ends"] == "supported" and ctx.case["modal.damping"] != "full":
-        from ..errors import CaseError
-
-        raise CaseError([("modal.damping", ctx.case["modal.damping"],
-                          "track.ends = 'supported' in the modal path (modal, mbs, run and "
-                          "the modal studies) needs 'full': the supports' graded dashpots, "
-                          "which absorb the rail's bending waves, are no proportional "
-                          "damping, so only their projection on the modes keeps them")])
-    pml = [f for f in BOUNDARY_FACES if ctx.case[f"boundary.{f}"] == "pml"]
-    if pml:
-        from ..errors import CaseError
-
-        raise CaseError([(f"boundary.{pml[0]}", "pml",
-                          "a perfectly matched layer is frequency dependent (its stretching "
-                          "1 + d / (i omega)), so the modal path (modal, mbs, run and the "
-                          "modal studies) has no modes of it; it is for railvib transient "
-                          "with transient.engine = 'explicit'; allowed here: fixed, roller, "
-                          "free, absorbing, caughey")])
     old = _reused_modes(ctx)
     if old is not None:
         return old
@@ -147,8 +135,7 @@ def compute(ctx: StageContext) -> ModesOutput:
 # ----------------------------------------------------------------------------- products
 #: The random fields of the soil layers (the element matrices: ``Problem.fields``); at
 #: their defaults (realisation 0: no field) they enter no digest.
-RANDOM_FIELDS: Selection = (("uncertainty.field", ()), ("uncertainty.realisation", ()),
-                            ("uncertainty.seed", ()))
+RANDOM_FIELDS: Selection = RANDOM_FIELD_KEYS
 #: A sample of the reduced model (``uncertainty.basis``: its modes are the reduced model's
 #: on the basis's nominal mesh, or a full solve on that mesh; at their defaults, a plain
 #: model, they enter no digest).
@@ -166,12 +153,13 @@ MODAL_ONLY_EXCLUDED = (*MODAL_DAMPING_KEYS, *MODAL_SOLVER_LAYOUT)
 #: and shift of an unsliced solve: the band cache's inputs leave them out, so raising
 #: ``modal.f_max`` keeps the cache and only adds bands.
 BAND_EXTENT = ("f_max", "n_modes", "max_basis", "shift_hz")
-#: The modes' case keys (and the static fields'): the mesh's, materials, sections, pads and
-#: [modal] less damping and solver layout, the boundary, the random fields.
-MODES_KEYS: Selection = MESH_KEYS + (
+#: The modes' case keys (and the static fields') beyond the mesh's (every row here extends
+#: ``mesh.h5``'s keys): materials, sections, pads and [modal] less damping and solver
+#: layout, the boundary, the random fields.
+MODES_KEYS: Selection = (
     ("materials", MODAL_ONLY_EXCLUDED), ("sections", ()), ("pads", MODAL_ONLY_EXCLUDED),
     ("modal", MODAL_ONLY_EXCLUDED), ("boundary", ())) + RANDOM_FIELDS + REDUCED
-_BAND_KEYS: Selection = MESH_KEYS + (
+_BAND_KEYS: Selection = (
     ("materials", MODAL_ONLY_EXCLUDED), ("sections", ()), ("pads", MODAL_ONLY_EXCLUDED),
     ("modal", (*MODAL_ONLY_EXCLUDED, *BAND_EXTENT)), ("boundary", ())) + RANDOM_FIELDS
 #: The projected parts of C (``modal.damping = 'full'``): the modes' inputs, the pads'
@@ -180,20 +168,32 @@ _BAND_KEYS: Selection = MESH_KEYS + (
 #: one with them serves a run without the static correction as well.
 _DAMPING_KEYS: Selection = MODES_KEYS + (("pads", ()), ("damping", ()))
 #: The products: the modes (and their XDMF view), the static fields, the projected damping,
-#: the band cache (:mod:`~railvib_hpc.io.formats.bands`).
+#: the band cache (:mod:`~railvib_hpc.io.formats.bands`); each depends on the mesh's case
+#: keys too (``extends``).
 PRODUCTS = (
     StageFile(MODES_H5, "modal", 2, MODES_KEYS, (MESH_H5,), (MODES_XDMF,), ("mesh.file",),
-              check=check_modes),
+              check=check_modes, extends=(MESH_H5,)),
     StageFile(STATIC_H5, "modal", 2, MODES_KEYS, (MESH_H5, MODES_H5), (), ("mesh.file",),
-              check=check_static),
+              check=check_static, extends=(MESH_H5,)),
     StageFile(MODAL_DAMPING_H5, "modal", 2, _DAMPING_KEYS, (MESH_H5, MODES_H5), (),
-              ("mesh.file",), check=check_modal_damping),
+              ("mesh.file",), check=check_modal_damping, extends=(MESH_H5,)),
     StageFile(BAND_CACHE, "modal", 2, _BAND_KEYS, (), (), ("mesh.file",),
-              check=check_band_cache),
+              check=check_band_cache, extends=(MESH_H5,)),
 )
 
 STAGE = Stage(name="modal", help="assemble K, M and extract mass-normalised modes",
-              products=PRODUCTS, reads=(MESH_H5,), compute=compute, petsc=True)
+              products=PRODUCTS, reads=(MESH_H5,), compute=compute, petsc=True,
+              needs=("mesh",), refuse=modal_refusals)
+
+
+def _mesh(ctx: StageContext):
+    """The mesh and the digest of ``mesh.h5``, from the runner (``ctx.input("mesh")``: built
+    or reused), on every rank (collective)."""
+    def load():
+        given = ctx.input("mesh")
+        return given.value, given.sha256
+
+    return on_root(load, ctx.comm)
 
 
 def run_modal_stage(case: Case, out_dir: Path, comm: MPI.Comm, rep: Reporter,
@@ -281,7 +281,7 @@ def _modal(ctx: StageContext) -> tuple[dict, np.ndarray, tuple[int, int] | None]
     rom_path = case.resolve(case["uncertainty.basis"]) if case["uncertainty.basis"] else None
     with rep.stage("mesh (load/build + broadcast)"):
         if rom_path is None:
-            mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+            mesh, mesh_sha = _mesh(ctx)
         else:                 # a reduced-model sample: the nominal mesh the basis lives on
             mesh, mesh_sha = on_root(lambda: _basis_mesh(rom_path), comm)
     if problem.fields:
@@ -568,7 +568,7 @@ def _static_only(ctx: StageContext, modes_sha: str) -> None:
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     problem = Problem.from_case(case)
     with rep.stage("static correction: mesh + assembly"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+        mesh, mesh_sha = _mesh(ctx)
         dofmap = problem_dofmap(mesh, problem, comm.size)
         K, M, _ = assemble(mesh, problem, dofmap, comm)
         problem = _with_track_ends(ctx, mesh, dofmap, problem, K, M)
@@ -618,7 +618,7 @@ def _damping_only(ctx: StageContext, modes_sha: str, m: int) -> None:
     case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     problem = Problem.from_case(case)
     with rep.stage("projected damping (reused modes)"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+        mesh, mesh_sha = _mesh(ctx)
         dofmap = problem_dofmap(mesh, problem, comm.size)
         want_static = bool(case["mbs.static_correction"])
         # (the supported track ends' fit needs M for its factor's memory check)

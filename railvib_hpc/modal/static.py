@@ -46,7 +46,7 @@ def rail_load_dofs(mesh, dofmap) -> tuple[np.ndarray, np.ndarray]:
     table
         (n_r, 3) rail index, node id, component (0: ``w`` = uz, 1: ``ry``).
     """
-    from ..mesh.stage import require_parts
+    from ..mesh.checks import require_parts
 
     require_parts(mesh, ("rail",), "mbs.static_correction = true (unit loads on the rails)")
     rails = mesh.rail_nodes()

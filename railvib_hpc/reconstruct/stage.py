@@ -77,16 +77,14 @@ from ..io.files import (
 )
 from ..io.formats.checks import open_input, text_attr
 from ..io.formats.fields import FieldsFile, check_fields
-from ..io.formats.mbs import MbsFile, MbsFileError, check_mbs
-from ..io.formats.modes import check_modes
+from ..io.formats.mbs import MbsFile, MbsFileError, passage_inputs
 from ..io.formats.probes import check_probes, write_probes_csv, write_probes_h5
-from ..io.formats.static import check_static
 from ..io.products import Selection, StageFile
 from ..io.stage_outputs import FieldsOutput
 from ..io.stage_protocol import Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views, remove_xdmf
 from ..log import Reporter
-from ..mbs.stage import MBS_KEYS
+from ..modal.refusals import needs_track
 from ..parallel import on_root
 from ..site import line_probes
 from .fields import reconstruct_fields, write_fields_xdmf
@@ -260,14 +258,8 @@ def reconstruct_options(case, out_dir: Path) -> dict:
 
 def input_files(out_dir: Path) -> tuple[str, ...]:
     """The stage files the reconstruction reads (``static.h5`` when ``mbs.h5`` has a
-    static correction)."""
-    names = [MODES_H5, MBS_H5]
-    try:
-        if MbsFile(out_dir / MBS_H5).has_static_correction():
-            names.insert(1, STATIC_H5)
-    except OSError:
-        pass
-    return tuple(names)
+    static correction; :func:`~railvib_hpc.io.formats.mbs.passage_inputs`)."""
+    return passage_inputs(out_dir)
 
 
 def compute(ctx: StageContext) -> FieldsOutput:
@@ -278,14 +270,12 @@ def compute(ctx: StageContext) -> FieldsOutput:
     file, what differs and the command to run), takes the options from ``[output]`` and
     reconstructs (as :func:`reconstruct_outputs`).
     """
-    from ..mbs.stage import check_context
-
     case, out_dir = ctx.case, ctx.out_dir
 
     def prepare() -> dict:
         names = input_files(out_dir)
-        ctx.require(names, {MODES_H5: check_modes, STATIC_H5: check_static,
-                            MBS_H5: check_mbs}, context=check_context(case, out_dir))
+        ctx.input("modal", names[:-1])          # modes.h5 (static.h5), then mbs.h5
+        ctx.input("mbs", names[-1:])
         return reconstruct_options(case, out_dir)
 
     opts = on_root(prepare, ctx.comm)
@@ -310,26 +300,26 @@ def compute(ctx: StageContext) -> FieldsOutput:
     return on_root(output, ctx.comm)
 
 
-#: The fields' case keys: the passage's, the output steps and window, the precision and
-#: the static correction's rates.
-FIELDS_KEYS: Selection = MBS_KEYS + (("output.dt", ()), ("output.window", ()),
-                                     ("output.float32", ()),
-                                     ("output.static_correction_rates", ()))
-#: The probes' case keys: the passage's, the window, the probes and [probes].
-PROBES_KEYS: Selection = MBS_KEYS + (("output.window", ()), ("output.probes", ()),
-                                     ("output.static_correction_rates", ()), ("probes", ()))
+#: The fields' case keys beyond the passage's (the rows extend ``mbs.h5``'s): the output
+#: steps and window, the precision and the static correction's rates.
+FIELDS_KEYS: Selection = (("output.dt", ()), ("output.window", ()), ("output.float32", ()),
+                          ("output.static_correction_rates", ()))
+#: The probes' case keys beyond the passage's: the window, the probes and [probes].
+PROBES_KEYS: Selection = (("output.window", ()), ("output.probes", ()),
+                          ("output.static_correction_rates", ()), ("probes", ()))
 #: The products: ``fields.h5`` (and its XDMF view) and ``probes.h5``, computed from the
 #: modes and the passage (and the static fields with the static correction).
 PRODUCTS = (
     StageFile(FIELDS_H5, "reconstruct", 2, FIELDS_KEYS, (MODES_H5, MBS_H5, STATIC_H5),
-              (FIELDS_XDMF,), ("mesh.file", "irregularity.file"), check=check_fields),
+              (FIELDS_XDMF,), ("mesh.file", "irregularity.file"), check=check_fields,
+              extends=(MBS_H5,)),
     StageFile(PROBES_H5, "reconstruct", 2, PROBES_KEYS, (MODES_H5, MBS_H5, STATIC_H5), (),
-              ("mesh.file", "irregularity.file"), check=check_probes),
+              ("mesh.file", "irregularity.file"), check=check_probes, extends=(MBS_H5,)),
 )
 
 STAGE = Stage(name="reconstruct", help="rebuild displacement/velocity/acceleration fields of "
               "every node", products=PRODUCTS, reads=(MODES_H5, STATIC_H5, MBS_H5),
-              compute=compute)
+              compute=compute, needs=("modal", "mbs"), refuse=needs_track)
 
 
 def run_reconstruct_stage(case, out_dir: str | os.PathLike, comm: MPI.Comm, rep: Reporter,
@@ -392,9 +382,9 @@ def reconstruct_outputs(modes_path: str | os.PathLike, mbs_path: str | os.PathLi
     ReconstructInputError
         Invalid inputs (on every rank).
     """
-    out_dir = Path(out_dir)
-    with StageRunner(out_dir, comm, rep, command="reconstruct").session():
-        return _outputs(StageContext(case, out_dir, comm, rep), modes_path, mbs_path,
+    runner = StageRunner(out_dir, comm, rep, command="reconstruct")
+    with runner.session():
+        return _outputs(runner.context(case), modes_path, mbs_path,
                         stride=stride, window=window, float32=float32,
                         stress_times=stress_times, user_probes=user_probes,
                         user_probe_roles=user_probe_roles, correction_rates=correction_rates)

@@ -442,8 +442,12 @@ def prepare_shared(plan: StudyPlan, case: Case, root: Path, comm: MPI.Comm, rep:
 
 
 def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.Comm, rep: Reporter,
-                settings: dict[str, Any], wait: bool = False) -> dict:
+                settings: dict[str, Any], wait: bool = False, compute=None) -> dict:
     """Run one variant (collective) unless it is finished; returns its result.
+
+    ``compute``: the study's own computation of a variant (``Study.variant``,
+    :mod:`.protocol`); None: the stages (the modal solution, or the full-order one with
+    ``solver = direct``).
 
     Returns
     -------
@@ -455,11 +459,11 @@ def run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, comm: MPI.C
     runner = StageRunner(root / v.name, comm, rep, wait=wait,
                          command=f"railvib study {plan.kind} --variant {v.name}")
     with runner.session(f"study {plan.kind} --variant {v.name}"):
-        return _run_variant(plan, v, case, root, runner, settings)
+        return _run_variant(plan, v, case, root, runner, settings, compute)
 
 
 def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, runner: StageRunner,
-                 settings: dict[str, Any]) -> dict:
+                 settings: dict[str, Any], compute=None) -> dict:
     vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
 
     def setup():
@@ -472,6 +476,8 @@ def _run_variant(plan: StudyPlan, v: Variant, case: Case, root: Path, runner: St
         rep.info(f"[{plan.kind}/{v.name}] finished earlier: skipping ({vdir / RESULT_NAME})")
         return {**done, "reused_result": True}
     rep.info(f"[{plan.kind}/{v.name}] running: " + (", ".join(v.overrides) or "the case"))
+    if compute is not None:
+        return _run_own_variant(plan, v, vcase, digest, runner, settings, compute)
     if settings.get("solver") == "direct":
         return _run_direct_variant(plan, v, vcase, digest, runner, settings)
     t_start = time.perf_counter()
@@ -535,6 +541,34 @@ def _record_failure(plan: StudyPlan, v: Variant, digest: str, vdir: Path, comm, 
     on_root(record, comm)
     rep.info(f"[{plan.kind}/{v.name}] FAILED: {msg}")
     return {"failed": msg, "variant": v.name}
+
+
+def _run_own_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
+                     runner: StageRunner, settings: dict[str, Any], compute) -> dict:
+    """A variant computed by the study itself (``Study.variant``): its entries, with what
+    every ``result.json`` holds (the study, the variant, the digest, the timings)."""
+    vdir, comm, rep = runner.out_dir, runner.comm, runner.rep
+    t_start = time.perf_counter()
+    try:
+        if comm.rank == 0:
+            vdir.mkdir(parents=True, exist_ok=True)
+        own = compute(plan, v, vcase, runner, settings)
+
+        def finish() -> dict:
+            result = {"schema": RESULT_FORMAT, "study": plan.kind, "variant": v.name,
+                      "parameter": v.parameter, "overrides": list(v.overrides),
+                      "inputs_sha256": digest, "railvib_version": __version__,
+                      "ranks": comm.size, **own,
+                      "timings": {**own.get("timings", {}),
+                                  "total": time.perf_counter() - t_start},
+                      "complete": True}
+            write_result(vdir, result, vcase)
+            return result
+
+        result = on_root(finish, comm)
+    except UserError as exc:
+        return _record_failure(plan, v, digest, vdir, comm, rep, exc)
+    return {**result, "reused_result": False}
 
 
 def _run_direct_variant(plan: StudyPlan, v: Variant, vcase: Case, digest: str,
@@ -676,7 +710,7 @@ def band_coverage(plan: StudyPlan, results: dict[str, dict]) -> dict:
     per = []
     for v in plan.variants:
         r = results.get(v.name)
-        if r is None:
+        if r is None or "model" not in r:       # (a study's own variants: no solution band)
             continue
         m = r.get("model") or {}
         direct = m.get("solver") == "direct"

@@ -23,13 +23,14 @@ import numpy as np
 
 from ..config import Case
 from .common import CONTACT_FORCE, StudyPlan, Variant, relative, response_quantities
+from .protocol import Study
 from .report import figure, fmt, pct, save
 from .richardson import extrapolate, mesh_sizes
 
 TITLE = "Mesh convergence study"
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """One variant per refinement level."""
     variants = tuple(Variant(name=f"r{lv:g}", overrides=(f"mesh.refinement={lv!r}",),
                              parameter={"refinement": lv})
@@ -138,7 +139,8 @@ def _verdict(rich: dict, data: list, settings: dict, notes: list) -> dict:
             "tolerance_percent": settings["tolerance"], "finest": fine["variant"]}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Quantities relative to the finest level against DOFs (stars: Richardson limits where
     the observed order is reliable)."""
     data = analysis["levels"]
@@ -169,3 +171,12 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7, ncol=2)
     return [save(fig, fig_dir / "convergence.png")]
+
+
+STUDY = Study(
+    name="convergence",
+    help=("mesh convergence: the response at several refinements, Richardson "
+          "extrapolation"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    sorted_settings=("levels",),
+)

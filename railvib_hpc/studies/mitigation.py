@@ -45,6 +45,7 @@ import numpy as np
 from ..config import Case, parse_override
 from ..errors import CaseError
 from .common import StudyPlan, Variant, response_quantities
+from .protocol import Study
 from .report import figure, fmt, save, transpose
 
 TITLE = "Mitigation study"
@@ -128,7 +129,7 @@ def reference_overrides(overrides: tuple[str, ...]) -> tuple[str, ...] | None:
     return kept + tuple(GEOMETRIC[s] for s in sections)
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """The baseline, every measure, and the same-mesh references of the geometric ones."""
     from .settings import StudySettingsError
 
@@ -304,7 +305,8 @@ def _verdict(rows: list[dict], baseline: dict | None, probes: list[str]) -> dict
             "ranking": [d["measure"] for d in rows]}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Insertion loss against frequency, one panel per probe, one line per measure."""
     rows = analysis.get("rows") or []
     if not rows:
@@ -326,3 +328,12 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     for ax in axes[len(probes):]:
         ax.set_visible(False)
     return [save(fig, fig_dir / "mitigation_insertion_loss.png")]
+
+
+STUDY = Study(
+    name="mitigation",
+    help=("mitigation: the baseline and each measure with everything else identical, "
+          "ranked"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    trackless_problem=trackless_problem,
+)

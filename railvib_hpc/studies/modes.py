@@ -24,6 +24,7 @@ from typing import Any
 
 from ..config import Case
 from .common import StudyPlan, Variant, relative, response_quantities
+from .protocol import Study
 from .report import figure, fmt, pct, save, transpose
 
 TITLE = "Modal truncation study"
@@ -33,7 +34,7 @@ def _tag(corrected: bool) -> str:
     return "corrected" if corrected else "modal"
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """A shared model with the most modes; one MBS variant per (count, correction)."""
     n_max = max(settings["n_modes"])
     corr = settings["static_correction"]
@@ -177,7 +178,8 @@ def _verdict(needed: dict, ref: Variant, settings: dict, indicator: dict | None,
             "reference": ref.name}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Building peaks, contact force and rail deflection against the number of modes."""
     data = analysis.get("rows") or []
     if not data:
@@ -202,3 +204,13 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     for ax in axes[len(panels):]:
         ax.set_visible(False)
     return [save(fig, fig_dir / "modes.png")]
+
+
+STUDY = Study(
+    name="modes",
+    help=("modal truncation: the response against the number of modes, with and without "
+          "the static correction"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    sorted_settings=("n_modes", "static_correction"),
+    needs_track="it compares numbers of the track's modes under the vehicle (the modal path)",
+)

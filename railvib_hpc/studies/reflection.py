@@ -40,6 +40,7 @@ import numpy as np
 
 from ..config import Case
 from .common import StudyPlan, Variant, all_with_contact_force, relative, response_quantities
+from .protocol import Study
 from .report import figure, fmt, pct, save, transpose
 
 TITLE = "Boundary reflection study"
@@ -103,7 +104,7 @@ def pml_overrides(case: Case, change: tuple[float, float, float], thickness: flo
             f"boundary.layer_thickness={float(thickness)!r}"]
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """One variant per boundary setting and domain (own mesh and modes, or the direct
     solution with ``solver = direct``). With one boundary setting the variants are named
     after the domains, otherwise ``<boundary>-<domain>``."""
@@ -272,8 +273,8 @@ def _verdict(data: list, ref: Variant, settings: dict, complete_ref: bool,
             "within_threshold_from": ok_from, "boundary": boundary, "reference": ref.name}
 
 
-def figures(analysis: dict, results: dict[str, dict], settings: dict[str, Any],
-            fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Peak accelerations per domain (bars) and the total-acceleration spectra."""
     data = analysis.get("rows") or []
     if not data:
@@ -299,7 +300,7 @@ def figures(analysis: dict, results: dict[str, dict], settings: dict[str, Any],
     axes = fig.subplots(2, 2).ravel()
     for ax, p in zip(axes, probes[:4]):
         for d in data:
-            s = results[d["variant"]]["spectra"].get(p)
+            s = ((results or {}).get(d["variant"]) or {}).get("spectra", {}).get(p)
             if s:
                 ax.semilogy(s["bands_hz"], s["acc_rms"]["total"], "o-", ms=3, lw=1,
                             label=d["variant"])
@@ -313,3 +314,18 @@ def figures(analysis: dict, results: dict[str, dict], settings: dict[str, Any],
         ax.set_visible(False)
     out.append(save(fig, fig_dir / "reflection_spectra.png"))
     return out
+
+
+def derive_settings(settings: dict[str, Any], given: dict[str, Any]) -> None:
+    """Domains given without their names: ``domain1``, ``domain2``, ... (in place)."""
+    if "domains" in given and "names" not in given:
+        settings["names"] = [f"domain{i + 1}" for i in range(len(settings["domains"]))]
+
+
+STUDY = Study(
+    name="reflection",
+    help=("boundary reflections: the same train and building in larger and larger soil "
+          "domains"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    derive_settings=derive_settings,
+)

@@ -16,6 +16,10 @@ files). :func:`execute_study` returns a summary (the variants and their status, 
 failed ones, the verdict, tables and report files); the command line exits with code 2
 when a selected variant failed with a user error (e.g. the modal stage's memory check).
 The report is written either way.
+
+The studies are those of the registry (:mod:`.registry`, each module's ``STUDY``, a
+:class:`~.protocol.Study`): this runner knows no study by name, it calls what a study
+declares (its plan, its variants' computation, its analysis, figures and hooks).
 """
 
 from __future__ import annotations
@@ -30,7 +34,6 @@ from ..errors import CaseError
 from ..io.locks import output_lock
 from ..log import Reporter
 from ..parallel import on_root
-from . import convergence, mitigation, modes, reflection, speed, thesis, uncertainty
 from .common import (
     FAILED_NAME,
     SHARED_DIR,
@@ -46,37 +49,31 @@ from .common import (
     variant_case,
     variant_digest,
 )
+from .registry import STUDIES, STUDY_MODULES, study
 from .report import fmt, text_table, write_report
 from .settings import StudySettingsError, study_settings
 
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-#: The study modules by command name.
-STUDY_MODULES = {"convergence": convergence, "modes": modes, "reflection": reflection,
-                 "speed": speed, "thesis": thesis, "mitigation": mitigation,
-                 "uncertainty": uncertainty}
+__all__ = ["STUDY_MODULES", "execute_study", "make_plan", "merge", "select", "status",
+           "trackless_kinds", "trackless_problem"]
 
 
-#: The studies that run a case without a track (``track.count = 0``: the moving load of
-#: ``[load]`` on the bare soil) with ``solver = direct``: their variants change the mesh,
-#: the domain, the soil or the building, or the load's speed. The others compare the
-#: vehicle on the track's modes (``modes``, ``thesis``) or sample the train's inputs
-#: (``uncertainty``, not yet without a track).
-TRACKLESS_KINDS = ("convergence", "mitigation", "reflection", "speed")
-#: Why each of the other studies needs a track (the refusal's sentence).
-_NEEDS_TRACK = {
-    "modes": "it compares numbers of the track's modes under the vehicle (the modal path)",
-    "thesis": "it compares the vehicle's passage on the track's modes with the thesis",
-    "uncertainty": "its samples and reduced model are built for the train's passage (not "
-                   "yet for the moving load of [load])",
-}
+def trackless_kinds() -> tuple[str, ...]:
+    """The studies that run a case without a track (``track.count = 0``: the moving load of
+    ``[load]`` on the bare soil) with ``solver = direct``: those that declare no need of a
+    track (``Study.needs_track``; their variants change the mesh, the domain, the soil or
+    the building, or the load's speed). The others compare the vehicle on the track's
+    modes (``modes``, ``thesis``) or sample the train's inputs (``uncertainty``, not yet
+    without a track); in alphabetical order."""
+    return tuple(sorted(name for name in STUDIES if study(name).needs_track is None))
 
 
 def trackless_problem(kind: str, case: Case, settings: dict[str, Any]
                       ) -> tuple[str, Any, str] | None:
     """What a study cannot do with a case without a track (None: it can, or the case has
-    a track): a study of :data:`TRACKLESS_KINDS` with ``solver = direct`` (the transient
+    a track): a study of :func:`trackless_kinds` with ``solver = direct`` (the transient
     engines), and what the study's own ``trackless_problem`` finds in its settings (e.g. a
     mitigation measure on the track's keys).
 
@@ -87,17 +84,17 @@ def trackless_problem(kind: str, case: Case, settings: dict[str, Any]
     """
     if case["track.count"] != 0:
         return None
-    kinds = ", ".join(TRACKLESS_KINDS)
-    if kind not in TRACKLESS_KINDS:
+    declared = study(kind)
+    if declared.needs_track is not None:
         return ("track.count", 0, f"railvib study {kind} needs a track (1 or 2): "
-                f"{_NEEDS_TRACK[kind]}; a case without a track runs the studies {kinds} "
-                "with solver = direct")
+                f"{declared.needs_track}; a case without a track runs the studies "
+                f"{', '.join(trackless_kinds())} with solver = direct")
     if settings.get("solver") != "direct":
         return (f"study.{kind}.solver", settings.get("solver"),
                 "a case without a track (track.count = 0: the moving load of [load]) runs "
                 "its studies on the full-order transient engines only: set it to direct "
                 f"(--study-set solver=direct, or solver = \"direct\" in [study.{kind}])")
-    own = getattr(STUDY_MODULES[kind], "trackless_problem", None)
+    own = declared.trackless_problem
     return own(settings) if own is not None else None
 
 
@@ -121,14 +118,12 @@ def make_plan(kind: str, case: Case, settings: dict[str, Any], root: Path | None
     from ..mesh.layout import build_layout
 
     known = list(build_layout(case).probes)
-    bad = [p for p in settings["probes"] if p not in known]
+    bad = [p for p in settings.get("probes", ()) if p not in known]
     if bad:
         raise StudySettingsError(kind, [(f"study.{kind}.probes", settings["probes"],
                                          f"unknown probes {bad}; the mesh has: "
                                          + ", ".join(known))])
-    mod = STUDY_MODULES[kind]
-    plan = mod.plan(case, settings, root=root) if getattr(mod, "PLAN_IN_FOLDER", False) \
-        else mod.plan(case, settings)
+    plan = study(kind).plan(case, settings, root=root)
     for v in plan.variants:
         variant_case(case, v.overrides)
     if plan.shared_overrides is not None:
@@ -207,7 +202,7 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
         With ``merge_only`` (``--merge``) when no variant has finished: there is nothing
         to report.
     """
-    mod = STUDY_MODULES[kind]
+    declared = study(kind)
     entries, results = status(plan, case, root, settings)
     if merge_only and not results:
         counts: dict[str, int] = {}
@@ -219,20 +214,17 @@ def merge(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict,
             f"them first (railvib study {kind} CASE --out ..., without --merge)")
     coverage = band_coverage(plan, results)
     shown = {name: resolved_spectra(r) for name, r in results.items()}
-    analysis = _annotate(mod.analyse(plan, shown, settings), entries, coverage)
+    analysis = _annotate({"title": declared.title, **declared.analyse(plan, shown, settings)},
+                         entries, coverage)
     if coverage["warning"]:
         rep.info(f"WARNING: {coverage['warning']}")
     for warning in analysis.get("warnings", []):        # e.g. Sobol' indices left out
         rep.info(f"WARNING: {warning}")
     results = shown
-    fig_dir = root / "figures"
-    if kind == "reflection":
-        figs = mod.figures(analysis, results, settings, fig_dir)
-    else:
-        figs = mod.figures(analysis, settings, fig_dir)
+    figs = declared.figures(analysis, settings, root / "figures", results=results)
     files = write_report(root, kind, case_info(case), settings, entries, analysis, figs)
-    if hasattr(mod, "write_results"):                 # e.g. the uncertainty study's HDF5
-        files.update(mod.write_results(analysis, root))
+    if declared.write_results is not None:            # e.g. the uncertainty study's HDF5
+        files.update(declared.write_results(analysis, root))
     for t in analysis.get("tables", []):
         if t["rows"]:
             rep.info(f"{t['title']}:\n" + text_table(t["head"], t["rows"]))
@@ -320,7 +312,7 @@ def listing(kind: str, plan: StudyPlan, case: Case, root: Path, settings: dict) 
     entries, _ = status(plan, case, root, settings)
     lines = [f"{kind} study, folder {root}" + (f" (shared model in {root / SHARED_DIR})"
                                                if plan.shared_overrides is not None else "")]
-    hook = getattr(STUDY_MODULES[kind], "listing_columns", None)
+    hook = study(kind).listing_columns
     if hook is not None:
         notes, head, cells = hook(plan, case, entries)
         lines += notes
@@ -349,7 +341,7 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
     Parameters
     ----------
     kind
-        ``convergence``, ``modes``, ``reflection`` or ``speed``.
+        A registered study (:data:`~.registry.STUDIES`).
     case
         The validated case (broadcast to every rank).
     out
@@ -407,15 +399,17 @@ def execute_study(kind: str, case: Case, out: Path, comm: MPI.Comm, rep: Reporte
                      "(nothing to prepare)")
         elif prepare or any(v.shared for v in todo):
             prepare_shared(plan, case, root, comm, rep)
-        hook = getattr(STUDY_MODULES[kind], "prepare", None)
+        declared = study(kind)
+        hook = declared.prepare
         if hook is not None and (todo or prepare):   # the uncertainty study's reduced model
             hook(plan, case, root, comm, rep)
-        progress = getattr(STUDY_MODULES[kind], "progress", None)
+        progress = declared.progress
         # the finished results, kept up to date for the statistics printed after each one
         known = on_root(lambda: status(plan, case, root, cfg)[1], comm) if progress else {}
         for v in todo:
             with rep.stage(f"{kind}/{v.name}"):
-                res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait)
+                res = run_variant(plan, v, case, root, comm, rep, cfg, wait=wait,
+                                  compute=declared.variant)
             if "failed" in res:
                 failed.append(v.name)
             else:

@@ -1,9 +1,11 @@
 """Study settings: the ``[study.KIND]`` tables of the case schema, ``--study-set`` overrides.
 
 The settings of each study are ordinary case keys, ``study.<kind>.<key>``, declared in
-:mod:`railvib_hpc.schema` and checked by the one validation engine of
-:mod:`railvib_hpc.validation` (same types, ranges and error format: key, value, allowed). A
-case file may hold them as tables (``[study.convergence]``, ...); ``--study-set KEY=VALUE``
+:mod:`railvib_hpc.schema` (a study's ``Study.settings``, :mod:`.protocol`: the schema's
+``[study.<kind>]`` table, or its own for a study outside the schema) and checked by the one
+validation engine of :mod:`railvib_hpc.validation` (same types, ranges and error format:
+key, value, allowed). A case file may hold the schema's as tables (``[study.convergence]``,
+...); ``--study-set KEY=VALUE``
 (repeatable, the value in TOML syntax, bare words allowed, e.g. ``--study-set
 levels=[0.5,0.75,1]`` or ``--study-set probes=[slab1,slab2]``) overrides the study's
 ``study.<kind>.KEY`` on the command line. Every problem is reported at once
@@ -20,12 +22,14 @@ from typing import Any
 from ..config import Case, toml_value
 from ..errors import CaseError
 from ..schema import BUILDING_PROBES, SCHEMA, Param
-from ..validation import ALL_KEYS, check_studies, check_value
+from ..validation import check_studies, check_value
+from .registry import STUDIES, UnknownStudy, study
 
 __all__ = ["BUILDING_PROBES", "SETTINGS", "StudySettingsError", "describe",
            "parse_study_set", "study_settings"]
 
-#: Settings of each study with their defaults: the ``study`` tables of the case schema.
+#: Settings of the studies in the case schema with their defaults: its ``study`` tables
+#: (every registered study's are its ``Study.settings``).
 SETTINGS: dict[str, dict[str, Param]] = SCHEMA["study"]
 
 
@@ -88,7 +92,7 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
     Parameters
     ----------
     kind
-        ``convergence``, ``modes``, ``reflection``, ``speed`` or ``thesis``.
+        A registered study (:data:`~railvib_hpc.studies.registry.STUDIES`).
     overrides
         ``key=value`` strings (``--study-set``), keys without the ``study.<kind>.`` prefix.
     values
@@ -107,11 +111,14 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
         With every problem found (unknown keys with a did-you-mean, wrong types, values
         out of range, inconsistent lists).
     """
-    if kind not in SETTINGS:
-        raise StudySettingsError(kind, [("study", kind, "allowed: " + ", ".join(SETTINGS))])
-    spec = SETTINGS[kind]
+    try:
+        declared = study(kind)
+    except UnknownStudy:
+        raise StudySettingsError(kind, [("study", kind, "allowed: " + ", ".join(STUDIES))]) \
+            from None
+    spec = declared.settings
     prefix = f"study.{kind}."
-    base = case.section(f"study.{kind}") if case is not None else {
+    base = case.section(f"study.{kind}") if case is not None and declared.in_schema else {
         k: json.loads(json.dumps(p.default)) for k, p in spec.items()}
     given: dict[str, Any] = {k: _thaw(v) for k, v in (values or {}).items()}
     for text in overrides:
@@ -126,17 +133,16 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
             problems.append((prefix + key, value, f"unknown setting of the '{kind}' study; "
                              "allowed: " + ", ".join(spec) + hint))
             continue
-        out[key] = check_value(prefix + key, ALL_KEYS[prefix + key], value, problems)
+        out[key] = check_value(prefix + key, spec[key], value, problems)
     if problems:
         raise StudySettingsError(kind, problems)
-    if kind == "reflection" and "domains" in given and "names" not in given:
-        out["names"] = [f"domain{i + 1}" for i in range(len(out["domains"]))]
-    problems = check_studies({kind: out})
+    if declared.derive_settings is not None:
+        declared.derive_settings(out, given)
+    problems = check_studies({kind: out}) + (
+        declared.check_settings(out) if declared.check_settings is not None else [])
     if problems:
         raise StudySettingsError(kind, problems)
-    for key in {"convergence": ("levels",), "modes": ("n_modes", "static_correction"),
-                "speed": ("speeds",), "thesis": ("drop_heights", "contact_damping")
-                }.get(kind, ()):
+    for key in declared.sorted_settings:
         out[key] = sorted(out[key])
     return out
 
@@ -144,5 +150,5 @@ def study_settings(kind: str, overrides: Sequence[str] = (),
 def describe(kind: str) -> str:
     """Markdown table of a study's settings and defaults (for ``jobs/README.md``)."""
     rows = [f"| `{k}` | `{json.dumps(s.default)}` | {s.doc} |"
-            for k, s in SETTINGS[kind].items()]
+            for k, s in study(kind).settings.items()]
     return "\n".join(["| setting | default | meaning |", "|---|---|---|", *rows])

@@ -26,6 +26,7 @@ from typing import Any
 
 from ..config import Case
 from .common import StudyPlan, Variant, all_with_contact_force, response_quantities
+from .protocol import Study
 from .report import figure, fmt, save, transpose
 
 TITLE = "Speed sweep"
@@ -37,7 +38,7 @@ def speed_key(case: Case) -> str:
     return "load.speed" if case["track.count"] == 0 else "vehicle.speed"
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """A shared model (the case's modes); one MBS variant per speed. With ``solver =
     direct`` every speed is a full-order time integration of its own (no shared model);
     a case without a track varies the speed of its moving load (:func:`speed_key`)."""
@@ -150,7 +151,8 @@ def _verdict(data: list, acc: list[str], planned: int | None = None) -> dict:
             "max_utilisation": umax["max_utilisation"], "max_utilisation_speed": umax["speed"]}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Building peaks, contact force and utilisation against speed."""
     data = analysis.get("rows") or []
     if not data:
@@ -179,3 +181,12 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
         ax.grid(alpha=0.3)
     a1.legend(fontsize=7)
     return [save(fig, fig_dir / "speed.png")]
+
+
+STUDY = Study(
+    name="speed",
+    help=("speed sweep: peak building response and contact force against the running "
+          "speed"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    sorted_settings=("speeds",),
+)

@@ -27,6 +27,7 @@ from typing import Any
 from ..assess.thesis import THESIS
 from ..config import Case
 from .common import StudyPlan, Variant
+from .protocol import Study
 from .report import figure, fmt, save, transpose
 
 TITLE = "Thesis comparison: mode count vs band, and the drop of the wheelset"
@@ -46,7 +47,7 @@ def _name(label: str, drop: float, damping: float, many_c: bool) -> str:
     return name + (f"_c{damping:g}" if many_c else "")
 
 
-def plan(case: Case, settings: dict[str, Any]) -> StudyPlan:
+def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> StudyPlan:
     """A shared model with every mode below the band; (count, band) x drops x dampings."""
     band = settings["band_hz"]
     model = (f"modal.f_max={band!r}",)
@@ -156,7 +157,8 @@ def _verdict(data: list[dict], settings: dict[str, Any]) -> dict:
     return {"text": text, "ok": None, "brackets_thesis": bracket}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """Slab accelerations per variant with the thesis's values, and the contact forces."""
     data = analysis.get("rows") or []
     if not data:
@@ -182,3 +184,13 @@ def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Pat
     a2.set_ylabel("peak contact force [kN]")
     a2.grid(alpha=0.3, axis="y")
     return [save(fig, fig_dir / "thesis_comparison.png")]
+
+
+STUDY = Study(
+    name="thesis",
+    help=("thesis comparison: the thesis's mode count and band, and the drop of the "
+          "wheelset"),
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    sorted_settings=("drop_heights", "contact_damping"),
+    needs_track="it compares the vehicle's passage on the track's modes with the thesis",
+)

@@ -49,6 +49,7 @@ from ..uncertainty.statistics import (
     sobol_indices,
 )
 from .common import StudyPlan, Variant
+from .protocol import Study
 from .report import figure, fmt, pct, save
 
 TITLE = "Uncertainty study"
@@ -587,7 +588,8 @@ def write_results(analysis: dict, root: Path) -> dict[str, Path]:
     return {"hdf5": path}
 
 
-def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path) -> list[Path]:
+def figures(analysis: dict, settings: dict[str, Any], fig_dir: Path,
+            results: dict[str, dict] | None = None) -> list[Path]:
     """The convergence of P95 and of the exceedance probability per probe, and the
     one-third-octave percentile bands against the VC curve."""
     conv = analysis.get("convergence") or {}
@@ -644,3 +646,14 @@ def _convergence_figure(conv: dict, fig_dir: Path) -> Path:
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=7)
     return save(fig, fig_dir / "uncertainty_convergence.png")
+
+
+STUDY = Study(
+    name="uncertainty",
+    help="uncertainty: the case's uncertain inputs sampled, statistics and sensitivities",
+    title=TITLE, plan=plan, analyse=analyse, figures=figures,
+    needs_track=("its samples and reduced model are built for the train's passage (not "
+                 "yet for the moving load of [load])"),
+    prepare=prepare, progress=progress, listing_columns=listing_columns,
+    write_results=write_results,
+)

@@ -219,7 +219,7 @@ def check_implicit_outside_layers(case: Case, mesh, inside: np.ndarray) -> None:
     matched layer (``inside``: the layers' mask): the layer's memory forces are explicit,
     and with its elements implicit the layer grew unstable (measured on the plane-strain
     slab, an implicit column through the base layer: the energy grew 1000 x in 1.5 s)."""
-    from ..mesh.stage import present_parts
+    from ..mesh.checks import present_parts
     from ..schema import PART_ID
     from .imex import implicit_part_names
 
@@ -245,7 +245,7 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     perfectly matched layers (None without ``pml``, the setup's
     :func:`~.pml.pml_geometry`; their ``M_e2`` is in the limit, their hexahedra take the
     full formulation in the partition as in K)."""
-    from ..mesh.stage import present_parts
+    from ..mesh.checks import present_parts
     from ..modal.petsc import assemble_partition
     from ..schema import PART_ID
     from .explicit import STEP_SAFETY, limiting_element, lumped_diagonal, stability_limit

@@ -28,8 +28,9 @@ studies read them unchanged; their own rows of
   ``/rail/x, uz, ry``; attribute ``stats`` (run statistics, contact forces).
 
 Every file carries its provenance and is written checked, atomically and recorded
-(:mod:`railvib_hpc.io.atomic`); the mesh is ``mesh.h5`` of the same folder (built or
-reused as by ``railvib mesh``).
+(:mod:`railvib_hpc.io.atomic`); the mesh is ``mesh.h5`` of the same folder, which the
+stage needs (``Stage(needs=("mesh",))``): the runner hands it over built or reused as by
+``railvib mesh`` (``ctx.input("mesh")``).
 
 Size: before the mesh is built, the number of steps and the memory of the histories are
 checked (:func:`precheck_size`, :data:`MAX_TRANSIENT_STEPS`); a run that would exceed them
@@ -98,10 +99,8 @@ from ..io.stage_protocol import NotReusable, Stage, StageContext, StageOutput, S
 from ..io.temp_names import resume_path
 from ..io.xdmf import remove_xdmf
 from ..log import Reporter
-from ..mesh.stage import MESH_KEYS
-from ..modal.stage import RANDOM_FIELDS
 from ..parallel import on_root
-from ..problem import Problem
+from ..problem import RANDOM_FIELD_KEYS, Problem
 from ..resources import check_memory, peak_memory_gb
 from ..site import line_probes
 from .engines import (  # TransientInputError re-exported
@@ -149,7 +148,9 @@ class Interrupted(RuntimeError):
 
 
 # --------------------------------------------------------------------------- reuse
-def _checks_context(case: Case) -> dict:
+def _checks_context(case: Case, out_dir: Path | None = None) -> dict:
+    """What the data check of ``transient.h5`` needs: the static wheel load (also as the
+    row's ``check_context``, for a stage that verifies it)."""
     from ..mbs.case_vehicle import static_wheel_load
 
     return {"static_wheel_load": static_wheel_load(case)}
@@ -517,9 +518,7 @@ def compute(ctx: StageContext) -> TransientOutput:
                  "settings)")
         _refresh_stress(case, out_dir, comm, rep)
         return TransientOutput.of_stats({**old, "reused": True})
-    return TransientOutput.of_stats(_transient(case, out_dir, comm, rep,
-                                               ctx.options.get("checkpoint_steps"),
-                                               ctx.options.get("stop_after")))
+    return TransientOutput.of_stats(_transient(ctx))
 
 
 # ----------------------------------------------------------------------------- products
@@ -527,13 +526,14 @@ def compute(ctx: StageContext) -> TransientOutput:
 #: time step (no ``[mbs]`` key: it has its own time step and contact loop; of ``[modal]``
 #: only the keys that change K, M and C); ``transient.checkpoint_interval`` is how it
 #: runs, not what.
-TRANSIENT_KEYS: Selection = MESH_KEYS + (
+TRANSIENT_KEYS: Selection = (
     ("materials", ()), ("sections", ()), ("pads", ()), ("boundary", ()), ("damping", ()),
     ("vehicle", ()), ("train2", ()), ("irregularity", ()), ("load", ()),
     ("transient", ("checkpoint_interval",)), ("modal.lumped_mass", ()),
     ("modal.hex_formulation", ()), ("modal.fix_sleeper_rotations", ()),
     ("modal.fix_rail_rotations_at_pads", ()), ("modal.damping_ratio", ()),
-    ("output.dt", ()), ("track.end_stiffness", ()), ("track.end_damping", ())) + RANDOM_FIELDS
+    ("output.dt", ()), ("track.end_stiffness", ()), ("track.end_damping", ())) \
+    + RANDOM_FIELD_KEYS
 _FIELD_KEYS: Selection = TRANSIENT_KEYS + (("output.window", ()), ("output.float32", ()))
 _PROBE_KEYS: Selection = TRANSIENT_KEYS + (("output.probes", ()), ("output.probe_roles", ()),
                                            ("probes", ()))
@@ -542,21 +542,22 @@ _STATE_KEYS: Selection = _FIELD_KEYS + (("output.probes", ()), ("output.probe_ro
                                         ("probes", ()))
 _FILES = ("mesh.file", "irregularity.file")
 #: The rows of the products and the checkpoint: ``fields.h5`` and ``probes.h5`` in the
-#: layout of ``reconstruct`` under their own table names (``transient:fields.h5``, ...).
+#: layout of ``reconstruct`` under their own table names (``transient:fields.h5``, ...);
+#: each depends on the mesh's case keys too (``extends``).
 ROWS = (
     StageFile(HISTORIES, "transient", 2, TRANSIENT_KEYS, (MESH_H5,), (), _FILES,
-              check=check_transient),
+              check=check_transient, extends=(MESH_H5,), check_context=_checks_context),
     StageFile(FIELDS, "transient", 2, _FIELD_KEYS, (MESH_H5,), (FIELDS_XDMF,), _FILES,
-              file=FIELDS_H5, check=check_fields),
+              file=FIELDS_H5, check=check_fields, extends=(MESH_H5,)),
     StageFile(PROBES, "transient", 2, _PROBE_KEYS, (MESH_H5,), (), _FILES, file=PROBES_H5,
-              check=check_probes),
+              check=check_probes, extends=(MESH_H5,)),
     StageFile(CHECKPOINT, "transient", 2, _STATE_KEYS, (MESH_H5,), (), _FILES,
-              check=check_checkpoint),
+              check=check_checkpoint, extends=(MESH_H5,)),
 )
 
 STAGE = Stage(name="transient", help="direct time integration of the full FE model "
               "(absorbing faces, causal waves)", products=ROWS, reads=(MESH_H5,),
-              compute=compute, petsc=True)
+              compute=compute, petsc=True, needs=("mesh",))
 
 
 def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
@@ -583,10 +584,9 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
                            stop_after=stop_after).result.summary)
 
 
-def _transient(case: Case, out_dir: Path, comm, rep: Reporter, checkpoint_steps: int | None,
-               stop_after: int | None) -> dict:
-    t_wall = time.perf_counter()
-    ctx = StageContext(case, out_dir, comm, rep)
+def _transient(ctx: StageContext) -> dict:
+    t_wall, case, out_dir, comm, rep = time.perf_counter(), ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    checkpoint_steps, stop_after = map(ctx.options.get, ("checkpoint_steps", "stop_after"))
     init = _setup(ctx)
     mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
     nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
@@ -772,16 +772,22 @@ def _passage(case: Case, mesh, dofmap) -> tuple:
     return rails, vehicle, passage(case, vehicle, float(rails.x.max()))
 
 
+def _mesh_input(ctx: StageContext):
+    """The mesh the runner hands over (``ctx.input("mesh")``: ``mesh.h5`` built or reused)
+    and its digest (rank 0)."""
+    given = ctx.input("mesh")
+    return given.value, given.sha256
+
+
 def _setup(ctx: StageContext) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
     from ..mbs.case_vehicle import passage_irregularity
-    from ..mesh.stage import build_or_reuse_mesh
     from ..modal.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
     from .petsc import TransientSystem
 
     case, comm, rep = ctx.case, ctx.comm, ctx.rep
     with rep.stage("transient: mesh"):
-        mesh, mesh_sha = on_root(lambda: build_or_reuse_mesh(ctx)[::2], comm)
+        mesh, mesh_sha = on_root(lambda: _mesh_input(ctx), comm)
     with rep.stage("transient: dofs"):
         problem = Problem.from_case(case)
         dofmap = problem_dofmap(mesh, problem, comm.size)
@@ -932,8 +938,8 @@ def band_check(case: Case, mesh, dt: float, rep: Reporter) -> float:
     frequency the run resolves at the farthest probe (``transient.f_max`` when it does;
     rank 0). Raises :class:`~railvib_hpc.mesh.dispersion_check.DispersionError` as the
     mesh check does, at ``mesh.max_dispersion_error``."""
+    from ..mesh.checks import max_edge_per_soil_part, wavelength_warnings
     from ..mesh.dispersion_check import transient_band_check
-    from ..mesh.stage import max_edge_per_soil_part, wavelength_warnings
 
     f_max = case["transient.f_max"]
     quality = {"max_edge_per_soil_part": max_edge_per_soil_part(mesh)}

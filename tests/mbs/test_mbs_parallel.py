@@ -63,7 +63,9 @@ def test_mbs_on_all_ranks_equals_serial(shared_tmp, par):
         ser = shared_tmp / "ser"
         ser.mkdir()
         # the same static solutions from a serial factorization (same modes file)
-        from railvib_hpc.mbs.stage import simulate_case
+        from railvib_hpc.io.stage_protocol import StageRunner
+        from railvib_hpc.log import Reporter
+        from railvib_hpc.mbs.stage import STAGE, simulate_case
 
         (ser / "modes.h5").symlink_to(par / "modes.h5")
         case = _case()
@@ -71,7 +73,9 @@ def test_mbs_on_all_ranks_equals_serial(shared_tmp, par):
             x_par = f["static/rail_flexibility"][()]
             t_par = f["static/translation"][:, ::97, :]
         (ser / "static.h5").symlink_to(par / "static.h5")
-        simulate_case(case, ser)
+        # the stage's work on this rank alone, in a context of the folder (no lock taken)
+        simulate_case(StageRunner(ser, MPI.COMM_SELF, Reporter(0), command="mbs")
+                      .context(case, STAGE))
         with h5py.File(par / "mbs.h5", "r") as a, h5py.File(ser / "mbs.h5", "r") as b:
             for name in ("wheels/contact_force", "modal/q", "static/g", "vehicle/y"):
                 np.testing.assert_array_equal(a[name][()], b[name][()])

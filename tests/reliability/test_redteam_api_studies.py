@@ -401,8 +401,8 @@ def test_studies_accept_solver_direct(tmp_path, monkeypatch, tally):
     assert sp.shared_overrides is None and not any(v.shared for v in sp.variants)
     called = []
 
-    def fake_transient(vcase, vdir, comm, rep, *args, **kwargs):
-        called.append(vdir.name)
+    def fake_transient(ctx, *args, **kwargs):           # the stage's context: its folder
+        called.append(ctx.out_dir.name)
         raise UserError("full-order solve not run in this test")
 
     import railvib_hpc.transient.stage as ts

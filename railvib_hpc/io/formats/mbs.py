@@ -40,6 +40,7 @@ import numpy as np
 
 from ...errors import UserError
 from ..atomic import write_h5
+from ..files import MBS_H5, MODES_H5, STATIC_H5
 from .checks import (
     CONTACT_FORCE_FACTOR,
     absent,
@@ -399,3 +400,17 @@ def _static(g, path: Path, nt: int, n: int, i0: int, i1: int) -> tuple[tuple, in
                                f"expected (k, n, 3) = ({k}, {n}, 3) to match "
                                f"{path}:static/g and the modes")
     return (str(basis_file), basis, *hist), k
+
+
+def passage_inputs(out_dir: Path) -> tuple[str, ...]:
+    """The modal solution's files a reader of the passage in ``out_dir`` rests on, upstream
+    first: ``modes.h5``, ``static.h5`` when ``mbs.h5`` holds a static correction, then
+    ``mbs.h5`` (the inputs of ``railvib reconstruct``, and of ``railvib assess`` before
+    the reconstruction's own files)."""
+    names = [MODES_H5, MBS_H5]
+    try:
+        if MbsFile(Path(out_dir) / MBS_H5).has_static_correction():
+            names.insert(1, STATIC_H5)
+    except OSError:
+        pass
+    return tuple(names)

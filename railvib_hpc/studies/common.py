@@ -727,15 +727,19 @@ def band_coverage(plan: StudyPlan, results: dict[str, dict]) -> dict:
     warning = None
     if short:
         worst = min(short, key=lambda p: p["f_max_hz"])
-        what = ("transient.f_max" if worst["solver"] == "direct" else
+        direct = worst["solver"] == "direct"
+        what = ("transient.f_max, or less where the mesh does not resolve it" if direct else
                 f"{worst['modes']} modes, {fmt_hz(worst['f1_hz'])}–"
                 f"{fmt_hz(worst['f_max_hz'])} Hz")
+        remedy = (f"a finer soil mesh (mesh.wavelength_hz = {hi:g}, or a spectral order) "
+                  f"and transient.f_max = {hi:g}" if direct else
+                  f"more modes (e.g. modal.f_max = {hi:g}) or solver = direct")
         warning = (f"the solution of {len(short)} of {len(per)} finished variants does not "
                    f"cover the assessment band {lo:g}–{hi:g} Hz ({worst['variant']}: "
                    f"{what}, resolved up to {fmt_hz(worst['f_max_hz'])} Hz): one-third-octave "
                    "bands above a variant's band are not reported, and its peaks and "
                    f"assessment miss the response above {fmt_hz(worst['f_max_hz'])} Hz; use "
-                   f"more modes (e.g. modal.f_max = {hi:g}) or solver = direct")
+                   f"{remedy}")
     return {"assessment_band_hz": [lo, hi], "variants": per,
             "f_max_hz": min((p["f_max_hz"] for p in tops), default=None), "warning": warning}
 

@@ -275,6 +275,13 @@ BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey", "pml")
 PML_ALPHA = 3.14159
 #: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
 BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
+#: The time integration engines of ``railvib transient`` (``transient.engine``).
+TRANSIENT_ENGINES = ("direct", "explicit", "imex")
+#: The engines that take ``pml`` faces, which the refusals of a layer name: all of them
+#: (the direct engine's layer is implicit, the explicit and imex engines' explicit with
+#: ``M_e1`` and ``M_e2`` at the full step or in K_eff; docs/transient.md). An engine left
+#: out here is refused with a layer.
+PML_ENGINES = TRANSIENT_ENGINES
 
 
 def _face(default: str, where: str) -> Param:
@@ -1255,7 +1262,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
                         "MUMPS factor, the rest (the soil) explicit with the lumped mass: the "
                         "step limited by the soil's elements only; needs modal.lumped_mass = "
                         "true)",
-                        choices=("direct", "explicit", "imex"),
+                        choices=TRANSIENT_ENGINES,
                         source="issue 28: an engine whose memory and cost grow linearly"),
         "implicit_elements": Param("parts", "str", "-",
                                    "transient.engine = 'imex': 'parts' integrates the parts "

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..schema import BOUNDARY_FACES
+from ..schema import BOUNDARY_FACES, BOUNDARY_TYPES, PML_ENGINES
 
 Refusal = tuple[str, Any, str]
 
@@ -57,11 +57,13 @@ def no_pml(case) -> list[Refusal]:
     pml = [f for f in BOUNDARY_FACES if case[f"boundary.{f}"] == "pml"]
     if not pml:
         return []
+    engines = ", ".join(f"'{e}'" for e in PML_ENGINES[:-1]) + f" or '{PML_ENGINES[-1]}'"
+    allowed = ", ".join(t for t in BOUNDARY_TYPES if t != "pml")
     return [(f"boundary.{pml[0]}", "pml",
              "a perfectly matched layer is frequency dependent (its stretching 1 + d / (i "
              "omega)), so the modal path (modal, mbs, run and the modal studies) has no modes "
-             "of it; it is for railvib transient with transient.engine = 'explicit'; allowed "
-             "here: fixed, roller, free, absorbing, caughey")]
+             f"of it; it is for railvib transient with transient.engine = {engines}; allowed "
+             f"here: {allowed}")]
 
 
 def modal_refusals(case, command: str) -> list[Refusal]:

@@ -126,10 +126,9 @@ def explicit_system(ctx: StageContext, mesh, dofmap, problem: Problem, rails: Ra
     layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
     # (its step is set below; the diagonal dashpots, apart from C, do not limit it)
     system = ExplicitSystem(K, M, C, 0.0, comm, dashpots=dashpots, pml=layer)
-    plus = layer_stiffening(comm, K, layer)
-    lim = stability_limit(K, system.m, C, comm, plus=plus)
-    if plus is not None:
-        plus.destroy()
+    # (the layers' M_e2 is taken at the average displacement: it does not limit the step,
+    # ExplicitSystem.effective_mass)
+    lim = stability_limit(K, system.m, C, comm)
     critical = lim.dt_critical
     where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
     if vehicle is not None:
@@ -171,17 +170,6 @@ def pml_layer(ctx: StageContext, mesh, dofmap, problem: Problem, K, pml: tuple |
     for line in pml_warnings(layer.faces, problem):
         ctx.rep.info(line)
     return layer
-
-
-def layer_stiffening(comm, K, layer):
-    """The layers' ``M_e2`` diagonal as a matrix in K's layout, for the stability limit's
-    ``plus`` (it stiffens their nodes; None without layers; the caller destroys it)."""
-    if layer is None:
-        return None
-    from .petsc import diagonal_matrix
-
-    return diagonal_matrix(comm, K.getOwnershipRange(), K.getSize()[0],
-                           layer.stiffness_diagonal)
 
 
 def stable_step(case: Case, lim, critical: float, where: str, dt_band: float,
@@ -243,8 +231,8 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     C - C_I``; the implicit elements do not limit the step, :mod:`.imex`), the largest
     step it allows (:data:`~.explicit.STEP_SAFETY` of the critical one) and the
     perfectly matched layers (None without ``pml``, the setup's
-    :func:`~.pml.pml_geometry`; their ``M_e2`` is in the limit, their hexahedra take the
-    full formulation in the partition as in K)."""
+    :func:`~.pml.pml_geometry`; their ``M_e2`` is implicit, not in the limit, their
+    hexahedra take the full formulation in the partition as in K)."""
     from ..mesh.checks import present_parts
     from ..modal.petsc import assemble_partition
     from ..schema import PART_ID
@@ -264,13 +252,13 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
         extra = auto_implicit_hexes(mesh, problem, target, STEP_SAFETY, outside)
     K_I, C_I = assemble_partition(mesh, problem, dofmap, comm, parts, extra, boundary=True,
                                   full_hexes=None if pml is None else pml[1])
-    layer = plus = None
+    layer = None
     try:
         m = lumped_diagonal(M, comm)
         layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
-        plus = layer_stiffening(comm, K, layer)
+        # (the layers' M_e2 is implicit, in K_eff: it does not limit the step)
         lim = stability_limit(K, m, C, comm, minus=(K_I, C_I),
-                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
+                              damping_factor=DAMPING_STABILITY_FACTOR)
         where = limiting_element(mesh, dofmap.index, lim.limiting_dof)
         dt, text = stable_step(case, lim, lim.dt_critical, where, dt_band, "imex")
     except BaseException:
@@ -280,13 +268,11 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
         if layer is not None:
             layer.destroy()
         raise
-    finally:
-        if plus is not None:
-            plus.destroy()
     auto = (f" and {int(extra.sum()):,} elements below the target step" if extra is not None
             else "")
     text = (f"implicit: {', '.join(parts) or 'none'}{auto}, the absorbing faces' springs and "
-            f"dashpots{', the layers M_e1' if layer is not None else ''}; explicit part {text}")
+            f"dashpots{', the layers M_e1, M_e2' if layer is not None else ''}; explicit part "
+            f"{text}")
     return (K_I, C_I), dt, text, layer, STEP_SAFETY * lim.dt_critical
 
 

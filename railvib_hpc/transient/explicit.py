@@ -207,7 +207,7 @@ class StableStep:
 
 
 def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
-                    damping_factor: float = 1.0, plus=None) -> StableStep:
+                    damping_factor: float = 1.0) -> StableStep:
     """The critical step of ``K, C`` on the lumped mass ``m`` (collective).
 
     The largest frequency of ``K, m`` (SLEPc Krylov-Schur on ``m^-1/2 K m^-1/2``, to
@@ -228,14 +228,12 @@ def stability_limit(K, m: np.ndarray, C, comm, minus: tuple | None = None,
     ``minus = (K_p, C_p)``: the limit of ``K - K_p, C - C_p`` (the explicit part of the
     IMEX engine, :mod:`.imex`, whose implicit partition ``K_p, C_p`` is unconditionally
     stable; ``C_p`` may be None). ``K_p``'s pattern must be a subset of ``K``'s.
-    ``plus``: a matrix added to K (the perfectly matched layers' diagonal ``M_e2``,
-    :class:`~.pml.PmlLayer`).
     """
     d = K.createVecLeft()
     d.getArray()[:] = 1.0 / np.sqrt(m)
     K_p, C_p = (None, None) if minus is None else minus
     # m^-1/2 (K - K_p) m^-1/2 as a shell: no copy of K (a third of the setup's peak)
-    op = _ScaledCombination(d, [(K, 1.0), (K_p, -1.0), (plus, 1.0)])
+    op = _ScaledCombination(d, [(K, 1.0), (K_p, -1.0)])
     lam, x, iterations = _largest_eigenpair(op, comm)
     phi = x.getArray() * d.getArray()        # the mode in displacements (x = m^1/2 phi)
     omega = float(np.sqrt(max(lam, 0.0)))
@@ -443,6 +441,7 @@ class ExplicitSystem:
         if pml is not None:           # the layers' M_e1 at the full step, like the dashpots
             base = np.zeros(self.n_local) if self.dashpots is None else self.dashpots
             self.dashpots = base + pml.damping_diagonal
+        self._effective = None                # (dt, the divisor of accelerate)
         self._x, self._y = K.createVecRight(), K.createVecLeft()
         self._v, self._w = K.createVecRight(), K.createVecLeft()
         self.time_products = 0.0
@@ -572,12 +571,30 @@ class ExplicitSystem:
     def accelerate(self, rhs: np.ndarray, v_half: np.ndarray) -> np.ndarray:
         """``a_{n+1}`` from ``rhs = f_{n+1} - K u_{n+1} - C v_{n+1/2}`` (changed in place):
         ``rhs / m``, or with the diagonal dashpots at ``v_{n+1} = v_{n+1/2} + dt / 2
-        a_{n+1}``, ``(rhs - d v_{n+1/2}) / (m + dt / 2 d)``."""
+        a_{n+1}``, ``(rhs - d v_{n+1/2}) / (m + dt / 2 d)``; with layers ``+ dt^2 / 4
+        M_e2`` in the divisor (:meth:`effective_mass`)."""
         d = self.dashpots
-        if d is None:
-            return rhs / self.m
-        rhs -= d * v_half
-        return rhs / (self.m + (0.5 * self.dt) * d)
+        if d is not None:
+            rhs -= d * v_half
+        return rhs / self.effective_mass()
+
+    def effective_mass(self) -> np.ndarray:
+        """The diagonal that :meth:`accelerate` divides by: ``m + dt / 2 d + dt^2 / 4
+        M_e2`` (the dashpots ``d`` at the full-step velocity; the layers' ``M_e2``,
+        :attr:`~.pml.PmlLayer.average_diagonal`, at the average displacement ``(u_{n+1}
+        + 2 u_n + u_{n-1}) / 4 = u_n + dt^2 / 4 a_n``, Newmark's beta = 1/4 on a diagonal:
+        the step ``(m + dt^2 / 4 e) a_n + (K + e) u_n = f_n`` is stable while ``m +
+        dt^2 / 4 e - dt^2 / 4 (K + e) = m - dt^2 / 4 K`` is positive, the elastic limit,
+        so ``M_e2`` no longer shortens the step; with it explicit, the limit of ``K +
+        M_e2`` was 1.65 x shorter on a box with five layers). Formed once per step size."""
+        if self._effective is None or self._effective[0] != self.dt:
+            out = self.m.copy()
+            if self.dashpots is not None:
+                out += (0.5 * self.dt) * self.dashpots
+            if self.pml is not None:
+                out += (0.25 * self.dt * self.dt) * self.pml.average_diagonal
+            self._effective = (self.dt, out)
+        return self._effective[1]
 
     def energy(self, u: np.ndarray, v: np.ndarray) -> float:
         """Kinetic plus strain energy ``1/2 v^T m v + 1/2 u^T K u`` (collective)."""
@@ -634,15 +651,18 @@ def initial_acceleration(system: ExplicitSystem, state: State,
                          loads: list[SparseLoad]) -> None:
     """``a_0 = m^-1 (f_0 - C v_0 - d v_0 - K u_0)`` (the counterpart of
     :func:`~.integrate.initial_acceleration`; the mass is diagonal, ``d`` the system's
-    diagonal dashpots)."""
+    diagonal dashpots; with layers ``m + dt^2 / 4 M_e2``, their ``M_e2`` at the average
+    displacement as in every step, :meth:`ExplicitSystem.effective_mass`)."""
     res = -system.internal_force(state.u, state.v)
+    mass = system.m
     if system.pml is not None:
         res -= system.pml.start(state.u)
+        mass = mass + (0.25 * system.dt * system.dt) * system.pml.average_diagonal
     if system.dashpots is not None:
         res -= system.dashpots * state.v
     for dofs, values in loads:
         add_sparse(res, system.r0, dofs, values)
-    state.a[:] = res / system.m
+    state.a[:] = res / mass
 
 
 class ExplicitSolver:

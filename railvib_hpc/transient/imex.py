@@ -230,8 +230,11 @@ class ImexSystem(ExplicitSystem):
         self.implicit = implicit_rows(self.h_implicit)
         self.implicit_rows = comm.allreduce(int(self.implicit.sum()))
         self._diagonal = self._c_mass * self.m
-        if pml is not None:        # the layers' M_e1, trapezoidal like C_I: in K_eff
-            self._diagonal = self._diagonal + (g / (b * dt)) * pml.damping_diagonal
+        if pml is not None:
+            # the layers' M_e1, trapezoidal like C_I, and M_e2, implicit like K_I (so
+            # it does not shorten the step): in K_eff
+            self._diagonal = self._diagonal + (g / (b * dt)) * pml.damping_diagonal \
+                + pml.average_diagonal
         self.op = self.k_implicit = None
         if self.implicit_rows:
             full = with_diagonal(self.h_implicit, self._diagonal, comm)
@@ -273,18 +276,20 @@ class ImexSystem(ExplicitSystem):
         + C_I (v* - v~)`` from the state ``u, v, a`` (PETSc vectors; see the module
         notes); once per step.
 
-        With perfectly matched layers also ``+ gamma / (beta dt) d u~ - d v~ - f_pml(u~)``:
-        their ``M_e1`` (diagonal ``d``) is implicit like ``C_I`` (in K_eff's diagonal:
-        ``d v_{n+1}``), their memory and ``M_e2`` force explicit, at the predictor ``u~``,
-        the displacement the explicit elements see (with gamma = 1/2 the predictors step
-        as the central differences, :meth:`scheme_energy`: the layer advances along them
-        as in the explicit engine, and ``M_e2`` enters the explicit part's stability
-        limit). The memory starts at rest with the first predictor.
+        With perfectly matched layers also ``+ (gamma / (beta dt) d + e) u~ - d v~ -
+        f_pml(u~)``: their ``M_e1`` (diagonal ``d``) is implicit like ``C_I`` (in K_eff's
+        diagonal: ``d v_{n+1}``), their ``M_e2`` (diagonal ``e``,
+        :attr:`~.pml.PmlLayer.average_diagonal`) implicit like ``K_I`` (``e u_{n+1}``:
+        it does not limit the step), the rest of their force (memory, ``-alpha M_e1``,
+        the chains) explicit, at the predictor ``u~``, the displacement the explicit
+        elements see (with gamma = 1/2 the predictors step as the central differences,
+        :meth:`scheme_energy`: the layer advances along them as in the explicit engine).
+        The memory starts at rest with the first predictor.
         """
         dt, b, g = self.dt, self.scheme.beta, self.scheme.gamma
         u_, v_, a_ = (self.local(x) for x in (u, v, a))
         u_pred = u_ + dt * v_ + (dt * dt * (0.5 - b)) * a_
-        res = self._diagonal * u_pred              # (c_mass m [+ g/(b dt) d], formed once)
+        res = self._diagonal * u_pred         # (c_mass m [+ g/(b dt) d + e], formed once)
         res -= self.internal_force(u_pred, damping_velocity(v_, a_, dt))
         res += self.times(self.h_implicit, u_pred)
         if self.C_I is not None:

@@ -302,13 +302,3 @@ def _with_diagonal_damping(K, C, diagonal: np.ndarray, comm):
     out.setDiagonal(d, addv=PETSc.InsertMode.ADD_VALUES)
     d.destroy()
     return out
-
-
-def diagonal_matrix(comm, rows: tuple[int, int], n_global: int, values: np.ndarray):
-    """A distributed AIJ matrix with this rank's rows ``values`` on its diagonal (the
-    perfectly matched layers' ``M_e2`` in the explicit engine's stability limit)."""
-    import scipy.sparse as sp
-
-    r0, r1 = rows
-    return csr_matrix(comm, sp.diags(np.asarray(values, dtype=float), offsets=r0,
-                                     shape=(r1 - r0, n_global), format="csr"))

@@ -1,11 +1,11 @@
 """The perfectly matched layers of ``pml`` faces for the time-domain engines (issue 29).
 
-A face ``boundary.<face> = "pml"`` is fixed, and the hexahedra whose centroids lie within
-``boundary.layer_thickness`` of it form its layer: their coordinate normal to the face is
-stretched by ``1 + d(xi) / (i omega)`` (:mod:`railvib_hpc.fem.pml`: formulation, profile,
-kernel), with ``xi`` the depth into the layer. Edges and corners, where two or three
-layers overlap, stretch two or three coordinates; the soil's layers and parts continue
-through it (each element keeps its material). The layer's strength ``d_max`` follows
+A face ``boundary.<face> = "pml"`` is fixed, and the hexahedra with a Gauss point within
+``boundary.layer_thickness`` of it form its layer (:func:`pml_geometry`): their coordinate
+normal to the face is stretched by ``1 + d(xi) / (i omega)`` (:mod:`railvib_hpc.fem.pml`:
+formulation, profile, kernel), with ``xi`` the depth into the layer. Edges and corners,
+where two or three layers overlap, stretch two or three coordinates; the soil's layers and
+parts continue through it (each element keeps its material). The layer's strength ``d_max`` follows
 from the largest P-wave speed in it and ``boundary.pml_reflection``,
 ``boundary.pml_power``.
 
@@ -35,9 +35,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import UserError
-from ..fem.hex8 import hex8_lumped_mass_diagonal
 from ..fem.material import lame_parameters
-from ..fem.pml import MIN_ELEMENTS, PmlElements, mass_coefficients, profile, profile_strength
+from ..fem.pml import (
+    MIN_ELEMENTS,
+    PmlElements,
+    lumped_mass_coefficients,
+    profile,
+    profile_strength,
+)
 from ..fem.reference import GAUSS_VALUES
 from ..mesh.model import Mesh
 from ..modal.boundary import FACE_AXIS, face_node_sets, face_types
@@ -99,8 +104,21 @@ def _element_materials(mesh: Mesh, problem: Problem, sel: np.ndarray
     return lam, mu, rho
 
 
+def _gauss_coordinates(mesh: Mesh, axis: int) -> np.ndarray:
+    """Coordinate ``axis`` of every hexahedron's 2x2x2 Gauss points, (n_hexes, 8)."""
+    return mesh.points[mesh.hexes][:, :, axis] @ GAUSS_VALUES.T
+
+
 def pml_geometry(mesh: Mesh, problem: Problem) -> tuple[list[PmlFace], np.ndarray]:
     """The ``pml`` faces and the mask of the hexahedra in their layers (checked).
+
+    A face's layer holds every hexahedron with a Gauss point less than
+    ``boundary.layer_thickness`` from the face (by more than :data:`ACROSS_TOL` of it):
+    the elements where its stretching ``d > 0`` acts. So the stretching is a function of
+    the coordinate normal to the face alone, as the continuous layer's (an element that
+    straddles the layer's inner plane is in it, whatever its size; by the centroids, a
+    coarse element whose centroid lay at the thickness was in or out by round-off: 10 of
+    the 496 8-m elements of a 4-m layer on the coarse thesis model).
 
     Raises
     ------
@@ -120,21 +138,25 @@ def pml_geometry(mesh: Mesh, problem: Problem) -> tuple[list[PmlFace], np.ndarra
             raise PmlError(f"boundary.{face} = 'pml': the mesh has no nodes on that face")
         axis = FACE_AXIS[face]
         plane = float(mesh.points[nodes, axis].mean())
-        layer = np.abs(centres[:, axis] - plane) < thickness
+        distance = np.abs(_gauss_coordinates(mesh, axis) - plane).min(axis=1)
+        layer = distance < thickness * (1.0 - ACROSS_TOL)
         if not layer.any():
-            nearest = float(np.abs(centres[:, axis] - plane).min())
+            k = int(np.argmin(distance))
+            ext = mesh.points[mesh.hexes[k], axis]
+            size = float(ext.max() - ext.min())
             raise PmlError(
                 f"boundary.layer_thickness = {thickness:g}: the pml layer of boundary.{face} "
-                f"holds no element (the nearest centroid lies {nearest:.4g} m from the "
-                f"face); allowed: more than {nearest:.4g} m, better {MIN_ELEMENTS} element "
-                f"layers (about {2 * MIN_ELEMENTS * nearest:.3g} m on this mesh)")
+                f"holds no element (the nearest Gauss point lies {distance[k]:.4g} m from "
+                f"the face); allowed: more than {distance[k]:.4g} m, better {MIN_ELEMENTS} "
+                f"element layers (about {MIN_ELEMENTS * size:.3g} m on this mesh)")
         if (layer & building).any():
             k = int(np.flatnonzero(layer & building)[0])
             raise PmlError(
                 f"boundary.layer_thickness = {thickness:g}: the pml layer of boundary.{face} "
                 f"reaches the building (element {k} at {np.round(centres[k], 3).tolist()} "
                 "m); a layer stands in for the ground beyond the model: make it thinner or "
-                "the domain larger ([domain], case.extra_*)")
+                "the domain larger (domain.extra_depth, domain.extra_length, "
+                "domain.extra_width)")
         lam, mu, rho = _element_materials(mesh, problem, np.flatnonzero(layer))
         c_p = float(np.sqrt((lam + 2.0 * mu) / rho).max())
         d_max = profile_strength(c_p, thickness, problem.boundary.pml_power,
@@ -238,7 +260,8 @@ class PmlLayer:
         lam, mu, rho = _element_materials(mesh, problem, sel)
         gauss = np.einsum("qa,eak->eqk", GAUSS_VALUES, x)
         alpha = self.alpha = problem.boundary.pml_alpha
-        self.kernel = PmlElements(x, lam, mu, damping_at(gauss, self.faces, problem), alpha)
+        damping = damping_at(gauss, self.faces, problem)
+        self.kernel = PmlElements(x, lam, mu, damping, alpha)
         self.dofs = dofmap.index[conn][:, :, :3]                    # (nel, 8, 3), -1 fixed
         flat = self.dofs.ravel()
         needed = np.unique(flat[flat >= 0])
@@ -251,14 +274,19 @@ class PmlLayer:
         # element slots of this rank's rows, and those rows
         self._owned = np.flatnonzero((flat >= r0) & (flat < r1))
         self._rows = flat[self._owned] - r0
-        # the layer elements' lumped masses weighted by e1, e2, e3 at their nodes
-        mass = hex8_lumped_mass_diagonal(x, rho).reshape(-1, 8, 3)
-        m1, m2, m3 = (self._to_rows(mass * c[:, :, None])
-                      for c in mass_coefficients(damping_at(x, self.faces, problem)))
+        # the layer elements' lumped masses weighted by e1, e2, e3 at the Gauss points,
+        # where the memory terms take d (at the nodes the layer grew, fem.pml)
+        m1, m2, m3 = (self._to_rows(np.repeat(c[:, :, None], 3, axis=2))
+                      for c in lumped_mass_coefficients(x, rho, damping))
         # rho s^2 J u with J = 1 + e1 r + e2 r^2 + e3 r^3, r = 1 / (s + alpha):
         # M_e1 u' + (M_e2 - alpha M_e1) u + c_k chi_k, chi_k = r^k u (fem.pml)
         self.damping_diagonal = m1
         self.stiffness_diagonal = m2 - alpha * m1
+        #: ``M_e2`` (>= 0), which the conditionally stable engines take at the Newmark
+        #: average displacement, so that it never limits their step (the explicit
+        #: engine's ``m + dt^2 / 4 M_e2``, the imex engine's K_eff; it is in
+        #: :attr:`stiffness_diagonal` and :meth:`force` as the direct engine takes it)
+        self.average_diagonal = m2
         self._chi_coef = (alpha * alpha * m1 - 2.0 * alpha * m2 + m3,
                           alpha * alpha * m2 - 2.0 * alpha * m3, alpha * alpha * m3)
         self.n_elements = len(sel)

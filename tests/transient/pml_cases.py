@@ -114,17 +114,13 @@ def _system(mesh, problem, dofmap, comm, matrices: tuple, layer, implicit, direc
     """The engine's system and its step (:func:`run_box`'s ``implicit``, ``direct``,
     ``courant``); ``matrices``: K, M and the layers' full-integration mask."""
     from railvib_hpc.transient.explicit import ExplicitSystem, stability_limit
-    from railvib_hpc.transient.petsc import diagonal_matrix
 
     K, M, full = matrices
-    rows, n_global = K.getOwnershipRange(), K.getSize()[0]
-    plus = None if layer is None else diagonal_matrix(comm, rows, n_global,
-                                                      layer.stiffness_diagonal)
     if direct is not None:
         lim = None
     elif implicit is None:
         system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
-        lim = stability_limit(K, system.m, None, comm, plus=plus)
+        lim = stability_limit(K, system.m, None, comm)
     else:
         from railvib_hpc.modal.petsc import assemble_partition
         from railvib_hpc.transient.explicit import lumped_diagonal
@@ -133,9 +129,7 @@ def _system(mesh, problem, dofmap, comm, matrices: tuple, layer, implicit, direc
         partition = assemble_partition(mesh, problem, dofmap, comm, (), extra_hexes=implicit,
                                        full_hexes=full)
         lim = stability_limit(K, lumped_diagonal(M, comm), None, comm, minus=partition,
-                              damping_factor=DAMPING_STABILITY_FACTOR, plus=plus)
-    if plus is not None:
-        plus.destroy()
+                              damping_factor=DAMPING_STABILITY_FACTOR)
     ext = mesh.points[mesh.hexes]
     h_min = float((ext.max(axis=1) - ext.min(axis=1)).min())
     dt = direct if direct is not None else \

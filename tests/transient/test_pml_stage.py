@@ -106,7 +106,7 @@ def test_a_pml_reflection_outside_0_1_is_refused(tmp_path, capsys):
 def test_a_layer_without_an_element_names_the_thickness_it_needs(tmp_path, capsys):
     err = _refused(tmp_path, capsys, "transient", *LAYERS, "boundary.layer_thickness=0.2")
     assert "boundary.layer_thickness = 0.2: the pml layer of boundary." in err
-    assert "holds no element (the nearest centroid lies" in err and "allowed: more than" in err
+    assert "holds no element (the nearest Gauss point lies" in err and "allowed: more than" in err
 
 
 def test_a_layer_that_reaches_the_building_is_refused(tmp_path, capsys):
@@ -195,15 +195,16 @@ def test_the_imex_engine_runs_the_thesis_model_with_layers_on_1_and_2_ranks(shar
                                                                            serial_refs,
                                                                            capsys):
     """The same short run with the imex engine (the track and the building implicit): the
-    layers' M_e1 is named among the implicit terms, the step is the explicit soil's
-    (measured: 3.33e-4 s, 20 steps, against the explicit engine's ~2e-6 s for the rail),
+    layers' M_e1 and M_e2 are named among the implicit terms, the step is the explicit
+    soil's (measured: 3.33e-4 s, 20 steps, against the explicit engine's ~2e-6 s for the
+    rail),
     the probes are finite, and on 2 ranks they equal the same run alone on COMM_SELF
     (``serial_refs``) within 1e-9 of their peak."""
     out = shared_tmp / f"pml_imex_{comm.size}"
     assert run(["transient", str(BASELINE), "--out", str(out), *_sets(*IMEX)]) == 0
     text = capsys.readouterr().out
     if comm.rank == 0:
-        assert "the layers M_e1; explicit part stable up to" in text
+        assert "the layers M_e1, M_e2; explicit part stable up to" in text
         with h5py.File(out / "transient.h5", "r") as f:
             stats = json.loads(f.attrs["stats"])
         assert stats["engine"] == "imex" and stats["pml_elements"] >= 2620

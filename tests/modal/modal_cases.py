@@ -135,15 +135,30 @@ def residual_floors(K, M, phi: np.ndarray, lam) -> np.ndarray:
                                                                                  axis=0)
 
 
-def assert_within_roundoff_of_tol(res, tol: float = 1e-10) -> None:
-    """Every mode of ``res`` converged or is limited by round-off: its measured relative
-    residual is at most ``tol`` plus its round-off floor (the measurement's own error bound,
-    :func:`railvib_hpc.modal.ritz.within_roundoff`), so no CPU kernel's rounding can tip a
-    pair whose true residual is within ``tol`` over this bound. (Was ``max(tol, floor)``:
-    a pair whose floor is near ``tol`` then passed with one OpenBLAS kernel and failed with
-    another, 1.94e-10 against a floor of 1.72e-10.)"""
-    bad = res.residuals > tol + res.residual_floors
-    assert not bad.any(), (np.flatnonzero(bad), res.residuals[bad], res.residual_floors[bad])
+def assert_accepted_by_the_verdict(res, tol: float = 1e-10) -> None:
+    """Every mode of ``res`` is in a class that :func:`railvib_hpc.modal.ritz.convergence_verdict`
+    accepts (converged; limited by round-off, ``rho <= tol + floor``; or, after the retry,
+    ``rho <= RETRY_TOL_FACTOR * tol``), and every mode above ``tol`` is reported in the
+    result's warnings, the last class by its own warning.
+
+    Which accepted class a pair falls in is not pinned: the solver's stopping test is on the
+    shift-inverted operator, so the true residual of a pair it returns moves with the
+    rounding of the whole Lanczos run, not only of the residual's evaluation. Measured on the
+    60-element column's two-band merge at ``tol = 1e-10``: 1.549e-10 against ``tol + floor``
+    = 1.41e-10 with OpenBLAS on two threads (native and SkylakeX kernels), within ``tol +
+    floor`` on one thread and with Haswell's kernel. (Was ``rho <= tol + floor``, which
+    passed or failed by the BLAS thread count; before that ``max(tol, floor)``, which
+    passed or failed by the OpenBLAS kernel.)"""
+    from railvib_hpc.modal.ritz import hopeless
+
+    res_, floors = res.residuals, res.residual_floors
+    bad = hopeless(res, tol)
+    assert not bad.any(), (np.flatnonzero(bad), res_[bad], floors[bad])
+    if (res_ > tol).any():
+        assert res.warnings, (res_.max(), "a mode above tol with no warning")
+    if (res_ > tol + floors).any():
+        assert any("end with a relative residual above" in w for w in res.warnings), \
+            res.warnings
 
 
 def assert_same_subspaces(K, M, lam, phi_a, phi_b, rtol) -> int:

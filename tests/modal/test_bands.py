@@ -16,8 +16,8 @@ import h5py
 import numpy as np
 import pytest
 from modal_cases import (
+    assert_accepted_by_the_verdict,
     assert_same_subspaces,
-    assert_within_roundoff_of_tol,
     beam_mesh,
     block_mesh,
     column_mesh,
@@ -543,7 +543,7 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
         _same_modes(res, ref, K, M, n, 12)
         assert res.stats["n_bands"] == 1
         # (this column at tol = 1e-10: some modes sit at their round-off floor, warned)
-        assert_within_roundoff_of_tol(res)
+        assert_accepted_by_the_verdict(res)
         runs[name] = res
     st = {k: r.stats for k, r in runs.items()}
     assert [st["solved"]["bands"][0].get("reused"), st["cached"]["bands"][0]["reused"]] == \
@@ -611,7 +611,7 @@ def test_multi_band_merge_forms_only_the_blocks_between_bands(tmp_path):
         res, *_ = solve_banded(mesh, soil_case(), rules, f_max, tmp_path, band_modes=12)
         _same_modes(res, ref, K, M, n, 12)
         assert res.stats["n_bands"] >= 2
-        assert_within_roundoff_of_tol(res)
+        assert_accepted_by_the_verdict(res)
         runs[name] = res
     assert runs["solved"].stats["merge_gram"].startswith("cross-band blocks")
     assert runs["cached"].stats["merge_gram"] == "full"
@@ -670,7 +670,7 @@ def test_the_merge_keeps_the_bands_modes_only_where_the_measured_grams_allow(tmp
     assert gram == pytest.approx(kept.stats["max_orthonormality_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
     _same_residuals(rho, kept, K, M)
-    assert_within_roundoff_of_tol(kept)
+    assert_accepted_by_the_verdict(kept)
 
 
 def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
@@ -735,5 +735,5 @@ def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
     assert stiff == pytest.approx(part.stats["max_stiffness_diag_error"], rel=0.5, abs=1e-14)
     rho = np.linalg.norm(Ks @ phi - (Ms @ phi) * lam, axis=0) / np.linalg.norm(Ks @ phi, axis=0)
     _same_residuals(rho, part, K, M)
-    assert_within_roundoff_of_tol(part)
+    assert_accepted_by_the_verdict(part)
     _same_verdicts(part, full, K, M)

@@ -61,9 +61,22 @@ RAMP, SETTLE, FIT = 2.0, 12.0, 3.0
 MARGIN, LAYER, DEPTH = 16, 10, 2.0
 #: The issue's bound on the amplitude at ten wavelengths.
 LIMIT = 0.05
-#: The measured phase lag per wavelength against the grid's Rayleigh relation, relative
-#: (measured: within 0.2-2.5 % at 8, 12, 16 per wavelength, ahead and behind).
+#: The measured phase lag per wavelength against the grid's Rayleigh relation, relative,
+#: on top of :data:`PHASE_FLOOR` (measured ahead: within 0.4-1.4 % at 8, 12, 16 per
+#: wavelength).
 PHASE_LIMIT = 0.05
+#: Largest reflected energy of a layer measured at 0-60 degrees (8 elements; this slab's
+#: layers have 10): 5.6e-5 (tests/transient/test_pml_oblique.py), an amplitude of 0.75 %.
+LAYER_REFLECTED_ENERGY = 5.6e-5
+#: The phase slope's floor [cycles per wavelength] that such a reflection sets: a wave of
+#: relative amplitude R on top moves the phase by up to R / (2 pi) cycles, so the slope
+#: fitted over the 9 wavelengths between the nearest and farthest compared points by up
+#: to 2 R / (2 pi 9) = 2.6e-4. The grid's lag behind the load at 20-27 elements per
+#: wavelength is only 1.5e-3 to 2.7e-3 per wavelength, so there the layer's share shows
+#: (measured behind, 1 rank, the layers' mass at their Gauss points, on the meshes of 8 /
+#: 12 / 16 per wavelength ahead: 0.00604 / 0.00261 / 0.00143 against 0.00622 / 0.00272 /
+#: 0.00152 predicted, 0.9-1.8e-4 below and not falling with h; ahead within 0.4-1.4 %).
+PHASE_FLOOR = 2.0 * math.sqrt(LAYER_REFLECTED_ENERGY) / (2.0 * math.pi * 9.0)
 
 
 def _soil(epw: int):
@@ -156,6 +169,13 @@ def phase_slopes(r: dict) -> tuple[np.ndarray, np.ndarray]:
     return measured, grid * doppler
 
 
+def assert_the_grid_lag(measured: np.ndarray, predicted: np.ndarray) -> None:
+    """The measured phase lags per wavelength (ahead, behind) are the grid's Rayleigh
+    relation's, within :data:`PHASE_LIMIT` of it plus the layers' :data:`PHASE_FLOOR`."""
+    bound = PHASE_LIMIT * np.abs(predicted) + PHASE_FLOOR
+    assert np.all(np.abs(measured - predicted) < bound), (measured, predicted, bound)
+
+
 def _errors(r: dict) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude error (relative) and phase lag [cycles] per compared ``xi``."""
     return (np.abs(r["v_fe"]) / np.abs(r["v_ref"]) - 1,
@@ -191,7 +211,7 @@ def test_the_moving_harmonic_load_at_ten_wavelengths_converges_at_second_order()
         print(f"{r['epw']} per wavelength: phase lag per wavelength ahead / behind measured "
               f"{measured[0]:.5f} / {measured[1]:.5f}, predicted {predicted[0]:.5f} / "
               f"{predicted[1]:.5f}")
-        assert np.all(np.abs(measured / predicted - 1) < PHASE_LIMIT), (measured, predicted)
+        assert_the_grid_lag(measured, predicted)
     # the phase lag grows with the distance, the amplitude error does not
     ahead = runs[-1]["xi"] > 0
     assert abs(phase[-1, -1]) > 4 * abs(phase[-1, ahead][0])
@@ -227,4 +247,4 @@ def test_the_moving_harmonic_load_on_two_ranks(serial_refs):
         print(f"{comm.size} ranks against 1: {diff:.1e} of the largest amplitude")
     assert diff < 1e-9, diff
     measured, predicted = phase_slopes(r)
-    assert np.all(np.abs(measured / predicted - 1) < PHASE_LIMIT), (measured, predicted)
+    assert_the_grid_lag(measured, predicted)

@@ -1,0 +1,59 @@
+"""The static start against the steady state of a point load moving over a half-space, at
+several speeds: the sweep behind the table of ``tests/transient/test_moving_load_steady.py``.
+
+The test tier runs one speed (0.6 c_R, the side-by-side case against STEM); this script
+runs the box of :mod:`moving_load_steady` (``tests/transient/``) at each speed asked and
+prints, per speed and distance, the errors in u_z and v_z against
+:mod:`railvib_hpc.fem.halfspace` with the harness's derived tolerance beside them, the DOFs,
+the steps and the wall time per speed.
+
+Usage::
+
+    python bench/moving_load_steady.py                    # 0.3, 0.6 and 0.8 c_R
+    python bench/moving_load_steady.py --ratios 0.3 0.8 --out /tmp/box
+
+Measured (2026-12, the shared 2-core machine, one rank): 272,853 DOFs; 78-96 s per speed
+alone, of which about half is the static start's MUMPS factor; the errors are those
+listed in the test module's notes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "transient"))
+sys.path.insert(0, str(ROOT / "tests"))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the sweep and print the table; 0 when every speed ran."""
+    from moving_load_steady import box_overrides, compare, format_rows, run_box, soil
+    from mpi4py import MPI
+
+    parser = argparse.ArgumentParser(
+        description="the moving point load's static start against the steady state, per speed")
+    parser.add_argument("--ratios", type=float, nargs="+", default=[0.3, 0.6, 0.8],
+                        help="load speeds over the Rayleigh speed")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="folder for the runs (default: a temporary one)")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as scratch:
+        base = args.out or Path(scratch)
+        for ratio in args.ratios:
+            t0 = time.perf_counter()
+            run = run_box(base / f"box_{ratio:g}", box_overrides(ratio), MPI.COMM_SELF)
+            rows = compare(run)
+            print(f"\nc = {ratio:g} c_R: {run.stats['n_dofs']:,} DOFs, "
+                  f"{run.stats['n_steps']} steps of {run.stats['dt']:.3g} s, "
+                  f"{time.perf_counter() - t0:.0f} s wall")
+            print(format_rows(rows, soil(run.case)["c_r"]))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -38,6 +38,7 @@ from .boundary import (
     PML_FACES,
     TRANSIENT_ENGINES,
 )
+from .case_view import CaseView
 from .conditions import (
     BALLAST_MAT,
     BAND_SLICED,
@@ -196,6 +197,7 @@ __all__ = [
     "WHEEL_FLATS",
     "WIB",
     "WIB_BLOCK",
+    "CaseView",
     "Param",
     "PresetValue",
     "in_building",

@@ -113,7 +113,7 @@ MAX_TWIST_SHEAR = 1.0 / math.tan(math.radians(25.0))
 #: line of ``railvib check`` and the mesh report says so). A micro-degree moves the corners
 #: of the thesis's plan (5.1 m from its centre) by 0.09 um, less than the 0.1 um within
 #: which the layouts merge levels (:func:`railvib_hpc.mesh.layout._merge`). (Such twists
-#: divided the ring into 0 elements: a ZeroDivisionError, issue 26.)
+#: divided the ring into 0 elements: a ZeroDivisionError.)
 TWIST_RESOLUTION_DEG = 1e-6
 
 

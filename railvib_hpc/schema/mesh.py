@@ -111,9 +111,10 @@ MESH_SECTIONS: dict[str, dict[str, Any]] = {
                                       "period off) is refused at mesh.wavelength_hz whatever "
                                       "this value (warned about at transient.f_max)",
                                       "unit",
-                                      source="issue 28, item 2: accuracy that holds over "
-                                             "distance (docs/transient.md, numerical "
-                                             "dispersion)"),
+                                      source="numerical dispersion of the hexahedral grid "
+                                             "(Mullen & Belytschko 1982; "
+                                             "docs/transient.md): accuracy that holds over "
+                                             "distance"),
     },
     "soil": {
         "layers": Param([], "layers", "-",

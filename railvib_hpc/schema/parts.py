@@ -20,7 +20,7 @@ MIN_SOIL_LAYER_THICKNESS = 0.1
 MAX_ROTATION_DEG = 360.0
 #: Most storeys of the building (``building.storeys``): a program limit. The layout's
 #: cost grows with the square of the storeys (``railvib check``: about 4 s at 100, 25 s at
-#: 300, 107 s at 1000, out of memory at 1e8: issue 26), and 100 storeys (380 m at the
+#: 300, 107 s at 1000, out of memory at 1e8), and 100 storeys (380 m at the
 #: thesis's storey height) is far beyond what the model's frame, one column size and one
 #: slab thickness for every storey, represents.
 MAX_STOREYS = 100

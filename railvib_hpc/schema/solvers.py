@@ -149,7 +149,9 @@ SOLVERS_SECTIONS: dict[str, dict[str, Any]] = {
                         "step limited by the soil's elements only; needs modal.lumped_mass = "
                         "true)",
                         choices=TRANSIENT_ENGINES,
-                        source="issue 28: an engine whose memory and cost grow linearly"),
+                        source="not in the thesis: the direct path (one MUMPS factor) is the "
+                               "reference; explicit and imex are engines whose memory and "
+                               "cost grow linearly (docs/transient.md)"),
         "implicit_elements": Param("parts", "str", "-",
                                    "transient.engine = 'imex': 'parts' integrates the parts "
                                    "of transient.implicit_parts implicitly; 'auto' also every "
@@ -160,7 +162,8 @@ SOLVERS_SECTIONS: dict[str, dict[str, Any]] = {
                                    "heavily damped elements of the soil no longer set the "
                                    "step of the whole model",
                                    choices=("parts", "auto"),
-                                   source="issue 28: element-wise stable steps",
+                                   source="element-wise stable steps of an implicit-explicit "
+                                          "partition (Hughes & Liu 1978; docs/transient.md)",
                                    applies=IMEX_ENGINE),
         "implicit_parts": Param(["track", "building"], "strs", "-",
                                 "transient.engine = 'imex': the parts integrated implicitly "
@@ -168,8 +171,9 @@ SOLVERS_SECTIONS: dict[str, dict[str, Any]] = {
                                 "under-sleeper pads, ballast mats and 'building' = the "
                                 "building's parts and its base isolation); every other "
                                 "element is explicit and sets the stable step",
-                                source="issue 28: the stiff, small track and building "
-                                       "implicit, the soil explicit", applies=IMEX_ENGINE),
+                                source="Hughes & Liu 1978: the stiff, small track and "
+                                       "building implicit, the soil explicit "
+                                       "(docs/transient.md)", applies=IMEX_ENGINE),
         "checkpoint_interval": Param(120.0, "float", "s",
                                      "wall-clock time between checkpoints of the state (an "
                                      "interrupted run resumes from the last one; 0: none)",

@@ -54,7 +54,7 @@ STUDIES_SECTIONS: dict[str, dict[str, Any]] = {
                                 "wave arrival: first time the acceleration magnitude exceeds "
                                 "this fraction of its peak", "fraction"),
     },
-    # Uncertain inputs (issue 30, docs/uncertainty.md): `railvib study uncertainty CASE`
+    # Uncertain inputs (docs/uncertainty.md): `railvib study uncertainty CASE`
     # samples them; `railvib run` uses the nominal values (and field realisation 0: none).
     "uncertainty": {
         "parameter": Param([], "uncertain_parameters", "-",

@@ -98,8 +98,9 @@ VEHICLE_SECTIONS: dict[str, dict[str, Any]] = {
                                "(the critical speed of a track on soft soil: the response "
                                "grows and forms a Mach cone; without this key such a speed "
                                "is refused)",
-                               source="issue 28: reaching the soil's Rayleigh speed must be "
-                                      "handled"),
+                               source="the critical speed of a track on soft soil (Krylov "
+                                      "1995; Madshus & Kaynia 2000): refused unless "
+                                      "accepted"),
         "drop_height": Param(0.0, "float", "m",
                              "initial condition: 0 starts the vehicle at rest in static "
                              "equilibrium; > 0 drops it: at t = 0 the track is at rest and "
@@ -220,7 +221,9 @@ VEHICLE_SECTIONS: dict[str, dict[str, Any]] = {
                        "the bare soil surface (0: no surface load; STEM's 'moving load on "
                        "soil', the verification against the steady state of a load moving "
                        "over an elastic half-space, railvib_hpc.fem.halfspace)", "nonneg",
-                       source="issue 28 item 5: a verification load, no default model",
+                       source="a verification load, no default model: STEM's moving "
+                              "load on soil, against Eason 1965 / de Barros & Luco 1994 "
+                              "(docs/verification.md)",
                        applies=BARE_SOIL),
         "speed": Param(30.0, "float", "m/s",
                        "the surface load's speed along +x (at or above the ground's Rayleigh "
@@ -273,7 +276,9 @@ VEHICLE_SECTIONS: dict[str, dict[str, Any]] = {
                            "waves of wavelength (c_R -/+ speed) / frequency ahead of and "
                            "behind it (its plane-strain reference: "
                            "railvib_hpc.fem.halfspace_line); at most transient.f_max",
-                           "nonneg", source="issue 28 item 7: a verification load",
+                           "nonneg", source="a verification load: the moving harmonic load "
+                                            "in the moving frame of Sheng, Jones & Petyt "
+                                            "1999 (docs/verification.md)",
                            applies=BARE_SOIL),
     },
 }

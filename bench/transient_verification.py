@@ -83,7 +83,7 @@ def section_a() -> list[str]:
             e_in = r["energy"][np.searchsorted(r["t"], 0.04 + 1.0 / c)]
             row.append(r["energy"][-1] / e_in)
         out.append(f"| {h} | {row[0]:.2e} | {row[1]:.2e} |")
-    out += ["", "Criterion (issue 12): reflected energy < 1 % at normal incidence; the error "
+    out += ["", "Criterion: reflected energy < 1 % at normal incidence; the error "
             "falls at the scheme's order (2).", "",
             "Second method, a graded Caughey absorbing layer (CALM: Rayleigh damping at 10 "
             "and 50 Hz whose ratio grows quadratically to zeta_max at the fixed bottom) in "
@@ -193,7 +193,7 @@ def section_b() -> list[str]:
                    f"{res['run_s']:.1f} s | | | | | | | | | |")
     out += ["", "The analytic onset is at the P front (zero before it); the FE solution is "
             "causal (its largest value before r/c_P is in the last column, relative to the "
-            "peak). Criterion (issue 12): arrivals within a few time steps, amplitude within "
+            "peak). Criterion: arrivals within a few time steps, amplitude within "
             "5 % at distances >= 5 elements.", ""]
     return out
 

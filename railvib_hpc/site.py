@@ -16,14 +16,12 @@ from __future__ import annotations
 import math
 from collections.abc import Collection, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from .schema import MAX_ROTATION_DEG, SOIL_LAYER_PARTS, iter_params
+from .schema import MAX_ROTATION_DEG, SOIL_LAYER_PARTS, CaseView, iter_params
 
-if TYPE_CHECKING:
-    from .config import Case
 
 def rayleigh_speed(c_s: float, nu: float) -> float:
     """Rayleigh-wave speed of an elastic half-space [m/s]: the real root in (0, c_s) of
@@ -40,7 +38,7 @@ def rayleigh_speed(c_s: float, nu: float) -> float:
     return float(c_s * np.sqrt(real.min()))
 
 
-def ground_rayleigh_speeds(case: Case) -> dict[str, float]:
+def ground_rayleigh_speeds(case: CaseView) -> dict[str, float]:
     """Rayleigh speed [m/s] of each ground material: the soil layers, or the subgrade."""
     layers = soil_layers(case)
     mats = ({name: (lay["c_s"], lay["nu"]) for name, lay in zip(SOIL_LAYER_PARTS, layers)}
@@ -52,7 +50,7 @@ def ground_rayleigh_speeds(case: Case) -> dict[str, float]:
     return {name: rayleigh_speed(c_s, nu) for name, (c_s, nu) in mats.items()}
 
 
-def soil_layers(case: Case) -> list[dict[str, float]]:
+def soil_layers(case: CaseView) -> list[dict[str, float]]:
     """The case's soil layers, top down, with ``E``, ``c_s``, ``nu``, ``rho``, ``damping_ratio``,
     ``thickness`` and their levels ``z_top``, ``z_bottom`` (m; the last one ends at the base).
 
@@ -90,12 +88,12 @@ def soil_layers(case: Case) -> list[dict[str, float]]:
     return out
 
 
-def track_lift(case: Case) -> float:
+def track_lift(case: CaseView) -> float:
     """How far a fill embankment lifts the track bed above ``geometry.z2, z3, z4`` [m]."""
     return case["track.embankment_height"]
 
 
-def embankment_toe(case: Case) -> float:
+def embankment_toe(case: CaseView) -> float:
     """Half-width of the embankment's base on the ground on the building side [m]: |YS1|,
     plus the fill's slope run."""
     return -case["geometry.ys1"] + case["track.embankment_slope"] * track_lift(case)
@@ -115,7 +113,7 @@ MAX_TWIST_SHEAR = 1.0 / math.tan(math.radians(25.0))
 #: line of ``railvib check`` and the mesh report says so). A micro-degree moves the corners
 #: of the thesis's plan (5.1 m from its centre) by 0.09 um, less than the 0.1 um within
 #: which the layouts merge levels (:func:`railvib_hpc.mesh.layout._merge`). (Such twists
-#: divided the ring into 0 elements: a ZeroDivisionError, issue 26.)
+#: divided the ring into 0 elements: a ZeroDivisionError.)
 TWIST_RESOLUTION_DEG = 1e-6
 
 
@@ -164,7 +162,7 @@ def turn_quarters(x: Any, y: Any, k: int, centre: tuple[float, float]) -> tuple[
     return centre[0] + dx, centre[1] + dy
 
 
-def placed_plan(case: Case) -> tuple[float, float, float, float]:
+def placed_plan(case: CaseView) -> tuple[float, float, float, float]:
     """``(x_lo, x_hi, y_lo, y_hi)``: the building's excavation as meshed, i.e. ``[X2, X3]
     x [YS3, YS2]`` turned by ``building.rotation``'s whole quarter turns about its centre
     (:func:`quarter_turns`; an odd number exchanges its length and width)."""
@@ -228,7 +226,7 @@ class BuildingTurn:
         return abs(self.angle) * self.shear_per_radian if self.angle else 0.0
 
 
-def building_turn(case: Case) -> BuildingTurn:
+def building_turn(case: CaseView) -> BuildingTurn:
     """The twist of a validated case's turned building (``building.rotation`` beyond its
     whole quarter turns) and its ring.
 
@@ -253,7 +251,7 @@ def building_turn(case: Case) -> BuildingTurn:
                         r_out=r_out, bound=bound)
 
 
-def slab_bases(case: Case) -> list[float]:
+def slab_bases(case: CaseView) -> list[float]:
     """Underside of every slab above ZBB, bottom up [m]: ``building.slab_bases``, or
     ``z_slab1_base`` and each further storey ``z_slab2_base - z_slab1_base`` higher."""
     b = case["building"]
@@ -263,12 +261,12 @@ def slab_bases(case: Case) -> list[float]:
     return [b["z_slab1_base"] + k * storey for k in range(b["storeys"])]
 
 
-def train2_vehicle(case: Case) -> dict[str, Any]:
+def train2_vehicle(case: CaseView) -> dict[str, Any]:
     """The second train's vehicle: ``[vehicle]`` with ``[train2.vehicle]``'s keys."""
     return {**case["vehicle"], **case["train2.vehicle"]}
 
 
-def solid_material(case: Case, name: str) -> dict[str, float]:
+def solid_material(case: CaseView, name: str) -> dict[str, float]:
     """``E``, ``nu``, ``rho``, ``damping_ratio`` of a material: ``materials.<name>``, or a
     soil layer's (``name`` = ``soil_layer_<k>``, :func:`soil_layers`)."""
     if name in SOIL_LAYER_PARTS:
@@ -546,7 +544,7 @@ def line_probe_name(line: str, distance: float) -> str:
     return f"{line}_{distance:g}m"
 
 
-def line_x(case: Case, entry: Mapping[str, Any]) -> float:
+def line_x(case: CaseView, entry: Mapping[str, Any]) -> float:
     """The position of a probe line along the track: its ``x``, or the middle of the
     flexible track."""
     if "x" in entry:
@@ -554,7 +552,7 @@ def line_x(case: Case, entry: Mapping[str, Any]) -> float:
     return case["geometry.x1"] + 0.5 * case["track.rail_length"]
 
 
-def line_probes(case: Case) -> dict[str, LineProbe]:
+def line_probes(case: CaseView) -> dict[str, LineProbe]:
     """The points of every ``[[probes.line]]`` of a validated case, by probe name, in the
     order of the lines and their distances."""
     out = {}
@@ -568,7 +566,7 @@ def line_probes(case: Case) -> dict[str, LineProbe]:
     return out
 
 
-def _plan_chord(case: Case, point: tuple[float, float], direction: tuple[float, float]
+def _plan_chord(case: CaseView, point: tuple[float, float], direction: tuple[float, float]
                 ) -> tuple[float, float] | None:
     """The open interval of ``t`` where the line ``point + t direction`` runs through the
     building's plan ``[X2, X3] x [YS3, YS2]`` turned by ``building.rotation`` about its
@@ -593,14 +591,14 @@ def _plan_chord(case: Case, point: tuple[float, float], direction: tuple[float, 
     return (lo, hi) if lo < hi else None
 
 
-def _footprint(case: Case, x: float) -> tuple[float, float] | None:
+def _footprint(case: CaseView, x: float) -> tuple[float, float] | None:
     """The open interval of distances (building side, y = -d) where the line at ``x`` runs
     through the building's plan (turned by ``building.rotation``); None where it passes
     by."""
     return _plan_chord(case, (x, 0.0), (0.0, -1.0))
 
 
-def load_path_crossing(case: Case) -> tuple[float, float] | None:
+def load_path_crossing(case: CaseView) -> tuple[float, float] | None:
     """Where the moving surface load's path (``track.count = 0``: the line ``y = load.y``
     on the ground) runs through the building's plan: the interval of x [m] that the loads
     pass over there (their spreading ``load.half_width`` included), None where they never
@@ -635,7 +633,7 @@ def load_path_crossing(case: Case) -> tuple[float, float] | None:
     return (_round(chord[0]), _round(chord[1])) if a < b else None
 
 
-def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:
+def line_ranges(case: CaseView, x: float, side: str) -> list[tuple[float, float]]:
     """The distances [m] a probe line at ``x`` may reach on ``side``: closed intervals of
     the ground between the embankment toe and the soil's edge, without the building's plan
     and an open trench (building side).
@@ -666,7 +664,7 @@ def line_ranges(case: Case, x: float, side: str) -> list[tuple[float, float]]:
     return [(_round(lo), _round(hi)) for lo, hi in out]
 
 
-def site_lines(case: Case) -> list[str]:
+def site_lines(case: CaseView) -> list[str]:
     """What ``railvib check`` says of the ``[site]`` keys given (and the geometry they set)
     and of the probe lines.
 

@@ -26,11 +26,17 @@ from __future__ import annotations
 import difflib
 import math
 import re
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from .schema import MAX_ROTATION_DEG, MIN_SOIL_LAYER_THICKNESS, SOIL_LAYER_KEYS, iter_params
+from .schema import (
+    MAX_ROTATION_DEG,
+    MIN_SOIL_LAYER_THICKNESS,
+    SOIL_LAYER_KEYS,
+    CaseView,
+    iter_params,
+)
 from .uncertainty.distributions import (
     PARAMETER_KEYS,
     PHYSICAL_RANGE_PROBABILITY,
@@ -38,9 +44,6 @@ from .uncertainty.distributions import (
     make_marginal,
 )
 from .uncertainty.fields import MODELS, QUANTITIES
-
-if TYPE_CHECKING:
-    from .config import Case
 
 #: ``soil.layers[k].<name>``: one entry of a soil layer (1-based k).
 LAYER_KEY = re.compile(r"^soil\.layers\[(\d+)\]\.(\w+)$")
@@ -96,7 +99,7 @@ def check_uncertainty_tables(key: str, kind: str, value: Any, problems: list) ->
     return value
 
 
-def resolve_key(case: Case, key: Any) -> tuple[float | None, tuple, str | None]:
+def resolve_key(case: CaseView, key: Any) -> tuple[float | None, tuple, str | None]:
     """The nominal value and physical range of an uncertain ``key``.
 
     Returns
@@ -140,7 +143,7 @@ def resolve_key(case: Case, key: Any) -> tuple[float | None, tuple, str | None]:
                                 ".E, .nu, .rho, .damping_ratio, .thickness)" + hint)
 
 
-def marginals(case: Case, problems: list | None = None) -> list[Marginal]:
+def marginals(case: CaseView, problems: list | None = None) -> list[Marginal]:
     """The marginal distributions of ``uncertainty.parameter`` (problems appended)."""
     problems = [] if problems is None else problems
     out = []
@@ -167,7 +170,7 @@ def marginals(case: Case, problems: list | None = None) -> list[Marginal]:
     return out
 
 
-def check_uncertainty(case: Case) -> list[tuple[str, Any, str]]:
+def check_uncertainty(case: CaseView) -> list[tuple[str, Any, str]]:
     """The cross-key checks of ``[uncertainty]`` (see the module notes)."""
     out: list[tuple[str, Any, str]] = []
     params = case["uncertainty.parameter"]

@@ -95,3 +95,51 @@ def test_a_file_name_spelled_outside_its_home_is_found(tmp_path):
     assert code_rules.file_name_violations(tmp_path) == [
         "railvib_hpc/stage.py: line 6: the file name 'modes.h5' (use its constant from "
         "railvib_hpc/io/files.py)"]
+
+
+def test_no_module_over_the_limit_unless_listed():
+    assert code_rules.module_length_violations() == []
+
+
+def test_the_module_rule_finds_a_long_module_and_a_stale_entry(tmp_path):
+    pkg = tmp_path / "railvib_hpc"
+    pkg.mkdir()
+    limit = code_rules.MAX_MODULE_LINES
+    (pkg / "long.py").write_text("x = 1\n" * (limit + 1))
+    (pkg / "fits.py").write_text("x = 1\n" * limit)
+    found = code_rules.module_length_violations(tmp_path, {"fits.py": "was long",
+                                                           "gone.py": "was long"})
+    assert [v.split(": ")[0] for v in found] == ["railvib_hpc/fits.py", "railvib_hpc/long.py",
+                                                 "railvib_hpc/gone.py"]
+    assert f"{limit + 1} lines" in found[1]
+
+
+def test_the_docs_cite_sources_not_tickets():
+    assert code_rules.ticket_violations() == []
+
+
+def test_the_ticket_rule_finds_a_ticket_number(tmp_path):
+    (tmp_path / "railvib_hpc").mkdir()
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "railvib_hpc" / "m.py").write_text('"""Why (Issue 28, item 2)."""\n')
+    (tmp_path / "docs" / "a.md").write_text("fine: Lamb (1904)\nissues #12 and 13\n")
+    (tmp_path / "README.md").write_text("see https://github.com/owner/repo/issues/7\n")
+    assert [v.split(": ")[:2] for v in code_rules.ticket_violations(tmp_path)] == [
+        ["railvib_hpc/m.py", "line 1"], ["docs/a.md", "line 2"]]
+
+
+def test_the_schema_imports_nothing_from_the_assessment():
+    assert code_rules.schema_import_violations() == []
+
+
+def test_the_schema_rule_finds_an_import_of_the_assessment(tmp_path):
+    schema = tmp_path / "railvib_hpc" / "schema"
+    schema.mkdir(parents=True)
+    (schema / "__init__.py").write_text('"""S."""\nfrom .a import X\n')
+    (schema / "a.py").write_text('"""A."""\n\n\ndef f():\n    from ..assess import standards\n'
+                                 '    return standards\n')
+    (schema / "b.py").write_text('"""B."""\nfrom railvib_hpc.assess.standards import STANDARDS\n')
+    (tmp_path / "railvib_hpc" / "standards_registry.py").write_text('"""R."""\nimport math\n')
+    found = code_rules.schema_import_violations(tmp_path)
+    assert [v.split(": ")[:2] for v in found] == [["railvib_hpc/schema/a.py", "line 5"],
+                                                  ["railvib_hpc/schema/b.py", "line 2"]]

@@ -50,7 +50,7 @@ CYCLES = {
     "modal.stage <-> modal.static": ("modal/static.py", "from .stage import run_modal_stage"),
     "io <-> mesh": ("io/xdmf.py", "from ..mesh.model import Mesh"),
     "fem -> mesh": ("fem/hex8.py", "from ..mesh.search import locate"),
-    "schema -> config": ("schema.py", "from .config import Case"),
+    "schema -> config": ("schema/__init__.py", "from ..config import Case"),
 }
 
 

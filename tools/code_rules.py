@@ -1,5 +1,6 @@
-"""Three rules of ``make lint``: function length, kernels that never take the case, and
-file names from one place.
+"""The rules of ``make lint`` beyond ruff and the import layers: function and module
+length, kernels that never take the case, file names from one place, docs that cite sources
+rather than tickets, and a schema that takes nothing from the assessment.
 
 *Function length*: no function over 150 lines unless allowed. A function's length is
 counted by its syntax tree, from its ``def`` line to its last line, docstring and comments
@@ -14,9 +15,20 @@ problem object (:class:`railvib_hpc.problem.Problem`), so it may neither import 
 have a parameter named ``case``. Modules still to be converted are listed in
 :data:`PENDING` with the reason; an entry that no longer reads the case breaks the rule.
 
-*File names from one place* (issue 27): the package's file names (``"modes.h5"``, ...) are
+*File names from one place*: the package's file names (``"modes.h5"``, ...) are
 the constants of ``railvib_hpc/io/files.py``; no other module of ``railvib_hpc`` spells one
 as a string (docstrings, which name the files for the reader, aside).
+
+*Module length*: no module of ``railvib_hpc`` over :data:`MAX_MODULE_LINES` lines unless
+listed in :data:`LONG_MODULES` with the reason (an entry no longer needed breaks the rule).
+
+*Sources, not tickets*: no "issue <number>" in ``railvib_hpc/``, ``docs/`` or
+``README.md``: a reader needs the literature, the thesis or the reason, not an internal
+ticket's number.
+
+*The schema below the assessment*: no module of ``railvib_hpc/schema/`` (nor
+``railvib_hpc/standards_registry.py``, whose names the schema takes) imports from
+``railvib_hpc.assess``.
 
 Usage::
 
@@ -28,6 +40,7 @@ Usage::
 from __future__ import annotations
 
 import ast
+import re
 import sys
 from collections.abc import Iterator, Mapping
 from pathlib import Path
@@ -209,9 +222,104 @@ def file_name_violations(root: Path = ROOT) -> list[str]:
     return out
 
 
+#: Longest module of ``railvib_hpc`` [lines].
+MAX_MODULE_LINES = 1000
+#: Modules allowed over :data:`MAX_MODULE_LINES` for now, with why (to go).
+LONG_MODULES: dict[str, str] = {
+    "transient/stage.py": "being rewritten around the time-domain engine protocol",
+}
+
+
+def module_length_violations(root: Path = ROOT,
+                             allowed: Mapping[str, str] = LONG_MODULES) -> list[str]:
+    """Every module of ``railvib_hpc`` over :data:`MAX_MODULE_LINES` lines not in
+    ``allowed``, and every entry of ``allowed`` no longer needed."""
+    out = []
+    for path in sorted((root / "railvib_hpc").rglob("*.py")):
+        name = path.relative_to(root / "railvib_hpc").as_posix()
+        n = len(path.read_text().splitlines())
+        if n > MAX_MODULE_LINES and name not in allowed:
+            out.append(f"railvib_hpc/{name}: {n} lines (at most {MAX_MODULE_LINES}: split it "
+                       "by what its parts do)")
+        elif n <= MAX_MODULE_LINES and name in allowed:
+            out.append(f"railvib_hpc/{name}: listed in tools/code_rules.py LONG_MODULES but it "
+                       f"has {n} lines: remove the entry")
+    out += [f"railvib_hpc/{name}: listed in tools/code_rules.py LONG_MODULES but no such "
+            "module: remove the entry"
+            for name in allowed if not (root / "railvib_hpc" / name).exists()]
+    return out
+
+
+#: An internal ticket cited by number ("issue 28", "Issues 26 and 28", "issue #12").
+TICKET = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
+#: The text the ticket rule reads: the package's sources, the docs and the README.
+TICKET_SUFFIXES = (".py", ".md", ".rst", ".txt", ".toml")
+
+
+def ticket_violations(root: Path = ROOT) -> list[str]:
+    """Every line of ``railvib_hpc/``, ``docs/`` and ``README.md`` that cites a ticket by
+    number (:data:`TICKET`)."""
+    paths = [*sorted((root / "railvib_hpc").rglob("*.py")),
+             *sorted(p for p in (root / "docs").rglob("*") if p.suffix in TICKET_SUFFIXES),
+             root / "README.md"]
+    out = []
+    for path in paths:
+        if not path.is_file():
+            continue
+        for number, line in enumerate(path.read_text().splitlines(), 1):
+            for match in TICKET.finditer(line):
+                out.append(f"{path.relative_to(root).as_posix()}: line {number}: "
+                           f"{match.group(0)!r} (cite the literature, the thesis or the reason)")
+    return out
+
+
+#: The modules below the assessment (relative to ``railvib_hpc/``): the schema and the
+#: standards' declarations it takes its choices from.
+BELOW_ASSESS = ("schema", "standards_registry.py")
+
+
+def _imported_modules(path: Path, package: str) -> Iterator[tuple[int, str]]:
+    """``(line, module)`` of every import of ``path`` (module ``package.<stem>``), relative
+    ones resolved, function-level and ``TYPE_CHECKING`` ones included."""
+    parts = package.split(".")
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            yield from ((node.lineno, a.name) for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(parts[:len(parts) - node.level + 1] + ([base] if base else []))
+            yield node.lineno, base
+            yield from ((node.lineno, f"{base}.{a.name}") for a in node.names)
+
+
+def schema_import_violations(root: Path = ROOT) -> list[str]:
+    """Every import of ``railvib_hpc.assess`` by a module of :data:`BELOW_ASSESS`."""
+    out = []
+    for below in BELOW_ASSESS:
+        start = root / "railvib_hpc" / below
+        paths = sorted(start.rglob("*.py")) if start.is_dir() else [start]
+        for path in paths:
+            if not path.is_file():
+                continue
+            rel = path.relative_to(root).with_suffix("")
+            package = ".".join(rel.parts if path.name == "__init__.py" else rel.parts[:-1])
+            package = package.removesuffix(".__init__")
+            seen = set()
+            for line, module in _imported_modules(path, package):
+                if (module == "railvib_hpc.assess" or module.startswith("railvib_hpc.assess.")
+                        ) and line not in seen:
+                    seen.add(line)
+                    out.append(f"{path.relative_to(root).as_posix()}: line {line}: imports "
+                               f"{module} (the schema sits below the assessment: declare "
+                               "what it needs in railvib_hpc/standards_registry.py)")
+    return out
+
+
 def main() -> int:
     """Print the breaches of the rules; 1 if there are any."""
-    found = violations() + case_violations() + file_name_violations()
+    found = (violations() + case_violations() + file_name_violations()
+             + module_length_violations() + ticket_violations() + schema_import_violations())
     for line in found:
         print(line, file=sys.stderr)
     return 1 if found else 0

@@ -6,9 +6,11 @@ numbers); each choice beyond it is documented where it is made.
 Standards (names accepted in ``standards``)
 -------------------------------------------
 The standards form a registry, :data:`STANDARDS` (name -> :class:`Standard`), filled by the
-:func:`standard` decorator on each evaluation function below. The registry gives the case
-schema its choices (``assessment.standards``), :func:`assess_probe` its dispatch and the
-report its order and titles; a new standard is one decorated function.
+:func:`standard` decorator on each evaluation function below, under the names, titles and
+order declared in :mod:`railvib_hpc.standards_registry` (below the case schema, which takes
+its choices, ``assessment.standards``, from there). The registry gives :func:`assess_probe`
+its dispatch and the report its order and titles; a new standard is one declaration and
+one decorated function.
 
 ``"iso2631"``
     ISO 2631-2:2003 W_m weighting; the verdict compares the **MTVV** (maximum of the
@@ -70,6 +72,7 @@ import numpy as np
 
 from ..constants import STANDARD_GRAVITY
 from ..errors import UserError
+from ..standards_registry import BUILDING_USES, DECLARED_STANDARDS, FTA_EVENTS, PERIODS
 from . import metrics
 from .weighting import BandSpectrum, third_octave_rms, weight_wm
 
@@ -155,15 +158,6 @@ VC_FMIN, VC_FMAX, VC_CORNER = 1.0, 80.0, 8.0
 #: Thesis criterion 0.005 g [m/s², peak].
 THESIS_LIMIT = 0.005 * STANDARD_GRAVITY
 
-#: What each building use selects in each standard (each overridable by keyword).
-BUILDING_USES: dict[str, dict[str, str]] = {
-    "critical": {"fta": "sensitive", "vc": "critical", "din4150-3": "residential"},
-    "residential": {"fta": "residential", "vc": "residential", "din4150-3": "residential"},
-    "office": {"fta": "institutional", "vc": "office", "din4150-3": "residential"},
-    "workshop": {"fta": "institutional", "vc": "workshop", "din4150-3": "commercial"},
-}
-PERIODS = ("day", "night")
-FTA_EVENTS = ("frequent", "occasional", "infrequent")
 DIN4150_3_LOCATIONS = ("foundation", "floor", "top_floor")
 #: DIN 4150-3 location of a probe by its role (railvib_hpc.schema.PROBE_ROLES): floor slabs
 #: get the vertical floor limit; footings, walls and ground points (free-field points of the
@@ -244,21 +238,36 @@ class Standard:
 STANDARDS: dict[str, Standard] = {}
 
 
-def standard(name: str, title: str, quantity: str, comparison_only: bool = False):
+def standard(name: str, title: str | None = None, quantity: str | None = None,
+             comparison_only: bool | None = None):
     """Register the decorated ``evaluate(record, settings)`` function as a standard.
 
     Parameters
     ----------
-    name, title, quantity, comparison_only
-        See :class:`Standard`.
+    name
+        The standard's name; one declared in
+        :data:`railvib_hpc.standards_registry.DECLARED_STANDARDS` takes its title, quantity
+        and ``comparison_only`` from there.
+    title, quantity, comparison_only
+        See :class:`Standard`; given, they replace the declared ones (required for a name
+        not declared).
 
     Raises
     ------
     ValueError
-        For a name registered twice or an unknown quantity.
+        For a name registered twice, an undeclared name without title and quantity, or an
+        unknown quantity.
     """
     if name in STANDARDS:
         raise ValueError(f"standard {name!r} is registered twice")
+    declared = DECLARED_STANDARDS.get(name)
+    if declared is None and (title is None or quantity is None):
+        raise ValueError(f"standard {name!r} is not declared in railvib_hpc.standards_registry"
+                         " and has no title and quantity")
+    title = declared.title if title is None else title
+    quantity = declared.quantity if quantity is None else quantity
+    if comparison_only is None:
+        comparison_only = declared is not None and declared.comparison_only
     if quantity not in ("acceleration", "velocity"):
         raise ValueError(f"standard {name!r}: quantity must be 'acceleration' or 'velocity'")
 
@@ -466,7 +475,7 @@ def _block(name: str, metric: str, unit: str, directions: dict[str, dict],
             "notes": notes, **extra}
 
 
-@standard("iso2631", "ISO 2631-2 Wm / ISO 10137 base curve", "acceleration")
+@standard("iso2631")
 def _iso2631(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     a, fs, duration = r.acceleration, r.fs, r.duration
     use, period = s["building_use"], s["period"]
@@ -491,7 +500,7 @@ def _iso2631(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
                   notes, vdv_unit="m/s^1.75")
 
 
-@standard("din4150-2", "DIN 4150-2 (people in buildings)", "velocity")
+@standard("din4150-2")
 def _din4150_2(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     v, fs = r.velocity, r.fs
     use, period, events = s["building_use"], s["period"], s["din4150_2_events"]
@@ -531,7 +540,7 @@ def _din4150_2(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
                   notes, n_cycles=n_cycles, din4150_2_events=events)
 
 
-@standard("din4150-3", "DIN 4150-3 (structural damage)", "velocity")
+@standard("din4150-3")
 def _din4150_3(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     v, fs = r.velocity, r.fs
     structure, location = s["din4150_3_structure"], s["din4150_3_location"]
@@ -559,7 +568,7 @@ def _din4150_3(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
                   structure=structure, location=location)
 
 
-@standard("fta", "FTA (US transit) velocity level", "velocity")
+@standard("fta")
 def _fta(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     v, fs, duration = r.velocity, r.fs, r.duration
     category, events = s["fta_category"], s["fta_events"]
@@ -599,7 +608,7 @@ def vc_spectrum(v, fs: float) -> BandSpectrum:
     return third_octave_rms(v, fs, fmin=VC_FMIN, fmax=VC_FMAX, axis=0)
 
 
-@standard("vc", "VC curves (one-third-octave velocity)", "velocity")
+@standard("vc")
 def _vc(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     v, fs = r.velocity, r.fs
     vc_class, low_frequency = s["vc_class"], s["vc_low_frequency"]
@@ -630,8 +639,7 @@ def _vc(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
                             for i, d in enumerate(DIRECTIONS)}})
 
 
-@standard("thesis", "Thesis 0.005 g peak (comparison only)", "acceleration",
-          comparison_only=True)
+@standard("thesis")
 def _thesis(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
     a = r.acceleration
     pk = metrics.peak(a)
@@ -645,6 +653,12 @@ def _thesis(r: ProbeRecord, s: Mapping[str, Any]) -> dict[str, Any]:
 
 # --------------------------------------------------------------------------------------
 # public entry points
+
+
+if tuple(STANDARDS) != tuple(DECLARED_STANDARDS):
+    raise ImportError("the standards registered here and those declared in "
+                      f"railvib_hpc.standards_registry differ: {tuple(STANDARDS)} against "
+                      f"{tuple(DECLARED_STANDARDS)}")
 
 
 def assess_probe(t, acceleration, velocity, standards: Sequence[str] | None = None, *,

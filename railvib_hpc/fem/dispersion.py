@@ -1,4 +1,4 @@
-"""Numerical dispersion of the trilinear hexahedron with a time scheme (issue 28, item 2).
+"""Numerical dispersion of the trilinear hexahedron with a time scheme (docs/transient.md).
 
 A plane wave ``u = U exp(i (k . x - omega t))`` on an unbounded uniform grid of cubic
 8-node hexahedra (edge ``h``) satisfies the discrete equations exactly when ``U`` and

@@ -1,6 +1,6 @@
 """Steady state of a vertical point load moving over the surface of an elastic half-space.
 
-The reference of the moving-load verification (issue 28, item 5): a constant vertical force
+The reference of the moving-load verification (docs/verification.md): a constant vertical force
 ``P`` (downwards) moves at a constant speed ``c`` along ``x`` on the surface ``z = 0`` of a
 homogeneous, isotropic, linearly elastic half-space ``z < 0`` (shear modulus ``mu``,
 Poisson's ratio ``nu``, density ``rho``; optionally a hysteretic loss factor ``eta``). Below

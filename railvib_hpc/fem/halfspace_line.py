@@ -1,6 +1,6 @@
 """Steady state of a harmonic vertical line load moving over an elastic half-space.
 
-The reference of the moving *harmonic* load verification (issue 28, item 7), in plane
+The reference of the moving *harmonic* load verification (docs/verification.md), in plane
 strain: a vertical line load ``P cos(omega_0 t)`` per unit length (downwards) moves at a
 constant speed ``c`` along ``x`` on the surface ``z = 0`` of a homogeneous, isotropic,
 linearly elastic half-space ``z < 0`` (shear modulus ``mu``, Poisson's ratio ``nu``, shear

@@ -3,7 +3,7 @@
 The structured blocks of a site mesh give most hexahedra an identical shape per block, so
 the product ``K u = sum_e P_e^T K_e P_e u`` needs only one ``K_e`` per *class* (shape up to
 a translation, and material), applied to all the class's elements at once as one GEMM
-(issue 28, item 1):
+(docs/transient.md, the matrix-free product):
 
 1. gather ``U = u[dofs]``, shape (nel, 24);
 2. per class ``c``: ``F_c = U_c K_c`` (``K_c`` symmetric), a (n_c, 24) x (24, 24) product;

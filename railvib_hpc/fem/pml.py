@@ -23,7 +23,7 @@ With ``e1 = sum d``, ``e2 = d0 d1 + d1 d2 + d0 d2``, ``e3 = d0 d1 d2`` and, per 
     strain:     G~_kl = g_kl - d_l psi_kl,   psi_kl' + (d_l + alpha) psi_kl = g_kl.
 
 Outside the layer ``d = 0`` and every extra term vanishes, so the layer needs no interface
-condition and the soil's layering continues through it. Why this form (issue 29): it is
+condition and the soil's layering continues through it. Why this form: it is
 displacement-only (no stress DOFs, so the explicit engine's lumped diagonal mass and its
 O(N) step stay), it is unsplit (the memory lives at the Gauss points of the layer's
 elements only), the stretching is stable for isotropic solids, layered or not (Becache,

@@ -116,7 +116,7 @@ from .stage_checks import CHECKS
 #: default stays out of every inputs digest, so a case that does not use them keeps the
 #: digests, and the results, it had (the golden record, ``tests/data/golden_run.json``,
 #: stands). A given site key's effect is in the geometry keys it sets (hashed anyway).
-#: ``[load]``: no moving surface load (issue 28, item 5).
+#: ``[load]``: no moving surface load.
 DIGEST_NEUTRAL_SECTIONS = ("site", "probes", "uncertainty", "load")
 #: Keys that only decide whether a stage accepts what it computed (a check's limit), never
 #: what a file holds: they enter no inputs digest, and the stage checks a reused file again.
@@ -346,10 +346,11 @@ def external_files(case, keys: Sequence[str]) -> dict[str, str]:
 
 #: Keys that enter a digest only when they differ from their default: added after the
 #: products of the defaults were recorded, they leave those products current (their
-#: default is the model that was there before them: issue 28's rigid track ends; issue
-#: 29's layer parameters, which act on pml faces only; the building, present by default).
+#: default is the model that was there before them: the rigid track ends; the perfectly
+#: matched layers' parameters, which act on pml faces only; the building, present by
+#: default).
 NEUTRAL_AT_DEFAULT_KEYS = ("track.ends", "track.end_stiffness", "track.end_damping",
-                           # issue 29: the perfectly matched layers' parameters
+                           # the perfectly matched layers' parameters
                            "boundary.pml_reflection", "boundary.pml_power",
                            "boundary.pml_alpha",
                            # the optional building: its default is the site there was

@@ -1,4 +1,4 @@
-"""The mesh check's numerical dispersion at the farthest probe (issue 28, item 2).
+"""The mesh check's numerical dispersion at the farthest probe (docs/transient.md).
 
 A wave of ``mesh.wavelength_hz`` that travels from the track to the farthest probe
 accumulates the grid's phase error (:mod:`railvib_hpc.fem.dispersion`): the check predicts
@@ -46,8 +46,8 @@ from ..fem.dispersion import critical_courant, elements_needed
 from ..fem.dispersion_rayleigh import worst_surface_error
 from ..schema import SOIL_LAYER_PARTS
 
-#: The target of issue 28, item 2: below 5 % peak-velocity error at the farthest probe; a
-#: larger predicted error is warned about.
+#: The accuracy the mesh check aims at: below 5 % peak-velocity error at the farthest
+#: probe; a larger predicted error is warned about.
 DISPERSION_TARGET = 0.05
 #: Phase error at the farthest probe, in periods of the band's top frequency, from which the
 #: mesh cannot resolve the band there: the wave arrives in antiphase (the harmonic bound has

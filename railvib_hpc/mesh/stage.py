@@ -43,7 +43,8 @@ if TYPE_CHECKING:
 
 #: Memory per hexahedron of the mesh stage: its peak is gmsh's model while it meshes and the
 #: mesh is extracted, 2.17 GB for 2,674,714 hexahedra (0.81 kB each; ``bench/mesh_bench.py
-#: --site``, issue 28 item 6), the batched checks and writes stay below it; rounded up.
+#: --site``, the 3 M-node site of docs/model.md), the batched checks and writes stay below
+#: it; rounded up.
 MESH_BYTES_PER_HEX = 1.0e3
 #: Size of the binary ``mesh.msh`` per hexahedron: 3.57 MB for the 8,556 of refinement 0.5
 #: (417 B, with the nodes, beams, pads and boundary quads), rounded up.

@@ -33,14 +33,12 @@ import numpy as np
 from scipy.linalg import eigh
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
+from .progress import Progress
 
 if TYPE_CHECKING:
     from .factor import ShiftInvertFactor
 
 
-#: Progress callback of the long phases: ``progress(phase, done, total)`` (units of work
-#: done of ``total``; rank 0 prints it, throttled, with the phase's percent and ETA).
-Progress = Callable[[str, int, int], None]
 
 
 def no_progress(phase: str, done: int, total: int) -> None:

@@ -28,7 +28,7 @@ from ..constants import BYTES_PER_GB
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-    from .block_lanczos import Progress
+    from .progress import Progress
 
 
 def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
@@ -389,7 +389,7 @@ class ShiftInvertFactor:
     def solve(self, B: np.ndarray, chunk: int = 64, progress: Progress | None = None,
               phase: str = "solves") -> np.ndarray:
         """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time
-        (``progress``: :data:`~railvib_hpc.modal.block_lanczos.Progress` after each chunk)."""
+        (``progress``: :data:`~railvib_hpc.modal.progress.Progress` after each chunk)."""
         from petsc4py import PETSc
 
         out = np.empty(B.shape)

@@ -1,6 +1,6 @@
 """Explicit central-difference time integration with a lumped mass: O(N) memory and work per step.
 
-The engine of ``transient.engine = "explicit"`` (issue 28). With the diagonal (lumped) mass
+The engine of ``transient.engine = "explicit"`` (docs/transient.md). With the diagonal (lumped) mass
 ``m`` of the model, every step ``t_n -> t_{n+1}`` is::
 
     u_{n+1}   = u_n + dt v_n + dt^2 / 2 a_n
@@ -13,7 +13,7 @@ half-step velocity, so no matrix is ever factored). A step costs two sparse prod
 C; one with Rayleigh damping applied as an operator,
 :class:`~railvib_hpc.modal.petsc.RayleighOperator`) and a few vector operations, and the
 memory is the matrices and a few vectors: both grow linearly with the DOFs, where the
-direct path's factor grows as n^(4/3) (issue 28).
+direct path's factor grows as n^(4/3) (the fill of nested dissection on a 3-D mesh).
 The scheme is second order, conserves the discrete energy of an undamped system and is
 stable while ``m - dt / 2 C - dt^2 / 4 K`` is positive definite (:func:`stability_limit`):
 ``2 / omega_max`` undamped, with ``omega_max`` the largest natural frequency of ``K, m``;

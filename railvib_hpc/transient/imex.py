@@ -1,6 +1,6 @@
 """Implicit-explicit time integration: the track and building implicit, the soil explicit.
 
-The engine of ``transient.engine = "imex"`` (issue 28). The explicit engine's step
+The engine of ``transient.engine = "imex"`` (docs/transient.md). The explicit engine's step
 (:mod:`.explicit`) is set by the stiffest, lightest elements of the model: the rail's
 beams (~2e-5 s), thin concrete slabs (~5e-5 s, less with their Rayleigh damping), the
 pads' springs. The soil, almost all of the DOFs of a real site, would allow 2-4e-4 s at

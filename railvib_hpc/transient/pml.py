@@ -1,4 +1,4 @@
-"""The perfectly matched layers of ``pml`` faces for the time-domain engines (issue 29).
+"""The perfectly matched layers of ``pml`` faces for the time-domain engines (docs/transient.md).
 
 A face ``boundary.<face> = "pml"`` is fixed, and the hexahedra with a Gauss point within
 ``boundary.layer_thickness`` of it form its layer (:func:`pml_geometry`): their coordinate

@@ -1,4 +1,4 @@
-"""The case's moving surface load (``track.count = 0``, ``[load]``; issue 28, item 5).
+"""The case's moving surface load (``track.count = 0``, ``[load]``; docs/transient.md).
 
 A site without a track: the bare soil (and the building) of the generated mesh, loaded by
 the vertical point loads of ``[load]`` moving along ``x`` on the ground line ``y =

@@ -1,4 +1,4 @@
-"""Vertical point loads moving over the soil surface, without a track (issue 28, item 5).
+"""Vertical point loads moving over the soil surface, without a track (docs/transient.md).
 
 The load of the moving-load verification (:mod:`railvib_hpc.fem.halfspace`, STEM's
 "moving load on soil"): ``n`` vertical forces ``P_j`` (downwards) at ``x_j(t) = x_start +

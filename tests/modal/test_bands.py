@@ -529,7 +529,7 @@ def test_one_band_merge_skips_what_the_band_proved(tmp_path, monkeypatch):
     M Phi from the band file) when the band comes from the cache, and the full merge runs
     when the measured Gram matrix does not prove the band orthonormal. The same modes and
     the same verdicts come out every time."""
-    import railvib_hpc.modal.band_solve as band_solve
+    import railvib_hpc.modal.band_merge as band_solve
 
     mesh, rules = column_mesh(60), {"bottom": ("ux", "uy", "uz")}
     ref, K, M, _ = solve(mesh, soil_case(), rules, 40)
@@ -689,7 +689,7 @@ def test_the_merge_rotates_only_the_coupled_pairs(tmp_path, monkeypatch):
     full merge here and in the test above). The merge as they are is refused, and the
     coupling bound put between the two largest measured M-overlaps, so that exactly the pair
     of the largest one is coupled to start with, whatever the kernel."""
-    import railvib_hpc.modal.band_solve as band_solve
+    import railvib_hpc.modal.band_merge as band_solve
     from railvib_hpc.modal import ritz
 
     real_coupled_set = band_solve._coupled_set

@@ -186,7 +186,7 @@ class BandSettings:
 def _factor(K, M, comm, sigma: float, extra_gb: float, out_of_core: str, inertia: bool):
     """The :class:`~.factor.ShiftInvertFactor` at ``sigma`` (nudged when it hits an
     eigenvalue)."""
-    from .factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
+    from ..model.factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
 
     for attempt in range(3):
         s = sigma * (1.0 + SHIFT_NUDGE * attempt) if sigma else 0.0
@@ -255,7 +255,7 @@ def check_mode_count(key: str, f_hz: float, n_below: int, n_dofs: int, comm) -> 
     """Refuse (:class:`EigenSolveError`, one line) a band plan up to ``f_hz`` (the value of
     the case key ``key``) whose inertia count ``n_below`` exceeds :func:`mode_count_limit`;
     called before any band is solved (collective)."""
-    from .factor import available_memory_gb
+    from ..model.factor import available_memory_gb
 
     limit, why = mode_count_limit(n_dofs, available_memory_gb(comm))
     if n_below <= limit:
@@ -682,8 +682,8 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     products), with ``progress``."""
     from mpi4py import MPI
 
+    from ..model.factor import sparse_times_block
     from .block_lanczos import no_progress, symmetric_from_upper
-    from .factor import sparse_times_block
     from .ritz import NORMALISE_CHUNK
 
     chunk = chunk or NORMALISE_CHUNK
@@ -710,8 +710,8 @@ def _band_grams(K, M, Phi: np.ndarray, comm, stiff: list[np.ndarray],
     and M products of a chunk in one pass (the chunk copied to PETSc once)."""
     from mpi4py import MPI
 
+    from ..model.factor import sparse_times_block_pair
     from .block_lanczos import no_progress, symmetric_from_upper
-    from .factor import sparse_times_block_pair
     from .ritz import NORMALISE_CHUNK
 
     progress = progress or no_progress
@@ -743,8 +743,8 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     (:func:`_merge_coupled`) where the measured Gram matrices allow."""
     from scipy.linalg import eigh
 
+    from ..model.factor import available_memory_gb
     from .block_lanczos import narrow_columns, rotate_narrowing
-    from .factor import available_memory_gb
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()

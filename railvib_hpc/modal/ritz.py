@@ -591,8 +591,8 @@ def normalise_and_check(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float = 0
     """
     from mpi4py import MPI
 
+    from ..model.factor import sparse_times_block_pair
     from .block_lanczos import no_progress
-    from .factor import sparse_times_block_pair
 
     progress = progress or no_progress
     t0 = time.perf_counter()
@@ -658,7 +658,7 @@ def _residual_floors(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float,
     from mpi4py import MPI
 
     from .. import tolerances
-    from .factor import abs_matrix, longest_row, sparse_times_block
+    from ..model.factor import abs_matrix, longest_row, sparse_times_block
 
     phi, lam = result.phi, result.eigenvalues
     floor = np.zeros(len(lam))

@@ -45,7 +45,7 @@ from ..fem.pml import (
 )
 from ..fem.reference import GAUSS_VALUES
 from ..mesh.model import Mesh
-from ..modal.boundary import FACE_AXIS, face_node_sets, face_types
+from ..model.boundary import FACE_AXIS, face_node_sets, face_types
 from ..problem import Problem
 from ..schema import BUILDING_PARTS, PART_ID, SOLID_MATERIAL
 
@@ -85,7 +85,7 @@ def _element_materials(mesh: Mesh, problem: Problem, sel: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lame parameters and densities of the hexahedra ``sel`` (their random fields'
     factors applied at the centroids, as the assembly does)."""
-    from ..modal.elements import element_factors
+    from ..model.elements import element_factors
 
     lam, mu, rho = np.zeros(len(sel)), np.zeros(len(sel)), np.zeros(len(sel))
     parts = mesh.hex_part[sel]

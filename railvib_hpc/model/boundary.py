@@ -26,7 +26,7 @@ Each face is
   ground under and beside it.
 
 The thesis defaults (rollers, fixed base) give exactly the constraint rules of
-:data:`railvib_hpc.modal.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
+:data:`railvib_hpc.model.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
 """
 
 from __future__ import annotations

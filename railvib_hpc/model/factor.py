@@ -28,7 +28,7 @@ from ..constants import BYTES_PER_GB
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-    from .block_lanczos import Progress
+    from ..modal.block_lanczos import Progress
 
 
 def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):

@@ -282,7 +282,7 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
 
     Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
     ``N(sigma)`` and statistics. ``progress``:
-    :data:`~railvib_hpc.modal.block_lanczos.Progress` of the phases after the expansions.
+    :data:`~railvib_hpc.model.factor.Progress` of the phases after the expansions.
     """
     from mpi4py import MPI
 
@@ -456,7 +456,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         the numbers are also in the band's ``stats`` (:func:`band_memory`).
     progress
         ``progress(phase, done, total)``: the phases after each band's expansions and the
-        merge's (:data:`~railvib_hpc.modal.block_lanczos.Progress`).
+        merge's (:data:`~railvib_hpc.model.factor.Progress`).
 
     Returns
     -------

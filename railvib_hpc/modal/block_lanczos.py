@@ -33,14 +33,10 @@ import numpy as np
 from scipy.linalg import eigh
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
+from ..model.factor import Progress  # the progress callback of the long phases
 
 if TYPE_CHECKING:
     from ..model.factor import ShiftInvertFactor
-
-
-#: Progress callback of the long phases: ``progress(phase, done, total)`` (units of work
-#: done of ``total``; rank 0 prints it, throttled, with the phase's percent and ETA).
-Progress = Callable[[str, int, int], None]
 
 
 def no_progress(phase: str, done: int, total: int) -> None:

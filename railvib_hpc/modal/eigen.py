@@ -159,7 +159,7 @@ class ModalSolver:
         ``progress(phase, done, total)``: the phases after (and between) the Lanczos
         expansions, which ``monitor`` does not cover: thick restarts, Ritz vectors,
         purification, Rayleigh-Ritz, residual checks, round-off floors, the band merge
-        (:data:`~railvib_hpc.modal.block_lanczos.Progress`).
+        (:data:`~railvib_hpc.model.factor.Progress`).
 
     Examples
     --------

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..boundary_registry import boundary_kind
 from ..errors import UserError
 from ..fem.material import lame_parameters
 from ..fem.pml import (
@@ -77,8 +78,10 @@ class PmlFace:
 
 
 def pml_faces(problem: Problem) -> list[str]:
-    """The faces whose type is ``pml``."""
-    return [face for face, kind in face_types(problem).items() if kind == "pml"]
+    """The faces whose kind has a perfectly matched layer (``pml``,
+    :attr:`~railvib_hpc.model.boundary_kind.BoundaryKind.matched_layer`)."""
+    return [face for face, kind in face_types(problem).items()
+            if boundary_kind(kind).matched_layer]
 
 
 def _element_materials(mesh: Mesh, problem: Problem, sel: np.ndarray

@@ -16,11 +16,11 @@ from railvib_hpc.fem.boundary import face_impedance, wave_speeds
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.model.boundary import (
     BoundaryError,
-    absorbing_faces,
     boundary_node_blocks,
     face_node_sets,
     problem_dofmap,
 )
+from railvib_hpc.model.boundary_kinds.absorbing import absorbing_faces
 from railvib_hpc.model.damping import rayleigh_coefficients, rayleigh_ratio
 from railvib_hpc.model.dofmap import build_dofmap
 from railvib_hpc.petsc_env import init_petsc

@@ -269,8 +269,7 @@ PROBE_ROLES = ("floor", "wall", "foundation", "ground", "free_field")
 #: Role of a user probe without one.
 DEFAULT_PROBE_ROLE = "ground"
 #: Conditions of a truncation face of the soil box (``[boundary]``).
-from .boundary_registry import BOUNDARY_KIND_NAMES as BOUNDARY_TYPES  # noqa: E402
-
+from .boundary_registry import BOUNDARY_KIND_NAMES as BOUNDARY_TYPES  # noqa: E402, I001
 #: Default frequency shift of the perfectly matched layers [1/s]: 2 pi x 0.5 Hz, half the
 #: lowest one-third-octave band assessed (1 Hz); there omega / |i omega + alpha| = 0.89.
 PML_ALPHA = 3.14159

@@ -109,9 +109,9 @@ def one(n_dofs: float, steps: int, engine: str = "explicit") -> dict:
 
     from railvib_hpc.config import load_case
     from railvib_hpc.io.run_record import peak_memory_gb
-    from railvib_hpc.modal.boundary import constraint_rules, dashpot_diagonal, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import (
+    from railvib_hpc.model.boundary import constraint_rules, dashpot_diagonal, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import (
         assemble,
         assemble_damping,
         assemble_partition,

@@ -47,9 +47,9 @@ def one(n_dofs: float, engine: str, repeat: int) -> dict:
     from mpi4py import MPI
 
     from railvib_hpc.config import load_case
-    from railvib_hpc.modal.boundary import constraint_rules, dashpot_diagonal, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.boundary import constraint_rules, dashpot_diagonal, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_damping
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.problem import Problem
 

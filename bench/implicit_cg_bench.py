@@ -64,9 +64,9 @@ def _model(n_dofs: float):
     from mpi4py import MPI
 
     from railvib_hpc.config import load_case
-    from railvib_hpc.modal.boundary import constraint_rules, dashpot_diagonal, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap, rigid_body_modes
-    from railvib_hpc.modal.petsc import assemble, assemble_damping, rayleigh_operator
+    from railvib_hpc.model.boundary import constraint_rules, dashpot_diagonal, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap, rigid_body_modes
+    from railvib_hpc.model.petsc import assemble, assemble_damping, rayleigh_operator
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.problem import Problem
 

@@ -37,8 +37,8 @@ import numpy as np, scipy.sparse as sp
 from scipy.sparse.linalg import eigsh
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.stage import make_mesh
-from railvib_hpc.modal.dofmap import build_dofmap
-from railvib_hpc.modal.petsc import assemble
+from railvib_hpc.model.dofmap import build_dofmap
+from railvib_hpc.model.petsc import assemble
 from railvib_hpc.petsc_env import init_petsc
 from railvib_hpc.problem import Problem
 from mpi4py import MPI

@@ -6,7 +6,7 @@ Usage (under the shared lock; one configuration per process, so memory is its ow
         [--refinement 1] [--shift-hz 0 40] [--blr 0 1e-10 1e-8 1e-6] [--ooc]
 
 For every (shift, BLR tolerance) it factors ``K - sigma M`` with MUMPS Cholesky through the
-same :class:`~railvib_hpc.modal.factor.ShiftInvertFactor` as the eigensolver (options
+same :class:`~railvib_hpc.model.factor.ShiftInvertFactor` as the eigensolver (options
 prefix ``railvib_eig_st_``; BLR = ICNTL(35) = 2, CNTL(7) = tolerance), and prints the
 analysis estimate (INFOG(17) in core, INFOG(27) out of core), the entries of the factor
 (INFOG(29): after BLR compression), the factorisation time, the time of a block of 32
@@ -48,10 +48,10 @@ def main() -> None:
     from petsc4py import PETSc
 
     from railvib_hpc.modal.block_lanczos import start_block
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import PREFIX
-    from railvib_hpc.modal.factor import ShiftInvertFactor
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.factor import ShiftInvertFactor
+    from railvib_hpc.model.petsc import assemble
 
     comm = MPI.COMM_WORLD
     case = load_case(None, [f"mesh.refinement={args.refinement!r}"])

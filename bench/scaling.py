@@ -155,10 +155,10 @@ from railvib_hpc.petsc_env import init_petsc
 init_petsc([])
 from railvib_hpc.config import load_case
 from railvib_hpc.mesh.stage import make_mesh
-from railvib_hpc.modal.dofmap import build_dofmap
+from railvib_hpc.model.dofmap import build_dofmap
 from railvib_hpc.modal.eigen import PREFIX
-from railvib_hpc.modal.factor import ShiftInvertFactor
-from railvib_hpc.modal.petsc import assemble
+from railvib_hpc.model.factor import ShiftInvertFactor
+from railvib_hpc.model.petsc import assemble
 from railvib_hpc.parallel import on_root
 from railvib_hpc.problem import Problem
 comm = MPI.COMM_WORLD

@@ -39,8 +39,8 @@ def main() -> None:
     from mpi4py import MPI
 
     from railvib_hpc.mesh.stage import present_parts
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
     from railvib_hpc.transient.explicit import STEP_SAFETY
     from railvib_hpc.transient.imex import (
         AUTO_IMPLICIT_SHARE,

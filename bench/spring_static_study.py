@@ -3,7 +3,7 @@
 Below the Rayleigh speed a moving load's field is nearly quasi-static, so a truncated box
 must give the static compliance of the half-space it stands for: the springs of
 ``boundary.virtual_thickness = t`` (``(lambda + 2 G) / t`` normal and ``G / t`` tangential
-per unit area, :mod:`railvib_hpc.modal.boundary`) carry the soil beyond the faces. This
+per unit area, :mod:`railvib_hpc.model.boundary`) carry the soil beyond the faces. This
 bench measures which ``t`` does that, independently of the dynamic test that chose
 ``t = 36 m`` (``tests/transient/test_moving_load_halfspace.py``): the same box (half of the
 half-space, ``y >= 0`` on a roller, 1 m cubes 96 x 36 x 30, thesis subgrade with
@@ -52,9 +52,9 @@ def settlements(comm, mesh, faces: str, thickness: float, nu: float, path, recei
     explicit engines' static start: :meth:`ExplicitSystem.solve_matrix`)."""
     from wave_cases import soil_case
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap, rigid_body_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap, rigid_body_modes
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.explicit import ExplicitSystem
     from railvib_hpc.transient.integrate import gather_values

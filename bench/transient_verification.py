@@ -118,7 +118,7 @@ def section_a() -> list[str]:
 def lamb_run(h: float, extent=(16.0, 16.0, 12.0), radii=(5.0, 8.0)) -> dict:
     from lamb import GAMMA, lamb_displacement, pulse
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
 
     n = tuple(int(round(e / h)) for e in extent)
     mesh = box_mesh(n, extent, origin=(0, 0, -extent[2]))

@@ -32,7 +32,7 @@ the boundary parameters, the damping model, and the element switches (lumped mas
 formulation, the constrained rotations). Not the mesh nor the DOF map (arrays, passed
 next to it), and not the solver settings (tolerances, shifts, block sizes, PETSc
 prefixes): those belong to the solver objects
-(:class:`~railvib_hpc.modal.factor.ShiftInvertFactor`, the eigensolver's and the time
+(:class:`~railvib_hpc.model.factor.ShiftInvertFactor`, the eigensolver's and the time
 integrators' settings).
 
 Examples
@@ -136,7 +136,7 @@ class Damping:
 
 @dataclass(frozen=True)
 class TrackEnds:
-    """``track.ends`` and its supported sections (:mod:`railvib_hpc.modal.track_ends`).
+    """``track.ends`` and its supported sections (:mod:`railvib_hpc.model.track_ends`).
 
     ``kind`` is ``"rigid"`` or ``"supported"``; the supported rail lies on ``[box_start -
     length, box_start]`` and ``[box_end, box_end + length]`` with a support at every

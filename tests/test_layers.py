@@ -51,6 +51,7 @@ CYCLES = {
     "io <-> mesh": ("io/xdmf.py", "from ..mesh.model import Mesh"),
     "fem -> mesh": ("fem/hex8.py", "from ..mesh.search import locate"),
     "schema -> config": ("schema/__init__.py", "from ..config import Case"),
+    "model -> modal": ("model/factor.py", "from ..modal.block_lanczos import Progress"),
 }
 
 

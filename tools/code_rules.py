@@ -91,7 +91,7 @@ def violations(root: Path = ROOT) -> list[str]:
 
 #: The packages whose modules are numerical kernels, but for :data:`TRANSLATORS` and
 #: :data:`PENDING` (paths relative to ``railvib_hpc/``).
-KERNEL_PACKAGES = ("fem", "mesh", "modal", "mbs", "transient", "reconstruct", "assess")
+KERNEL_PACKAGES = ("fem", "mesh", "model", "modal", "mbs", "transient", "reconstruct", "assess")
 #: Modules of :data:`KERNEL_PACKAGES` that read the case by design, with why.
 TRANSLATORS: dict[str, str] = {
     **{f"{pkg}/stage.py": "a stage: builds the problem object from the case"

@@ -29,7 +29,7 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None,
     ``modal.damping = 'uniform'``: ``modal.damping_ratio`` for every mode;
     ``'strain_energy'``: per material from the strain energies stored in ``modes_path``
     (:func:`railvib_hpc.modal.energy.damping_from_energies`); ``'rayleigh'``:
-    ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.modal.damping`); ``'full'``:
+    ``alpha / (2 omega) + beta omega / 2`` (:mod:`railvib_hpc.model.damping`); ``'full'``:
     the matrix ``D = Phi^T C Phi`` from ``modal_damping.h5`` next to ``modes_path``
     (:func:`railvib_hpc.modal.projection.compose_damping`), whose diagonal the overrides set
     to ``2 zeta omega``, verified through ``ctx``, the ``mbs`` stage's context
@@ -59,7 +59,7 @@ def modal_damping(case: Case, m: int, modes_path: Path | None = None,
                                 "rerun 'railvib modal' to recompute it")
         zeta = damping_from_energies(energies, Problem.from_case(case))[:m].copy()
     elif kind == "rayleigh":
-        from ..modal.damping import problem_rayleigh, rayleigh_ratio
+        from ..model.damping import problem_rayleigh, rayleigh_ratio
 
         zeta = rayleigh_ratio(*problem_rayleigh(Problem.from_case(case)), omega)
     elif kind == "full":
@@ -143,7 +143,7 @@ def residual_damping(case: Case, zeta: np.ndarray, res, rest_rows: np.ndarray,
         return _override_diagonal(case, compose_damping(Problem.from_case(case), parts, om),
                                   om, m)
     if kind == "rayleigh":
-        from ..modal.damping import problem_rayleigh, rayleigh_ratio
+        from ..model.damping import problem_rayleigh, rayleigh_ratio
 
         extra = rayleigh_ratio(*problem_rayleigh(Problem.from_case(case)), res.omega)
     else:

@@ -1,1 +1,1 @@
-"""Modal analysis: DOFs, distributed K and M, the eigensolvers and the modes of the model."""
+"""Modal analysis: the eigensolvers and the modes of the model (K, M, C from ``model/``)."""

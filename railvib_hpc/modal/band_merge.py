@@ -39,7 +39,7 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     from mpi4py import MPI
 
     from .block_lanczos import no_progress, symmetric_from_upper
-    from .factor import sparse_times_block
+    from ..model.factor import sparse_times_block
     from .ritz import NORMALISE_CHUNK
 
     chunk = chunk or NORMALISE_CHUNK
@@ -67,7 +67,7 @@ def _band_grams(K, M, Phi: np.ndarray, comm, stiff: list[np.ndarray],
     from mpi4py import MPI
 
     from .block_lanczos import no_progress, symmetric_from_upper
-    from .factor import sparse_times_block_pair
+    from ..model.factor import sparse_times_block_pair
     from .ritz import NORMALISE_CHUNK
 
     progress = progress or no_progress
@@ -100,7 +100,7 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     from scipy.linalg import eigh
 
     from .block_lanczos import narrow_columns, rotate_narrowing
-    from .factor import available_memory_gb
+    from ..model.factor import available_memory_gb
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()

@@ -67,7 +67,7 @@ from .ritz import (
 def _factor(K, M, comm, sigma: float, extra_gb: float, out_of_core: str, inertia: bool):
     """The :class:`~.factor.ShiftInvertFactor` at ``sigma`` (nudged when it hits an
     eigenvalue)."""
-    from .factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
+    from ..model.factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
 
     for attempt in range(3):
         s = sigma * (1.0 + SHIFT_NUDGE * attempt) if sigma else 0.0
@@ -136,7 +136,7 @@ def check_mode_count(key: str, f_hz: float, n_below: int, n_dofs: int, comm) -> 
     """Refuse (:class:`EigenSolveError`, one line) a band plan up to ``f_hz`` (the value of
     the case key ``key``) whose inertia count ``n_below`` exceeds :func:`mode_count_limit`;
     called before any band is solved (collective)."""
-    from .factor import available_memory_gb
+    from ..model.factor import available_memory_gb
 
     limit, why = mode_count_limit(n_dofs, available_memory_gb(comm))
     if n_below <= limit:
@@ -163,7 +163,7 @@ def solve_band(K, M, comm, band: Band, estimate: int, s: BandSettings, monitor=N
 
     Returns the modes (all converged: the band plus :data:`EDGE_MARGIN` beyond each edge),
     ``N(sigma)`` and statistics. ``progress``:
-    :data:`~railvib_hpc.modal.progress.Progress` of the phases after the expansions.
+    :data:`~railvib_hpc.model.factor.Progress` of the phases after the expansions.
     """
     from mpi4py import MPI
 
@@ -337,7 +337,7 @@ def solve_bands(K, M, comm, s: BandSettings, assemble=None, monitor=None,
         the numbers are also in the band's ``stats`` (:func:`band_memory`).
     progress
         ``progress(phase, done, total)``: the phases after each band's expansions and the
-        merge's (:data:`~railvib_hpc.modal.progress.Progress`).
+        merge's (:data:`~railvib_hpc.model.factor.Progress`).
 
     Returns
     -------

@@ -7,7 +7,7 @@ in a block of 32, 168k DOFs on 2 ranks). This is what ANSYS's Block Lanczos
 exploits.
 
 Method: the operator ``A = (K - sigma M)^-1 M``
-(:meth:`~railvib_hpc.modal.factor.ShiftInvertFactor.apply`) is self-adjoint in the M inner
+(:meth:`~railvib_hpc.model.factor.ShiftInvertFactor.apply`) is self-adjoint in the M inner
 product. The basis ``V`` is M-orthonormal (block classical Gram-Schmidt applied
 twice, then SVQB normalisation); ``T = V^T M A V`` is accumulated from the
 Gram-Schmidt coefficients. Ritz pairs ``(theta, y)`` of ``T`` give eigenvalues
@@ -33,12 +33,10 @@ import numpy as np
 from scipy.linalg import eigh
 
 from ..constants import BYTES_PER_DOUBLE, BYTES_PER_GB
-from .progress import Progress
+from ..model.factor import Progress  # the progress callback of the long phases
 
 if TYPE_CHECKING:
-    from .factor import ShiftInvertFactor
-
-
+    from ..model.factor import ShiftInvertFactor
 
 
 def no_progress(phase: str, done: int, total: int) -> None:

@@ -159,7 +159,7 @@ class ModalSolver:
         ``progress(phase, done, total)``: the phases after (and between) the Lanczos
         expansions, which ``monitor`` does not cover: thick restarts, Ritz vectors,
         purification, Rayleigh-Ritz, residual checks, round-off floors, the band merge
-        (:data:`~railvib_hpc.modal.progress.Progress`).
+        (:data:`~railvib_hpc.model.factor.Progress`).
 
     Examples
     --------
@@ -344,8 +344,8 @@ def _solve_block(K, M, comm: MPI.Comm, n_modes: int, shift_hz: float, tol: float
     from mpi4py import MPI
     from petsc4py import PETSc
 
+    from ..model.factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
     from .block_lanczos import NotConverged, block_lanczos, default_max_basis, dense_gb
-    from .factor import FactorizationError, InsufficientMemory, ShiftInvertFactor
 
     opts = PETSc.Options(PREFIX)
     block_size = opts.getInt("bl_block_size", block_size)

@@ -19,10 +19,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..mesh.model import Mesh
+from ..model.dofmap import DofMap
+from ..model.elements import group_damping_ratio, material_groups
+from ..model.petsc import assemble
 from ..problem import Problem
-from .dofmap import DofMap
-from .elements import group_damping_ratio, material_groups
-from .petsc import assemble
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -40,7 +40,7 @@ def group_strain_energies(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MP
     Parameters
     ----------
     mesh, problem, dofmap
-        The model as assembled by :func:`~railvib_hpc.modal.petsc.assemble`.
+        The model as assembled by :func:`~railvib_hpc.model.petsc.assemble`.
     comm
         MPI communicator.
     phi
@@ -54,7 +54,7 @@ def group_strain_energies(mesh: Mesh, problem: Problem, dofmap: DofMap, comm: MP
         Group name -> (m,) strain energies (the same on every rank); their sum over the
         groups is ``omega^2``.
     """
-    from .factor import sparse_times_block
+    from ..model.factor import sparse_times_block
 
     m = phi.shape[1]
     energies = {}

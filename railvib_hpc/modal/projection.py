@@ -94,8 +94,8 @@ def project(A, phi: np.ndarray, comm) -> np.ndarray:
 def project_damping_parts(mesh, problem: Problem, dofmap, comm, K, phi: np.ndarray
                           ) -> dict[str, np.ndarray]:
     """The projected parts of C (see the module notes), collective."""
-    from .elements import material_groups
-    from .petsc import assemble, node_block_matrix
+    from ..model.elements import material_groups
+    from ..model.petsc import assemble, node_block_matrix
 
     out: dict[str, np.ndarray] = {}
     for which in PARTS:
@@ -122,7 +122,7 @@ def compose_damping(problem: Problem, parts: dict[str, np.ndarray], omega: np.nd
     ``omega`` are the circular frequencies of the modes used (their number ``m`` may be
     smaller than the stored parts).
     """
-    from .damping import material_rayleigh, problem_rayleigh
+    from ..model.damping import material_rayleigh, problem_rayleigh
 
     om = np.asarray(omega, dtype=float)
     m = om.size

@@ -29,15 +29,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..model.elements import PAD_DIRECTION, PADS, material_groups
+from ..model.factor import sparse_times_block
+from ..model.petsc import assemble
 from ..uncertainty.reduced import (
     orthonormalising_map,
     reduced_eigenpairs,
     reduced_matrices,
     relative_residuals,
 )
-from .elements import PAD_DIRECTION, PADS, material_groups
-from .factor import sparse_times_block
-from .petsc import assemble
 
 if TYPE_CHECKING:
     from mpi4py import MPI
@@ -119,8 +119,8 @@ def build_basis(mesh, problem: Problem, dofmap, comm: MPI.Comm, K, M, phi: np.nd
     """
     from mpi4py import MPI
 
+    from ..model.factor import ShiftInvertFactor
     from .eigen import PREFIX
-    from .factor import ShiftInvertFactor
 
     t0 = time.perf_counter()
     parts = rom_parts(mesh, problem)
@@ -272,8 +272,8 @@ def prepare_basis(problem: Problem, path: Path, comm: MPI.Comm, rep,
     from ..io.digests import file_digest
     from ..io.files import MESH_H5, MODES_H5
     from ..mesh.mesh_io import read_mesh_h5
+    from ..model.boundary import problem_dofmap
     from ..parallel import on_root
-    from .boundary import problem_dofmap
     from .projection import read_phi_rows
 
     folder = path.parent

@@ -22,7 +22,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..schema import BOUNDARY_FACES, BOUNDARY_TYPES, PML_ENGINES
+from ..boundary_registry import BOUNDARY_KINDS, boundary_kind
+from ..schema import BOUNDARY_FACES
 
 Refusal = tuple[str, Any, str]
 
@@ -53,17 +54,15 @@ def supported_ends_damping(case) -> list[Refusal]:
 
 
 def no_pml(case) -> list[Refusal]:
-    """A perfectly matched layer has no modes: the first face with one."""
-    pml = [f for f in BOUNDARY_FACES if case[f"boundary.{f}"] == "pml"]
-    if not pml:
-        return []
-    engines = ", ".join(f"'{e}'" for e in PML_ENGINES[:-1]) + f" or '{PML_ENGINES[-1]}'"
-    allowed = ", ".join(t for t in BOUNDARY_TYPES if t != "pml")
-    return [(f"boundary.{pml[0]}", "pml",
-             "a perfectly matched layer is frequency dependent (its stretching 1 + d / (i "
-             "omega)), so the modal path (modal, mbs, run and the modal studies) has no modes "
-             f"of it; it is for railvib transient with transient.engine = {engines}; allowed "
-             f"here: {allowed}")]
+    """A boundary kind with no modes (a perfectly matched layer: the kinds whose
+    :attr:`~railvib_hpc.model.boundary_kind.BoundaryKind.modal` is False): the first face
+    with one."""
+    for face in BOUNDARY_FACES:
+        name = case[f"boundary.{face}"]
+        if name in BOUNDARY_KINDS and not (kind := boundary_kind(name)).modal:
+            allowed = [k for k in BOUNDARY_KINDS if boundary_kind(k).modal]
+            return [(f"boundary.{face}", name, kind.modal_refusal(allowed))]
+    return []
 
 
 def modal_refusals(case, command: str) -> list[Refusal]:

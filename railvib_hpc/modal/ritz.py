@@ -122,7 +122,7 @@ def purified_modes(op, X: np.ndarray, block: int, K, M, comm: MPI.Comm, tol: flo
     ``stats["repurified_modes"]``: the passes after it and the modes they redid.
     ``window``: only the eigenvalues in ``[lo, hi]`` must converge (a band; the pairs
     beyond its edges belong to the neighbouring bands). ``progress``:
-    :data:`~railvib_hpc.modal.progress.Progress` of the phases (purification,
+    :data:`~railvib_hpc.model.factor.Progress` of the phases (purification,
     Rayleigh-Ritz, residual checks, round-off floors).
 
     Statistics (added to ``stats``, seconds summed over the passes):
@@ -341,7 +341,7 @@ def purify_locked(op, X: np.ndarray, n_locked: int, block: int,
     ``||S z||`` (the triangle inequality over the columns' refined solve residuals ``S``;
     the projection's share, ``(K - sigma M) Phi_c C z``, is of the order of the locked
     modes' coupling ``||C||``, itself of the order of their residuals, and not included).
-    ``progress``: :data:`~railvib_hpc.modal.progress.Progress` (phases "purification"
+    ``progress``: :data:`~railvib_hpc.model.factor.Progress` (phases "purification"
     and "Rayleigh-Ritz"); ``timings``: seconds added under ``"solves"``, ``"products"`` (the
     K and M products and solve residuals) and ``"rayleigh_ritz"`` (projection, dense
     eigenproblem, rotation).
@@ -579,7 +579,7 @@ def normalise_and_check(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float = 0
     verify an eigenpair. (Computing it needs |K| and |M|, so it is only done when needed.)
     Memory: ``result.phi`` is scaled in place and every other n x m temporary is formed
     :data:`NORMALISE_CHUNK` columns at a time (the floors' bound: n x the modes above
-    ``tol``). ``progress``: :data:`~railvib_hpc.modal.progress.Progress` (phases
+    ``tol``). ``progress``: :data:`~railvib_hpc.model.factor.Progress` (phases
     "residual checks" and "round-off floors").
 
     Returns
@@ -591,8 +591,8 @@ def normalise_and_check(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float = 0
     """
     from mpi4py import MPI
 
+    from ..model.factor import sparse_times_block_pair
     from .block_lanczos import no_progress
-    from .factor import sparse_times_block_pair
 
     progress = progress or no_progress
     t0 = time.perf_counter()
@@ -658,7 +658,7 @@ def _residual_floors(result: Eigenpairs, K, M, comm: MPI.Comm, tol: float,
     from mpi4py import MPI
 
     from .. import tolerances
-    from .factor import abs_matrix, longest_row, sparse_times_block
+    from ..model.factor import abs_matrix, longest_row, sparse_times_block
 
     phi, lam = result.phi, result.eigenvalues
     floor = np.zeros(len(lam))

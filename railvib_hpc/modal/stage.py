@@ -37,17 +37,17 @@ from ..io.stage_outputs import ModesOutput
 from ..io.stage_protocol import NotReusable, Stage, StageContext, StageRunner
 from ..io.xdmf import ensure_views
 from ..log import Reporter
+from ..model.boundary import problem_dofmap
+from ..model.dofmap import NODE_ARRAY_CHUNK
+from ..model.elements import nodal_masses
+from ..model.factor import sparse_times_block
+from ..model.petsc import assemble
 from ..parallel import on_root
 from ..problem import RANDOM_FIELD_KEYS, Problem
 from ..resources import peak_memory_gb
 from ..uncertainty.fields import resolution_warnings
-from .boundary import problem_dofmap
-from .dofmap import NODE_ARRAY_CHUNK
 from .eigen import ModalProblem, ModalSolver
-from .elements import nodal_masses
 from .energy import group_strain_energies
-from .factor import sparse_times_block
-from .petsc import assemble
 from .projection import project_damping_parts, read_phi_rows
 from .refusals import modal_refusals
 from .static import rail_load_dofs, residual_mass, solve_static, unit_loads, write_static
@@ -400,7 +400,7 @@ def _with_track_ends(ctx: StageContext, mesh, dofmap, problem: Problem, K, M) ->
     (:func:`~.petsc.fit_track_ends`, shared with the full-order path; its line goes to the
     log). Rigid ends: ``problem`` unchanged (collective)."""
     from ..errors import UserError
-    from .petsc import fit_track_ends
+    from ..model.petsc import fit_track_ends
 
     try:
         problem, line = fit_track_ends(mesh, dofmap, problem, K, M, ctx.comm,

@@ -104,7 +104,7 @@ def deflate(M, phi: np.ndarray, cols: np.ndarray, comm: MPI.Comm) -> np.ndarray:
     (mass-normalised) modes taken out, M-orthogonal to them (collective)."""
     from mpi4py import MPI
 
-    from .factor import sparse_times_block
+    from ..model.factor import sparse_times_block
 
     coef = phi.T @ sparse_times_block(M, cols, comm)
     comm.Allreduce(MPI.IN_PLACE, coef, op=MPI.SUM)
@@ -145,8 +145,8 @@ def write_static(path: Path, comm: MPI.Comm, mesh, dofmap, x_local: np.ndarray, 
 
 def solve_static(K, M, comm: MPI.Comm, rhs: np.ndarray) -> np.ndarray:
     """``K^-1 rhs`` with its own MUMPS Cholesky factorization (options prefix railvib_eig_)."""
+    from ..model.factor import ShiftInvertFactor
     from .eigen import PREFIX
-    from .factor import ShiftInvertFactor
 
     # dense blocks held besides the factor: the right-hand sides and the solutions (all ranks)
     extra_gb = 2 * BYTES_PER_DOUBLE * comm.allreduce(rhs.size) / BYTES_PER_GB

@@ -87,7 +87,7 @@ def hex_materials(problem: Problem) -> dict[int, tuple[float, float]]:
     dict
         Keys are :data:`railvib_hpc.schema.PART_ID` values of the solid parts.
     """
-    from ..modal.elements import SOLID_MATERIAL
+    from ..model.elements import SOLID_MATERIAL
 
     out = {}
     for part, mat in SOLID_MATERIAL.items():

@@ -8,11 +8,13 @@ from __future__ import annotations
 from typing import Any
 
 from ..applies import Condition, any_of, includes, is_
+from ..boundary_registry import BOUNDARY_KIND_NAMES
 from .conditions import ON_TRACK
 from .param import Param
 
-#: Conditions of a truncation face of the soil box (``[boundary]``).
-BOUNDARY_TYPES = ("fixed", "roller", "free", "absorbing", "caughey", "pml")
+#: Conditions of a truncation face of the soil box (``[boundary]``): the registered boundary
+#: kinds (:mod:`railvib_hpc.boundary_registry`; a kind registered later is allowed too).
+BOUNDARY_TYPES = BOUNDARY_KIND_NAMES
 #: Default frequency shift of the perfectly matched layers [1/s]: 2 pi x 0.5 Hz, half the
 #: lowest one-third-octave band assessed (1 Hz); there omega / |i omega + alpha| = 0.89.
 PML_ALPHA = 3.14159

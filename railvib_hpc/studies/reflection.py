@@ -38,7 +38,9 @@ from typing import Any
 
 import numpy as np
 
+from ..boundary_registry import BOUNDARY_KINDS, boundary_kind
 from ..config import Case
+from ..schema import BOUNDARY_FACES
 from .common import StudyPlan, Variant, all_with_contact_force, relative, response_quantities
 from .protocol import Study
 from .report import figure, fmt, pct, save, transpose
@@ -78,18 +80,30 @@ def domain_overrides(case: Case, change: tuple[float, float, float]) -> list[str
                   f"domain.extra_width={base['extra_width'] + w!r}"]
 
 
-#: Overrides of each boundary setting of the study (``boundaries``).
-BOUNDARY_OVERRIDES = {
+#: Overrides of the boundary settings of the study (``boundaries``) that are no boundary
+#: kind: the case's own faces and the thesis's.
+SETTING_OVERRIDES = {
     "case": (),
     "thesis": ("boundary.x_min=roller", "boundary.x_max=roller", "boundary.y_min=roller",
                "boundary.y_max=roller", "boundary.base=fixed"),
-    "absorbing": tuple(f"boundary.{f}=absorbing" for f in
-                       ("x_min", "x_max", "y_min", "y_max", "base")),
-    # the layers need an explicit engine (plan) and its lumped mass; their thickness is
-    # added outside each domain (:func:`pml_overrides`)
-    "pml": (*(f"boundary.{f}=pml" for f in ("x_min", "x_max", "y_min", "y_max", "base")),
-            "modal.lumped_mass=true"),
 }
+
+
+def variant_kinds() -> list[str]:
+    """The boundary kinds the study offers on all five faces (those whose
+    :attr:`~railvib_hpc.model.boundary_kind.BoundaryKind.reflection_variant` is set)."""
+    return [name for name in BOUNDARY_KINDS if boundary_kind(name).reflection_variant]
+
+
+def boundary_overrides(setting: str) -> tuple[str, ...]:
+    """The overrides of one boundary setting: the case's or the thesis's faces
+    (:data:`SETTING_OVERRIDES`), or a kind on all five faces with the kind's own further
+    overrides (the perfectly matched layers' lumped mass; their thickness is added outside
+    each domain, :func:`pml_overrides`)."""
+    if setting in SETTING_OVERRIDES:
+        return SETTING_OVERRIDES[setting]
+    kind = boundary_kind(setting)
+    return (*(f"boundary.{f}={setting}" for f in BOUNDARY_FACES), *kind.reflection_overrides)
 
 
 def pml_overrides(case: Case, change: tuple[float, float, float], thickness: float
@@ -122,15 +136,18 @@ def plan(case: Case, settings: dict[str, Any], root: Path | None = None) -> Stud
             f"the building base (z = {case['geometry.zbb']:g} m): a depth change must be "
             f"> {lowest:g} m")])
     boundaries = settings.get("boundaries", ["case"])
-    if "pml" in boundaries and not direct:
+    kinds = {b: boundary_kind(b) for b in boundaries if b in BOUNDARY_KINDS}
+    time_domain = [b for b, kind in kinds.items() if not kind.modal]
+    if time_domain and not direct:
         raise StudySettingsError("reflection", [(
             "study.reflection.boundaries", boundaries,
-            "'pml' needs study.reflection.solver = 'direct' (the layers are time-domain "
-            "only: railvib transient)")])
+            f"'{time_domain[0]}' needs study.reflection.solver = 'direct' "
+            f"({kinds[time_domain[0]].time_domain_note}: railvib transient)")])
     for b in boundaries:
+        outside = b in kinds and kinds[b].reflection_layer_outside
         for name, (d, ln, w) in zip(settings["names"], settings["domains"]):
-            ov = [*(pml_overrides(case, (d, ln, w), settings["pml_thickness"]) if b == "pml"
-                    else domain_overrides(case, (d, ln, w))), *BOUNDARY_OVERRIDES[b]]
+            ov = [*(pml_overrides(case, (d, ln, w), settings["pml_thickness"]) if outside
+                    else domain_overrides(case, (d, ln, w))), *boundary_overrides(b)]
             if band > 0:
                 # every mode below the band, proved by the inertia counts of the band solve
                 ov += [f"modal.f_max={float(band)!r}"]

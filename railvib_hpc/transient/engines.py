@@ -47,8 +47,8 @@ def assemble_matrices(ctx: StageContext, mesh, dofmap, problem: Problem,
     case by :func:`.stage._setup`; ``pml``: its :func:`~.pml.pml_geometry` (None without ``pml``
     faces), whose hexahedra take the plain full formulation, the one their memory terms
     use."""
-    from ..modal.boundary import dashpot_diagonal
-    from ..modal.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
+    from ..model.boundary import dashpot_diagonal
+    from ..model.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
     engine = case["transient.engine"]
@@ -87,9 +87,9 @@ TRACK_ENDS_PREFIX = "railvib_tr_ends_"
 
 def fit_track_ends(ctx: StageContext, mesh, dofmap, problem: Problem, K, M) -> Problem:
     """The problem with the supported track ends' springs, added to the assembled K
-    (:func:`~railvib_hpc.modal.petsc.fit_track_ends`, which the modal path shares; its
+    (:func:`~railvib_hpc.model.petsc.fit_track_ends`, which the modal path shares; its
     line goes to the log). Rigid ends: ``problem`` unchanged."""
-    from ..modal.petsc import fit_track_ends as fit
+    from ..model.petsc import fit_track_ends as fit
 
     try:
         problem, line = fit(mesh, dofmap, problem, K, M, ctx.comm, TRACK_ENDS_PREFIX)
@@ -234,7 +234,7 @@ def imex_partition(ctx: StageContext, mesh, dofmap, problem: Problem, K, M, C,
     :func:`~.pml.pml_geometry`; their ``M_e2`` is implicit, not in the limit, their
     hexahedra take the full formulation in the partition as in K)."""
     from ..mesh.checks import present_parts
-    from ..modal.petsc import assemble_partition
+    from ..model.petsc import assemble_partition
     from ..schema import PART_ID
     from .explicit import STEP_SAFETY, limiting_element, lumped_diagonal, stability_limit
     from .imex import DAMPING_STABILITY_FACTOR, auto_implicit_hexes, implicit_part_names

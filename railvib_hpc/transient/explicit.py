@@ -11,7 +11,7 @@ The engine of ``transient.engine = "explicit"`` (docs/transient.md). With the di
 (Newmark beta = 0, gamma = 1/2: the central-difference method; the damping force takes the
 half-step velocity, so no matrix is ever factored). A step costs two sparse products (K,
 C; one with Rayleigh damping applied as an operator,
-:class:`~railvib_hpc.modal.petsc.RayleighOperator`) and a few vector operations, and the
+:class:`~railvib_hpc.model.petsc.RayleighOperator`) and a few vector operations, and the
 memory is the matrices and a few vectors: both grow linearly with the DOFs, where the
 direct path's factor grows as n^(4/3) (the fill of nested dissection on a 3-D mesh).
 The scheme is second order, conserves the discrete energy of an undamped system and is
@@ -407,7 +407,7 @@ class ExplicitSystem:
 
     ``dashpots``: this rank's rows of a diagonal damping taken at the full-step velocity
     ``v_{n+1}`` instead of the half step (the absorbing faces' dashpots,
-    :func:`~railvib_hpc.modal.boundary.dashpot_diagonal`; not in C then): the step solves
+    :func:`~railvib_hpc.model.boundary.dashpot_diagonal`; not in C then): the step solves
     ``(m + dt / 2 d) a_{n+1} = f - K u_{n+1} - C v_{n+1/2} - d v_{n+1/2}``, a diagonal, and
     the dashpots no longer limit it (trapezoidal on them: the leapfrog's damping force
     ``d v_n`` at the mean of the two half-step velocities dissipates at any step). Without
@@ -450,7 +450,7 @@ class ExplicitSystem:
         self.n_solves = 0
         #: ``near_null() -> (n_local, k)``: the near null space of K for the static
         #: start's GAMG (the rigid-body motions,
-        #: :func:`~railvib_hpc.modal.dofmap.rigid_body_modes`), built only when CG runs,
+        #: :func:`~railvib_hpc.model.dofmap.rigid_body_modes`), built only when CG runs,
         #: not held through the run (48 bytes per DOF); None: none given
         self.near_null: Callable[[], np.ndarray] | None = None
         #: How the static start was solved, with its time (None before).
@@ -482,7 +482,7 @@ class ExplicitSystem:
 
     def _factor_solve(self, A, B: np.ndarray) -> np.ndarray | None:
         """``A^-1 B`` with a MUMPS Cholesky factor of A, None when it does not fit."""
-        from ..modal.factor import InsufficientMemory
+        from ..model.factor import InsufficientMemory
         from .petsc import factor_solve
 
         try:
@@ -556,8 +556,8 @@ class ExplicitSystem:
     def internal_force(self, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """``K u + C v`` for this rank's rows (a new array): one product with K when C is
         Rayleigh damping applied as an operator
-        (:func:`~railvib_hpc.modal.petsc.stiffness_and_damping`)."""
-        from ..modal.petsc import stiffness_and_damping
+        (:func:`~railvib_hpc.model.petsc.stiffness_and_damping`)."""
+        from ..model.petsc import stiffness_and_damping
 
         t0 = time.perf_counter()
         self._x.getArray()[:] = u

@@ -90,11 +90,11 @@ AUTO_IMPLICIT_SHARE = 0.05
 
 def element_allowed_steps(mesh, problem: Problem, safety: float) -> np.ndarray:
     """Every hexahedron's own allowed step: ``safety`` x its critical step alone
-    (:func:`damped_critical_steps` of :func:`~railvib_hpc.modal.elements.hex_max_frequencies`
+    (:func:`damped_critical_steps` of :func:`~railvib_hpc.model.elements.hex_max_frequencies`
     with its Rayleigh coefficients). By Irons' theorem the explicit part's critical step is
     at least the smallest of these over its elements (a bound, not the limit itself)."""
-    from ..modal.damping import material_rayleigh, rayleigh_coefficients
-    from ..modal.elements import hex_max_frequencies, material_groups
+    from ..model.damping import material_rayleigh, rayleigh_coefficients
+    from ..model.elements import hex_max_frequencies, material_groups
     from ..schema import PART_ID
 
     omega = hex_max_frequencies(mesh, problem)
@@ -192,7 +192,7 @@ class ImexSystem(ExplicitSystem):
         The whole model's matrices (M lumped; C may be None).
     K_I, C_I
         Stiffness and damping of the implicit partition
-        (:func:`~railvib_hpc.modal.petsc.assemble_partition`; C_I may be None). The system
+        (:func:`~railvib_hpc.model.petsc.assemble_partition`; C_I may be None). The system
         owns them from here on.
     dt
         Time step (at most the explicit part's stable step).
@@ -211,7 +211,7 @@ class ImexSystem(ExplicitSystem):
                  extra_gb: float | Callable[[int], float] = 0.0, pml=None):
         from petsc4py import PETSc
 
-        from ..modal.factor import ShiftInvertFactor
+        from ..model.factor import ShiftInvertFactor
 
         super().__init__(K, M, C, dt, comm)
         # (not through ExplicitSystem's dashpots: here M_e1 is implicit, in K_eff)

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..mesh.model import Mesh
 from ..mesh.search import hex_shape_values, locate
-from ..modal.dofmap import DofMap
+from ..model.dofmap import DofMap
 
 
 # --------------------------------------------------------------------------- sampling

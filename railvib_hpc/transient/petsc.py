@@ -3,7 +3,7 @@
 :class:`TransientSystem` holds the distributed K, M, C of the model, builds the effective
 matrix ``K_eff = c_m M + c_c C + c_k K`` of :class:`~.scheme.GeneralizedAlpha` (the same
 sparsity pattern as K), factors it once with MUMPS Cholesky (through
-:class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0: memory check, automatic
+:class:`~railvib_hpc.model.factor.ShiftInvertFactor` at sigma = 0: memory check, automatic
 out of core, options prefix ``railvib_tr_st_``) and reuses the factor at every step. The history
 part of the right-hand side is precombined into at most three matrices
 ``H_u = m_u M + c_u C - alpha_f K``, ``H_v = m_v M + c_v C``, ``H_a = m_a M + c_a C``
@@ -11,7 +11,7 @@ part of the right-hand side is precombined into at most three matrices
 sparse products.
 
 State vectors are numpy arrays of this rank's rows (global DOF numbers of
-:class:`~railvib_hpc.modal.dofmap.DofMap`, independent of the number of ranks) wrapped as
+:class:`~railvib_hpc.model.dofmap.DofMap`, independent of the number of ranks) wrapped as
 PETSc vectors without copies.
 """
 
@@ -55,7 +55,7 @@ class TransientSystem:
                  pml=None):
         from petsc4py import PETSc
 
-        from ..modal.factor import ShiftInvertFactor
+        from ..model.factor import ShiftInvertFactor
 
         self.n_global = K.getSize()[0]
         self.r0, self.r1 = K.getOwnershipRange()
@@ -214,10 +214,10 @@ class TransientSystem:
 
 def factor_solve(A, M, B: np.ndarray, comm, prefix: str) -> np.ndarray:
     """``A^-1 B`` for a block B of this rank's rows with one MUMPS Cholesky factor of A
-    (:class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0, its memory check
-    included: :class:`~railvib_hpc.modal.factor.InsufficientMemory` when it does not fit),
+    (:class:`~railvib_hpc.model.factor.ShiftInvertFactor` at sigma = 0, its memory check
+    included: :class:`~railvib_hpc.model.factor.InsufficientMemory` when it does not fit),
     freed before returning (collective)."""
-    from ..modal.factor import ShiftInvertFactor
+    from ..model.factor import ShiftInvertFactor
 
     op = ShiftInvertFactor(A, M, 0.0, comm, prefix, extra_gb=16.0 * B.size / 1e9)
     try:

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..boundary_registry import boundary_kind
 from ..errors import UserError
 from ..fem.material import lame_parameters
 from ..fem.pml import (
@@ -45,7 +46,7 @@ from ..fem.pml import (
 )
 from ..fem.reference import GAUSS_VALUES
 from ..mesh.model import Mesh
-from ..modal.boundary import FACE_AXIS, face_node_sets, face_types
+from ..model.boundary import FACE_AXIS, face_node_sets, face_types
 from ..problem import Problem
 from ..schema import BUILDING_PARTS, PART_ID, SOLID_MATERIAL
 
@@ -77,15 +78,17 @@ class PmlFace:
 
 
 def pml_faces(problem: Problem) -> list[str]:
-    """The faces whose type is ``pml``."""
-    return [face for face, kind in face_types(problem).items() if kind == "pml"]
+    """The faces whose kind has a perfectly matched layer (``pml``,
+    :attr:`~railvib_hpc.model.boundary_kind.BoundaryKind.matched_layer`)."""
+    return [face for face, kind in face_types(problem).items()
+            if boundary_kind(kind).matched_layer]
 
 
 def _element_materials(mesh: Mesh, problem: Problem, sel: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lame parameters and densities of the hexahedra ``sel`` (their random fields'
     factors applied at the centroids, as the assembly does)."""
-    from ..modal.elements import element_factors
+    from ..model.elements import element_factors
 
     lam, mu, rho = np.zeros(len(sel)), np.zeros(len(sel)), np.zeros(len(sel))
     parts = mesh.hex_part[sel]

@@ -726,7 +726,7 @@ def _transient(ctx: StageContext) -> dict:
     for A in (init["K"], init["M"]):
         if A is not None:
             A.destroy()
-    from ..modal.petsc import destroy_damping
+    from ..model.petsc import destroy_damping
 
     destroy_damping(init["C"])
     rep.info(format_summary(stats))
@@ -782,7 +782,7 @@ def _mesh_input(ctx: StageContext):
 def _setup(ctx: StageContext) -> dict:
     """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
     from ..mbs.case_vehicle import passage_irregularity
-    from ..modal.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
+    from ..model.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
     from .petsc import TransientSystem
 
     case, comm, rep = ctx.case, ctx.comm, ctx.rep
@@ -911,7 +911,7 @@ def _setup(ctx: StageContext) -> dict:
     else:
         solver = DirectSolver(system, prescribed, driver, columns)
     if engine != "direct":
-        from ..modal.dofmap import rigid_body_modes
+        from ..model.dofmap import rigid_body_modes
 
         # GAMG's near null space for the static start, when it is solved by CG
         system.near_null = lambda: rigid_body_modes(mesh.points, dofmap, comm.rank)

@@ -26,23 +26,23 @@ def _check_bands(case: CaseView) -> list[tuple[str, Any, str]]:
     return out
 
 
+def _boundary_kind_problems(case: CaseView) -> list[tuple[str, Any, str]]:
+    """The ``[boundary]`` checks of the kinds on the faces, in registry order
+    (:meth:`~railvib_hpc.model.boundary_kind.BoundaryKind.section_problems`: a caughey or
+    pml layer's thickness, the pml's target reflection)."""
+    from ..boundary_registry import BOUNDARY_KINDS, boundary_kind
+
+    faces = ("x_min", "x_max", "y_min", "y_max", "base")
+    on = {name: [f for f in faces if case[f"boundary.{f}"] == name] for name in BOUNDARY_KINDS}
+    return [p for name, where in on.items() if where
+            for p in boundary_kind(name).section_problems(case["boundary"], where)]
+
+
 def _check_dynamics(case: CaseView) -> list[tuple[str, Any, str]]:
     """Cross-key checks of [damping] and [transient]."""
     out: list[tuple[str, Any, str]] = []
     d, tr = case["damping"], case["transient"]
-    faces = [f for f in ("x_min", "x_max", "y_min", "y_max", "base")
-             if case[f"boundary.{f}"] == "caughey"]
-    if faces and not case["boundary.layer_thickness"] > 0:
-        out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
-                    f"must be > 0 m for the caughey face(s) {', '.join(faces)}"))
-    pml = [f for f in ("x_min", "x_max", "y_min", "y_max", "base")
-           if case[f"boundary.{f}"] == "pml"]
-    if pml and not case["boundary.layer_thickness"] > 0:
-        out.append(("boundary.layer_thickness", case["boundary.layer_thickness"],
-                    f"must be > 0 m for the pml face(s) {', '.join(pml)}"))
-    if pml and not 0.0 < case["boundary.pml_reflection"] < 1.0:
-        out.append(("boundary.pml_reflection", case["boundary.pml_reflection"],
-                    "must lie in (0, 1): the target reflection of the layer"))
+    out.extend(_boundary_kind_problems(case))
     if not d["f1"] < d["f2"]:
         out.append(("damping.f2", d["f2"], f"must be greater than damping.f1 = {d['f1']:g} Hz "
                     "(the two frequencies of the Rayleigh damping)"))

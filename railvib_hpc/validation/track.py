@@ -93,15 +93,17 @@ _FACE_PLANES = {"x_min": (0, False), "x_max": (0, True), "y_min": (1, False),
 
 
 def _statically_held(case: CaseView, face: str) -> tuple[int, ...]:
-    """The displacement components a face holds against a static load: fixed, caughey
+    """The displacement components a face holds against a static load, its kind's
+    (:meth:`~railvib_hpc.model.boundary_kind.BoundaryKind.statically_held`): fixed, caughey
     and pml faces all three, a roller its normal one, an absorbing face all three with
     its springs (``boundary.virtual_thickness > 0``) and none on dashpots alone (they
     hold no static load), a free face none."""
+    from ..boundary_registry import BOUNDARY_KINDS, boundary_kind
+
     kind = case[f"boundary.{face}"]
-    if kind in ("fixed", "caughey", "pml") or (
-            kind == "absorbing" and case["boundary.virtual_thickness"] > 0):
-        return (0, 1, 2)
-    return (_FACE_PLANES[face][0],) if kind == "roller" else ()
+    if kind not in BOUNDARY_KINDS:                # refused with the values
+        return ()
+    return boundary_kind(kind).statically_held(face, case["boundary"])
 
 
 def _check_static_start(case: CaseView) -> list[tuple[str, Any, str]]:

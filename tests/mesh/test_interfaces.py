@@ -25,7 +25,7 @@ from railvib_hpc.fem.assemble_serial import assemble_matrix
 from railvib_hpc.mesh.interfaces import split_interfaces, tributary_areas
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.stage import make_mesh
-from railvib_hpc.modal.elements import element_batches, group_damping_ratio
+from railvib_hpc.model.elements import element_batches, group_damping_ratio
 from railvib_hpc.problem import Problem
 from railvib_hpc.schema import INTERFACE_PARTS, PART_ID
 

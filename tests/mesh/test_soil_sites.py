@@ -31,7 +31,7 @@ from railvib_hpc.fem.assemble_serial import assemble_matrix
 from railvib_hpc.mesh.layout import build_layout
 from railvib_hpc.mesh.model import Mesh
 from railvib_hpc.mesh.stage import predicted_hexes, wavelength_warnings
-from railvib_hpc.modal.elements import element_batches
+from railvib_hpc.model.elements import element_batches
 from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 from railvib_hpc.site import soil_layers

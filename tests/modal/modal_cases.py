@@ -55,9 +55,9 @@ def solve(mesh: Mesh, case, rules, n_modes: int, comm=None, method="block_lanczo
     from railvib_hpc.petsc_env import init_petsc
 
     init_petsc([])
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     comm = comm or MPI.COMM_SELF
     dofmap = build_dofmap(mesh, comm.size, rules=rules)
@@ -253,7 +253,7 @@ def energy_sum_allowance(mesh, case, dofmap, phi, comm=None):
 
     from railvib_hpc import tolerances
     from railvib_hpc.modal.energy import material_groups
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.petsc import assemble
 
     comm = comm or MPI.COMM_SELF
     per_group = []
@@ -312,9 +312,9 @@ def solve_banded(mesh: Mesh, case, rules, f_max: float, cache_dir, comm=None, ed
 
     init_petsc([])
     from railvib_hpc.modal.band_solve import BandSettings
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     comm = comm or MPI.COMM_SELF
     dofmap = build_dofmap(mesh, comm.size, rules=rules)

@@ -184,10 +184,10 @@ def test_block_operator_destroy_frees_the_factor():
     """petsc4py 3.18 does not destroy a parallel factor Mat whose last Python reference
     goes (it waits for PETSc.garbage_cleanup): ShiftInvertFactor.destroy must free it itself.
     Three operators one after the other leave less than half a factor behind."""
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.factor import ShiftInvertFactor
-    from railvib_hpc.modal.petsc import assemble
     from railvib_hpc.modal.ritz import PREFIX
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.factor import ShiftInvertFactor
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.resources import current_memory_gb, release_memory
 

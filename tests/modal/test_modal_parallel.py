@@ -73,9 +73,9 @@ def _serial_site(folder: Path) -> None:
     references, and the test reads them (and the mesh)."""
     import pickle
 
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", *SITE])
     mesh = _site_mesh(case)
@@ -180,9 +180,9 @@ def _assert_equal_serial(case, mesh, K1, M1, lam, phi_1):
     init_petsc([])
     from petsc4py import PETSc
 
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.schema import PART_ID, SOLID_MATERIAL, SOLID_PARTS
     from railvib_hpc.site import solid_material
 
@@ -267,9 +267,9 @@ def _compare_with_serial(coarse, serial, out, freq):
     strain energies agree."""
     import h5py
 
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.energy import material_groups
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.n_modes=20"])
     _, mesh = coarse
@@ -302,10 +302,10 @@ def test_incompatible_modes_and_out_of_core_equal_serial(coarse, monkeypatch):
     from petsc4py import PETSc
 
     from railvib_hpc.config import load_case
-    from railvib_hpc.modal import factor
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model import factor
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", "modal.hex_formulation=incompatible"])

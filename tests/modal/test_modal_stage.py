@@ -160,7 +160,7 @@ def test_strain_energies_in_modes_file_and_material_damping(modal_run, tmp_path,
     from railvib_hpc.mbs.case_vehicle import MBSInputError
     from railvib_hpc.mbs.damping_model import modal_damping
     from railvib_hpc.mesh.mesh_io import read_mesh_h5
-    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.model.dofmap import build_dofmap
 
     energies = read_strain_energies(modal_run / "modes.h5")
     assert set(energies) == {"ballast", "subballast", "subgrade", "concrete", "rail",

@@ -3,7 +3,7 @@
 The rail continues beyond the soil box on fitted springs and graded dashpots; the modal
 path (``railvib run``, its modal and mbs stages) takes it with ``modal.damping = 'full'``
 (the dashpots projected on the modes) and fits the springs with the same function as the
-full-order path (:func:`railvib_hpc.modal.petsc.fit_track_ends`). Checked against the
+full-order path (:func:`railvib_hpc.model.petsc.fit_track_ends`). Checked against the
 direct path on the same tiny model, on the rank count the test runs on.
 """
 

@@ -195,7 +195,7 @@ def test_out_of_core_factorization(monkeypatch, setting):
     The memory situation is simulated: 1 GB available, 100 GB in core, 0.001 GB out of core."""
     from petsc4py import PETSc
 
-    from railvib_hpc.modal import factor
+    from railvib_hpc.model import factor
 
     name = "railvib_eig_st_mat_mumps_icntl_22"
     reference, K, M, _ = solve(column_mesh(32), soil_case(), {"bottom": ("ux", "uy", "uz"),
@@ -228,7 +228,7 @@ def test_out_of_core_factorization(monkeypatch, setting):
 def test_out_of_core_that_does_not_fit_either_is_a_clear_error(monkeypatch):
     from petsc4py import PETSc
 
-    from railvib_hpc.modal import factor
+    from railvib_hpc.model import factor
 
     monkeypatch.setattr(factor, "available_memory_gb", lambda comm: 1.0)
     monkeypatch.setattr(factor.ShiftInvertFactor, "_estimate_factor_memory",

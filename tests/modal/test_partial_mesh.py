@@ -65,8 +65,8 @@ def test_soil_column_modal_against_the_analytic_column(column_msh, shared_tmp, c
     assert freq[0] == pytest.approx(14.939, abs=5e-3)
     # the same pencil as the serial assembly, for the round-off tolerance
     from railvib_hpc.mesh.stage import make_mesh
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     case = load_case(BASELINE, [f"mesh.file='{column_msh}'"])
     mesh, _ = make_mesh(case)
@@ -91,8 +91,8 @@ def test_soil_column_on_all_rank_counts(column_msh, shared_tmp):
     from fem_tools import frequency_rtol
 
     from railvib_hpc.mesh.stage import make_mesh
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     case = load_case(BASELINE, [f"mesh.file='{column_msh}'"])
     mesh, _ = make_mesh(case)

@@ -84,9 +84,9 @@ def _column_operator(sigma_between: tuple[int, int] | None):
     from mpi4py import MPI
     from scipy.linalg import eigh
 
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.factor import ShiftInvertFactor
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.factor import ShiftInvertFactor
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.petsc_env import init_petsc
 
     init_petsc([])
@@ -158,9 +158,9 @@ def test_every_phase_after_the_expansions_reports_progress(tmp_path):
     from mpi4py import MPI
 
     from railvib_hpc.modal.band_solve import BandSettings
-    from railvib_hpc.modal.dofmap import build_dofmap
     from railvib_hpc.modal.eigen import solve_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.petsc_env import init_petsc
 
     init_petsc([])

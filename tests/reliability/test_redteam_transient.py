@@ -81,7 +81,7 @@ def test_caughey_layer_damps_the_ground_only(mesh, tally):
     (0.87-0.95 before) nor the ballast and subballast (such a layer is refused by
     :func:`check_layers`, since it reaches the building; the weights alone are checked
     here); 3 m does not reach the footings, and its line names the parts left undamped."""
-    from railvib_hpc.modal.boundary import LAYER_PARTS, layer_line, layer_weights
+    from railvib_hpc.model.boundary import LAYER_PARTS, layer_line, layer_weights
     from railvib_hpc.schema import PART_ID
 
     case = load_case(ABSORBING, [*COARSE_SETS, "boundary.base=caughey",
@@ -111,7 +111,7 @@ def test_caughey_layer_reaching_the_building_is_refused(mesh, meshed, tmp_path, 
     (about 27 % at the ground) with an info line; now it is refused in one line (exit 2)
     naming the key, the value and the range allowed, as the perfectly matched layers
     refuse a layer that reaches the building; a 1.5 m layer is accepted."""
-    from railvib_hpc.modal.boundary import check_layers
+    from railvib_hpc.model.boundary import check_layers
 
     code, out, err = _transient(capsys, meshed, tmp_path / "out", "boundary.base=caughey",
                                 "boundary.layer_thickness=96")
@@ -132,7 +132,7 @@ def test_caughey_layer_reaching_the_building_is_refused(mesh, meshed, tmp_path, 
 # --------------------------------------------------------------------------- item 2
 def test_caughey_layer_without_an_element_is_refused(mesh, meshed, tmp_path, capsys, tally):
     """3 m at y_min: the first centroids lie 6 m from the face; refused naming both."""
-    from railvib_hpc.modal.boundary import BoundaryError, check_layers
+    from railvib_hpc.model.boundary import BoundaryError, check_layers
 
     code, out, err = _transient(capsys, meshed, tmp_path / "out", "boundary.y_min=caughey",
                                 "boundary.layer_thickness=3")
@@ -162,8 +162,8 @@ class _StopAfterSetupChecks(UserError):
 def test_unsupported_box_is_warned(mesh, meshed, tmp_path, capsys, tally, monkeypatch):
     """All faces free: a warning naming the free motions and the faces (the run goes on;
     here it is stopped where the assembly would start)."""
-    import railvib_hpc.modal.petsc as modal_petsc
-    from railvib_hpc.modal.boundary import unsupported_motions
+    import railvib_hpc.model.petsc as modal_petsc
+    from railvib_hpc.model.boundary import unsupported_motions
 
     def stop(*args, **kwargs):
         raise _StopAfterSetupChecks("stopped before the assembly (test)")
@@ -194,7 +194,7 @@ def test_unsupported_box_is_warned(mesh, meshed, tmp_path, capsys, tally, monkey
 
 
 def test_supported_box_gives_no_warning(mesh):
-    from railvib_hpc.modal.boundary import support_warning
+    from railvib_hpc.model.boundary import support_warning
 
     assert support_warning(mesh, Problem.from_case(load_case(ABSORBING, COARSE_SETS))) is None
 

@@ -59,9 +59,9 @@ def run_moving_load(comm, h: float, n: tuple[int, int, int], receivers: tuple[fl
         ``t``, ``v`` (nt + 1, receivers; downward velocity), ``v_exact`` (steady state at
         the same times), ``speed``, ``c_r``, ``dt``, ``dofs``, ``seconds``.
     """
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_damping
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.explicit import (

@@ -81,8 +81,8 @@ def serial_layer(mesh, faces: dict[str, str], *extra: str):
     (others fixed) on one rank, and its DOF count (the layer's unit tests)."""
     from mpi4py import MPI
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.petsc import GhostGather
     from railvib_hpc.transient.pml import PmlLayer
@@ -122,7 +122,7 @@ def _system(mesh, problem, dofmap, comm, matrices: tuple, layer, implicit, direc
         system = ExplicitSystem(K, M, None, 0.0, comm, pml=layer)
         lim = stability_limit(K, system.m, None, comm)
     else:
-        from railvib_hpc.modal.petsc import assemble_partition
+        from railvib_hpc.model.petsc import assemble_partition
         from railvib_hpc.transient.explicit import lumped_diagonal
         from railvib_hpc.transient.imex import DAMPING_STABILITY_FACTOR
 
@@ -208,9 +208,9 @@ def run_box(mesh, faces: dict[str, str], thickness: float, source: tuple, receiv
     """
     import time
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.explicit import ExplicitSolver, initial_acceleration
     from railvib_hpc.transient.integrate import State

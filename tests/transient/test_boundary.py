@@ -14,15 +14,15 @@ from railvib_hpc.config import load_case
 from railvib_hpc.errors import CaseError
 from railvib_hpc.fem.boundary import face_impedance, wave_speeds
 from railvib_hpc.mesh.model import Mesh
-from railvib_hpc.modal.boundary import (
+from railvib_hpc.model.boundary import (
     BoundaryError,
-    absorbing_faces,
     boundary_node_blocks,
     face_node_sets,
     problem_dofmap,
 )
-from railvib_hpc.modal.damping import rayleigh_coefficients, rayleigh_ratio
-from railvib_hpc.modal.dofmap import build_dofmap
+from railvib_hpc.model.boundary_kinds.absorbing import absorbing_faces
+from railvib_hpc.model.damping import rayleigh_coefficients, rayleigh_ratio
+from railvib_hpc.model.dofmap import build_dofmap
 from railvib_hpc.petsc_env import init_petsc
 from railvib_hpc.problem import Problem
 from railvib_hpc.schema import BOUNDARY_FACES, PART_ID
@@ -150,7 +150,7 @@ def test_virtual_thickness_springs_add_the_layer_behind_the_base():
     import scipy.sparse as sp
     from scipy.sparse.linalg import spsolve
 
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.petsc import assemble
 
     mesh = _column()
     t = 3.0
@@ -192,7 +192,7 @@ def test_damping_matrix_equals_serial(coarse, model):
     init_petsc([])
     from petsc4py import PETSc
 
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.petsc import assemble, assemble_damping
 
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", f"damping.model={model}",
@@ -222,7 +222,7 @@ def test_damping_matrix_equals_serial(coarse, model):
 
 def test_rayleigh_damping_matrix_is_alpha_m_plus_beta_k_plus_dashpots(coarse):
     init_petsc([])
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.petsc import assemble, assemble_damping
 
     _, mesh = coarse
     case = load_case(BASELINE, ["mesh.refinement=0.5", "boundary.base=absorbing"])
@@ -254,7 +254,7 @@ def test_caughey_face_needs_a_layer_and_is_fixed(coarse):
     with pytest.raises(CaseError, match=r"boundary.layer_thickness = 0.0: must be > 0 m for "
                                         r"the caughey face\(s\) base"):
         load_case(BASELINE, ["boundary.base=caughey"])
-    from railvib_hpc.modal.boundary import layer_weights
+    from railvib_hpc.model.boundary import layer_weights
 
     _, mesh = coarse
     # 9 m: the first column of elements at y_min (centroids 6 m from the face) inside, the

@@ -16,8 +16,8 @@ FACES = [f"boundary.{f}=absorbing" for f in ("x_min", "x_max", "y_min", "y_max",
 
 
 def _model():
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
     from railvib_hpc.petsc_env import init_petsc
 
     init_petsc([])
@@ -32,7 +32,7 @@ def _model():
 def test_rayleigh_operator_is_the_assembled_damping():
     """``C x`` of the shell (alpha m + beta K + the dashpots) and of the assembled C agree to
     round-off, and the fused ``K u + C v`` is the sum of the two products."""
-    from railvib_hpc.modal.petsc import (
+    from railvib_hpc.model.petsc import (
         assemble,
         assemble_damping,
         destroy_damping,
@@ -72,8 +72,8 @@ def test_rayleigh_operator_is_the_assembled_damping():
 
 def test_the_pattern_by_chunks_is_the_pattern_at_once(monkeypatch):
     """Any chunk size gives the same CSR pattern, on every rank of 1 to 3."""
-    from railvib_hpc.modal import petsc
-    from railvib_hpc.modal.dofmap import build_dofmap
+    from railvib_hpc.model import petsc
+    from railvib_hpc.model.dofmap import build_dofmap
 
     mesh = _model()[0]
     for ranks in (1, 2, 3):

@@ -45,7 +45,7 @@ def _burst(t, f0):
 def _column_run(kind: str, engine: str, rho_inf: float = 1.0) -> dict:
     """Receiver velocities of the burst in a column (``engine``: explicit or direct with
     generalized-alpha of spectral radius ``rho_inf``)."""
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
 
     c = C_P if kind == "P" else C_S
     comp = 2 if kind == "P" else 0

@@ -9,7 +9,7 @@ import pytest
 
 
 @pytest.mark.parametrize("module", ["railvib_hpc.transient.scheme", "railvib_hpc.fem.boundary",
-                                    "railvib_hpc.modal.damping", "railvib_hpc.fem.halfspace"])
+                                    "railvib_hpc.model.damping", "railvib_hpc.fem.halfspace"])
 def test_docstring_examples(module):
     result = doctest.testmod(importlib.import_module(module))
     assert result.attempted > 0 and result.failed == 0

@@ -28,7 +28,7 @@ A 4 x 4 x 4 box of soil (1 m hexahedra, top free), a smooth initial velocity fie
 2 x 2 middle elements in concrete as its implicit partition (155 times stiffer than the
 soil: ``m + beta dt^2 K_I`` far from ``m``), with the absorbing faces' springs and
 dashpots implicit as the engine has them (``boundary=True`` of
-:func:`~railvib_hpc.modal.petsc.assemble_partition`).
+:func:`~railvib_hpc.model.petsc.assemble_partition`).
 """
 
 from __future__ import annotations
@@ -55,9 +55,9 @@ T_END = 0.3
 def _run(engine: str, closed: bool, damping: str = "none"):
     """Step the box; returns the discrete energies ``e``, the cumulative damping work
     ``work`` (and ``naive``: ``dt v_n^T C v_n``), the physical energies, per step."""
-    from railvib_hpc.modal.boundary import dashpot_diagonal, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping, assemble_partition
+    from railvib_hpc.model.boundary import dashpot_diagonal, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_damping, assemble_partition
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.transient.explicit import (
         ExplicitSolver,

@@ -24,8 +24,8 @@ class ExplicitModel:
     """Assembled model with a lumped mass and the explicit solver on ``comm``."""
 
     def __init__(self, mesh, case, rules, node_sets=None):
-        from railvib_hpc.modal.dofmap import build_dofmap
-        from railvib_hpc.modal.petsc import assemble, assemble_damping
+        from railvib_hpc.model.dofmap import build_dofmap
+        from railvib_hpc.model.petsc import assemble, assemble_damping
         from railvib_hpc.petsc_env import init_petsc
 
         init_petsc([])
@@ -68,7 +68,7 @@ class ExplicitModel:
 def _column(kind: str, h: float, courant: float, height: float = 40.0, depth: float = 15.0,
             duration: float = 0.04):
     """The column pulse of ``wave_cases.column_pulse`` with the explicit engine."""
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
     from railvib_hpc.transient.explicit import ExplicitSolver, stability_limit
 
     c = C_P if kind == "P" else C_S
@@ -126,8 +126,8 @@ def test_stability_limit_is_the_largest_natural_frequency():
     """Against the dense eigenproblem of the same K and lumped mass (a 3 x 3 x 3 box)."""
     from scipy.linalg import eigh
 
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.transient.explicit import lumped_diagonal, stability_limit
 
     mesh = box_mesh((3, 3, 3), (3.0, 3.0, 3.0))
@@ -180,7 +180,7 @@ def test_undamped_closed_box_keeps_its_energy():
 
     closed = {"bottom": ("ux", "uy", "uz"), "x_faces": ("ux", "uy", "uz"),
               "y_faces": ("ux", "uy", "uz")}
-    from railvib_hpc.modal.boundary import face_node_sets
+    from railvib_hpc.model.boundary import face_node_sets
 
     mesh = box_mesh((4, 4, 4), (4.0, 4.0, 4.0))
     model = ExplicitModel(mesh, soil_case("damping.model=none", "modal.lumped_mass=true"),
@@ -248,9 +248,9 @@ def test_the_limit_with_absorbing_faces_is_that_of_the_whole_damped_map(damping)
     map is stable at the allowed step and unstable 2 % above the critical one, on 1 and 2
     ranks; the largest mode's own damping ratio would allow a step on which the map grows.
     """
-    from railvib_hpc.modal.boundary import face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.boundary import face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_damping
     from railvib_hpc.transient.explicit import lumped_diagonal, stability_limit
 
     faces = [f"boundary.{f}=absorbing" for f in ("x_min", "x_max", "y_min", "y_max", "base")]
@@ -304,13 +304,13 @@ def test_proportional_damping_keeps_the_largest_modes_limit():
 @pytest.mark.parametrize("damping", ["none", "rayleigh"])
 def test_dashpots_at_the_full_step_do_not_limit_it(damping):
     """The same box, the dashpots taken apart as a diagonal at the full-step velocity (what
-    the stage does, :func:`~railvib_hpc.modal.boundary.dashpot_diagonal`): the limit is that
+    the stage does, :func:`~railvib_hpc.model.boundary.dashpot_diagonal`): the limit is that
     of K and the Rayleigh damping alone, the dense map is stable at its allowed step and
     unstable 2 % above the critical one, and 200 engine steps of a pulse match the dense
     recursion to round-off on 1 and 2 ranks."""
-    from railvib_hpc.modal.boundary import dashpot_diagonal, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_damping
+    from railvib_hpc.model.boundary import dashpot_diagonal, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_damping
     from railvib_hpc.transient.explicit import (
         ExplicitSolver,
         ExplicitSystem,

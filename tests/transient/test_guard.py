@@ -48,9 +48,9 @@ def _box_run(engine: str) -> dict:
     """Step a closed, undamped 4 x 4 x 4 box under a vertical load at a top node; the
     scheme's energy (the discrete one of the leapfrogs, the physical one of the
     trapezoidal rule) and the solver's summed load work."""
-    from railvib_hpc.modal.boundary import face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_partition
+    from railvib_hpc.model.boundary import face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_partition
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.explicit import (

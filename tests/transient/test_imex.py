@@ -73,8 +73,8 @@ class BoxModel:
     this rank alone (global DOF numbers are the same on any number of ranks)."""
 
     def __init__(self, damping: str = "rayleigh"):
-        from railvib_hpc.modal.dofmap import build_dofmap
-        from railvib_hpc.modal.petsc import assemble, assemble_damping, assemble_partition
+        from railvib_hpc.model.dofmap import build_dofmap
+        from railvib_hpc.model.petsc import assemble, assemble_damping, assemble_partition
         from railvib_hpc.petsc_env import init_petsc
 
         init_petsc([])
@@ -220,7 +220,7 @@ def test_auto_partition_takes_the_thin_elements_and_bounds_the_model():
     """A soil box whose top layer is 10 x thinner: the element-wise partition takes exactly
     that layer (target between the two element steps), the share cap bounds it, and the
     model's largest frequency is at most the largest element's (Irons)."""
-    from railvib_hpc.modal.elements import hex_max_frequencies
+    from railvib_hpc.model.elements import hex_max_frequencies
     from railvib_hpc.transient.imex import auto_implicit_hexes
 
     mesh = box_mesh((4, 4, 4), (4.0, 4.0, 4.0))
@@ -238,8 +238,8 @@ def test_auto_partition_takes_the_thin_elements_and_bounds_the_model():
     assert capped.sum() <= 0.1 * len(w) + 1 and not (capped & ~thin).any()
     from scipy.linalg import eigh
 
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble
 
     K, M, _ = assemble(mesh, Problem.from_case(case), build_dofmap(mesh, 1, rules=RULES),
                        MPI.COMM_SELF)

@@ -116,9 +116,9 @@ def _run(engine: str) -> dict:
     of the load implicit): receiver velocities and displacements (in the load direction)
     and the reference."""
     from railvib_hpc.fem.dispersion import critical_courant
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap
-    from railvib_hpc.modal.petsc import assemble, assemble_partition
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap
+    from railvib_hpc.model.petsc import assemble, assemble_partition
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.transient.explicit import (
         ExplicitSolver,

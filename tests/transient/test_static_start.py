@@ -27,9 +27,9 @@ ON_RAIL = ["vehicle.x_start=9", "vehicle.x_end=9.2", "transient.engine=imex"]
 def test_the_rigid_body_modes_are_the_near_null_space_of_a_free_box():
     """K of an unsupported soil box times each of the six modes is zero to round-off, and
     the six are independent (each translation moves its own component only)."""
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
-    from railvib_hpc.modal.dofmap import build_dofmap, rigid_body_modes
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.dofmap import build_dofmap, rigid_body_modes
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.problem import Problem
 
     comm = MPI.COMM_SELF

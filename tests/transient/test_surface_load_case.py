@@ -59,8 +59,8 @@ def hand_built(folder, case, steps: np.ndarray) -> tuple[np.ndarray, object]:
     (``mesh.h5`` of ``folder``) with its step: the nodes' velocities (len(steps), nodes, 3)
     at ``steps``, and the load."""
     from railvib_hpc.mesh.mesh_io import read_mesh_h5
-    from railvib_hpc.modal.boundary import problem_dofmap
-    from railvib_hpc.modal.petsc import assemble
+    from railvib_hpc.model.boundary import problem_dofmap
+    from railvib_hpc.model.petsc import assemble
     from railvib_hpc.petsc_env import init_petsc
     from railvib_hpc.problem import Problem
     from railvib_hpc.transient.explicit import (

@@ -17,7 +17,7 @@ from railvib_hpc.cli import run
 from railvib_hpc.config import load_case
 from railvib_hpc.fem.beam import beam_mass, beam_stiffness, shear_modulus
 from railvib_hpc.mesh.model import Mesh
-from railvib_hpc.modal.track_ends import (
+from railvib_hpc.model.track_ends import (
     fit_stiffness,
     point_deflection,
     support_blocks,
@@ -202,8 +202,8 @@ def test_the_far_ends_are_clamped_and_the_rail_is_one_beam(tmp_path):
     from x0 to x4 + rigid_length (rail_div elements per bay), its two far nodes fixed."""
     from railvib_hpc.mesh.gmsh_model import generate
     from railvib_hpc.mesh.layout import build_layout
-    from railvib_hpc.modal.boundary import problem_dofmap
-    from railvib_hpc.modal.track_ends import far_end_nodes
+    from railvib_hpc.model.boundary import problem_dofmap
+    from railvib_hpc.model.track_ends import far_end_nodes
 
     case = tiny_case("track.ends=supported")
     mesh, _ = generate(build_layout(case))

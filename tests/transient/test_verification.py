@@ -101,7 +101,7 @@ def lamb():
     14 h / c_S on the corner node; receivers on the surface at 5 and 8 elements."""
     from lamb import GAMMA, lamb_displacement, pulse
 
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
 
     h, n_xy, n_z = 1.0, 16, 12
     mesh = box_mesh((n_xy, n_xy, n_z), (n_xy * h, n_xy * h, n_z * h), origin=(0, 0, -n_z * h))
@@ -187,7 +187,7 @@ def test_lamb_arrivals_within_two_time_steps(lamb):
 
 # --------------------------------------------------------------------------- (c) energy
 def _box(case_extra, rules, rho_inf=1.0, steps=150):
-    from railvib_hpc.modal.boundary import face_node_sets
+    from railvib_hpc.model.boundary import face_node_sets
 
     mesh = box_mesh((4, 4, 4), (4.0, 4.0, 4.0))
     case = soil_case("damping.model=none", *case_extra)

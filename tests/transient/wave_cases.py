@@ -76,8 +76,8 @@ class Model:
 
     def __init__(self, mesh: Mesh, case, rules, comm, dt: float, rho_inf: float = 1.0,
                  node_sets=None):
-        from railvib_hpc.modal.dofmap import build_dofmap
-        from railvib_hpc.modal.petsc import assemble, assemble_damping
+        from railvib_hpc.model.dofmap import build_dofmap
+        from railvib_hpc.model.petsc import assemble, assemble_damping
         from railvib_hpc.petsc_env import init_petsc
 
         init_petsc([])
@@ -178,7 +178,7 @@ def column_pulse(kind: str, h: float, courant: float, comm, height: float = 40.0
     mesh = column_mesh(nz, height)
     case = soil_case(*base, "damping.model=none")
     dt = courant * h / c
-    from railvib_hpc.modal.boundary import constraint_rules, face_node_sets
+    from railvib_hpc.model.boundary import constraint_rules, face_node_sets
 
     model = Model(mesh, case, {**constraint_rules(Problem.from_case(case)), "all": free}, comm, dt,
                   node_sets=face_node_sets(mesh))

@@ -10,7 +10,7 @@ from fem_tools import box_mesh
 
 from railvib_hpc.config import Case
 from railvib_hpc.mesh.model import Mesh
-from railvib_hpc.modal.elements import element_batches
+from railvib_hpc.model.elements import element_batches
 from railvib_hpc.problem import Problem
 from railvib_hpc.schema import PART_ID
 from railvib_hpc.uncertainty.fields import RandomField, correlation, resolution_warnings

@@ -1,6 +1,6 @@
 """Distributed assembly of K and M into PETSc MPIAIJ matrices (PETSc code lives here).
 
-Each rank owns a contiguous range of nodes/DOFs (:class:`~railvib_hpc.modal.dofmap.DofMap`).
+Each rank owns a contiguous range of nodes/DOFs (:class:`~railvib_hpc.model.dofmap.DofMap`).
 It builds the exact sparsity pattern of its rows from the node graph (every pair of nodes
 sharing an element, expanded to their free DOFs), creates K and M with that pattern in one
 ``createAIJ(csr=...)`` call each (exact preallocation: no mallocs, K and M share the
@@ -559,7 +559,7 @@ def static_receptance(K, M, comm, dof: int, prefix: str) -> float:
     """``u[dof]`` of ``K u = e_dof``: the static receptance of one DOF [m/N] (collective).
 
     One MUMPS Cholesky factor of K (through
-    :class:`~railvib_hpc.modal.factor.ShiftInvertFactor` at sigma = 0, with its memory
+    :class:`~railvib_hpc.model.factor.ShiftInvertFactor` at sigma = 0, with its memory
     check; PETSc options prefix ``prefix``), freed before returning. Used to fit the
     supported track ends (:func:`fit_track_ends`).
     """
@@ -583,11 +583,11 @@ def fit_track_ends(mesh: Mesh, dofmap: DofMap, problem: Problem, K, M, comm,
     """The problem with the supported track ends' springs, added to the assembled K, and
     the line that says so (collective; both paths, modal and full-order, call it).
 
-    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.modal.track_ends.fit_stiffness`)
+    ``track.end_stiffness = 0``: fitted (:func:`~railvib_hpc.model.track_ends.fit_stiffness`)
     to the static receptance of the modelled track at the first rail's node nearest the
     middle of the box (one static solve of K, whose end sections then hang free from the
     box's rail; PETSc options ``prefix``); a given stiffness is in K already
-    (:func:`~railvib_hpc.modal.boundary.boundary_node_blocks`). Rigid ends: ``problem``
+    (:func:`~railvib_hpc.model.boundary.boundary_node_blocks`). Rigid ends: ``problem``
     unchanged and an empty line.
 
     Raises

@@ -6,7 +6,10 @@ Faces: ``x_min``, ``x_max`` (the planes normal to the track at the ends of the s
 at the middle of the x range, ``y_faces`` likewise, ``bottom``), so user meshes with the
 same node sets work too.
 
-Each face is
+Each face has a kind, a registered object (:data:`railvib_hpc.boundary_registry.BOUNDARY_KINDS`,
+one module of :mod:`railvib_hpc.model.boundary_kinds` each, :class:`~.boundary_kind.BoundaryKind`)
+that declares its constraints, node blocks, layer and checks; this module runs them over
+the faces. The kinds:
 
 * ``fixed``: all displacements (and rotations, if any) zero;
 * ``roller``: the normal displacement zero (the thesis's x and y faces);
@@ -15,6 +18,8 @@ Each face is
   tangential per unit area, lumped to the nodes, :mod:`railvib_hpc.fem.boundary`) with the
   material of the element behind each face, and optionally springs
   (``boundary.virtual_thickness``);
+* ``pml``: fixed, with a perfectly matched layer (:mod:`railvib_hpc.transient.pml`; the
+  transient engines only);
 * ``caughey``: fixed, with a graded Caughey absorbing layer (CALM, Semblat et al. 2011): the
   ground elements (:data:`LAYER_PARTS`) within ``boundary.layer_thickness`` of the face get
   Rayleigh damping whose ratio grows quadratically from 0 at the layer's inner edge to
@@ -26,7 +31,7 @@ Each face is
   ground under and beside it.
 
 The thesis defaults (rollers, fixed base) give exactly the constraint rules of
-:data:`railvib_hpc.modal.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
+:data:`railvib_hpc.model.dofmap.DEFAULT_RULES`, hence the same K, M and modes.
 """
 
 from __future__ import annotations
@@ -35,9 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..boundary_registry import BOUNDARY_KINDS, boundary_kind
 from ..errors import UserError
-from ..fem.boundary import face_impedance, wave_speeds
-from ..fem.material import lame_parameters
 from ..mesh.model import Mesh
 from ..mesh.search import HEX_FACES
 from ..problem import Problem
@@ -47,13 +51,9 @@ from ..schema import (
     PART_ID,
     PARTS,
     SOIL_LAYER_PARTS,
-    SOIL_PARTS,
 )
 from .dofmap import COMPONENTS
-from .elements import SOLID_MATERIAL
 
-#: Normal displacement component of each face (roller).
-_NORMAL = {"x_min": "ux", "x_max": "ux", "y_min": "uy", "y_max": "uy", "base": "uz"}
 #: Coordinate axis normal to each face.
 FACE_AXIS = {"x_min": 0, "x_max": 0, "y_min": 1, "y_max": 1, "base": 2}
 #: Parts a Caughey layer may damp: the ground (the subgrade or the soil layers), which the
@@ -71,9 +71,12 @@ def face_types(problem: Problem) -> dict[str, str]:
     return {f: problem.boundary.faces[f] for f in BOUNDARY_FACES}
 
 
-def has_absorbing(problem: Problem) -> bool:
-    """True when any face is absorbing."""
-    return "absorbing" in face_types(problem).values()
+def kind_faces(problem: Problem) -> dict[str, list[str]]:
+    """``{kind: its faces}`` of the kinds on the faces, in registry order (the order their
+    checks run in), each kind's faces in :data:`BOUNDARY_FACES` order."""
+    types = face_types(problem)
+    return {name: faces for name in BOUNDARY_KINDS
+            if (faces := [f for f in BOUNDARY_FACES if types[f] == name])}
 
 
 def face_node_sets(mesh: Mesh) -> dict[str, np.ndarray]:
@@ -95,7 +98,8 @@ def face_node_sets(mesh: Mesh) -> dict[str, np.ndarray]:
 
 
 def constraint_rules(problem: Problem) -> dict[str, tuple[str, ...]]:
-    """Constraint rules ``{face: components}`` for :func:`~.dofmap.build_dofmap`.
+    """Constraint rules ``{face: components}`` for :func:`~.dofmap.build_dofmap`: each
+    face's kind's :meth:`~.boundary_kind.BoundaryKind.constrained` components.
 
     ``fixed`` (and ``caughey``, ``pml``, whose layers end at a fixed face) fixes every
     component (as the thesis's ``bottom`` rule), ``roller`` the
@@ -103,10 +107,9 @@ def constraint_rules(problem: Problem) -> dict[str, tuple[str, ...]]:
     """
     rules: dict[str, tuple[str, ...]] = {}
     for face, kind in face_types(problem).items():
-        if kind in ("fixed", "caughey", "pml"):
-            rules[face] = COMPONENTS
-        elif kind == "roller":
-            rules[face] = (_NORMAL[face],)
+        components = boundary_kind(kind).constrained(face)
+        if components:
+            rules[face] = components
     return rules
 
 
@@ -146,47 +149,10 @@ def face_elements(mesh: Mesh, nodes: np.ndarray) -> FaceElements:
     return FaceElements(faces, owner, mesh.hex_part[owner])
 
 
-def absorbing_faces(mesh: Mesh, problem: Problem) -> dict[str, FaceElements]:
-    """The element faces of every absorbing face, checked.
-
-    Raises
-    ------
-    BoundaryError
-        An absorbing face with no element face on it, or with elements that are not soil
-        behind it (the domain must end in soil for the dashpots to stand for it).
-    """
-    sets = face_node_sets(mesh)
-    out = {}
-    for face, kind in face_types(problem).items():
-        if kind != "absorbing":
-            continue
-        fe = face_elements(mesh, sets[face])
-        if len(fe.quads) == 0:
-            raise BoundaryError(
-                f"boundary.{face} = 'absorbing': the mesh has no element face on it, so there "
-                "is no soil behind it to absorb waves; allowed: fixed, roller, free")
-        bad = ~np.isin(fe.part, [PART_ID[p] for p in SOIL_PARTS])
-        if bad.any():
-            parts = sorted({PARTS[int(p) - 1] for p in fe.part[bad]})
-            raise BoundaryError(
-                f"boundary.{face} = 'absorbing': {int(bad.sum())} of its {len(fe.part)} "
-                f"element faces have no soil behind them (part {', '.join(parts)}); an "
-                "absorbing face must cut through soil only (enlarge the domain, [domain])")
-        out[face] = fe
-    return out
-
-
-def _material_arrays(problem: Problem, part: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Per-face (E, nu, rho) of the solid behind it."""
-    mats = {int(p): problem.material(SOLID_MATERIAL[PARTS[int(p) - 1]])
-            for p in np.unique(part)}
-    return tuple(np.array([getattr(mats[int(p)], k) for p in part], dtype=float)
-                 for k in ("E", "nu", "rho"))
-
-
 def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
                          ) -> tuple[np.ndarray, np.ndarray]:
-    """Lumped 3 x 3 blocks of the absorbing faces and of the supported track ends
+    """Lumped 3 x 3 blocks of the faces' kinds (:meth:`~.boundary_kind.BoundaryKind.node_blocks`:
+    the absorbing faces') and of the supported track ends
     (:func:`.track_ends.support_blocks`), summed per node.
 
     Parameters
@@ -208,33 +174,16 @@ def boundary_node_blocks(mesh: Mesh, problem: Problem, kind: str
     from .track_ends import support_blocks
 
     ends = support_blocks(mesh, problem, kind)
-    faces = _face_blocks(mesh, problem, kind)
-    nodes, inverse = np.unique(np.concatenate([faces[0], ends[0]]), return_inverse=True)
-    out = np.zeros((len(nodes), 3, 3))
-    np.add.at(out, inverse, np.concatenate([faces[1], ends[1]]))
-    return nodes, out
-
-
-def _face_blocks(mesh: Mesh, problem: Problem, kind: str) -> tuple[np.ndarray, np.ndarray]:
-    """The absorbing faces' part of :func:`boundary_node_blocks`."""
     if kind not in ("dashpot", "spring"):
         raise ValueError(f"kind must be 'dashpot' or 'spring', got {kind!r}")
-    t = problem.boundary.virtual_thickness
-    faces = absorbing_faces(mesh, problem)
-    if not faces or (kind == "spring" and t <= 0.0):
-        return np.zeros(0, np.int64), np.zeros((0, 3, 3))
-    quads, parts = (np.concatenate([getattr(f, a) for f in faces.values()])
-                    for a in ("quads", "part"))
-    e, nu, rho = _material_arrays(problem, parts)
-    if kind == "dashpot":
-        cp, cs = wave_speeds(e, nu, rho)
-        blocks = face_impedance(mesh.points[quads], rho * cp, rho * cs)
-    else:
-        lam, g = lame_parameters(e, nu)
-        blocks = face_impedance(mesh.points[quads], (lam + 2.0 * g) / t, g / t)
-    nodes, inverse = np.unique(quads.ravel(), return_inverse=True)
+    faces = [blocks for name, on in kind_faces(problem).items()
+             if (blocks := boundary_kind(name).node_blocks(mesh, problem, on, kind))
+             is not None]
+    nodes, inverse = np.unique(np.concatenate([np.zeros(0, np.int64), *(f[0] for f in faces),
+                                               ends[0]]), return_inverse=True)
     out = np.zeros((len(nodes), 3, 3))
-    np.add.at(out, inverse.ravel(), blocks.reshape(-1, 3, 3))
+    np.add.at(out, inverse, np.concatenate([np.zeros((0, 3, 3)), *(f[1] for f in faces),
+                                            ends[1]]))
     return nodes, out
 
 
@@ -269,7 +218,8 @@ def dashpot_diagonal(mesh: Mesh, problem: Problem, dofmap, rank: int) -> np.ndar
 
 
 def boundary_summary(mesh: Mesh, problem: Problem) -> dict[str, dict]:
-    """Per face: type, element faces, area and (absorbing) the dashpot constants."""
+    """Per face: type, element faces, area and its kind's entries
+    (:meth:`~.boundary_kind.BoundaryKind.summary`: an absorbing face's dashpot constants)."""
     sets = face_node_sets(mesh)
     out = {}
     for face, kind in face_types(problem).items():
@@ -280,11 +230,7 @@ def boundary_summary(mesh: Mesh, problem: Problem) -> dict[str, dict]:
 
             area, _ = face_integrals(mesh.points[fe.quads])
             entry["area_m2"] = float(area.sum())
-            if kind == "absorbing":
-                e, nu, rho = _material_arrays(problem, fe.part)
-                cp, cs = wave_speeds(e, nu, rho)
-                entry["rho_cP"] = sorted({round(float(v), 1) for v in rho * cp})
-                entry["rho_cS"] = sorted({round(float(v), 1) for v in rho * cs})
+            entry.update(boundary_kind(kind).summary(problem, fe))
         out[face] = entry
     return out
 
@@ -292,16 +238,15 @@ def boundary_summary(mesh: Mesh, problem: Problem) -> dict[str, dict]:
 def problem_dofmap(mesh: Mesh, problem: Problem, size: int = 1):
     """The DOF map of a problem: its ``[boundary]`` constraints and the modal switches.
 
-    Checks the absorbing faces and the Caughey layers first (:func:`absorbing_faces`,
-    :func:`check_layers`), so a face without soil behind it, or a layer without an element,
-    stops the run before anything is computed or written.
+    Runs the faces' kinds' checks first (:meth:`~.boundary_kind.BoundaryKind.check`: the
+    absorbing faces', the Caughey layers', :func:`check_layers`), so a face without soil
+    behind it, or a layer without an element, stops the run before anything is computed or
+    written.
     """
     from .dofmap import build_dofmap
 
-    if has_absorbing(problem):
-        absorbing_faces(mesh, problem)
-    if "caughey" in face_types(problem).values():
-        check_layers(mesh, problem)
+    for name, faces in kind_faces(problem).items():
+        boundary_kind(name).check(mesh, problem, faces)
     from .track_ends import FAR_ENDS, far_end_nodes
 
     rules, sets = constraint_rules(problem), face_node_sets(mesh)
@@ -314,17 +259,18 @@ def problem_dofmap(mesh: Mesh, problem: Problem, size: int = 1):
 
 def _layer_distances(mesh: Mesh, problem: Problem, centres: np.ndarray | None
                      ) -> dict[str, np.ndarray]:
-    """``{caughey face: distance of each centroid to its plane}`` (default: every hexahedron)."""
+    """``{face with a graded damping layer: distance of each centroid to its plane}``
+    (default: every hexahedron)."""
     if centres is None:
         centres = mesh.points[mesh.hexes].mean(axis=1)
     sets = face_node_sets(mesh)
     out = {}
     for face, kind in face_types(problem).items():
-        if kind != "caughey":
+        if not boundary_kind(kind).graded_damping:
             continue
         nodes = sets[face]
         if nodes.size == 0:
-            raise BoundaryError(f"boundary.{face} = 'caughey': the mesh has no nodes on it")
+            raise BoundaryError(f"boundary.{face} = {kind!r}: the mesh has no nodes on it")
         plane = float(mesh.points[nodes, FACE_AXIS[face]].mean())
         out[face] = np.abs(centres[:, FACE_AXIS[face]] - plane)
     return out
@@ -451,19 +397,13 @@ SUPPORT_TOL = 1e-6
 def restrained_components(problem: Problem) -> dict[str, tuple[int, ...]]:
     """Displacement components (0, 1, 2 = x, y, z) each face restrains.
 
-    ``fixed``, ``caughey`` and ``pml`` all three, ``roller`` its normal one, ``absorbing`` all three
+    Each face's kind's :meth:`~.boundary_kind.BoundaryKind.restrained`: ``fixed``,
+    ``caughey`` and ``pml`` all three, ``roller`` its normal one, ``absorbing`` all three
     (dashpots normal and tangential, springs too when ``boundary.virtual_thickness > 0``),
     ``free`` none.
     """
-    out = {}
-    for face, kind in face_types(problem).items():
-        if kind in ("fixed", "caughey", "pml", "absorbing"):
-            out[face] = (0, 1, 2)
-        elif kind == "roller":
-            out[face] = (COMPONENTS.index(_NORMAL[face]),)
-        else:
-            out[face] = ()
-    return out
+    return {face: boundary_kind(kind).restrained(face)
+            for face, kind in face_types(problem).items()}
 
 
 def unsupported_motions(mesh: Mesh, problem: Problem) -> list[str]:

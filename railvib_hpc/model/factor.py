@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -28,7 +29,9 @@ from ..constants import BYTES_PER_GB
 if TYPE_CHECKING:
     from mpi4py import MPI
 
-    from .progress import Progress
+#: Progress callback of the long phases: ``progress(phase, done, total)`` (units of work
+#: done of ``total``; rank 0 prints it, throttled, with the phase's percent and ETA).
+Progress = Callable[[str, int, int], None]
 
 
 def dense_block(arr: np.ndarray, n_global: int, comm: MPI.Comm):
@@ -389,7 +392,7 @@ class ShiftInvertFactor:
     def solve(self, B: np.ndarray, chunk: int = 64, progress: Progress | None = None,
               phase: str = "solves") -> np.ndarray:
         """``(K - sigma M)^-1 B`` for right-hand sides B (n_local, b), ``chunk`` at a time
-        (``progress``: :data:`~railvib_hpc.modal.progress.Progress` after each chunk)."""
+        (``progress``: :data:`Progress` after each chunk)."""
         from petsc4py import PETSc
 
         out = np.empty(B.shape)

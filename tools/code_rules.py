@@ -112,6 +112,9 @@ TRANSLATORS: dict[str, str] = {
                             "transient/stage.py): reads the case's transient, damping and "
                             "boundary keys",
     "mbs/damping_model.py": "the case's modal.damping and mbs.damping_* overrides",
+    "transient/spectral_refusals.py": "what the transient stage refuses of a spectral soil "
+                                      "(its Stage.refuse): building, track, engine, "
+                                      "boundaries",
     "assess/thesis.py": "the thesis comparison: describes the case's mesh, vehicle and "
                         "geometry next to the thesis's tables",
 }

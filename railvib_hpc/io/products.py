@@ -354,7 +354,10 @@ NEUTRAL_AT_DEFAULT_KEYS = ("track.ends", "track.end_stiffness", "track.end_dampi
                            "boundary.pml_reflection", "boundary.pml_power",
                            "boundary.pml_alpha",
                            # the optional building: its default is the site there was
-                           "building.present")
+                           "building.present",
+                           # the soil's element order: its default is today's trilinear
+                           # element
+                           "mesh.order")
 
 _NEUTRAL_DEFAULTS = {key: param.default for key, param in iter_params()
                      if key.split(".", 1)[0] in DIGEST_NEUTRAL_SECTIONS

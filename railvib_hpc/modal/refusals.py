@@ -65,7 +65,19 @@ def no_pml(case) -> list[Refusal]:
     return []
 
 
+def trilinear_soil(case, command: str) -> list[Refusal]:
+    """The modal path computes its modes on the trilinear model: ``mesh.order = 1`` (the
+    spectral soil, docs/spectral.md, runs with ``railvib transient``)."""
+    order = case["mesh.order"]
+    if order <= 1:
+        return []
+    return [("mesh.order", order, f"railvib {command} (the modal path) runs the trilinear "
+             "soil only: 1; the spectral soil (2..8) runs with railvib transient "
+             "(explicit engine, bare soil)")]
+
+
 def modal_refusals(case, command: str) -> list[Refusal]:
     """The ``modal`` stage's refusals: a track, then the damping of supported ends, then no
-    perfectly matched layer."""
-    return needs_track(case, command) + supported_ends_damping(case) + no_pml(case)
+    perfectly matched layer, then the trilinear soil."""
+    return (needs_track(case, command) + supported_ends_damping(case) + no_pml(case)
+            + trilinear_soil(case, command))

@@ -99,6 +99,14 @@ MESH_SECTIONS: dict[str, dict[str, Any]] = {
                                              "consistent mass is (k h)^2 / 24: 4.6 % at 6, "
                                              "1.6 % at 10)",
                                              "pos"),
+        "order": Param(1, "int", "-",
+                       "order N of the soil's hexahedra: 1 the trilinear element (today's "
+                       "model and results); 2..8 spectral elements with (N+1)^3 "
+                       "Gauss-Lobatto-Legendre nodes and a diagonal mass (railvib transient, "
+                       "explicit engine, bare soil without track or building; "
+                       "docs/spectral.md)", "pos", maximum=8,
+                       source="Komatitsch & Tromp 1999 (Geophys. J. Int. 139): the spectral "
+                              "element of order N on GLL points; docs/spectral.md"),
         "max_dispersion_error": Param(0.0, "float", "-",
                                       "with mesh.wavelength_hz > 0: the largest predicted "
                                       "peak-velocity error at the farthest probe (numerical "

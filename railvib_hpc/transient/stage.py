@@ -116,6 +116,7 @@ from .integrate import DirectSolver, RailColumns, State, VehicleDriver
 from .output import FieldWriter, PointSampler, RailSampler
 from .rail import RailDofs, WheelCoupling
 from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
+from .spectral_refusals import spectral_refusals
 from .surface_case import (
     element_time,
     no_rails,
@@ -557,7 +558,7 @@ ROWS = (
 
 STAGE = Stage(name="transient", help="direct time integration of the full FE model "
               "(absorbing faces, causal waves)", products=ROWS, reads=(MESH_H5,),
-              compute=compute, petsc=True, needs=("mesh",))
+              compute=compute, petsc=True, needs=("mesh",), refuse=spectral_refusals)
 
 
 def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,

@@ -115,6 +115,9 @@ TRANSLATORS: dict[str, str] = {
     "transient/spectral_refusals.py": "what the transient stage refuses of a spectral soil "
                                       "(its Stage.refuse): building, track, engine, "
                                       "boundaries",
+    "transient/spectral_case.py": "the case -> the spectral soil's run (split from "
+                                  "transient/stage.py): reads the case's load, damping, "
+                                  "boundary and output keys",
     "assess/thesis.py": "the thesis comparison: describes the case's mesh, vehicle and "
                         "geometry next to the thesis's tables",
 }

@@ -33,6 +33,8 @@ Refusal = tuple[str, Any, str]
 SPECTRAL_BOUNDARY_KINDS = ("fixed", "roller", "free", "absorbing")
 #: The engines that run the spectral soil.
 SPECTRAL_ENGINES = ("explicit",)
+#: The damping models the spectral soil takes.
+SPECTRAL_DAMPING = ("none", "rayleigh")
 
 
 def spectral_refusals(case, command: str) -> list[Refusal]:
@@ -57,6 +59,13 @@ def spectral_refusals(case, command: str) -> list[Refusal]:
         out.append(("transient.engine", engine, f"{what} integrates with the explicit "
                     "engine only: 'explicit' (mesh.order = 1 for the direct and IMEX "
                     "engines)"))
+    if case["damping.model"] not in SPECTRAL_DAMPING:
+        out.append(("damping.model", case["damping.model"], f"{what} takes the damping "
+                    "models " + ", ".join(SPECTRAL_DAMPING) + " (one alpha M + beta K "
+                    "for the whole soil)"))
+    if case["output.stress_times"]:
+        out.append(("output.stress_times", case["output.stress_times"], f"{what} writes "
+                    "no stresses yet: []"))
     for face in BOUNDARY_FACES:
         kind = case[f"boundary.{face}"]
         if kind not in SPECTRAL_BOUNDARY_KINDS:

@@ -57,12 +57,12 @@ PROGRESS_S = 2.0
 
 def spectral_soil(case, mesh, comm) -> SpectralSoil:
     """The case's bare soil as spectral elements of order ``mesh.order`` (collective)."""
+    from ..boundary_registry import boundary_kind
     from ..fem.material import lame_parameters
     from ..model.boundary import FACE_AXIS, face_node_sets, face_types
     from ..model.boundary_kinds.absorbing import material_arrays
     from ..model.damping import problem_rayleigh
     from ..model.dofmap import COMPONENTS
-    from ..boundary_registry import boundary_kind
 
     problem = Problem.from_case(case)
     e, nu, rho = material_arrays(problem, mesh.hex_part)

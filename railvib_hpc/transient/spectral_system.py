@@ -48,7 +48,7 @@ from ..fem.gll import derivative_matrix, gll_points, hex_interpolation, lexicogr
 from ..fem.spectral_kernel import spectral_elasticity, stiffness_diagonal
 from ..fem.spectral_mesh import spectral_mesh
 
-__all__ = ["FacePlane", "SpectralSoil", "SpectralState", "STEP_SAFETY"]
+__all__ = ["STEP_SAFETY", "FacePlane", "SpectralSoil", "SpectralState"]
 
 #: Fraction of the critical step taken (the explicit engine's, :data:`.explicit.STEP_SAFETY`).
 STEP_SAFETY = 0.9
@@ -326,8 +326,9 @@ class SpectralSoil:
             z = inv * r
             rz, previous = self.dot(r, z), rz
             p = z + (rz / previous) * p
+        residual = math.sqrt(max(self.dot(r, r), 0.0)) / norm0
         raise RuntimeError(f"the static start did not converge in {STATIC_MAX_IT} CG "
-                           f"iterations (relative residual {math.sqrt(self.dot(r, r)) / norm0:.2g})")
+                           f"iterations (relative residual {residual:.2g})")
 
     def acceleration(self, u: np.ndarray, v_star: np.ndarray, f_ext: np.ndarray,
                      dt: float) -> np.ndarray:

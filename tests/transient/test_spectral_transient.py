@@ -49,12 +49,12 @@ def test_what_the_spectral_path_does_not_take_is_refused_before_meshing(override
 
 
 def test_a_track_or_a_building_is_refused_on_a_spectral_soil():
-    case = load_case(None, ["mesh.order=3", "transient.engine=explicit", "modal.lumped_mass=true",
-                            "building.present=false"])
+    case = load_case(None, ["mesh.order=3", "transient.engine=explicit",
+                            "modal.lumped_mass=true", "building.present=false"])
     (key, value, allowed), = command_problems(case, "transient")
     assert (key, value) == ("track.count", 1) and "mesh.order = 1" in allowed
-    case = load_case(None, ["mesh.order=3", "transient.engine=explicit", "modal.lumped_mass=true", "track.count=0",
-                            "load.force=1e5"])
+    case = load_case(None, ["mesh.order=3", "transient.engine=explicit",
+                            "modal.lumped_mass=true", "track.count=0", "load.force=1e5"])
     (key, value, allowed), = command_problems(case, "transient")
     assert (key, value) == ("building.present", True) and "mesh.order = 1" in allowed
 

@@ -11,7 +11,7 @@ promoted to order ``mesh.order``; ``damping.model`` ``none`` or ``rayleigh``
 :class:`~.surface_load.MovingSurfaceLoad` spreads them, each point's consistent load the
 GLL basis of the element under it), standing in static equilibrium at t = 0 with
 ``load.start = 'static'`` (CG on the matrix-free operator). The step is
-:data:`~.spectral_system.STEP_SAFETY` of the power iteration's limit (or ``transient.dt``
+:data:`~.spectral_system.STEP_SAFETY` of the Lanczos bound of the stable step (or ``transient.dt``
 when it is below it), bounded by the band's automatic step.
 
 Outputs: ``probes.h5`` + ``probes/*.csv`` (the probes read through the GLL basis at any
@@ -30,7 +30,16 @@ import uuid
 
 import numpy as np
 
-from ..io.files import FIELDS_H5, MESH_H5, PROBES_CSV_DIR, PROBES_H5, TRANSIENT_H5
+from ..io.files import (
+    FIELDS_H5,
+    MESH_H5,
+    PROBES_CSV_DIR,
+    PROBES_H5,
+    TRANSIENT_CHECKPOINT_H5,
+    TRANSIENT_FIELDS,
+    TRANSIENT_H5,
+    TRANSIENT_PROBES,
+)
 from ..io.stage_protocol import StageContext
 from ..parallel import on_root
 from ..problem import Problem
@@ -48,7 +57,7 @@ from .surface_load import SPREAD_SPACING, SurfaceLoadPath, spreading
 __all__ = ["run_spectral_transient", "spectral_soil"]
 
 #: The stage's product names (:data:`railvib_hpc.io.products.STAGE_FILES`).
-_FIELDS, _PROBES, _HISTORIES = "transient:fields.h5", "transient:probes.h5", "transient.h5"
+_FIELDS, _PROBES, _HISTORIES = TRANSIENT_FIELDS, TRANSIENT_PROBES, TRANSIENT_H5
 #: Largest number of steps (the trilinear path's :data:`.stage.MAX_TRANSIENT_STEPS`).
 MAX_STEPS = 200_000
 #: Seconds between two progress lines.
@@ -181,7 +190,7 @@ def _time_step(case, soil: SpectralSoil, rep) -> tuple[float, float, str]:
                                          case["output.dt"]))
     soil.dt_critical = critical
     text = (f"central differences (explicit) on spectral elements of order {soil.order}, "
-            f"stable step {critical:.4g} s (power iteration, omega_max = {omega:.4g} rad/s)")
+            f"stable step {critical:.4g} s (Lanczos bound, omega_max = {omega:.4g} rad/s)")
     return dt, critical, text
 
 
@@ -357,6 +366,9 @@ def _integrate(ctx, mesh, mesh_sha, soil, load, sampler, st, dt, nt, steps_out) 
              "steps_per_second": nt / max(t_integration, 1e-9),
              "ns_per_dof_step": 1e9 * t_integration * comm.size / max(nt * n_dofs, 1),
              "bytes_per_dof": nbytes / max(n_dofs, 1),
+             "node_set_bytes_per_dof": soil.mesh_nbytes * comm.size / max(n_dofs, 1),
+             "kernel_ns_per_dof_step": 1e9 * soil.time_products * comm.size
+             / max(nt * n_dofs, 1),
              "time_factorization": 0.0, "time_solves": 0.0,
              "time_products": soil.time_products, "time_contact": 0.0, "solves": 0,
              "time_pml": 0.0, "pml_elements": 0, "factor_memory_gb": 0.0,
@@ -398,4 +410,4 @@ def _write_rank0(ctx, mesh_sha, stats, names, coords, roles, sampler, run, dt, n
                                   "y": empty, "y_dot": empty, "y_ddot": empty},
                        dof_names=[], vehicle_type="surface_load", rail_x=rails.x,
                        rail=np.zeros((nt + 1,) + rails.dofs.shape[:2] + (2,)))
-    ctx.discard(out / "transient_checkpoint.h5")
+    ctx.discard(out / TRANSIENT_CHECKPOINT_H5)

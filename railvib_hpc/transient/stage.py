@@ -519,6 +519,10 @@ def compute(ctx: StageContext) -> TransientOutput:
                  "settings)")
         _refresh_stress(case, out_dir, comm, rep)
         return TransientOutput.of_stats({**old, "reused": True})
+    if case["mesh.order"] > 1:                      # the spectral soil (docs/spectral.md)
+        from .spectral_case import run_spectral_transient
+
+        return TransientOutput.of_stats(run_spectral_transient(ctx))
     return TransientOutput.of_stats(_transient(ctx))
 
 
@@ -586,10 +590,6 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
 
 
 def _transient(ctx: StageContext) -> dict:
-    if ctx.case["mesh.order"] > 1:                  # the spectral soil (docs/spectral.md)
-        from .spectral_case import run_spectral_transient
-
-        return run_spectral_transient(ctx)
     t_wall, case, out_dir, comm, rep = time.perf_counter(), ctx.case, ctx.out_dir, ctx.comm, ctx.rep
     checkpoint_steps, stop_after = map(ctx.options.get, ("checkpoint_steps", "stop_after"))
     init = _setup(ctx)

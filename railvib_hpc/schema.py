@@ -276,12 +276,11 @@ PML_ALPHA = 3.14159
 #: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
 BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
 #: The time integration engines of ``railvib transient`` (``transient.engine``).
-TRANSIENT_ENGINES = ("direct", "explicit", "imex")
+from .time_engines import ENGINE_NAMES as TRANSIENT_ENGINES, PML_ENGINE_NAMES as PML_ENGINES  # noqa: E402, F401, I001
 #: The engines that take ``pml`` faces, which the refusals of a layer name: all of them
 #: (the direct engine's layer is implicit, the explicit and imex engines' explicit with
 #: ``M_e1`` and ``M_e2`` at the full step or in K_eff; docs/transient.md). An engine left
-#: out here is refused with a layer.
-PML_ENGINES = TRANSIENT_ENGINES
+#: out here is refused with a layer (both read railvib_hpc.time_engines.ENGINES).
 
 
 def _face(default: str, where: str) -> Param:

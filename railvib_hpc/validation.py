@@ -46,6 +46,7 @@ from .site import (
     track_lift,
     train2_vehicle,
 )
+from .time_engines import needs_lumped_mass
 from .uncertain_inputs import check_uncertainty, check_uncertainty_tables
 
 if TYPE_CHECKING:
@@ -1101,7 +1102,7 @@ def _check_dynamics(case: Case) -> list[tuple[str, Any, str]]:
             out.append(("transient.dt", tr["dt"],
                         f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
                         "automatic)"))
-    if tr["engine"] in ("explicit", "imex") and not case["modal.lumped_mass"]:
+    if tr["engine"] in needs_lumped_mass() and not case["modal.lumped_mass"]:
         out.append(("transient.engine", tr["engine"],
                     "needs a diagonal mass: set modal.lumped_mass = true (or use "
                     "transient.engine = \"direct\")"))

@@ -111,6 +111,9 @@ TRANSLATORS: dict[str, str] = {
     "transient/engines.py": "the transient stage's setup of its engines (split from "
                             "transient/stage.py): reads the case's transient, damping and "
                             "boundary keys",
+    "transient/run_setup.py": "the transient stage's run setup (split from "
+                              "transient/stage.py): the case's passage, step, outputs and "
+                              "probes -> the typed run the loop steps",
     "mbs/damping_model.py": "the case's modal.damping and mbs.damping_* overrides",
     "assess/thesis.py": "the thesis comparison: describes the case's mesh, vehicle and "
                         "geometry next to the thesis's tables",

@@ -429,6 +429,17 @@ def _site_summary(case: Case) -> list[str]:
     return out
 
 
+def _engine_text(stats: dict) -> str:
+    """The assessment's words on the run's engine (its declaration's ``report``,
+    :data:`railvib_hpc.time_engines.ENGINES`; the direct engine's for results recorded
+    before there were others)."""
+    from ..time_engines import ENGINES, declaration
+
+    name = stats.get("engine")
+    spec = declaration(name if name in ENGINES else None)
+    return spec.report.format(rho_inf=stats.get("rho_inf", "?"))
+
+
 def _transient_summary(case: Case, path: Path) -> list[str]:
     """Report lines of a full-order (``railvib transient``) solution."""
     stats, key = TransientFile(path).summary()
@@ -442,10 +453,7 @@ def _transient_summary(case: Case, path: Path) -> list[str]:
     return [f"model                {stats.get('n_nodes', 0):,} nodes, "
             f"{stats.get('n_dofs', 0):,} free DOFs, solved on {stats.get('ranks', '?')} rank(s)",
             f"solver               {SOLVER_TEXT['transient']}, "
-            + {"explicit": "central differences (explicit), lumped mass, ",
-               "imex": "implicit-explicit Newmark (track and building implicit, soil "
-                       "explicit), lumped mass, "}.get(
-                stats.get("engine"), f"generalized-alpha rho_inf {stats.get('rho_inf', '?')}, ")
+            + _engine_text(stats)
             +
             f"dt {stats.get('dt', 0):.3e} s, {stats.get('n_steps', '?')} steps",
             f"boundaries           {faces}"

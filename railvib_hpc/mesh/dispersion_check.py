@@ -45,6 +45,7 @@ from ..fem.boundary import wave_speeds
 from ..fem.dispersion import critical_courant, elements_needed
 from ..fem.dispersion_rayleigh import worst_surface_error
 from ..schema import SOIL_LAYER_PARTS
+from ..time_engines import EngineNames, declaration
 
 #: The accuracy the mesh check aims at: below 5 % peak-velocity error at the farthest
 #: probe; a larger predicted error is warned about.
@@ -59,8 +60,9 @@ UNRESOLVED_PHASE = 0.5
 EXPLICIT_STEP_SAFETY = 0.9
 #: The ground parts a wave crosses on its way to the probes.
 GROUND_PARTS = ("subgrade", *SOIL_LAYER_PARTS)
-#: Engines whose soil is integrated with central differences and the lumped mass.
-EXPLICIT_ENGINES = ("explicit", "imex")
+#: Engines whose soil is integrated with central differences and the lumped mass (read
+#: from the engines' declarations, :data:`railvib_hpc.time_engines.ENGINES`).
+EXPLICIT_ENGINES = EngineNames(lambda d: d.soil_scheme == "central")
 
 
 class DispersionError(MeshError):
@@ -111,13 +113,13 @@ def _schemes(case: Case, c_p: float, c_r: float, f: float, nu: float,
     """The ``(scheme, courant)`` ends of the step range, as a function of the elements per
     Rayleigh wavelength ``n`` (the element edge is ``c_R / (f n)``); ``dt``: the run's own
     step (the transient stage's check), else its bound from the case."""
-    engine = case["transient.engine"]
-    if engine in EXPLICIT_ENGINES:
+    scheme = declaration(case["transient.engine"]).soil_scheme
+    if scheme == "central":
         cc = EXPLICIT_STEP_SAFETY * critical_courant(nu, case["modal.hex_formulation"])
         if dt is not None:
             return lambda n: (("none", 0.0), ("central", min(c_p * dt * f * n / c_r, cc)))
         return lambda n: (("none", 0.0), ("central", cc))
-    if engine == "direct":
+    if scheme == "generalized_alpha":
         if dt is None:
             dt = case["transient.dt"] or 1.0 / (case["transient.steps_per_period"]
                                                 * case["transient.f_max"])

@@ -38,8 +38,8 @@ def _gram(A, Phi: np.ndarray, comm, chunk: int = 0, progress=None,
     products), with ``progress``."""
     from mpi4py import MPI
 
-    from .block_lanczos import no_progress, symmetric_from_upper
     from ..model.factor import sparse_times_block
+    from .block_lanczos import no_progress, symmetric_from_upper
     from .ritz import NORMALISE_CHUNK
 
     chunk = chunk or NORMALISE_CHUNK
@@ -66,8 +66,8 @@ def _band_grams(K, M, Phi: np.ndarray, comm, stiff: list[np.ndarray],
     and M products of a chunk in one pass (the chunk copied to PETSc once)."""
     from mpi4py import MPI
 
-    from .block_lanczos import no_progress, symmetric_from_upper
     from ..model.factor import sparse_times_block_pair
+    from .block_lanczos import no_progress, symmetric_from_upper
     from .ritz import NORMALISE_CHUNK
 
     progress = progress or no_progress
@@ -99,8 +99,8 @@ def _merge(K, M, comm, bands: list[Band], cache: BandCache, s: BandSettings,
     (:func:`_merge_coupled`) where the measured Gram matrices allow."""
     from scipy.linalg import eigh
 
-    from .block_lanczos import narrow_columns, rotate_narrowing
     from ..model.factor import available_memory_gb
+    from .block_lanczos import narrow_columns, rotate_narrowing
     from .ritz import normalise_and_check
 
     t0 = time.perf_counter()

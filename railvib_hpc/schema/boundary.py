@@ -9,6 +9,7 @@ from typing import Any
 
 from ..applies import Condition, any_of, includes, is_
 from ..boundary_registry import BOUNDARY_KIND_NAMES
+from ..time_engines import ENGINE_NAMES, PML_ENGINE_NAMES
 from .conditions import ON_TRACK
 from .param import Param
 
@@ -20,13 +21,13 @@ BOUNDARY_TYPES = BOUNDARY_KIND_NAMES
 PML_ALPHA = 3.14159
 #: The truncation faces of the soil box: x = min/max, y = min/max, z = min.
 BOUNDARY_FACES = ("x_min", "x_max", "y_min", "y_max", "base")
-#: The time integration engines of ``railvib transient`` (``transient.engine``).
-TRANSIENT_ENGINES = ("direct", "explicit", "imex")
-#: The engines that take ``pml`` faces, which the refusals of a layer name: all of them
-#: (the direct engine's layer is implicit, the explicit and imex engines' explicit with
-#: ``M_e1`` and ``M_e2`` at the full step or in K_eff; docs/transient.md). An engine left
-#: out here is refused with a layer.
-PML_ENGINES = TRANSIENT_ENGINES
+#: The time integration engines of ``railvib transient`` (``transient.engine``), and those
+#: that take ``pml`` faces, which the refusals of a layer name (the direct engine's layer is
+#: implicit, the explicit and imex engines' explicit with ``M_e1`` and ``M_e2`` at the full
+#: step or in K_eff; docs/transient.md): live views of the engines' declarations
+#: (:mod:`railvib_hpc.time_engines`; an engine registered later is a choice too).
+TRANSIENT_ENGINES = ENGINE_NAMES
+PML_ENGINES = PML_ENGINE_NAMES
 
 
 def _face(default: str, where: str) -> Param:

@@ -4,8 +4,11 @@ Layers (each imports only downward): :mod:`.scheme` (generalized-alpha coefficie
 step, accuracy; numpy), :mod:`.rail` (wheel-rail coupling on the rail DOFs; numpy),
 :mod:`.petsc` (effective matrix, MUMPS factor, products; PETSc), :mod:`.integrate` (the
 stepping loop with prescribed loads or a vehicle), :mod:`.output` (fields, probes),
-:mod:`.engines` (the engines' matrices, systems, steps and initial state), :mod:`.stage`
-(the command; ``transient.h5`` and the checkpoints are written through
+:mod:`.engines` (the engines' matrices, systems, steps and initial state), :mod:`.engine`
+(the engine protocol; one module per engine, :mod:`.direct_engine`, :mod:`.explicit_engine`,
+:mod:`.imex_engine`, declared in :data:`railvib_hpc.time_engines.ENGINES`),
+:mod:`.run_setup` (the run as one typed object), :mod:`.stage` (the command and its time
+loop; ``transient.h5`` and the checkpoints are written through
 :mod:`railvib_hpc.io.formats.transient`).
 
 Why not PETSc's ``TSALPHA2`` (available in 3.18, the same Chung-Hulbert scheme): its step is

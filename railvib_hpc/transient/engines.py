@@ -1,14 +1,15 @@
 """The time integration engines of the ``transient`` stage: their matrices, systems, steps
 and initial state.
 
-Built once per run by the stage's setup (:func:`railvib_hpc.transient.stage._setup`), which
-reads the case and hands over the mesh, the DOF map and the problem:
+Built once per run by the engines (:mod:`.engine`, :mod:`.direct_engine`,
+:mod:`.explicit_engine`, :mod:`.imex_engine`) from the model the run's setup
+(:func:`~.run_setup.setup_run`) hands over: the mesh, the DOF map and the problem:
 
 * :func:`assemble_matrices`: K, M and C (Rayleigh damping applied, not stored, for the
   explicit engines; the absorbing faces' dashpots on the diagonal for ``explicit``), with
   the supported track ends' fitted springs (:func:`fit_track_ends`);
-* :func:`explicit_system` (``transient.engine = 'explicit'``) and :func:`imex_partition`
-  (``'imex'``): the conditionally stable engines' system or implicit partition, their step
+* :func:`explicit_system` (the explicit engine) and :func:`imex_partition`
+  (the IMEX engine): the conditionally stable engines' system or implicit partition, their step
   and the line on their stability limit (:func:`stable_step`);
 * :func:`pml_layer`: the perfectly matched layers of the ``pml`` faces, and
   :func:`check_implicit_outside_layers`, which refuses implicit elements in them;
@@ -16,7 +17,7 @@ reads the case and hands over the mesh, the DOF map and the problem:
   the possibly deflected rail).
 
 The direct engine's factor (:class:`~.petsc.TransientSystem`) and the IMEX system
-(:class:`~.imex.ImexSystem`) are made by the setup from these.
+(:class:`~.imex.ImexSystem`) are made by their engines from these.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from ..errors import UserError
 from ..io.stage_protocol import StageContext
 from ..log import Reporter
 from ..problem import Problem
-from .integrate import State, gather_values, initial_acceleration
+from .integrate import State, gather_values
 from .rail import RailDofs
 
 
@@ -39,34 +40,36 @@ class TransientInputError(UserError):
 
 
 def assemble_matrices(ctx: StageContext, mesh, dofmap, problem: Problem,
-                      pml: tuple | None = None) -> tuple:
-    """K, M, C (None when nothing damps), the damping summary, for the explicit engine
-    the absorbing faces' dashpots as this rank's diagonal (None otherwise; then they are
-    in C), and the problem (with the supported track ends' fitted stiffness,
-    :func:`fit_track_ends`) (collective). ``problem``: the run's, built once from the
-    case by :func:`.stage._setup`; ``pml``: its :func:`~.pml.pml_geometry` (None without ``pml``
-    faces), whose hexahedra take the plain full formulation, the one their memory terms
-    use."""
+                      pml: tuple | None = None, *, lumped: bool = False,
+                      diagonal_dashpots: bool = False) -> tuple:
+    """K, M, C (None when nothing damps), the damping summary, with ``diagonal_dashpots``
+    (the explicit engine) the absorbing faces' dashpots as this rank's diagonal (None
+    otherwise; then they are in C), and the problem (with the supported track ends'
+    fitted stiffness, :func:`fit_track_ends`) (collective). ``problem``: the run's, built
+    once from the case by :func:`.run_setup.setup_run`; ``pml``: its
+    :func:`~.pml.pml_geometry` (None without ``pml`` faces), whose hexahedra take the
+    plain full formulation, the one their memory terms use; ``lumped``: the lumped mass
+    on the diagonal alone and Rayleigh damping applied, not stored, where it can be (the
+    conditionally stable engines, :class:`~.engine.EngineBase`)."""
     from ..model.boundary import dashpot_diagonal
     from ..model.petsc import assemble, assemble_damping, destroy_damping, rayleigh_operator
 
     case, comm = ctx.case, ctx.comm
-    engine = case["transient.engine"]
     with ctx.rep.stage("transient: assembly"):
         # the explicit engines keep the lumped mass on the diagonal alone
         K, M, _ = assemble(mesh, problem, dofmap, comm,
-                           mass=True if engine == "direct" else "diagonal",
+                           mass="diagonal" if lumped else True,
                            full_hexes=None if pml is None else pml[1])
         problem = fit_track_ends(ctx, mesh, dofmap, problem, K, M)
         # the explicit engine takes diagonal dashpots at the full step, apart from C
         dashpots = dashpot_diagonal(mesh, problem, dofmap, comm.rank) \
-            if engine == "explicit" else None
+            if diagonal_dashpots else None
         # (every rank must agree: a rank without face nodes has an all-zero diagonal)
-        if engine == "explicit" and comm.allreduce(dashpots is None, op=_MPI_LOR()):
+        if diagonal_dashpots and comm.allreduce(dashpots is None, op=_MPI_LOR()):
             dashpots = None
         stored = dashpots is None
         C = None
-        if engine != "direct":
+        if lumped:
             # Rayleigh damping applied, not stored, where it can be (the explicit engines)
             from .explicit import lumped_diagonal
 
@@ -294,7 +297,7 @@ def static_start(system, state: State, load: tuple, rep: Reporter) -> None:
     add_sparse(rhs[:, 0], system.r0, *load)
     state.u[:] = system.solve_matrix(system.K, rhs)[:, 0]
     state.v[:] = 0.0
-    how = getattr(system, "static_method", None)
+    how = system.static_method
     rep.info("  static start: the soil in equilibrium under the loads at t = 0 (K u0 = f0, "
              "v0 = 0)" + (f"; {how}" if how else ""))
 
@@ -311,29 +314,24 @@ def _MPI_LOR():
     return MPI.LOR
 
 
-def initial_state(init: dict, comm, rep: Reporter) -> State:
+def initial_state(run, comm, rep: Reporter) -> State:
     """At rest; a vehicle in static equilibrium on the (possibly deflected) rail; with
-    ``init["static_start"]`` (``load.start = 'static'``) the soil in static equilibrium
-    under the prescribed loads of t = 0 (:func:`static_start`)."""
+    ``run.static_start`` (``load.start = 'static'``) the soil in static equilibrium
+    under the prescribed loads of t = 0 (:func:`static_start`). ``run``: the
+    :class:`~.run_setup.TransientRun`; the acceleration at t = 0 is its engine's
+    (:meth:`~.engine.Engine.initial_acceleration`)."""
     from ..mbs.vehicles import static_equilibrium
 
-    system = init["system"]
+    system, engine = run.system, run.engine
     n_local = system.n_local
     state = State(0, np.zeros(n_local), np.zeros(n_local), np.zeros(n_local))
-    vehicle, driver = init["vehicle"], init["driver"]
+    vehicle, driver = run.vehicle, run.driver
     if vehicle is None:
-        if init["prescribed"] is not None:
-            load = init["prescribed"](0)
-            if init.get("static_start"):
+        if run.prescribed is not None:
+            load = run.prescribed(0)
+            if run.static_start:
                 static_start(system, state, load, rep)
-            if init["scheme"] is None:
-                from .explicit import initial_acceleration as explicit_acceleration
-
-                explicit_acceleration(system, state, [load])    # (starts the layers)
-            else:
-                if getattr(system, "pml", None) is not None:
-                    system.pml.start(state.u)      # the static field: the layers' rest
-                initial_acceleration(system, state, [load])
+            engine.initial_acceleration(state, [load])    # (starts the layers)
         return state
     dofs, coef, _ = driver.coupling.at(driver.x[0])
     r = driver.heights(0)
@@ -353,7 +351,7 @@ def initial_state(init: dict, comm, rep: Reporter) -> State:
         wheel = np.broadcast_to(np.arange(nw)[:, None], dofs.shape)
         np.add.at(rhs, (dofs[own] - system.r0, wheel[own]), coef[own])
         xcols = system.solve_matrix(system.K, rhs)
-        if getattr(system, "static_method", None):
+        if system.static_method:
             rep.info(f"  static start: {system.static_method}")
         w = np.zeros((nw, nw))
         for j in range(nw):
@@ -363,7 +361,7 @@ def initial_state(init: dict, comm, rep: Reporter) -> State:
     y, force = static_equilibrium(vehicle, flex, r)
     if xcols is not None:
         state.u[:] = -(xcols @ force)
-    if getattr(system, "pml", None) is not None:
+    if system.pml is not None:
         # the static deflection is the layers' rest state (PmlLayer.start)
         system.pml.start(state.u)
     state.y, state.y_dot = y, np.zeros(vehicle.n_dof)

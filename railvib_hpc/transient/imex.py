@@ -304,6 +304,10 @@ class ImexSystem(ExplicitSystem):
             self.time_pml += time.perf_counter() - t0
         self.local(out)[:] = res
 
+    def end_step(self, u_new: np.ndarray) -> None:
+        """Nothing to finish: the layers' memory advanced with the predictor
+        (:meth:`history_rhs`)."""
+
     def solve(self, rhs, out) -> None:
         """``out = K_eff^-1 rhs``: the implicit rows with the factor, the rest diagonal
         (timed and counted by :meth:`solve_block`: before, both counted, and the run's

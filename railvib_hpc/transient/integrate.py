@@ -316,7 +316,7 @@ class DirectSolver:
         #: f_{n+1}^T v_{n+1}`` for a leapfrog system (``system.LOAD_WORK = "velocity"``,
         #: the IMEX engine's)
         self.work = 0.0
-        self._work_velocity = getattr(system, "LOAD_WORK", "displacement") == "velocity"
+        self._work_velocity = system.LOAD_WORK == "velocity"
 
     # ---------------------------------------------------------------- helpers
     def _prescribed(self, n: int) -> SparseLoad | None:
@@ -352,9 +352,7 @@ class DirectSolver:
         info = StepInfo()
         if self.driver is not None:
             u_new = self._contact(st, n1, u_new, info)
-        end_step = getattr(sys_, "end_step", None)
-        if end_step is not None:
-            end_step(u_new)                     # the layers' memory (petsc.TransientSystem)
+        sys_.end_step(u_new)             # the layers' memory (petsc.TransientSystem)
         v_new, a_new = self.scheme.update(u_new, st.u, st.v, st.a)
         if self.driver is not None:                  # the contact force at t_{n+1}
             loads = (*loads, (self._contact_load, wf1))

@@ -51,6 +51,12 @@ class TransientSystem:
         keeps its Cholesky factor.
     """
 
+    #: The loads' work in this scheme's energy balance is ``f^T (u_{n+1} - u_n)``
+    #: (:mod:`.guard`)
+    LOAD_WORK = "displacement"
+    #: How the static start was solved (its own factor of K: nothing to say)
+    static_method: str | None = None
+
     def __init__(self, K, M, C, scheme: GeneralizedAlpha, comm, extra_gb: float = 0.0,
                  pml=None):
         from petsc4py import PETSc
@@ -65,7 +71,7 @@ class TransientSystem:
         self._owned_c = None
         if pml is not None:
             C = self._owned_c = _with_diagonal_damping(K, C, pml.damping_diagonal, comm)
-            self._pml_force = np.zeros(self.n_local)
+            self.pml_force = np.zeros(self.n_local)
         self.K, self.M, self.C, self.scheme, self.comm = K, M, C, scheme, comm
         same = PETSc.Mat.Structure.SAME_NONZERO_PATTERN
         t0 = time.perf_counter()
@@ -149,11 +155,11 @@ class TransientSystem:
         t0 = time.perf_counter()
         layer, af = self.pml, self.scheme.alpha_f
         if not layer.started:
-            self._pml_force = layer.start(self.local(u))
+            self.pml_force = layer.start(self.local(u))
         res = self.local(out)
         res -= (1.0 - af) * layer.peek(np.zeros(self.n_local), self.scheme.dt)
         if af != 0.0:
-            res -= af * self._pml_force
+            res -= af * self.pml_force
         self.time_pml += time.perf_counter() - t0
 
     def end_step(self, u_new: np.ndarray) -> None:
@@ -162,7 +168,7 @@ class TransientSystem:
         if self.pml is None:
             return
         t0 = time.perf_counter()
-        self._pml_force = self.pml.force(u_new, self.scheme.dt)
+        self.pml_force = self.pml.force(u_new, self.scheme.dt)
         self.time_pml += time.perf_counter() - t0
 
     def solve(self, rhs, out) -> None:

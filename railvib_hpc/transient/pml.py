@@ -258,6 +258,9 @@ class PmlLayer:
         own = np.zeros(mesh.n_nodes, dtype=bool)
         own[dofmap.owned_nodes(rank)] = True
         sel = np.flatnonzero(inside & own[mesh.hexes].any(axis=1))
+        #: The global numbers of this rank's layer elements (increasing): the key of
+        #: their memory in a checkpoint (:meth:`memory`).
+        self.elements = sel
         conn = mesh.hexes[sel]
         x = mesh.points[conn]
         lam, mu, rho = _element_materials(mesh, problem, sel)
@@ -345,6 +348,40 @@ class PmlLayer:
         self._chi = [np.zeros(self.n_local) for _ in range(3)]
         self.started = True
         return np.zeros(self.n_local)
+
+    #: The element memory of :meth:`~railvib_hpc.fem.pml.PmlElements.memory`, by name.
+    MEMORY = ("psi", "g", "sigma", "s1", "s2")
+
+    def memory(self) -> dict[str, tuple[str, np.ndarray]]:
+        """The layer's whole state after a step, for a checkpoint (copies): ``name:
+        (kind, array)``, kind ``"rows"`` for this rank's rows of a vector over the global
+        DOFs (the displacement of the last step from the rest state, the chains
+        ``chi_k``, the rest state itself) and ``"elements"`` for one row per element of
+        :attr:`elements` (the kernel's memory, :meth:`~railvib_hpc.fem.pml.PmlElements.
+        memory`; an element several ranks hold has the same memory on each, computed
+        from the same gathered displacements), with the element numbers under
+        ``"pml_elements"`` (kind ``"ids"``). :meth:`restore` takes it back on any number
+        of ranks."""
+        out = {"pml_elements": ("ids", self.elements.astype(np.int64))}
+        for name, a in zip(self.MEMORY, self.kernel.memory()):
+            out[f"pml_{name}"] = ("elements", a)
+        out["pml_u"] = ("rows", self._u.copy())
+        for k, chi in enumerate(self._chi):
+            out[f"pml_chi{k}"] = ("rows", chi.copy())
+        offset = np.zeros(self.n_local) if self._offset is None else self._offset.copy()
+        out["pml_offset"] = ("rows", offset)
+        return out
+
+    def restore(self, saved: dict[str, np.ndarray]) -> None:
+        """Set the state of :meth:`memory` back: ``saved`` holds this rank's rows and
+        the rows of its :attr:`elements` (by the same names); the layer is started."""
+        self.kernel.restore(tuple(np.array(saved[f"pml_{name}"], dtype=float)
+                                  for name in self.MEMORY))
+        self._u = np.array(saved["pml_u"], dtype=float)
+        self._chi = [np.array(saved[f"pml_chi{k}"], dtype=float) for k in range(3)]
+        offset = np.array(saved["pml_offset"], dtype=float)
+        self._offset = offset if np.any(offset) else None
+        self.started = True
 
     def instant_diagonal(self, dt: float) -> np.ndarray:
         """``d f / d u_{n+1}`` of the mass-side terms of :meth:`force` on this rank's rows:

@@ -3,8 +3,11 @@
 ``railvib transient CASE`` (collective) builds the same model as the modal stage (mesh,
 DOFs with the ``[boundary]`` conditions, K and M), adds the damping matrix C of
 ``[damping]`` and the absorbing faces' dashpots, and integrates ``M u'' + C u' + K u = f``
-with the generalized-alpha scheme (:mod:`.scheme`; ``transient.rho_inf = 1``: Newmark
-average acceleration) on one MUMPS factor of the effective matrix. The loads are the
+with the engine of ``transient.engine`` (:mod:`.engine`, declared in
+:data:`railvib_hpc.time_engines.ENGINES`; ``direct``: the generalized-alpha scheme,
+:mod:`.scheme`, on one MUMPS factor of the effective matrix). The run is set up as one
+typed object (:func:`~.run_setup.setup_run`), which the loop steps, records and
+checkpoints (:class:`TimeLoop`). The loads are the
 moving forces or the vehicle of ``[vehicle]`` with the Hertz contact and the
 irregularities of ``[irregularity]``, exactly as in the ``mbs`` stage (same vehicle models
 and contact solver, :mod:`.integrate`), but on the full model: a causal solution whose
@@ -46,7 +49,10 @@ Checkpoints: an interrupted run resumes from its last checkpoint
 (``transient_checkpoint.h5``, every ``transient.checkpoint_interval`` seconds) and gives
 the same answer, bit for bit on one rank: the state is stored exactly, the factor is
 recomputed deterministically and the rail columns are computed in fixed blocks
-(:class:`~.integrate.RailColumns`). On several ranks MUMPS's parallel factorization is
+(:class:`~.integrate.RailColumns`). The engine's own state is in it too
+(:meth:`~.engine.Engine.state`: the perfectly matched layers' memory, by global DOF and
+element, so that a run with layers resumes on any number of ranks). On several ranks
+MUMPS's parallel factorization is
 reproducible only to its round-off (two uninterrupted 2-rank runs differ by ~4e-9
 relative), and a resumed run lies within that spread (docs/transient.md).
 The checkpoint is a stage file too: it is resumed only when it is current for the case,
@@ -68,7 +74,6 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Case
-from ..errors import ResourceError
 from ..io.atomic import ensure_space
 from ..io.digests import digest, record_file
 from ..io.files import (
@@ -101,29 +106,31 @@ from ..io.xdmf import remove_xdmf
 from ..log import Reporter
 from ..parallel import on_root
 from ..problem import RANDOM_FIELD_KEYS, Problem
-from ..resources import check_memory, peak_memory_gb
+from ..resources import peak_memory_gb
 from ..site import line_probes
-from .engines import (  # TransientInputError re-exported
-    TransientInputError,
-    assemble_matrices,
-    check_implicit_outside_layers,
-    explicit_system,
-    imex_partition,
-    initial_state,
-    pml_layer,
+from .engine import gather_state
+from .engines import TransientInputError, initial_state  # noqa: F401 (re-exported)
+from .integrate import State
+from .output import FieldWriter
+from .run_setup import (  # noqa: F401 (re-exported: the setup's parts, for scripts, tests)
+    HISTORY_COPIES,
+    MAX_TRANSIENT_STEPS,
+    NEAR_CRITICAL_SPEED,
+    TransientRun,
+    band_check,
+    check_run_size,
+    check_stress_times,
+    history_bytes,
+    output_steps,
+    precheck_size,
+    probe_points,
+    setup_run,
+    speed_warning,
+    time_step,
 )
-from .integrate import DirectSolver, RailColumns, State, VehicleDriver
-from .output import FieldWriter, PointSampler, RailSampler
-from .rail import RailDofs, WheelCoupling
-from .scheme import GeneralizedAlpha, choose_time_step, coarse_step_warning
+from .run_setup import setup_run as _setup  # noqa: F401 (the name scripts use)
 from .spectral_refusals import spectral_refusals
-from .surface_case import (
-    element_time,
-    no_rails,
-    surface_load,
-    surface_passage,
-    uses_surface_load,
-)
+from .surface_case import uses_surface_load
 
 #: Table names of the products (:data:`railvib_hpc.io.products.STAGE_FILES`), in the
 #: order they are checked (the solution first; it is written last).
@@ -132,16 +139,6 @@ PRODUCTS = (HISTORIES, FIELDS, PROBES)
 CHECKPOINT = TRANSIENT_CHECKPOINT_H5
 #: Output steps buffered per collective write of fields.h5.
 FIELD_BLOCK = 16
-#: Rail nodes ahead of each wheel whose columns are computed in one block.
-LOOKAHEAD_NODES = 12
-#: Largest number of time steps of one run: 100 times the thesis passage's 1840 steps,
-#: about 7.5 hours at the 7.4 steps/s measured for the thesis model on 2 ranks
-#: (docs/transient.md). Checked before anything is built or allocated
-#: (:func:`check_run_size`).
-MAX_TRANSIENT_STEPS = 200_000
-#: Copies of rank 0's histories held at once at the end of a run (the histories and the
-#: rail bending moments and file buffers computed from them while the files are written).
-HISTORY_COPIES = 2
 
 
 class Interrupted(RuntimeError):
@@ -203,7 +200,7 @@ def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
         from ..io.formats.fields import FieldsFile
 
         stored = FieldsFile(fields)
-        _check_stress_times(case, stored.times())
+        check_stress_times(case, stored.times())
         n_hexes = stored.n_hexes()
         ensure_space(out_dir, _stress_bytes(case, n_hexes), "the stresses of fields.h5")
         return n_hexes
@@ -214,26 +211,18 @@ def _refresh_stress(case: Case, out_dir: Path, comm, rep: Reporter) -> None:
         record_file(fields, comm)
 
 
-def _check_stress_times(case: Case, t_out: np.ndarray) -> None:
-    times = [float(v) for v in case["output.stress_times"]]
-    tol = 1e-9 * max(1.0, float(np.abs(t_out).max()))
-    bad = [v for v in times if v < t_out[0] - tol or v > t_out[-1] + tol]
-    if bad:
-        raise TransientInputError(f"output.stress_times = {times}: {bad} outside the stored "
-                                  f"time range [{t_out[0]:.6g}, {t_out[-1]:.6g}] s of "
-                                  "fields.h5 (output.window)")
-
-
 def _stress_bytes(case: Case, n_hexes: int) -> int:
     n = len(case["output.stress_times"])
     return 16 * n * int(n_hexes) + 16 * n
 
 
-def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> str | None:
+def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int,
+               engine_state: bool = False) -> str | None:
     """The run id of a checkpoint this run may resume, or None (rank 0).
 
     The checkpoint must be current for the case and computed from this ``mesh.h5``,
-    unchanged and sound (:func:`~railvib_hpc.io.provenance.examine`), and the partial
+    unchanged and sound (:func:`~railvib_hpc.io.provenance.examine`), hold the engine's
+    own state when it has one (``engine_state``: the layers' memory), and the partial
     ``fields.h5`` must carry the fields' provenance and the checkpoint's run id. Anything
     else is deleted, saying why.
     """
@@ -260,6 +249,11 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
         if not (0 <= step < nt and 0 <= written <= n_fields[0]):
             raise NotReusable(f"it is at step {step} of {nt} with {written} output steps "
                               "written")
+        if engine_state:
+            with h5py.File(ctx.out_dir / CHECKPOINT, "r") as f:
+                if "engine" not in f:
+                    raise NotReusable("it has no engine state (the perfectly matched "
+                                      "layers' memory)")
         return run_id
 
     old = ctx.reuse(CHECKPOINT, accept=matching, upstream={MESH_H5: mesh_sha},
@@ -272,157 +266,6 @@ def _resumable(ctx: StageContext, mesh_sha: str, n_fields: tuple, nt: int) -> st
 
 
 # --------------------------------------------------------------------------- setup
-def history_bytes(nt: int, n_wheels: int, n_dof: int, n_probes: int, n_rails: int,
-                  n_rail_nodes: int) -> float:
-    """Rank 0's memory for the per-step histories of a run of ``nt`` steps [bytes].
-
-    Parameters
-    ----------
-    nt
-        Time steps.
-    n_wheels, n_dof
-        Wheels (or moving forces) and vehicle DOFs.
-    n_probes
-        Probes (mesh probes and ``output.probes``).
-    n_rails, n_rail_nodes
-        Flexible rails and nodes per rail.
-
-    Returns
-    -------
-    float
-        The :class:`Recorder`'s arrays, the times, wheel positions and output index,
-        times :data:`HISTORY_COPIES`.
-    """
-    per_step = (4 * n_wheels + 3 * n_dof + 9 * n_probes + 2 * n_rails * n_rail_nodes
-                + n_wheels + 2)
-    return HISTORY_COPIES * 8.0 * (nt + 1) * per_step
-
-
-def check_run_size(case: Case, run: dict, dt: float, how: str, n_wheels: int, n_dof: int,
-                   n_probes: int, n_rails: int, n_rail_nodes: int) -> int:
-    """Refuse a run with too many steps or histories larger than the memory (one line).
-
-    Parameters
-    ----------
-    case
-        The case.
-    run
-        :func:`~railvib_hpc.mbs.case_vehicle.passage` of the case.
-    dt
-        The time step (or an upper bound of it: the count is then a lower bound).
-    how
-        Where ``dt`` comes from, for the message (``transient.dt = 1e-07 s``).
-    n_wheels, n_dof, n_probes, n_rails, n_rail_nodes
-        Sizes of the histories (:func:`history_bytes`).
-
-    Returns
-    -------
-    int
-        The number of steps.
-
-    Raises
-    ------
-    ResourceError
-        More than :data:`MAX_TRANSIENT_STEPS` steps, or histories beyond the available
-        memory (:func:`~railvib_hpc.resources.check_memory`).
-    """
-    from ..mbs.results import n_steps
-
-    sec = "load" if uses_surface_load(case) else "vehicle"
-    what = "load" if sec == "load" else "wheel"
-    t_end, t_after = run["t_end"], case[f"{sec}.t_after"]
-    nt = n_steps(t_end, dt)
-    advice = (f"shorten the passage ({sec}.t_after, {sec}.x_start, {sec}.x_end"
-              + (", train2.t_start" if sec == "vehicle" else "")
-              + ") or use a larger transient.dt (0 = automatic)")
-    if nt > MAX_TRANSIENT_STEPS:
-        raise ResourceError(
-            f"the passage lasts {t_end:.4g} s ({t_end - t_after:.4g} s until the last {what} "
-            f"reaches x = {run['x_end']:g} m at up to {float(np.abs(run['speeds']).max()):g} "
-            f"m/s, then {sec}.t_after = {t_after:g} s): {nt:.3g} steps of {how}, more than "
-            f"the limit of {MAX_TRANSIENT_STEPS:,} (about 7.5 hours at thesis size); "
-            + advice)
-    need = history_bytes(nt, n_wheels, n_dof, n_probes, n_rails, n_rail_nodes)
-    check_memory(need, f"the transient histories ({nt:.3g} steps)", advice)
-    return nt
-
-
-def precheck_size(case: Case) -> None:
-    """:func:`check_run_size` from the case and its layout alone, before the mesh is built.
-
-    The automatic step is bounded above by the band and ``output.dt`` (the rail elements
-    can only shorten it), so the count is a lower bound of the run's: a refusal here is
-    one the exact check after the mesh would give too.
-    """
-    from ..mbs.case_vehicle import build_vehicle, passage
-    from ..mesh.layout import build_layout
-
-    lay = build_layout(case)
-    if uses_surface_load(case):
-        vehicle, run = None, surface_passage(case)
-    else:
-        vehicle = build_vehicle(case)
-        run = passage(case, vehicle, float(np.max(lay.sleeper_x)))
-    if not run["t_end"] > 0:
-        return                      # an empty passage: refused later with its own message
-    tr = case["transient"]
-    if tr["dt"] > 0:
-        dt, how = tr["dt"], f"transient.dt = {tr['dt']:g} s"
-    else:
-        dt = choose_time_step(tr["f_max"], tr["steps_per_period"], case["output.dt"])
-        how = f"the automatic step (at most {dt:.3g} s)"
-    n_user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3).shape[0] \
-        + len(line_probes(case))
-    n_rail_nodes = lay.rail_div * max(len(lay.sleeper_x) - 1, 1) + 1
-    check_run_size(case, run, dt, how, run["wheel_rail"].size,
-                   0 if vehicle is None else vehicle.n_dof, len(lay.probes) + n_user,
-                   len(lay.rail_y), n_rail_nodes)
-
-
-def time_step(case: Case, element_time: float, rep: Reporter) -> float:
-    """``transient.dt`` or the automatic step; warns when it is too coarse for the band."""
-    tr = case["transient"]
-    if tr["dt"] > 0:
-        dt = tr["dt"]
-    else:
-        dt = choose_time_step(tr["f_max"], tr["steps_per_period"], case["output.dt"],
-                              element_time, tr["steps_per_element"])
-    warning = coarse_step_warning(dt, tr["f_max"], tr["steps_per_period"], tr["rho_inf"])
-    if warning:
-        rep.info(warning)
-    return dt
-
-
-def output_steps(case: Case, dt: float, nt: int) -> np.ndarray:
-    """Steps written to ``fields.h5``: every ``output.dt`` within ``output.window``."""
-    stride = max(1, int(round(case["output.dt"] / dt))) if case["output.dt"] > 0 else 1
-    steps = np.arange(0, nt + 1, stride)
-    w = case["output.window"]
-    if w:
-        t = steps * dt
-        tol = 1e-9 * max(1.0, w[1])
-        steps = steps[(t >= w[0] - tol) & (t <= w[1] + tol)]
-    if steps.size == 0:
-        raise TransientInputError(f"output.window = {w} contains no output step of the run "
-                                  f"(0 .. {nt * dt:.4g} s)")
-    return steps
-
-
-def probe_points(mesh, case: Case) -> tuple[list[str], np.ndarray]:
-    """Names and coordinates: the mesh probes, then ``output.probes`` (``user_1``, ...),
-    then the points of the probe lines (:func:`railvib_hpc.site.line_probes`)."""
-    names = list(mesh.probes)
-    coords = [mesh.probes[k] for k in names]
-    user = np.asarray(case["output.probes"], dtype=float).reshape(-1, 3)
-    for i, p in enumerate(user):
-        names.append(f"user_{i + 1}")
-        coords.append(p)
-    for name, point in line_probes(case).items():
-        names.append(name)
-        coords.append(point.point)
-    return names, np.asarray(coords, dtype=float).reshape(-1, 3)
-
-
 class Recorder:
     """Rank 0's histories of the run (every step)."""
 
@@ -590,38 +433,54 @@ def run_transient_stage(case: Case, out_dir: Path, comm, rep: Reporter,
 
 
 def _transient(ctx: StageContext) -> dict:
-    t_wall, case, out_dir, comm, rep = time.perf_counter(), ctx.case, ctx.out_dir, ctx.comm, ctx.rep
-    checkpoint_steps, stop_after = map(ctx.options.get, ("checkpoint_steps", "stop_after"))
-    init = _setup(ctx)
-    mesh, dofmap, system, solver = init["mesh"], init["dofmap"], init["system"], init["solver"]
-    nt, dt, steps_out = init["nt"], init["dt"], init["steps_out"]
-    upstream = {MESH_H5: init["mesh_sha"]}
-    recorder = Recorder(nt, init["n_wheels"], init["n_dof"], len(init["probe_names"]),
-                        init["rails"].dofs.shape[:2] + (2,)) if comm.rank == 0 else None
-    out_index = np.full(nt + 1, -1, dtype=np.int64)
-    out_index[steps_out] = np.arange(steps_out.size)
-    ckpt_path = out_dir / CHECKPOINT
+    t_wall, out_dir, rep = time.perf_counter(), ctx.out_dir, ctx.rep
+    run = setup_run(ctx)
+    loop = _start(ctx, run)
+    with rep.stage("transient: time integration"), _discard_on_divergence(ctx, loop.writer):
+        loop.iterate()
+    t_integration = time.perf_counter() - loop.t_run
+    _outputs(ctx, run, loop, t_integration, t_wall)
+    stats = loop.stats
+    run.engine.destroy()
+    rep.info(format_summary(stats))
+    rep.info(f"wrote {out_dir / FIELDS_H5}, {out_dir / PROBES_H5}, "
+             f"{out_dir / TRANSIENT_H5}")
+    return {**stats, "reused": False}
 
-    # ---- initial state or resume
-    # the perfectly matched layers' memory is not checkpointed: such a run starts at t = 0
-    layers = getattr(system, "pml", None) is not None
-    run_id = None if layers else on_root(lambda: _resumable(
-        ctx, init["mesh_sha"], (steps_out.size, mesh.n_nodes, 3), nt), comm)
-    resume_ok = run_id is not None
-    if resume_ok:
-        ck = read_checkpoint(ckpt_path, dofmap.owned_dofs(comm.rank), comm.rank)
-        state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
-                      ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
-        if comm.rank == 0:
-            for k, v in ck["history"].items():
-                recorder.arrays[k][...] = v
-        fields_written = ck["fields_written"]
-        rep.info(f"resuming from the checkpoint at step {state.step} of {nt} "
-                 f"(t = {state.step * dt:.4f} s)")
-    else:
+
+def _start(ctx: StageContext, run: TransientRun) -> TimeLoop:
+    """The loop of ``run`` at its first step: resumed from a current checkpoint (the
+    engine's own state, the layers' memory, restored too) or from the initial state, with
+    the fields' writer open (collective)."""
+    case, comm, rep, dt, nt = ctx.case, ctx.comm, ctx.rep, run.dt, run.nt
+    steps_out, mesh = run.steps_out, run.mesh
+    upstream = {MESH_H5: run.mesh_sha}
+    recorder = Recorder(nt, run.n_wheels, run.n_dof, len(run.probe_names),
+                        run.rails.dofs.shape[:2] + (2,)) if comm.rank == 0 else None
+    ckpt_path = ctx.out_dir / CHECKPOINT
+    engine_state = bool(run.engine.state())
+    run_id = on_root(lambda: _resumable(ctx, run.mesh_sha, (steps_out.size, mesh.n_nodes, 3),
+                                        nt, engine_state), comm)
+    state = None
+    if run_id is not None:
+        state, fields_written = _resume(ckpt_path, run, recorder, comm)
+        if state is None:
+            def drop() -> None:
+                ctx.rep.info(f"not resuming from {ckpt_path}: its engine state does not "
+                             "match the model's layers; starting at t = 0")
+                ctx.discard(ckpt_path)
+                resume_path(ctx.out_dir / FIELDS_H5).unlink(missing_ok=True)
+
+            on_root(drop, comm)
+            run_id = None
+        else:
+            rep.info(f"resuming from the checkpoint at step {state.step} of {nt} "
+                     f"(t = {state.step * dt:.4f} s)")
+    resume_ok = state is not None
+    if not resume_ok:
         run_id = on_root(lambda: uuid.uuid4().hex, comm)
         with rep.stage("transient: initial state"):
-            state = initial_state(init, comm, rep)
+            state = initial_state(run, comm, rep)
         fields_written = 0
 
     def fields_attrs() -> dict:
@@ -629,18 +488,73 @@ def _transient(ctx: StageContext) -> dict:
                 "stride": int(steps_out[1] - steps_out[0]) if steps_out.size > 1 else 1,
                 "window": json.dumps(case["output.window"] or None)}
 
-    writer = FieldWriter(out_dir / FIELDS_H5, comm, mesh, dofmap, steps_out * dt, steps_out,
-                         case["output.float32"],
+    writer = FieldWriter(ctx.out_dir / FIELDS_H5, comm, mesh, run.dofmap, steps_out * dt,
+                         steps_out, case["output.float32"],
                          on_root(fields_attrs, comm) if not resume_ok else {},
                          resume=resume_ok, block=FIELD_BLOCK,
                          extra_bytes=_stress_bytes(case, len(mesh.hexes)))
-    solver.start(state)
-    guard = make_guard(init, case, state)
-    probes, rails_s = init["probe_sampler"], init["rail_sampler"]
+    run.engine.start(state)
+    loop = TimeLoop(ctx, run, state, recorder, writer, run_id, fields_written)
+    if not resume_ok:
+        loop.record(0)
+    return loop
 
-    def record(n: int, info=None) -> None:
+
+def _resume(path: Path, run: TransientRun, recorder, comm) -> tuple:
+    """The state and the output steps written of the checkpoint ``path``, the engine's
+    own state restored (collective); ``(None, 0)`` when a rank's part of the engine's
+    state is not in it (the run starts at t = 0)."""
+    layer = run.engine.state()
+    ids = layer["pml_elements"][1] if "pml_elements" in layer else None
+    try:
+        ck = read_checkpoint(path, run.dofmap.owned_dofs(comm.rank), comm.rank, ids)
+        missing = bool(layer) and not set(layer) <= set(ck["engine"])
+    except KeyError:
+        missing = True
+    if comm.allreduce(missing, op=_lor()):
+        return None, 0
+    run.engine.restore(ck["engine"])
+    state = State(ck["step"], ck["u"].copy(), ck["v"].copy(), ck["a"].copy(),
+                  ck["y"], ck["y_dot"], ck["y_ddot"], ck["penetration"], ck["force"])
+    if comm.rank == 0:
+        for k, v in ck["history"].items():
+            recorder.arrays[k][...] = v
+    return state, ck["fields_written"]
+
+
+def _lor():
+    from mpi4py import MPI
+
+    return MPI.LOR
+
+
+class TimeLoop:
+    """The time loop of a run: step, record, checkpoint (as SPECFEM3D's
+    ``iterate_time``); the engine does the physics (:class:`~.engine.Engine`).
+
+    ``ctx.options``: ``checkpoint_steps`` (also checkpoint every this many steps; tests)
+    and ``stop_after`` (raise :class:`Interrupted` after the first checkpoint at or after
+    this step).
+    """
+
+    def __init__(self, ctx: StageContext, run: TransientRun, state: State, recorder,
+                 writer: FieldWriter, run_id: str, fields_written: int):
+        self.ctx, self.run, self.state, self.recorder = ctx, run, state, recorder
+        self.writer, self.run_id, self.fields_written = writer, run_id, fields_written
+        self.comm = ctx.comm
+        self.out_index = np.full(run.nt + 1, -1, dtype=np.int64)
+        self.out_index[run.steps_out] = np.arange(run.steps_out.size)
+        self.guard = make_guard(run, ctx.case, state)
+        self.first_step = state.step
+        self.t_run = time.perf_counter()
+        self.stats: dict = {}
+
+    def record(self, n: int, info=None) -> None:
+        """The probes, rails, wheels and fields of step ``n`` (collective)."""
+        run, state, comm, recorder = self.run, self.state, self.comm, self.recorder
+        probes = run.probe_sampler
         part = np.concatenate([probes.sample(state.u, state.v, state.a).ravel(),
-                               rails_s.sample(state.u).ravel()])
+                               run.rail_sampler.sample(state.u).ravel()])
         total = part
         if comm.size > 1:
             total = np.zeros_like(part) if comm.rank == 0 else None
@@ -649,95 +563,95 @@ def _transient(ctx: StageContext) -> dict:
             npb = 9 * probes.n
             recorder.put(n, probes=total[:npb].reshape(3, probes.n, 3),
                          rail=total[npb:].reshape(recorder.arrays["rail"].shape[1:]))
-            if init["driver"] is not None:
+            if run.driver is not None:
                 recorder.put(n, contact_force=state.force, penetration=state.penetration,
                              y=state.y, y_dot=state.y_dot, y_ddot=state.y_ddot)
                 if info is not None and info.rail_displacement is not None:
                     recorder.put(n, rail_displacement=info.rail_displacement,
                                  wheel_height=info.wheel_height)
-            elif init["forces"] is not None:
-                recorder.put(n, contact_force=init["forces"])
-        k = out_index[n]
-        if k >= fields_written_box[0]:
-            writer.put(int(k), state.u, state.v, state.a)
+            elif run.forces is not None:
+                recorder.put(n, contact_force=run.forces)
+        k = self.out_index[n]
+        if k >= self.fields_written:
+            self.writer.put(int(k), state.u, state.v, state.a)
 
-    def checkpoint_attrs() -> dict:
-        return {**ctx.provenance(CHECKPOINT, upstream), "run_id": run_id}
-
-    fields_written_box = [fields_written]
-    if not resume_ok:
-        record(0, init.get("info0"))
-    interval = case["transient.checkpoint_interval"]
-    if layers and (interval > 0 or checkpoint_steps is not None):
-        rep.info("  checkpoints: none written (the perfectly matched layers' memory is not in "
-                 "them): an interrupted run starts again at t = 0")
-    t_run = time.perf_counter()
-    last_progress = last_ckpt = t_run
-    first_step = state.step
-    with rep.stage("transient: time integration"), _discard_on_divergence(ctx, writer):
+    def iterate(self) -> None:
+        """Step to the end, recording every step and checkpointing as asked."""
+        ctx, run, state, comm = self.ctx, self.run, self.state, self.comm
+        nt, dt = run.nt, run.dt
+        interval = ctx.case["transient.checkpoint_interval"]
+        every, stop_after = map(ctx.options.get, ("checkpoint_steps", "stop_after"))
+        last_progress = last_ckpt = self.t_run
         while state.step < nt:
-            info = solver.step(state)
-            if guard.due(state.step, state.step == nt):
-                guard.check(state)             # before anything of this step is kept
-            record(state.step, info)
+            info = run.engine.step(state)
+            if self.guard.due(state.step, state.step == nt):
+                self.guard.check(state)             # before anything of this step is kept
+            self.record(state.step, info)
             now = time.perf_counter()
             if comm.rank == 0 and (now - last_progress >= 2.0 or state.step == nt):
                 last_progress = now
-                done = state.step - first_step
-                rep.progress(f"transient: step {state.step}/{nt} (t = {state.step * dt:.4f} s, "
-                             f"{done / max(now - t_run, 1e-9):.1f} steps/s)",
-                             done, nt - first_step, t_run)
+                done = state.step - self.first_step
+                ctx.rep.progress(f"transient: step {state.step}/{nt} (t = "
+                                 f"{state.step * dt:.4f} s, "
+                                 f"{done / max(now - self.t_run, 1e-9):.1f} steps/s)",
+                                 done, nt - self.first_step, self.t_run)
             want = (interval > 0 and now - last_ckpt >= interval) or \
-                (checkpoint_steps is not None and state.step % checkpoint_steps == 0)
+                (every is not None and state.step % every == 0)
             want = comm.bcast(want, root=0) if comm.size > 1 else want
-            if want and state.step < nt and not layers:
-                writer.sync()          # the fields on disk up to this step, then the state
-                fields_written_box[0] = int(np.searchsorted(steps_out, state.step, "right"))
-                _write_checkpoint(ckpt_path, comm,
-                                  checkpoint_attrs() if comm.rank == 0 else None,
-                                  fields_written_box[0], state, dofmap,
-                                  recorder.arrays if comm.rank == 0 else None)
+            if want and state.step < nt:
+                self.checkpoint()
                 last_ckpt = time.perf_counter()
                 if stop_after is not None and state.step >= stop_after:
-                    writer.close()
+                    self.writer.close()
                     raise Interrupted(f"stopped after the checkpoint at step {state.step}")
-    t_integration = time.perf_counter() - t_run
 
-    # ---- outputs: fields.h5 (+ /stress), probes.h5, transient.h5 (last), then the
-    # checkpoint goes
+    def checkpoint(self) -> None:
+        """``transient_checkpoint.h5`` after this step: the fields on disk up to it, then
+        the state, the engine's own state (the layers' memory) and the histories
+        (collective)."""
+        ctx, run, state, comm = self.ctx, self.run, self.state, self.comm
+        self.writer.sync()
+        self.fields_written = int(np.searchsorted(run.steps_out, state.step, "right"))
+        rows = run.dofmap.owned_dofs(comm.rank)
+        engine = gather_state(run.engine.state(), comm, rows, run.dofmap.n_dofs)
+        attrs = ({**ctx.provenance(CHECKPOINT, {MESH_H5: run.mesh_sha}),
+                  "run_id": self.run_id} if comm.rank == 0 else None)
+        small = {"y": state.y, "y_dot": state.y_dot, "y_ddot": state.y_ddot,
+                 "penetration": state.penetration, "force": state.force}
+        write_checkpoint(ctx.out_dir / CHECKPOINT, comm, attrs, state.step,
+                         self.fields_written, {"u": state.u, "v": state.v, "a": state.a},
+                         rows, run.dofmap.n_dofs, small,
+                         self.recorder.arrays if comm.rank == 0 else None, engine)
+
+
+def _outputs(ctx: StageContext, run: TransientRun, loop: TimeLoop, t_integration: float,
+             t_wall: float) -> None:
+    """fields.h5 (+ /stress), probes.h5, transient.h5 (last), then the checkpoint goes;
+    the run statistics in ``loop.stats`` (collective)."""
+    case, out_dir, comm, rep = ctx.case, ctx.out_dir, ctx.comm, ctx.rep
+    upstream = {MESH_H5: run.mesh_sha}
     with rep.stage("transient: fields, stresses"):
         stress = None
         if case["output.stress_times"]:
             stress = _stress_writer(case, comm, rep, on_root(lambda: stress_key(case), comm))
-        writer.finish(stress)
+        loop.writer.finish(stress)
         if not case["output.stress_times"] and comm.rank == 0:
             remove_xdmf(out_dir / STRESS_XDMF)
     rss = comm.allgather(peak_memory_gb())
-    stats = _stats(init, system, solver, t_integration, time.perf_counter() - t_wall, rss,
-                   recorder, nt - first_step, comm)
-    stats["guard"] = guard.stats(dofmap.n_dofs)
-    stats["resolved_up_to_hz"] = init["resolved_up_to_hz"]
-    rep.info(guard.summary(dofmap.n_dofs))
+    stats = _stats(run, t_integration, time.perf_counter() - t_wall, rss, loop.recorder,
+                   run.nt - loop.first_step, comm)
+    stats["guard"] = loop.guard.stats(run.dofmap.n_dofs)
+    stats["resolved_up_to_hz"] = run.resolved_up_to_hz
+    rep.info(loop.guard.summary(run.dofmap.n_dofs))
     with rep.stage("transient: probes, histories"):
         def write_rank0() -> None:
-            _write_probes(out_dir, init, recorder, case, ctx.provenance(PROBES, upstream))
-            _write_histories(out_dir / TRANSIENT_H5, case, init, recorder, stats,
+            _write_probes(out_dir, run, loop.recorder, case, ctx.provenance(PROBES, upstream))
+            _write_histories(out_dir / TRANSIENT_H5, case, run, loop.recorder, stats,
                              ctx.provenance(HISTORIES, upstream))
-            ctx.discard(ckpt_path)
+            ctx.discard(out_dir / CHECKPOINT)
 
         on_root(write_rank0, comm)
-    solver.destroy()
-    system.destroy()
-    for A in (init["K"], init["M"]):
-        if A is not None:
-            A.destroy()
-    from ..model.petsc import destroy_damping
-
-    destroy_damping(init["C"])
-    rep.info(format_summary(stats))
-    rep.info(f"wrote {out_dir / FIELDS_H5}, {out_dir / PROBES_H5}, "
-             f"{out_dir / TRANSIENT_H5}")
-    return {**stats, "reused": False}
+    loop.stats = stats
 
 
 @contextlib.contextmanager
@@ -761,278 +675,28 @@ def _discard_on_divergence(ctx: StageContext, writer: FieldWriter):
         raise
 
 
-def _passage(case: Case, mesh, dofmap) -> tuple:
-    """The rails, the vehicle (None: moving forces) and the passage
-    (:func:`~railvib_hpc.mbs.case_vehicle.passage`); with ``track.count = 0`` no rail, no
-    vehicle and the surface load's passage (:func:`.surface_case.surface_passage`)."""
-    from ..mbs.case_vehicle import build_vehicle, passage
-
-    if uses_surface_load(case):
-        return no_rails(), None, surface_passage(case)
-    try:
-        rails = RailDofs.from_mesh(mesh, dofmap.index)
-    except ValueError as exc:
-        raise TransientInputError(f"railvib transient: {exc}") from None
-    vehicle = build_vehicle(case)
-    return rails, vehicle, passage(case, vehicle, float(rails.x.max()))
-
-
-def _mesh_input(ctx: StageContext):
-    """The mesh the runner hands over (``ctx.input("mesh")``: ``mesh.h5`` built or reused)
-    and its digest (rank 0)."""
-    given = ctx.input("mesh")
-    return given.value, given.sha256
-
-
-def _setup(ctx: StageContext) -> dict:
-    """Mesh, DOFs, loads, time step, matrices, factor, samplers (collective)."""
-    from ..mbs.case_vehicle import passage_irregularity
-    from ..model.boundary import boundary_summary, layer_line, problem_dofmap, support_warning
-    from .petsc import TransientSystem
-
-    case, comm, rep = ctx.case, ctx.comm, ctx.rep
-    with rep.stage("transient: mesh"):
-        mesh, mesh_sha = on_root(lambda: _mesh_input(ctx), comm)
-    with rep.stage("transient: dofs"):
-        problem = Problem.from_case(case)
-        dofmap = problem_dofmap(mesh, problem, comm.size)
-        rep.info(f"  {mesh.n_nodes} nodes, {dofmap.n_dofs} free DOFs on {comm.size} rank(s); "
-                 "faces: " + ", ".join(f"{k} {v['type']}" for k, v in
-                                       boundary_summary(mesh, problem).items()))
-        layers = layer_line(mesh, problem)
-        if layers:
-            rep.info(f"  {layers}")
-        from .pml import pml_faces, pml_geometry
-
-        # the layers' faces and elements, checked once (a layer the mesh cannot carry is
-        # refused before assembly); assembly and the layer's kernel take them from here
-        pml = pml_geometry(mesh, problem) if pml_faces(problem) else None
-        if pml is not None and case["transient.engine"] == "imex":
-            check_implicit_outside_layers(case, mesh, pml[1])
-        unsupported = support_warning(mesh, problem)
-        if unsupported:
-            rep.info(unsupported)
-    surface = uses_surface_load(case)     # track.count = 0: [load] on the bare soil
-    rails, vehicle, run = _passage(case, mesh, dofmap)
-    speed = float(np.max(np.abs(run["speeds"])))
-    critical = speed_warning(case, speed)
-    if critical:
-        rep.info(critical)
-    crossing = (element_time(mesh, speed) if surface
-                else float(np.diff(rails.x, axis=1).min()) / speed)
-    dt = time_step(case, crossing, rep)
-    engine = case["transient.engine"]
-    explicit = engine == "explicit"
-    if engine != "direct":
-        # the step follows from the matrices: assemble first
-        K, M, C, cinfo, dashpots, problem = assemble_matrices(ctx, mesh, dofmap, problem,
-                                                              pml)
-        with rep.stage("transient: stability limit"):
-            if explicit:
-                system, dt, limit = explicit_system(ctx, mesh, dofmap, problem, rails,
-                                                     vehicle, (K, M, C, dashpots), dt, pml)
-                allowed = system.allowed_step
-            else:
-                partition, dt, limit, layer, allowed = imex_partition(ctx, mesh, dofmap,
-                                                                       problem, K, M, C, dt,
-                                                                       pml)
-        dt = _inject_step(dt, system if explicit else None)
-    how = (f"transient.dt = {dt:g} s" if case["transient.dt"] > 0
-           else f"the automatic step {dt:.3g} s")
-    # rank 0 holds the histories; its verdict holds for all ranks (no rank may stop alone)
-    nt = on_root(lambda: check_run_size(case, run, dt, how, run["wheel_rail"].size,
-                                        0 if vehicle is None else vehicle.n_dof,
-                                        len(probe_points(mesh, case)[0]), rails.x.shape[0],
-                                        rails.n_nodes), comm)
-    times = np.arange(nt + 1) * dt
-    x = run["x_start"] + run["offsets"][None, :] + run["speeds"][None, :] * times[:, None]
-    if surface:
-        x = x[:, :0]                     # no wheel: the loads' positions are the case's
-    steps_out = output_steps(case, dt, nt)
-    resolved = on_root(lambda: band_check(case, mesh, dt, rep), comm)
-    if case["output.stress_times"]:
-        _check_stress_times(case, steps_out * dt)
-    scheme_text = (f"generalized-alpha rho_inf = {case['transient.rho_inf']:g}"
-                   if engine == "direct" else
-                   {"explicit": "central differences (explicit), ",
-                    "imex": "implicit-explicit Newmark (Hughes-Liu), "}[engine] + limit)
-    rep.info(f"  dt = {dt:.4e} s, {nt} steps to t = {nt * dt:.4f} s, {steps_out.size} output "
-             f"steps; {scheme_text}")
-    if pml is not None:
-        from .pml import pml_memory_warning
-
-        line = pml_memory_warning(problem, nt * dt)
-        if line is not None:
-            rep.info(line)
-    n_wheels = run["wheel_rail"].size
-    scheme = None
-    if not explicit:
-        if engine == "direct":
-            K, M, C, cinfo, _, _ = assemble_matrices(ctx, mesh, dofmap, problem, pml)
-            layer = pml_layer(ctx, mesh, dofmap, problem, K, pml)
-            _inject_damping(C)
-            allowed = None                     # unconditionally stable
-        with rep.stage("transient: factorization"):
-            if engine == "direct":
-                scheme = GeneralizedAlpha.from_radius(dt, case["transient.rho_inf"])
-                system = TransientSystem(K, M, C, scheme, comm, pml=layer,
-                                         extra_gb=_rail_columns_gb(dofmap.n_dofs, n_wheels))
-            else:
-                from .imex import ImexSystem
-
-                system = ImexSystem(K, M, C, *partition, dt, comm, pml=layer,
-                                    extra_gb=lambda rows: _rail_columns_gb(rows, n_wheels))
-                scheme = system.scheme
-            rep.info(f"  MUMPS Cholesky of K_eff: {system.time_factorization:.2f} s, factor "
-                     f"~{system.factor_memory_gb:.2f} GB"
-                     + (" (out of core)" if system.out_of_core else "")
-                     + (f"; {system.implicit_rows:,} of {dofmap.n_dofs:,} rows implicit"
-                        if engine == "imex" else ""))
-    driver = columns = prescribed = coupling = None
-    forces = run["forces"]
-    if surface:
-        forces = None
-        try:
-            prescribed = surface_load(case, mesh, dofmap.index, dt, nt)
-        except ValueError as exc:
-            raise TransientInputError(f"railvib transient: load.y = {case['load.y']:g}: "
-                                      f"{exc}") from None
-    elif vehicle is None:
-        coupling = WheelCoupling(rails, run["wheel_rail"])
-
-        def prescribed(n: int):
-            dofs, coef, _ = coupling.at(x[n])
-            return dofs, -coef * forces[:, None]
-    else:
-        coupling = WheelCoupling(rails, run["wheel_rail"], getattr(vehicle, "conicity", 0.0))
-        irregularity = passage_irregularity(case, vehicle, run)
-        driver = VehicleDriver(vehicle, coupling, x, irregularity, dt)
-        if not explicit:
-            columns = RailColumns(system, rails, LOOKAHEAD_NODES)
-    if explicit:
-        from .explicit import ExplicitSolver
-
-        solver = ExplicitSolver(system, prescribed, driver)
-    else:
-        solver = DirectSolver(system, prescribed, driver, columns)
-    if engine != "direct":
-        from ..model.dofmap import rigid_body_modes
-
-        # GAMG's near null space for the static start, when it is solved by CG
-        system.near_null = lambda: rigid_body_modes(mesh.points, dofmap, comm.rank)
-    names, coords = probe_points(mesh, case)
-    return {"mesh": mesh, "mesh_sha": mesh_sha, "problem": problem, "dofmap": dofmap,
-            "rails": rails,
-            "vehicle": vehicle, "run": run,
-            "dt": dt, "nt": nt, "times": times, "x": x, "steps_out": steps_out, "K": K, "M": M,
-            "C": C, "damping": cinfo, "system": system, "solver": solver, "driver": driver,
-            "columns": columns, "coupling": coupling, "forces": forces,
-            "prescribed": prescribed, "n_wheels": n_wheels, "engine": engine,
-            "static_start": surface and case["load.start"] == "static",
-            "n_dof": 0 if vehicle is None else vehicle.n_dof,
-            "probe_names": names, "probe_coords": coords,
-            "probe_sampler": PointSampler(mesh, dofmap, comm.rank, coords, names),
-            "rail_sampler": RailSampler(rails, dofmap, comm.rank), "scheme": scheme,
-            "pml": pml, "allowed_step": allowed, "resolved_up_to_hz": resolved}
-
-
-def band_check(case: Case, mesh, dt: float, rep: Reporter) -> float:
-    """The mesh's dispersion at the stage's own band, ``transient.f_max``, for its mass and
-    step (:func:`~railvib_hpc.mesh.dispersion_check.transient_band_check`, and the
-    elements-per-wavelength warnings of the mesh check at that band): its lines, and the
-    frequency the run resolves at the farthest probe (``transient.f_max`` when it does;
-    rank 0). Raises :class:`~railvib_hpc.mesh.dispersion_check.DispersionError` as the
-    mesh check does, at ``mesh.max_dispersion_error``."""
-    from ..mesh.checks import max_edge_per_soil_part, wavelength_warnings
-    from ..mesh.dispersion_check import transient_band_check
-
-    f_max = case["transient.f_max"]
-    quality = {"max_edge_per_soil_part": max_edge_per_soil_part(mesh)}
-    for line in wavelength_warnings(quality, case, (f_max, "transient.f_max")):
-        rep.info(f"warning: {line}")
-    found = transient_band_check(quality, case, mesh.probes, dt)
-    if found is None:
-        return float(f_max)
-    rep.info(f"  {found['line']}")
-    for line in found["warnings"]:
-        rep.info(f"warning: {line}")
-    top = found["resolved_up_to_hz"]
-    if top < f_max:
-        rep.info(f"warning: the results are resolved up to {top:g} Hz at the farthest probe "
-                 f"(predicted peak-velocity error <= 5 %), not up to transient.f_max = "
-                 f"{f_max:g} Hz: the studies leave out the one-third-octave bands above it")
-    return float(top)
-
-
-def _inject_step(dt: float, system) -> float:
-    """The step, times the factor of a ``"step"`` :data:`~.guard.TEST_INJECTION` (the
-    explicit engines' test hook: past the pre-checked limit; ``system``: the explicit
-    engine's, whose own step follows)."""
-    from . import guard
-
-    inject = guard.TEST_INJECTION
-    if inject is None or inject.kind != "step":
-        return dt
-    dt = float(dt * inject.factor)
-    if system is not None:
-        system.dt = dt
-    return dt
-
-
-def _inject_damping(C) -> None:
-    """``C`` times ``-factor`` for a ``"negative_damping"`` :data:`~.guard.TEST_INJECTION`
-    (the direct engine's test hook)."""
-    from . import guard
-
-    inject = guard.TEST_INJECTION
-    if inject is not None and inject.kind == "negative_damping" and C is not None:
-        C.scale(-inject.factor)
-
-
-def make_guard(init: dict, case: Case, state: State):
+def make_guard(run: TransientRun, case: Case, state: State):
     """The run's :class:`~.guard.DivergenceGuard`, started from ``state``: the regions of
     this rank's rows (parts and perfectly matched layers), checked every output stride of
     steps at first (collective)."""
     from .guard import DivergenceGuard, dof_regions, node_regions
 
-    mesh, dofmap, system = init["mesh"], init["dofmap"], init["system"]
+    mesh, dofmap, system = run.mesh, run.dofmap, run.system
     layers = []
-    if init["pml"] is not None:
+    if run.pml is not None:
         centres = mesh.points[mesh.hexes].mean(axis=1)
         thickness = case["boundary.layer_thickness"]
-        for face in init["pml"][0]:
+        for face in run.pml[0]:
             layers.append((face.face, np.abs(centres[:, face.axis] - face.plane) < thickness))
     region, names = node_regions(mesh, layers)
     r0, r1 = system.r0, system.r1
     rows = dof_regions(region, dofmap.index, r0, r1)
-    steps = init["steps_out"]
-    stride = int(steps[1] - steps[0]) if steps.size > 1 else init["nt"]
-    guard = DivergenceGuard(system, init["solver"], rows, names, mesh.points, dofmap.index,
-                            init["dt"], init["engine"], init["allowed_step"], stride)
+    steps = run.steps_out
+    stride = int(steps[1] - steps[0]) if steps.size > 1 else run.nt
+    guard = DivergenceGuard(system, run.solver, rows, names, mesh.points, dofmap.index,
+                            run.dt, run.engine.name, run.engine.allowed_step, stride)
     guard.start(state)
     return guard
-
-
-#: Fraction of the ground's Rayleigh speed from which a train's speed is warned about: the
-#: dynamic amplification of a track on a half-space grows steeply above about 0.7 c_R
-#: (Dieterman & Metrikine 1996; the Ledsgard measurements, Madshus & Kaynia 2000).
-NEAR_CRITICAL_SPEED = 0.7
-
-
-def speed_warning(case: Case, speed: float) -> str:
-    """A warning line when ``speed`` is at least :data:`NEAR_CRITICAL_SPEED` of the ground's
-    lowest Rayleigh speed (at or above it only with ``vehicle.supercritical``), else ''."""
-    from ..site import ground_rayleigh_speeds
-
-    speeds = ground_rayleigh_speeds(case)
-    part, c_r = min(speeds.items(), key=lambda kv: kv[1])
-    if speed < NEAR_CRITICAL_SPEED * c_r:
-        return ""
-    what = ("above the ground's Rayleigh speed (accepted by vehicle.supercritical)"
-            if speed >= c_r else "near the ground's Rayleigh speed")
-    return (f"WARNING: the train's speed {speed:g} m/s is {speed / c_r:.0%} of c_R = "
-            f"{c_r:.1f} m/s ({part}): {what}; the response near the track grows steeply "
-            "there (the track's critical speed)")
 
 
 def _stress_writer(case: Case, comm, rep: Reporter, key: str):
@@ -1052,40 +716,41 @@ def _stress_writer(case: Case, comm, rep: Reporter, key: str):
     return write
 
 
-def _stats(init, system, solver, t_integration, t_wall, rss, recorder, n_done, comm) -> dict:
-    nt = init["nt"]
-    stats = {"solver": "transient", "dt": init["dt"], "n_steps": nt, "steps_run": n_done,
-             "t_end": nt * init["dt"], "n_dofs": init["dofmap"].n_dofs,
-             "n_nodes": init["mesh"].n_nodes, "ranks": comm.size,
-             "engine": init["engine"],
-             "rho_inf": init["scheme"].rho_inf if init["scheme"] is not None else None,
-             "damping": init["damping"],
+def _stats(run: TransientRun, t_integration, t_wall, rss, recorder, n_done, comm) -> dict:
+    system, solver, engine = run.system, run.solver, run.engine
+    nt = run.nt
+    stats = {"solver": "transient", "dt": run.dt, "n_steps": nt, "steps_run": n_done,
+             "t_end": nt * run.dt, "n_dofs": run.dofmap.n_dofs,
+             "n_nodes": run.mesh.n_nodes, "ranks": comm.size,
+             "engine": engine.name,
+             "rho_inf": engine.scheme.rho_inf if engine.scheme is not None else None,
+             "damping": engine.damping,
              "time_integration": t_integration, "time_total": t_wall,
              "steps_per_second": n_done / max(t_integration, 1e-9),
              "time_factorization": system.time_factorization,
              "time_solves": system.time_solves, "time_products": system.time_products,
              "time_contact": solver.time_contact, "solves": system.n_solves,
-             "time_pml": getattr(solver, "time_pml", 0.0) + getattr(system, "time_pml", 0.0),
-             "pml_elements": (0 if getattr(system, "pml", None) is None
-                              else comm.allreduce(system.pml.n_elements)),
+             "time_pml": engine.time_pml,
+             "pml_elements": (0 if engine.layer is None
+                              else comm.allreduce(engine.layer.n_elements)),
              "factor_memory_gb": system.factor_memory_gb, "out_of_core": system.out_of_core,
              "peak_rss_gb_per_rank": rss, "peak_rss_gb_total": float(sum(rss))}
-    if init["columns"] is not None:
-        stats["rail_columns"] = init["columns"].n_computed
-        stats["time_rail_columns"] = init["columns"].time
-    if comm.rank == 0 and init["n_wheels"]:
+    if run.columns is not None:
+        stats["rail_columns"] = run.columns.n_computed
+        stats["time_rail_columns"] = run.columns.time
+    if comm.rank == 0 and run.n_wheels:
         f = recorder.arrays["contact_force"]
-        x = init["x"]
-        lo, hi = float(init["rails"].x.min()), float(init["rails"].x.max())
+        x = run.x
+        lo, hi = float(run.rails.x.min()), float(run.rails.x.max())
         on = (x >= lo) & (x <= hi)
-        stats["static_wheel_load"] = (init["vehicle"].static_wheel_loads().tolist()
-                                      if init["vehicle"] is not None else f[0].tolist())
+        stats["static_wheel_load"] = (run.vehicle.static_wheel_loads().tolist()
+                                      if run.vehicle is not None else f[0].tolist())
         stats["mean_contact_force"] = [float(f[on[:, j], j].mean()) if on[:, j].any()
                                        else math.nan for j in range(f.shape[1])]
         stats["peak_contact_force"] = f.max(axis=0).tolist()
         stats["min_contact_force"] = f.min(axis=0).tolist()
         stats["loss_of_contact_steps"] = (int(np.any(f <= 0.0, axis=1)[1:].sum())
-                                          if init["vehicle"] is not None else 0)
+                                          if run.vehicle is not None else 0)
         stats["max_rail_deflection"] = float(-recorder.arrays["rail_displacement"].min())
     return comm.bcast(stats if comm.rank == 0 else None, root=0) if comm.size > 1 else stats
 
@@ -1112,7 +777,7 @@ def format_summary(stats: dict) -> str:
     return "\n".join(lines)
 
 
-def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
+def _write_probes(out_dir: Path, run: TransientRun, recorder: Recorder, case: Case,
                   prov: dict) -> None:
     """probes.h5 + probes/*.csv (layout of reconstruct, with the probes' roles) and the rail
     bending moments (rank 0)."""
@@ -1121,14 +786,14 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     from ..reconstruct.stress import rail_bending_moment, rail_section
     from ..schema import DEFAULT_PROBE_ROLE
 
-    t = init["times"]
+    t = run.times
     pr = recorder.arrays["probes"]
     hist = {}
-    sampler = init["probe_sampler"]
-    mesh = init["mesh"]
+    sampler = run.probe_sampler
+    mesh = run.mesh
     user_roles = list(case["output.probe_roles"])
     lines = line_probes(case)
-    for i, name in enumerate(init["probe_names"]):
+    for i, name in enumerate(run.probe_names):
         if name in mesh.probes:
             role = mesh.probe_roles.get(name, DEFAULT_PROBE_ROLE)
         elif name in lines:
@@ -1137,16 +802,16 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
             k = int(name.rsplit("_", 1)[1]) - 1
             role = user_roles[k] if k < len(user_roles) else DEFAULT_PROBE_ROLE
         hist[name] = {"t": t, "displacement": pr[:, 0, i], "velocity": pr[:, 1, i],
-                      "acceleration": pr[:, 2, i], "coords": init["probe_coords"][i],
+                      "acceleration": pr[:, 2, i], "coords": run.probe_coords[i],
                       "element": np.int64(sampler.elem[i]), "xi": sampler.xi[i],
                       "role": role}
     attrs = {**prov, "solver": "transient"}
-    rails = init["rails"]
+    rails = run.rails
     if not rails.nodes.shape[0]:             # no track (track.count = 0): no rail group
         write_probes_h5(out_dir / PROBES_H5, hist, attrs=attrs, groups={})
         write_probes_csv(out_dir / PROBES_CSV_DIR, hist)
         return
-    sec = rail_section(init["problem"])
+    sec = rail_section(run.problem)
     rail = recorder.arrays["rail"]                                # (nt+1, 2, k, 2)
     moments, ends = [], []
     for r in range(2):
@@ -1169,29 +834,23 @@ def _write_probes(out_dir: Path, init: dict, recorder: Recorder, case: Case,
     write_probes_csv(out_dir / PROBES_CSV_DIR, hist)
 
 
-def _write_histories(path: Path, case: Case, init: dict, recorder: Recorder, stats: dict,
+def _write_histories(path: Path, case: Case, run: TransientRun, recorder: Recorder,
+                     stats: dict,
                      prov: dict) -> None:
     """``transient.h5`` (rank 0; checked, atomic, recorded) of the run's recorder and setup
     (:func:`~railvib_hpc.io.formats.transient.write_transient_h5`)."""
     a = recorder.arrays
-    vehicle = init["vehicle"]
+    vehicle = run.vehicle
     context = _checks_context(case)
     write_transient_h5(path, stats=stats, provenance=prov,
                        check=lambda tmp: check_transient(tmp, True, context),
-                       time=init["times"], wheel_x=init["x"],
-                       rail_index=init["run"]["wheel_rail"],
+                       time=run.times, wheel_x=run.x,
+                       rail_index=run.passage["wheel_rail"],
                        histories={k: v for k, v in a.items() if k not in ("probes", "rail")},
                        dof_names=list(vehicle.dof_names) if vehicle is not None else [],
                        vehicle_type=("surface_load" if uses_surface_load(case)
-                                     else case["vehicle.type"]), rail_x=init["rails"].x,
+                                     else case["vehicle.type"]), rail_x=run.rails.x,
                        rail=a["rail"])
-
-
-def _rail_columns_gb(rows: int, n_wheels: int) -> float:
-    """Memory of the rail columns (:class:`~.integrate.RailColumns`) at most [GB], on
-    ``rows`` rows: every DOF for the direct engine, the implicit rows for the IMEX engine
-    (its columns are zero elsewhere)."""
-    return 8.0 * rows * 4 * 2 * (LOOKAHEAD_NODES + 3) * n_wheels / 1e9
 
 
 def _write_checkpoint(path: Path, comm, attrs: dict | None, fields_written: int,

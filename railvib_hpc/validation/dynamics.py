@@ -8,6 +8,7 @@ from typing import Any
 
 from ..schema import IMPLICIT_GROUPS, PARTS, CaseView
 from ..site import ground_rayleigh_speeds
+from ..time_engines import needs_lumped_mass
 
 
 def _check_bands(case: CaseView) -> list[tuple[str, Any, str]]:
@@ -53,7 +54,7 @@ def _check_dynamics(case: CaseView) -> list[tuple[str, Any, str]]:
             out.append(("transient.dt", tr["dt"],
                         f"must divide output.dt = {odt:g} s into whole steps (or be 0: "
                         "automatic)"))
-    if tr["engine"] in ("explicit", "imex") and not case["modal.lumped_mass"]:
+    if tr["engine"] in needs_lumped_mass() and not case["modal.lumped_mass"]:
         out.append(("transient.engine", tr["engine"],
                     "needs a diagonal mass: set modal.lumped_mass = true (or use "
                     "transient.engine = \"direct\")"))

@@ -97,7 +97,8 @@ def check_checkpoint(path: Path, full: bool = True, context: Mapping[str, Any] |
                 out.append(f"{name} has shape {f[name].shape}, expected {n}")
             else:
                 out += nonfinite(name, f[name][()])
-        for name, ds in (*f["small"].items(), *f["history"].items()):
+        engine = f["engine"].items() if "engine" in f else ()
+        for name, ds in (*f["small"].items(), *f["history"].items(), *engine):
             out += nonfinite(name, ds[()])
         for name, ds in f["history"].items():
             if ds.ndim == 0 or ds.shape[0] <= step:
@@ -219,8 +220,8 @@ class CheckpointHeader:
 
 def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_written: int,
                      vectors: Mapping[str, np.ndarray], rows: tuple[int, int], n_dofs: int,
-                     small: Mapping[str, Any], history: Mapping[str, np.ndarray] | None
-                     ) -> None:
+                     small: Mapping[str, Any], history: Mapping[str, np.ndarray] | None,
+                     engine: Mapping[str, tuple[str, np.ndarray]] | None = None) -> None:
     """Store the state after ``step`` (collective, atomic, recorded; the previous checkpoint
     is replaced by the rename).
 
@@ -239,6 +240,11 @@ def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_wri
         The vehicle's state and the contact (rank 0's values are stored).
     history
         Rank 0: the recorded histories (name: array); None on the others.
+    engine
+        Rank 0: the engine's own state gathered over the ranks, ``name: (kind, array)``
+        (``/engine/<name>`` with the attribute ``kind``: ``rows``, a vector over the
+        global DOFs; ``elements``, one row per element of the ``ids`` entry); None on the
+        others or without.
     """
     from ..parallel_h5 import h5py_parallel_ok
 
@@ -253,8 +259,11 @@ def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_wri
             r0, r1 = 0, n
     hist_meta = comm.bcast({k: (v.shape, v.dtype.str) for k, v in (history or {}).items()}
                            if comm.rank == 0 else None, root=0)
+    engine_meta = comm.bcast({k: (kind, v.shape, v.dtype.str) for k, (kind, v)
+                              in (engine or {}).items()} if comm.rank == 0 else None, root=0)
     size = 3 * 8 * n + sum(8 * np.size(v) for v in small.values()) + sum(
-        int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in hist_meta.values())
+        int(np.prod(shape)) * np.dtype(dt).itemsize for shape, dt in hist_meta.values()) + sum(
+        int(np.prod(shape)) * np.dtype(dt).itemsize for _, shape, dt in engine_meta.values())
 
     def fill(f, par: bool) -> None:
         f.attrs["step"] = int(step)
@@ -278,17 +287,34 @@ def write_checkpoint(path: Path, comm, attrs: dict | None, step: int, fields_wri
             d = h.create_dataset(name, shape, dtype)
             if comm.rank == 0:
                 d[...] = history[name]
+        if engine_meta:
+            e = f.create_group("engine")
+            for name, (kind, shape, dtype) in engine_meta.items():
+                d = e.create_dataset(name, shape, dtype)
+                d.attrs["kind"] = kind
+                if comm.rank == 0 and np.size(engine[name][1]):
+                    d[...] = engine[name][1]
 
     write_h5(path, comm, fill, size_hint=int(size), attrs=attrs, parallel=parallel,
              check=lambda tmp: check_checkpoint(tmp))
 
 
-def read_checkpoint(path: Path, rows: tuple[int, int], rank: int) -> dict:
+def read_checkpoint(path: Path, rows: tuple[int, int], rank: int,
+                    elements: np.ndarray | None = None) -> dict:
     """This rank's part of a checkpoint the stage found current and sound (every rank reads
     its own rows ``rows = (r0, r1)`` of the state vectors, plain h5py, read only): ``step``,
-    ``fields_written``, ``u``, ``v``, ``a``, the ``/small`` values by name and ``history``
-    (rank 0: name: array; None on the others)."""
+    ``fields_written``, ``u``, ``v``, ``a``, the ``/small`` values by name, ``history``
+    (rank 0: name: array; None on the others) and ``engine``: the engine's state, this
+    rank's rows of its ``rows`` entries and the rows of ``elements`` (this rank's global
+    element numbers, increasing) of its ``elements`` entries (``{}`` without).
+
+    Raises
+    ------
+    KeyError
+        An element of ``elements`` is not in the checkpoint's ``ids``.
+    """
     with h5_read(path) as f:
+        engine = _read_engine_state(f, rows, elements) if "engine" in f else {}
         r0, r1 = rows
         header = CheckpointHeader.of_attrs(f.attrs)
         out = {"step": header.step, "fields_written": header.fields_written}
@@ -298,4 +324,31 @@ def read_checkpoint(path: Path, rows: tuple[int, int], rank: int) -> dict:
             out[name] = f[f"small/{name}"][()]
         out["history"] = ({name: f[f"history/{name}"][()] for name in f["history"]}
                           if rank == 0 else None)
+        out["engine"] = engine
         return out
+
+
+def _read_engine_state(f, rows: tuple[int, int], elements: np.ndarray | None) -> dict:
+    """``/engine`` of an open checkpoint: this rank's part (:func:`read_checkpoint`)."""
+    group = f["engine"]
+    kinds = {name: str(ds.attrs.get("kind", "")) for name, ds in group.items()}
+    ids = [group[name][()] for name, kind in kinds.items() if kind == "ids"]
+    at = None
+    if ids and elements is not None:
+        stored = np.asarray(ids[0], dtype=np.int64)
+        at = np.searchsorted(stored, elements)
+        if np.any(at >= stored.size) or np.any(stored[np.minimum(at, stored.size - 1)]
+                                                 != elements):
+            raise KeyError("the checkpoint's engine state lacks elements of this rank")
+    out = {}
+    r0, r1 = rows
+    for name, kind in kinds.items():
+        ds = group[name]
+        if kind == "rows":
+            out[name] = ds[r0:r1]
+        elif kind == "elements":
+            out[name] = (ds[()][at] if at is not None and ds.shape[0] else
+                         np.zeros((0, *ds.shape[1:])))
+        else:
+            out[name] = ds[()]
+    return out

@@ -65,7 +65,8 @@ def main(argv=None) -> None:
     if comm.rank:
         return
     print("\n| order | edge [m] | free DOFs | ranks | steps | dt [s] | ns/DOF/step (loop) | "
-          "of which kernel | B/DOF held | B/DOF node set | wall [s] |")
+          "of which acceleration (kernel, damping, springs, interface sum) | B/DOF held | "
+          "B/DOF node set | wall [s] |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for n, s in rows:
         print(f"| {n} | {args.size:g} | {s['n_dofs']:,} | {s['ranks']} | {s['n_steps']} | "

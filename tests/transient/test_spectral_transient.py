@@ -1,13 +1,13 @@
 """``railvib transient`` on a spectral soil (``mesh.order > 1``; docs/spectral.md): the key,
 its refusals, the default left as it was, the energy of a closed box, the static start and
-the files the trilinear path writes (the boxes: :mod:`spectral_cases`)."""
+the files the trilinear path writes (the boxes: :mod:`spectral_soil_cases`)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from mpi4py import MPI
-from spectral_cases import ABSORBING, probes, small_case
+from spectral_soil_cases import ABSORBING, probes, small_case
 
 from railvib_hpc.config import Case, load_case
 from railvib_hpc.errors import CaseError

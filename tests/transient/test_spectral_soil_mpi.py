@@ -1,7 +1,7 @@
 """``railvib transient`` on a spectral soil on two ranks equals the one-rank run
 (``mpirun -n 2 python -m pytest -m mpi``; docs/spectral.md).
 
-The small box of :mod:`spectral_cases` with absorbing faces, springs, Rayleigh damping and
+The small box of :mod:`spectral_soil_cases` with absorbing faces, springs, Rayleigh damping and
 the static start: the elements in two slabs along x, the interface nodes' forces summed
 by one ``Allreduce`` per step. The probes differ by the static start's CG tolerance only
 (its dot products sum in another order: ~1e-10 relative).
@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
-from spectral_cases import ABSORBING, probes, small_case
+from spectral_soil_cases import ABSORBING, probes, small_case
 
 from railvib_hpc.log import Reporter
 from railvib_hpc.transient.stage import run_transient_stage

@@ -100,5 +100,30 @@ class DivergenceError(UserError):
     exit_code = 3
 
 
+class ContactNewtonError(DivergenceError):
+    """The wheel-rail contact's Newton iteration did not converge within its iterations
+    (a penetration that no Hertz force can balance: a step too large for the contact's
+    stiffness, or a rail that has already grown without bound). Not a result; exit code 3.
+
+    Parameters
+    ----------
+    iterations
+        The Newton iterations taken.
+    correction
+        The last Newton correction of the penetration [m].
+    tolerance
+        The tolerance it had to reach [m].
+    """
+
+    def __init__(self, iterations: int, correction: float, tolerance: float):
+        self.iterations, self.correction, self.tolerance = iterations, correction, tolerance
+        super().__init__(f"the wheel-rail contact's Newton iteration did not converge in "
+                         f"{iterations} iterations (last correction {correction:.3g} m, "
+                         f"tolerance {tolerance:.3g} m)")
+
+    def __reduce__(self):  # picklable, so it can be broadcast to every MPI rank
+        return (type(self), (self.iterations, self.correction, self.tolerance))
+
+
 class DataError(UserError):
     """Computed or stored data that fail their data checks (non-finite or implausible values)."""

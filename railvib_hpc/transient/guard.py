@@ -343,6 +343,11 @@ class DivergenceGuard:
                 f"{region} ({100 * share:.0f} % {what}{where}); likely cause: {cause}; "
                 f"change: {change}; nothing was written as a result")
 
+    @property
+    def last_check_time(self) -> float:
+        """The time of the last check (or of the start) [s]."""
+        return self._last_check * self.dt
+
     def _previous_time(self, step: int) -> float:
         return max(step - self.interval, 0) * self.dt
 

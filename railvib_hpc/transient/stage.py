@@ -74,6 +74,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Case
+from ..errors import ContactNewtonError, DivergenceError
 from ..io.atomic import ensure_space
 from ..io.digests import digest, record_file
 from ..io.files import (
@@ -110,7 +111,7 @@ from ..resources import peak_memory_gb
 from ..site import line_probes
 from .engine import gather_state
 from .engines import TransientInputError, initial_state  # noqa: F401 (re-exported)
-from .integrate import State
+from .integrate import State, StepInfo
 from .output import FieldWriter
 from .run_setup import (  # noqa: F401 (re-exported: the setup's parts, for scripts, tests)
     HISTORY_COPIES,
@@ -575,6 +576,23 @@ class TimeLoop:
         if k >= self.fields_written:
             self.writer.put(int(k), state.u, state.v, state.a)
 
+    def step(self, state: State) -> StepInfo | None:
+        """One step of the engine. A contact Newton iteration that fails (on every rank
+        together: the ranks solve the same gathered contact) leaves ``state`` at the last
+        step; the guard checks that state at once, so that a run that has grown without
+        bound is named as such, where it grows; else the failure is reported with its
+        time, its likely cause and what to change."""
+        try:
+            return self.run.engine.step(state)
+        except ContactNewtonError as exc:
+            self.guard.check(state)
+            raise DivergenceError(
+                f"the time integration failed at t = {(state.step + 1) * self.run.dt:.4f} s: "
+                f"{exc}; likely cause: a step too large for the Hertz contact's stiffness "
+                f"(or a rail that grew without bound since the last check at t = "
+                f"{self.guard.last_check_time:.4f} s); change: a smaller transient.dt; "
+                "nothing was written as a result") from exc
+
     def iterate(self) -> None:
         """Step to the end, recording every step and checkpointing as asked."""
         ctx, run, state, comm = self.ctx, self.run, self.state, self.comm
@@ -583,7 +601,7 @@ class TimeLoop:
         every, stop_after = map(ctx.options.get, ("checkpoint_steps", "stop_after"))
         last_progress = last_ckpt = self.t_run
         while state.step < nt:
-            info = run.engine.step(state)
+            info = self.step(state)
             if self.guard.due(state.step, state.step == nt):
                 self.guard.check(state)             # before anything of this step is kept
             self.record(state.step, info)
@@ -659,8 +677,6 @@ def _discard_on_divergence(ctx: StageContext, writer: FieldWriter):
     """On a :class:`~railvib_hpc.errors.DivergenceError` (raised on every rank
     together): close and delete the partial ``fields.h5`` and the checkpoint, so that
     nothing of the diverged run looks like a result or is resumed by a rerun."""
-    from ..errors import DivergenceError
-
     try:
         yield
     except DivergenceError:

@@ -270,3 +270,53 @@ def test_a_diverging_run_stops_in_one_line_and_leaves_no_result(engine, shared_t
     if comm.rank == 0:
         assert "reusing the transient results" not in text and "resuming" not in text
         assert "divergence guard: " in text and "transient complete: " in text
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("diverging", [True, False])
+def test_a_contact_newton_failure_stops_in_one_line_as_a_divergence(diverging, shared_tmp,
+                                                                    monkeypatch, capsys):
+    """The contact Newton fails before the next check: on a slow machine the guard's
+    interval widens to its most steps (emulated: a cost share of 1e-9), and a rail grown
+    without bound stalls the Newton at round-off (emulated: its relative floor off). The
+    guard checks the last good state at once and names the growth (``diverging``); a
+    failure with nothing grown (the Newton made to fail at its fifth call) is reported
+    with its time and what to change. Exit code 3 either way, nothing left as a result."""
+    from railvib_hpc.cli import run
+    from railvib_hpc.errors import ContactNewtonError
+    from railvib_hpc.mbs import integrate
+
+    out = shared_tmp / "run"
+    monkeypatch.setattr(guard, "GUARD_COST_SHARE", 1e-9)
+    if diverging:
+        monkeypatch.setattr(guard, "TEST_INJECTION", INJECTIONS["direct"])
+        monkeypatch.setattr(integrate, "NEWTON_ROUNDOFF", 0.0)
+    else:
+        calls, solve = [0], integrate.solve_contact
+
+        def failing(*args):
+            calls[0] += 1
+            if calls[0] == 5:
+                raise ContactNewtonError(50, 1e-9, 1e-15)
+            return solve(*args)
+
+        monkeypatch.setattr(integrate, "solve_contact", failing)
+    code = run(_cli("direct", out))
+    captured = capsys.readouterr()
+    assert code == 3, captured.err
+    if comm.rank == 0:
+        lines = [ln for ln in captured.err.splitlines() if ln.strip()]
+        assert len(lines) == 1, captured.err
+        if diverging:
+            assert lines[0].startswith("railvib transient: error: the time integration "
+                                       "diverged at t = 0.0")
+            assert "it grows in part rail" in lines[0]
+        else:
+            assert lines[0].startswith("railvib transient: error: the time integration "
+                                       "failed at t = 0.0")
+            assert "Newton iteration did not converge in 50 iterations" in lines[0]
+            assert "change: a smaller transient.dt" in lines[0]
+        assert "nothing was written as a result" in lines[0]
+        assert "Traceback" not in captured.err
+    comm.Barrier()
+    assert not [name for name in PRODUCTS if (out / name).exists()]

@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..errors import ContactNewtonError
+from ..errors import ContactNewtonError, DivergenceError
 from .contact import hertz_energy, hertz_linear_stiffness
 from .coupling import RailCoupling
 from .propagator import CoupledPropagator, ModalPropagator, make_propagator
@@ -563,7 +563,15 @@ def _march(run: _VehicleRun, vehicle: Vehicle, start: _VehicleState, out: Storag
         if res is not None:
             c_res = res.matrix(n)
             a_mat = a_mat + c_res
-        delta, f = solve_contact(delta_hat, a_mat, delta, kh, cc, dt, tol, max_iter)
+        try:
+            delta, f = solve_contact(delta_hat, a_mat, delta, kh, cc, dt, tol, max_iter)
+        except ContactNewtonError as exc:
+            raise DivergenceError(
+                f"the modal passage failed at t = {n * dt:.4f} s (leading wheel at x = "
+                f"{float(np.max(x[n])):.2f} m): {exc}; "
+                "likely cause: a step too large for the Hertz contact's stiffness; change: "
+                "more mbs.points_per_period or a smaller mbs.dt; nothing was written as a "
+                "result") from exc
         Q = -psi @ f
         q = qf + prop.q1(Q)
         v = vf + prop.v1(Q)

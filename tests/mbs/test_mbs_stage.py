@@ -115,3 +115,30 @@ def test_mbs_needs_static_file(modal_dir, tmp_path, capsys):
     (out / "static.h5").unlink()
     assert _mbs(out, "mbs.static_correction=true") == 2
     assert "static.h5" in capsys.readouterr().err
+
+
+def test_a_contact_newton_failure_stops_the_passage_in_one_line(modal_dir, tmp_path,
+                                                                monkeypatch, capsys):
+    """The contact Newton made to fail at its tenth call: exit code 3 (not a result, not a
+    bug), one line with the time, the position and what to change, no mbs.h5."""
+    from railvib_hpc.errors import ContactNewtonError
+    from railvib_hpc.mbs import integrate
+
+    calls, solve = [0], integrate.solve_contact
+
+    def failing(*args):
+        calls[0] += 1
+        if calls[0] == 10:
+            raise ContactNewtonError(50, 1e-9, 1e-15)
+        return solve(*args)
+
+    monkeypatch.setattr(integrate, "solve_contact", failing)
+    out = tmp_path / "run"
+    shutil.copytree(modal_dir, out)
+    capsys.readouterr()
+    assert _mbs(out) == 3
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+    assert len(err) == 1, err
+    assert err[0].startswith("railvib mbs: error: the modal passage failed at t = ")
+    assert "did not converge in 50 iterations" in err[0] and "change: " in err[0]
+    assert not (out / "mbs.h5").exists()

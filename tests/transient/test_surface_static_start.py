@@ -14,7 +14,7 @@ speed over ``load.ramp_time``.
 * On 2 ranks the probe histories equal the same run alone (``@pytest.mark.mpi``).
 
 The comparison with the steady state of the half-space is
-``tests/transient/test_moving_load_steady.py`` (slow).
+``bench/moving_load_steady.py``.
 """
 
 from __future__ import annotations

@@ -158,3 +158,26 @@ def baseline_layout():
     from railvib_hpc.mesh.layout import build_layout
 
     return build_layout(load_case(BASELINE))
+
+
+@pytest.fixture
+def failing_contact_newton(monkeypatch):
+    """``fail_at(call)``: the wheel-rail contact's Newton
+    (:func:`railvib_hpc.mbs.integrate.solve_contact`) made to raise
+    :class:`~railvib_hpc.errors.ContactNewtonError` at its ``call``-th call (1-based), and
+    to solve as usual otherwise."""
+    from railvib_hpc.errors import ContactNewtonError
+    from railvib_hpc.mbs import integrate
+
+    def fail_at(call: int) -> None:
+        calls, solve = [0], integrate.solve_contact
+
+        def failing(*args):
+            calls[0] += 1
+            if calls[0] == call:
+                raise ContactNewtonError(50, 1e-9, 1e-15)
+            return solve(*args)
+
+        monkeypatch.setattr(integrate, "solve_contact", failing)
+
+    return fail_at

@@ -239,10 +239,11 @@ def solve_contact(
             step = [(jac[1][1] * g[0] - jac[0][1] * g[1]) / det,
                     (jac[0][0] * g[1] - jac[1][0] * g[0]) / det]
         d = [d[i] - step[i] for i in range(nw)]
-        if max(abs(x) for x in step) <= tol + NEWTON_ROUNDOFF * max(abs(x) for x in d):
+        largest = max(abs(x) for x in step)
+        if largest <= tol or largest <= tol + NEWTON_ROUNDOFF * max(abs(x) for x in d):
             f = [hertz_force_and_slope(d[i], dold[i], kh, c, dt)[0] for i in range(nw)]
             return np.array(d), np.array(f)
-    raise ContactNewtonError(max_iter, max(abs(x) for x in step), tol)
+    raise ContactNewtonError(max_iter, largest, tol)
 
 
 def _hertz_vector(d: np.ndarray, d_old: np.ndarray, kh: float, c: float, dt: float
@@ -266,9 +267,10 @@ def _solve_contact_many(delta_hat, a, delta_old, kh, c, dt, tol, max_iter):
         f, df = _hertz_vector(d, delta_old, kh, c, dt)
         step = np.linalg.solve(eye + a * df[None, :], d + a @ f - delta_hat)
         d -= step
-        if np.abs(step).max() <= tol + NEWTON_ROUNDOFF * np.abs(d).max():
+        largest = float(np.abs(step).max())
+        if largest <= tol or largest <= tol + NEWTON_ROUNDOFF * np.abs(d).max():
             return d, _hertz_vector(d, delta_old, kh, c, dt)[0]
-    raise ContactNewtonError(max_iter, float(np.abs(step).max()), tol)
+    raise ContactNewtonError(max_iter, largest, tol)
 
 
 class VehiclePrediction(NamedTuple):

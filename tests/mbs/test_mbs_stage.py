@@ -118,21 +118,11 @@ def test_mbs_needs_static_file(modal_dir, tmp_path, capsys):
 
 
 def test_a_contact_newton_failure_stops_the_passage_in_one_line(modal_dir, tmp_path,
-                                                                monkeypatch, capsys):
+                                                                failing_contact_newton,
+                                                                capsys):
     """The contact Newton made to fail at its tenth call: exit code 3 (not a result, not a
     bug), one line with the time, the position and what to change, no mbs.h5."""
-    from railvib_hpc.errors import ContactNewtonError
-    from railvib_hpc.mbs import integrate
-
-    calls, solve = [0], integrate.solve_contact
-
-    def failing(*args):
-        calls[0] += 1
-        if calls[0] == 10:
-            raise ContactNewtonError(50, 1e-9, 1e-15)
-        return solve(*args)
-
-    monkeypatch.setattr(integrate, "solve_contact", failing)
+    failing_contact_newton(10)
     out = tmp_path / "run"
     shutil.copytree(modal_dir, out)
     capsys.readouterr()

@@ -275,7 +275,8 @@ def test_a_diverging_run_stops_in_one_line_and_leaves_no_result(engine, shared_t
 @pytest.mark.mpi
 @pytest.mark.parametrize("diverging", [True, False])
 def test_a_contact_newton_failure_stops_in_one_line_as_a_divergence(diverging, shared_tmp,
-                                                                    monkeypatch, capsys):
+                                                                    monkeypatch, capsys,
+                                                                    failing_contact_newton):
     """The contact Newton fails before the next check: on a slow machine the guard's
     interval widens to its most steps (emulated: a cost share of 1e-9), and a rail grown
     without bound stalls the Newton at round-off (emulated: its relative floor off). The
@@ -283,7 +284,6 @@ def test_a_contact_newton_failure_stops_in_one_line_as_a_divergence(diverging, s
     failure with nothing grown (the Newton made to fail at its fifth call) is reported
     with its time and what to change. Exit code 3 either way, nothing left as a result."""
     from railvib_hpc.cli import run
-    from railvib_hpc.errors import ContactNewtonError
     from railvib_hpc.mbs import integrate
 
     out = shared_tmp / "run"
@@ -292,15 +292,7 @@ def test_a_contact_newton_failure_stops_in_one_line_as_a_divergence(diverging, s
         monkeypatch.setattr(guard, "TEST_INJECTION", INJECTIONS["direct"])
         monkeypatch.setattr(integrate, "NEWTON_ROUNDOFF", 0.0)
     else:
-        calls, solve = [0], integrate.solve_contact
-
-        def failing(*args):
-            calls[0] += 1
-            if calls[0] == 5:
-                raise ContactNewtonError(50, 1e-9, 1e-15)
-            return solve(*args)
-
-        monkeypatch.setattr(integrate, "solve_contact", failing)
+        failing_contact_newton(5)
     code = run(_cli("direct", out))
     captured = capsys.readouterr()
     assert code == 3, captured.err

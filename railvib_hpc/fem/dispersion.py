@@ -618,12 +618,12 @@ def _s_ratio(epw: float, direction: str, nu: float, mass: str, scheme: str, cour
 
 
 def elements_needed(limit: float, wavelengths: float, lo: float = 2.0, hi: float = 200.0,
-                    worst=None, **kw) -> float:
+                    worst=None, rtol: float = 2e-3, **kw) -> float:
     """Fewest elements per wavelength with ``worst`` (default :func:`worst_peak_error`; the
     mesh check gives :func:`~.dispersion_rayleigh.worst_surface_error`) below ``limit``
     (``kw`` as :func:`worst_peak_error`; a callable ``schemes(epw)`` gives step-dependent
-    schemes), to 0.2 %: the bracket ``[lo, hi]`` is narrowed from ``lo`` up by doubling, then
-    bisected. ``inf`` when even ``hi`` is not enough.
+    schemes), to ``rtol`` (0.2 %): the bracket ``[lo, hi]`` is narrowed from ``lo`` up by
+    doubling, then bisected. ``inf`` when even ``hi`` is not enough.
 
     >>> round(elements_needed(0.05, 13.3, mass="consistent"), 1)
     20.7
@@ -640,7 +640,7 @@ def elements_needed(limit: float, wavelengths: float, lo: float = 2.0, hi: float
         if top >= hi:
             return float("inf")
         lo, top = top, min(2.0 * top, hi)
-    while top - lo > 2e-3 * top:
+    while top - lo > rtol * top:
         mid = 0.5 * (lo + top)
         lo, top = (lo, mid) if ok(mid) else (mid, top)
     return top

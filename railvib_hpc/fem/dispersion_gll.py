@@ -53,6 +53,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy import linalg, sparse
+from scipy.sparse.linalg import eigsh
 
 from .dispersion import DIRECTIONS, _cp_over_cs, time_frequency, worst_of
 from .gll import check_order, gll_points
@@ -433,5 +434,22 @@ def critical_courant(order: int, nu: float = 0.3) -> float:
     top = 0.0
     for kh in np.unique(np.sort(grid, axis=1), axis=0):          # the cube's symmetry
         A, _, _ = _cell_problem(n, float(nu), np.where(kh == 0.0, 1e-300, kh))
-        top = max(top, float(np.linalg.eigvalsh(A)[-1]))
+        top = max(top, _largest_eigenvalue(A))
     return float(2.0 / np.sqrt(top) * _cp_over_cs(nu))
+
+
+#: Cell problems up to this size get the largest eigenvalue from a full ``eigvalsh``; larger
+#: ones from Lanczos (ARPACK, a fixed start vector: the same answer on every run), which
+#: is ~10 times cheaper at order 7 (0.03 s against 0.35 s for 1,029 unknowns, measured).
+_LANCZOS_FROM = 200
+#: Relative accuracy of the Lanczos eigenvalue (the step's Courant number to ~1e-12).
+_LANCZOS_TOL = 1e-12
+
+
+def _largest_eigenvalue(A: np.ndarray) -> float:
+    """The largest eigenvalue of the Hermitian ``A``."""
+    if len(A) < _LANCZOS_FROM:
+        return float(np.linalg.eigvalsh(A)[-1])
+    v0 = np.ones(len(A), dtype=A.dtype)
+    return float(eigsh(A, k=1, which="LA", tol=_LANCZOS_TOL, v0=v0,
+                       return_eigenvectors=False)[0])

@@ -45,7 +45,26 @@ from .dispersion_rayleigh import DEPTH_WAVELENGTHS, SURFACE_DIRECTIONS
 from .gll import check_order, gll_points
 from .halfspace import rayleigh_mach_limit
 
-__all__ = ["rayleigh_frequency", "rayleigh_wavenumber_ratio", "worst_surface_error"]
+__all__ = ["MIN_POINTS_PER_WAVELENGTH", "ZONE_WINDOW", "checked_surface_error",
+           "rayleigh_frequency", "rayleigh_wavenumber_ratio", "worst_surface_error"]
+
+#: Fewest GLL points per Rayleigh wavelength (``N epw``) at which the relation is trusted:
+#: ``N`` points per element resolve up to ``k h ~ N pi / 2`` (:func:`rayleigh_frequency`),
+#: 4 points per wavelength. Below it the column's Bloch modes alias and the selection can
+#: match a spurious mode (measured, nu = 0.3, 3 wavelengths, the semidiscrete grid: order 5
+#: at 2.5 points 5.3 %, order 3 at 3 points 4e-5 and order 8 at 3.5 points 0.2 %, where the
+#: neighbouring sizes match none).
+MIN_POINTS_PER_WAVELENGTH = 4.0
+#: Relative half-width of the frequency window whose worst error
+#: :func:`checked_surface_error` takes. Within about 1 % of ``k h = m pi`` (the lattice's
+#: zone boundaries: the GLL grid's nodes are not evenly spaced and it has narrow stop bands
+#: there, and the wave and its alias are degenerate) the selected mode can be another
+#: branch's: measured at order 3, ``k h = pi (1 +- 1e-3)`` gave ``omega_h / (c_R k) - 1`` of
+#: -2.6e-3 .. -4.6e-3, against +1.5e-3 and +4.2e-3 at 6.1 and 5.9 points per wavelength on
+#: either side, and NaN at order 4 and 8 just above ``k h = 2 pi`` and ``4 pi``. The
+#: window's ends lie outside that band; the error grows with the frequency on each branch
+#: (and jumps up across a stop band), so the window's upper end bounds it from above.
+ZONE_WINDOW = 0.02
 
 #: Fixed-point steps of :func:`rayleigh_wavenumber_ratio` at most, and the relative change
 #: at which it stops (the inverse iteration's eigenvalues are good to ~1e-10; phase errors
@@ -274,3 +293,42 @@ def worst_surface_error(epw: float, wavelengths: float, nu: float = 0.3, order: 
                                                direction)[0])
 
     return worst_of(ratio, directions, epw, wavelengths, nu, schemes, rho_inf, measure)
+
+
+def checked_surface_error(epw: float, wavelengths: float, nu: float = 0.3, order: int = 4,
+                          schemes: tuple[tuple[str, float], ...] = (("none", 0.0),),
+                          rho_inf: float = 1.0, measure: str = "peak",
+                          directions: tuple[str, ...] = tuple(SURFACE_DIRECTIONS)
+                          ) -> tuple[float, str]:
+    """:func:`worst_surface_error` as a mesh check can trust it: the worst over the band's
+    top frequency and the window ``1 +- ZONE_WINDOW`` about it (the frequency ``s f`` has
+    ``epw / s`` elements per wavelength and ``s wavelengths`` to the probe; the window's
+    ends below :data:`MIN_POINTS_PER_WAVELENGTH` are left out), and "not resolved" (the
+    peak bound 1, the phase inf, as beyond the trilinear grid's cut-off) when the top
+    frequency has fewer than :data:`MIN_POINTS_PER_WAVELENGTH` points per wavelength.
+
+    Returns
+    -------
+    error, where : float, str
+
+    Examples
+    --------
+    >>> checked_surface_error(0.7, 10.0, nu=0.25, order=4)      # 2.8 points per wavelength
+    (1.0, 'fewer than 4 points per wavelength')
+    >>> e, where = checked_surface_error(1.5, 10.0, nu=0.25, order=4)
+    >>> bool(e < 0.01)
+    True
+    """
+    n = check_order(order)
+    if n * epw < MIN_POINTS_PER_WAVELENGTH:
+        return ((1.0 if measure == "peak" else math.inf),
+                f"fewer than {MIN_POINTS_PER_WAVELENGTH:g} points per wavelength")
+    best = (-1.0, "")
+    for s in (1.0, 1.0 + ZONE_WINDOW, 1.0 - ZONE_WINDOW):
+        if n * epw / s < MIN_POINTS_PER_WAVELENGTH:
+            continue
+        e, where = worst_surface_error(epw / s, wavelengths * s, nu, n, schemes, rho_inf,
+                                       measure, directions)
+        if e > best[0]:
+            best = (e, where if s == 1.0 else f"{where}, at {s:g} f")
+    return best

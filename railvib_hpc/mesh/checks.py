@@ -58,7 +58,11 @@ def wavelength_warnings(quality: dict, case: Case, band: tuple[float, str] | Non
     """One warning per soil part whose longest element edge resolves the shear wavelength at
     :func:`~railvib_hpc.mesh.layout.resolved_frequency` (or ``band = (frequency, key)``,
     the transient stage's ``transient.f_max``) with fewer than
-    ``mesh.min_elements_per_wavelength`` elements (none when no frequency is set)."""
+    ``mesh.min_elements_per_wavelength`` elements; for a spectral soil (``mesh.order = N``)
+    with fewer GLL points (``N`` per element) than the grid resolves,
+    :data:`~railvib_hpc.fem.dispersion_gll_rayleigh.MIN_POINTS_PER_WAVELENGTH` (its
+    dispersion is the mesh check's, :mod:`.dispersion_check`); none when no frequency is
+    set."""
     from ..site import solid_material
     from .layout import resolved_frequency, shear_wave_speed
 
@@ -68,6 +72,11 @@ def wavelength_warnings(quality: dict, case: Case, band: tuple[float, str] | Non
         return []
     key = ("mesh.wavelength_hz" if case["mesh.wavelength_hz"] else "modal.f_max") \
         if band is None else band[1]
+    order = case["mesh.order"]
+    if order > 1:             # the GLL grid's own limit (the trilinear rule does not apply)
+        from ..fem.dispersion_gll_rayleigh import MIN_POINTS_PER_WAVELENGTH
+
+        need = MIN_POINTS_PER_WAVELENGTH
     out = []
     for part, h in quality.get("max_edge_per_soil_part", {}).items():
         try:
@@ -75,10 +84,14 @@ def wavelength_warnings(quality: dict, case: Case, band: tuple[float, str] | Non
         except KeyError:          # a layer part in a user's mesh that the case does not give
             continue
         per = c_s / f / h
-        if per < need:
+        if order * per < need:
+            count = (f"{per:.2g} per wavelength" if order == 1 else
+                     f"{per:.2g} per wavelength, {order * per:.2g} GLL points at order {order}")
+            limit = (f"mesh.min_elements_per_wavelength = {need:g}" if order == 1 else
+                     f"{need:g}, the fewest the GLL grid resolves")
             out.append(f"{key} = {f:g} Hz is under-resolved in {part}: c_S {c_s:.4g} m/s, "
-                       f"wavelength {c_s / f:.3g} m, elements up to {h:.3g} m = {per:.2g} per "
-                       f"wavelength < mesh.min_elements_per_wavelength = {need:g}; refine "
+                       f"wavelength {c_s / f:.3g} m, elements up to {h:.3g} m = {count} < "
+                       f"{limit}; refine "
                        "(mesh.elements_per_wavelength, mesh.refinement) or lower the band")
     return out
 

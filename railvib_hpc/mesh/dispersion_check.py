@@ -14,17 +14,30 @@ Conservative choices, each an upper bound of what it replaces:
   (the embankment's ballast and the mitigation measures are crossed over a few metres only
   and are left out);
 * the wave is the Rayleigh wave that carries most of the energy to a surface probe, with
-  the grid's own Rayleigh relation (:mod:`railvib_hpc.fem.dispersion_rayleigh`, checked
-  against FE runs within 2.5 %) in the worse of a grid axis and a face diagonal (the
-  diagonal, 1.8 times the axis's lag for the lumped mass). The bulk S relation at the
-  Rayleigh wavelength, the check's proxy before, gave 9-11 % less lag;
+  the grid's own Rayleigh relation in the worse of a grid axis and a face diagonal: of the
+  trilinear grid (``mesh.order = 1``, :mod:`railvib_hpc.fem.dispersion_rayleigh`, checked
+  against FE runs within 2.5 %; the diagonal, 1.8 times the axis's lag for the lumped
+  mass; the bulk S relation at the Rayleigh wavelength, the check's proxy before, gave
+  9-11 % less lag), or of the spectral grid of order ``N = mesh.order`` (a periodic column
+  of GLL elements, :func:`railvib_hpc.fem.dispersion_gll_rayleigh.checked_surface_error`:
+  along the directions where it is worst,
+  :data:`~railvib_hpc.fem.spectral_advice.SURFACE_DIRECTIONS`, with its diagonal GLL mass,
+  the worst over a 2 % window about the band's top, whose zone boundaries ``k h = m pi``
+  the relation cannot be read at, and unresolved below 4 points per wavelength).
+  "Elements per wavelength" are elements, ``N`` points each;
 * the error is the harmonic bound of :func:`~railvib_hpc.fem.dispersion.peak_velocity_error`
   at the band's top frequency, the larger of the semidiscretisation (the modal path, and a
   step tending to 0) and the transient engine at its largest step (``transient.dt`` or the
   automatic step's bound ``1 / (transient.steps_per_period transient.f_max)`` for the
-  direct engine; for the explicit ones the soil grid's own limit, 0.9 of its critical step,
-  which only lowers the lumped mass's lag): the time scheme's error is monotone in the step
-  and of the opposite sign, so the worst lies at one of the two ends.
+  direct engine; for the explicit ones the soil grid's own limit, 0.9 of its critical step
+  (of the trilinear grid, or of the GLL grid of order N,
+  :func:`~railvib_hpc.fem.dispersion_gll.critical_courant`), which only lowers the lumped
+  mass's lag): the time scheme's error is monotone in the step and of the opposite sign, so
+  the worst lies at one of the two ends.
+
+For a spectral soil the advice names the elements per wavelength at the case's order and at
+the next one (with the DOFs per cubic metre of each; :mod:`railvib_hpc.fem.spectral_advice`
+compares all orders, a minute's search at orders 7-8, too slow for every run).
 
 The check runs after meshing, with the measured edges, and before ``mesh.h5`` is written;
 on a reused mesh it runs again (``output.probes`` and the limits are not mesh inputs).
@@ -34,6 +47,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -41,9 +56,13 @@ import numpy as np
 from ..config import Case
 from ..constants import THIRD_OCTAVE_MANTISSAS
 from ..errors import MeshError
+from ..fem import dispersion_gll, dispersion_gll_rayleigh
 from ..fem.boundary import wave_speeds
 from ..fem.dispersion import critical_courant, elements_needed
+from ..fem.dispersion_gll_rayleigh import MIN_POINTS_PER_WAVELENGTH
 from ..fem.dispersion_rayleigh import worst_surface_error
+from ..fem.gll import MAX_ORDER
+from ..fem.spectral_advice import SURFACE_DIRECTIONS
 from ..schema import SOIL_LAYER_PARTS
 from ..time_engines import EngineNames, declaration
 
@@ -58,6 +77,15 @@ UNRESOLVED_PHASE = 0.5
 #: :mod:`railvib_hpc.transient.explicit`, which the mesh layer cannot import; a test keeps
 #: the two equal).
 EXPLICIT_STEP_SAFETY = 0.9
+#: Where the advice's search for another order starts, a fraction of the case's elements
+#: per wavelength (the next order needs 0.5-0.8 of them at the same error: docs/spectral.md's
+#: advice table).
+_OTHER_ORDER_START = 0.25
+#: The root search's relative tolerance of the elements per wavelength advised, trilinear
+#: and spectral: the advice is rounded up to a tenth, 0.3-1 % of the trilinear grid's
+#: 10-30 per wavelength and 3-20 % of the spectral grid's 0.5-3 (each evaluation of the GLL
+#: relation is a sparse eigenproblem, 10-50 ms).
+_ADVICE_RTOL = (2e-3, 1e-2)
 #: The ground parts a wave crosses on its way to the probes.
 GROUND_PARTS = ("subgrade", *SOIL_LAYER_PARTS)
 #: Engines whose soil is integrated with central differences and the lumped mass (read
@@ -67,6 +95,50 @@ EXPLICIT_ENGINES = EngineNames(lambda d: d.soil_scheme == "central")
 
 class DispersionError(MeshError):
     """A band the mesh cannot resolve at the farthest probe (``mesh.max_dispersion_error``)."""
+
+
+@dataclass(frozen=True)
+class SoilGrid:
+    """The soil element the check predicts for (:func:`soil_grid`).
+
+    Attributes
+    ----------
+    order
+        ``mesh.order``: 1 the trilinear hexahedron, 2..8 spectral (GLL) elements.
+    worst
+        Its Rayleigh relation's worst error, ``worst(epw, wavelengths, nu=, schemes=,
+        measure=) -> (error, where)`` (``epw`` elements per Rayleigh wavelength).
+    critical
+        Its critical Courant number ``c_P dt / h`` of central differences, of ``nu``.
+    mass
+        The words for its mass in the report (``"lumped mass"``).
+    """
+
+    order: int
+    worst: Callable[..., tuple[float, str]]
+    critical: Callable[[float], float]
+    mass: str
+
+
+def soil_grid(case: Case, order: int | None = None) -> SoilGrid:
+    """The case's soil element (``order``: another order of the same case, the advice's).
+
+    >>> from railvib_hpc.config import Case
+    >>> soil_grid(Case.defaults()).mass, soil_grid(Case.defaults(), 4).mass
+    ('consistent mass', 'spectral order 4, diagonal GLL mass')
+    """
+    order = case["mesh.order"] if order is None else order
+    if order == 1:
+        formulation = case["modal.hex_formulation"]
+        return SoilGrid(1, partial(worst_surface_error, mass=_mass(case),
+                                   rho_inf=case["transient.rho_inf"], formulation=formulation),
+                        partial(critical_courant, formulation=formulation),
+                        f"{_mass(case)} mass")
+    return SoilGrid(order, partial(dispersion_gll_rayleigh.checked_surface_error, order=order,
+                                   rho_inf=case["transient.rho_inf"],
+                                   directions=SURFACE_DIRECTIONS[order]),
+                    partial(dispersion_gll.critical_courant, order),
+                    f"spectral order {order}, diagonal GLL mass")
 
 
 def rayleigh_ratio(nu: float) -> float:
@@ -109,13 +181,15 @@ def farthest_probe(case: Case, probes: Mapping[str, Any]) -> tuple[str, float, i
 
 
 def _schemes(case: Case, c_p: float, c_r: float, f: float, nu: float,
-             dt: float | None = None) -> Callable[[float], tuple[tuple[str, float], ...]]:
+             dt: float | None = None, grid: SoilGrid | None = None
+             ) -> Callable[[float], tuple[tuple[str, float], ...]]:
     """The ``(scheme, courant)`` ends of the step range, as a function of the elements per
     Rayleigh wavelength ``n`` (the element edge is ``c_R / (f n)``); ``dt``: the run's own
-    step (the transient stage's check), else its bound from the case."""
+    step (the transient stage's check), else its bound from the case; ``grid``: the soil
+    element (default the case's, :func:`soil_grid`)."""
     scheme = declaration(case["transient.engine"]).soil_scheme
     if scheme == "central":
-        cc = EXPLICIT_STEP_SAFETY * critical_courant(nu, case["modal.hex_formulation"])
+        cc = EXPLICIT_STEP_SAFETY * (grid or soil_grid(case)).critical(nu)
         if dt is not None:
             return lambda n: (("none", 0.0), ("central", min(c_p * dt * f * n / c_r, cc)))
         return lambda n: (("none", 0.0), ("central", cc))
@@ -131,7 +205,8 @@ def part_error(case: Case, part: str, h: float, f: float, distance: float,
                dt: float | None = None, phase: bool = True) -> dict | None:
     """The predicted error of the whole path in ground part ``part`` (edge ``h``; ``dt``:
     the run's step, :func:`_schemes`; ``phase = False``: the peak error alone, the phase
-    left NaN); None for a part the case does not give."""
+    left NaN) on the case's soil element (:func:`soil_grid`); None for a part the case
+    does not give."""
     from ..site import solid_material
 
     try:
@@ -142,29 +217,70 @@ def part_error(case: Case, part: str, h: float, f: float, distance: float,
     c_r = rayleigh_ratio(mat["nu"]) * c_s
     n_r = c_r / (f * h)
     wavelengths = distance * f / c_r
-    schemes = _schemes(case, c_p, c_r, f, mat["nu"], dt)
-    args = (n_r, wavelengths, mat["nu"], _mass(case), schemes(n_r), case["transient.rho_inf"],
-            case["modal.hex_formulation"])
-    err, where = worst_surface_error(*args)
-    phase = worst_surface_error(*args, measure="phase")[0] if phase else float("nan")
-    return {"h": h, "c_s": c_s, "nu": float(mat["nu"]), "epw": c_s / (f * h),
-            "epw_rayleigh": n_r, "wavelengths": wavelengths, "error": err, "where": where,
-            "phase": phase, "schemes": schemes}
+    grid = soil_grid(case)
+    schemes = _schemes(case, c_p, c_r, f, mat["nu"], dt, grid)
+    nu = float(mat["nu"])
+    err, where = grid.worst(n_r, wavelengths, nu=nu, schemes=schemes(n_r))
+    phase = (grid.worst(n_r, wavelengths, nu=nu, schemes=schemes(n_r), measure="phase")[0]
+             if phase else float("nan"))
+    return {"h": h, "c_s": c_s, "c_p": c_p, "c_r": c_r, "f": f, "dt": dt, "nu": nu,
+            "epw": c_s / (f * h), "epw_rayleigh": n_r, "wavelengths": wavelengths,
+            "error": err, "where": where, "phase": phase, "schemes": schemes,
+            "order": grid.order}
 
 
 def _mass(case: Case) -> str:
     return "lumped" if case["modal.lumped_mass"] else "consistent"
 
 
-def _needed(case: Case, p: dict, limit: float, measure: str = "peak") -> float:
+def _needed(case: Case, p: dict, limit: float, measure: str = "peak",
+            order: int | None = None) -> float:
     """Elements per S wavelength for an error (or a phase error, ``measure = "phase"``)
-    below ``limit`` in part ``p`` (inf: none)."""
+    below ``limit`` in part ``p`` (inf: none), on the case's element or of ``order``."""
     ratio = p["epw_rayleigh"] / p["epw"]
-    n = elements_needed(limit, p["wavelengths"], lo=p["epw_rayleigh"], schemes=p["schemes"],
-                        worst=worst_surface_error,
-                        nu=p["nu"], mass=_mass(case), rho_inf=case["transient.rho_inf"],
-                        formulation=case["modal.hex_formulation"], measure=measure)
+    grid = soil_grid(case, order)
+    own = grid.order == p["order"]
+    schemes = p["schemes"] if own else _schemes(case, p["c_p"], p["c_r"], p["f"], p["nu"],
+                                                p["dt"], grid)
+    # the case's order misses the limit at its own size: search upwards from there; another
+    # order may need fewer elements (:data:`_OTHER_ORDER_START`)
+    lo = p["epw_rayleigh"] * (1.0 if own else _OTHER_ORDER_START)
+    n = elements_needed(limit, p["wavelengths"], lo=lo, schemes=schemes, worst=grid.worst,
+                        rtol=_ADVICE_RTOL[grid.order > 1], nu=p["nu"], measure=measure)
     return n / ratio
+
+
+def _advice_for(case: Case, p: dict, limit: float, key: str, measure: str = "peak",
+                advise: bool = True) -> tuple[str, float]:
+    """The advice line for part ``p`` (:func:`_advice`) and the elements per S wavelength
+    needed at the case's order (NaN: not computed, ``advise = False``; inf: none suffices);
+    for a spectral soil the line adds what the next order needs."""
+    if not advise:
+        return _advice(math.nan, key, p["f"]), math.nan
+    need = _needed(case, p, limit, measure)
+    order = p["order"]
+    if order == 1 or not np.isfinite(need):
+        return _advice(need, key, p["f"], order), need
+    text = _advice(need, key, p["f"], order, dofs=_dofs_per_m3(order, p, need))
+    if order < MAX_ORDER:
+        higher = _needed(case, p, limit, measure, order + 1)
+        if np.isfinite(higher):
+            text += (f"; or mesh.order = {order + 1} with mesh.elements_per_wavelength >= "
+                     f"{_ceil(higher):g} ({_dofs_per_m3(order + 1, p, higher):.3g} DOFs per "
+                     "m^3)")
+    return text, need
+
+
+def _dofs_per_m3(order: int, p: dict, epw: float) -> float:
+    """DOFs per cubic metre of a grid of order ``order`` with ``epw`` elements per S
+    wavelength at the band of part ``p`` (3 per GLL node, ``N^3`` nodes per element)."""
+    h = p["c_s"] / (p["f"] * epw)
+    return 3.0 * (order / h) ** 3
+
+
+def _ceil(x: float) -> float:
+    """Up to the next tenth (the advice's numbers)."""
+    return float(np.ceil(x * 10) / 10)
 
 
 def dispersion_report(quality: dict, case: Case, probes: Mapping[str, Any]) -> dict | None:
@@ -225,20 +341,42 @@ def band_report(quality: dict, case: Case, probes: Mapping[str, Any], f: float, 
     out["key"] = key
     head = (f"numerical dispersion at the farthest probe, {name} ({distance:.3g} m from "
             f"track {track}'s centre line): at {key} = {f:g} Hz {worst} has "
-            f"{p['epw']:.3g} elements per S wavelength ({p['h']:.3g} m edges, c_S "
+            f"{_per_wavelength(p)} ({p['h']:.3g} m edges, c_S "
             f"{p['c_s']:.4g} m/s, {p['wavelengths']:.3g} Rayleigh wavelengths to the probe)")
+    out["order"] = p["order"]
     out["line"] = (f"{head}: phase off by {p['phase']:.2g} period, predicted peak-velocity "
-                   f"error {100 * p['error']:.3g} % ({_mass(case)} mass, worst of "
-                   f"{p['where']}; the whole path in the worst ground part, a conservative "
-                   "bound)")
+                   f"error {100 * p['error']:.3g} % ({soil_grid(case).mass}, "
+                   f"{_where(p['where'])}; the whole path in the worst ground part, a "
+                   "conservative bound)")
+    if _refused(case, p, refuse):         # before the warning's advice (a root search)
+        _refuse(case, out, p, refuse, advise)
     if p["error"] > DISPERSION_TARGET:
-        target = _needed(case, p, DISPERSION_TARGET) if advise else math.nan
+        advice, target = _advice_for(case, p, DISPERSION_TARGET, key, advise=advise)
         out["needed"] = target if np.isfinite(target) else None
         out["warnings"].append(
             f"{head}: predicted peak-velocity error {100 * p['error']:.3g} % > "
-            f"{100 * DISPERSION_TARGET:g} %; {_advice(target, key, f)}")
+            f"{100 * DISPERSION_TARGET:g} %; {advice}")
     _refuse(case, out, p, refuse, advise)
     return out
+
+
+def _where(where: str) -> str:
+    """``"worst of axis, central"``, or the reason there is no worst (the GLL floor)."""
+    return where if where.startswith("fewer than") else f"worst of {where}"
+
+
+def _per_wavelength(p: dict) -> str:
+    """``"3.2 elements per S wavelength"``, with the points of a spectral order."""
+    text = f"{p['epw']:.3g} elements per S wavelength"
+    if p["order"] > 1:
+        text += f" (order {p['order']}: {p['order'] * p['epw']:.3g} points)"
+    return text
+
+
+def _refused(case: Case, p: dict, refuse: bool) -> bool:
+    """Whether :func:`_refuse` raises for part ``p``."""
+    limit = case["mesh.max_dispersion_error"]
+    return (refuse and p["phase"] >= UNRESOLVED_PHASE) or (limit > 0 and p["error"] >= limit)
 
 
 def _refuse(case: Case, out: dict, p: dict, refuse: bool = True, advise: bool = True
@@ -251,23 +389,23 @@ def _refuse(case: Case, out: dict, p: dict, refuse: bool = True, advise: bool = 
     key = out["key"]
     where = (f"{key} = {out['frequency_hz']:g}: at the farthest probe "
              f"{out['probe']} ({out['distance_m']:.3g} m from track {out['track']}) "
-             f"{out['part']} has {p['epw']:.3g} elements per S wavelength")
+             f"{out['part']} has {_per_wavelength(p)}")
     unresolved = p["phase"] >= UNRESOLVED_PHASE
     if unresolved:
-        off = ("beyond the grid's cut-off" if not np.isfinite(p["phase"]) else
-               f"{p['phase']:.2g} period off")
-        need = _needed(case, p, UNRESOLVED_PHASE, "phase") if advise else math.nan
+        off = (f"{p['phase']:.2g} period off" if np.isfinite(p["phase"]) else
+               "beyond the grid's cut-off" if p["order"] == 1 else
+               f"beyond what the grid resolves: {p['order'] * p['epw_rayleigh']:.2g} points "
+               f"per Rayleigh wavelength, fewer than {MIN_POINTS_PER_WAVELENGTH:g}")
         text = (f"{where}: the mesh cannot resolve the band there (the wave arrives {off}; "
                 f"allowed: less than {UNRESOLVED_PHASE:g} period); "
-                f"{_advice(need, key, out['frequency_hz'])}")
+                f"{_advice_for(case, p, UNRESOLVED_PHASE, key, 'phase', advise)[0]}")
         if refuse:
             raise DispersionError(text)
     if limit > 0 and p["error"] >= limit:
-        need = _needed(case, p, limit) if advise or refuse else math.nan
         raise DispersionError(
             f"{where}: predicted peak-velocity error {100 * p['error']:.3g} % >= "
             f"mesh.max_dispersion_error = {limit:g}; "
-            f"{_advice(need, key, out['frequency_hz'])}, or raise "
+            f"{_advice_for(case, p, limit, key, advise=advise or refuse)[0]}, or raise "
             "mesh.max_dispersion_error (0: no limit)")
     if unresolved:
         out["unresolved"] = True
@@ -343,16 +481,21 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def _advice(need: float, key: str = "mesh.wavelength_hz", f: float = 0.0) -> str:
+def _advice(need: float, key: str = "mesh.wavelength_hz", f: float = 0.0, order: int = 1,
+            dofs: float | None = None) -> str:
     """What makes the error small enough (``key``: the band's key, ``f`` its value; NaN
-    ``need``: not computed)."""
+    ``need``: not computed; ``order``: the soil's, whose points per wavelength and DOFs per
+    cubic metre ``dofs`` the advice adds for a spectral soil)."""
     if math.isnan(need):
         return (f"mesh with mesh.wavelength_hz = {f:g} and enough "
                 f"mesh.elements_per_wavelength, or lower {key}")
     if np.isfinite(need):
-        per = f"mesh.elements_per_wavelength >= {np.ceil(need * 10) / 10:g}"
+        per = f"mesh.elements_per_wavelength >= {_ceil(need):g}"
+        if order > 1:
+            per += (f" (order {order}: {order * _ceil(need):.3g} points per S wavelength, "
+                    f"{dofs:.3g} DOFs per m^3)")
         if key == "mesh.wavelength_hz":
-            return f"raise {per.replace('>=', 'to >=')} or lower mesh.wavelength_hz"
+            return f"raise {per.replace('>=', 'to >=', 1)} or lower mesh.wavelength_hz"
         return f"mesh with mesh.wavelength_hz = {f:g} and {per}, or lower {key}"
     return ("no element size suffices at this time step (the time scheme's own error): "
             f"lower transient.dt or raise transient.steps_per_period, or lower {key}")

@@ -97,7 +97,10 @@ MESH_SECTIONS: dict[str, dict[str, Any]] = {
                                              "mesh.wavelength_hz before the mesh stage warns "
                                              "(the frequency error of trilinear hexahedra with "
                                              "consistent mass is (k h)^2 / 24: 4.6 % at 6, "
-                                             "1.6 % at 10)",
+                                             "1.6 % at 10); trilinear only: with mesh.order > 1 "
+                                             "the warning comes below 4 GLL points per "
+                                             "wavelength, the fewest the spectral grid "
+                                             "resolves, and its dispersion is predicted",
                                              "pos"),
         "order": Param(1, "int", "-",
                        "order N of the soil's hexahedra: 1 the trilinear element (today's "

@@ -12,6 +12,9 @@ import pytest
 from railvib_hpc.fem import dispersion as trilinear
 from railvib_hpc.fem import dispersion_gll as gll
 from railvib_hpc.fem.dispersion_gll_rayleigh import (
+    MIN_POINTS_PER_WAVELENGTH,
+    ZONE_WINDOW,
+    checked_surface_error,
     rayleigh_frequency,
     rayleigh_wavenumber_ratio,
     worst_surface_error,
@@ -132,6 +135,52 @@ def test_critical_courant():
         bound = 2.0 / np.sqrt(top) * trilinear._cp_over_cs(0.3)
         assert bound <= gll.critical_courant(order, 0.3) * (1 + 1e-12)
         assert gll.critical_courant(order, 0.3) < gll.critical_courant(order - 1, 0.3)
+
+
+def test_the_lanczos_critical_courant_equals_the_dense_one(monkeypatch):
+    """Order 6's cells (648 unknowns and more) take the Lanczos eigenvalue; the dense
+    ``eigvalsh`` of every cell gives the same Courant number to 1e-12."""
+    lanczos = gll.critical_courant(6, 0.3)
+    monkeypatch.setattr(gll, "_LANCZOS_FROM", 10**9)
+    gll.critical_courant.cache_clear()
+    try:
+        assert abs(gll.critical_courant(6, 0.3) / lanczos - 1) < 1e-12
+    finally:
+        gll.critical_courant.cache_clear()
+
+
+@pytest.mark.parametrize("order", (2, 5, 8))
+def test_below_four_points_per_wavelength_the_checked_relation_resolves_nothing(order):
+    """Below :data:`MIN_POINTS_PER_WAVELENGTH` the checked relation says "not resolved" (the
+    peak bound 1, the phase inf), whatever mode the column matches there; above it, a finite
+    error."""
+    below = 0.97 * MIN_POINTS_PER_WAVELENGTH / order
+    assert checked_surface_error(below, 3.0, order=order, directions=("axis",)) == (
+        1.0, "fewer than 4 points per wavelength")
+    assert checked_surface_error(below, 3.0, order=order, directions=("axis",),
+                                 measure="phase")[0] == np.inf
+    e, _ = checked_surface_error(6.0 / order, 3.0, order=order, directions=("axis",))
+    assert 0.0 <= e < 1.0
+
+
+def test_the_checked_relation_does_not_understate_the_error_at_a_zone_boundary():
+    """About ``k h = pi`` at order 3 (6 points per wavelength) the lattice has a narrow stop
+    band and the column's wave and its alias are degenerate: the phase error per wavelength
+    read there can be far below the grid's on either side (measured: 7.6e-4 at 6.05 points
+    between 4.3e-3 at 5.95 and 1.9e-3 at 6.2). Through the window the checked relation at
+    every size from 5.9 to 6.1 points is at least the grid's error at 6.3 points, the finer
+    side beyond the window (which grows with the frequency), and at least the unchecked
+    relation at the same size."""
+    order, directions = 3, ("axis",)
+    finer = worst_surface_error(6.3 / order, 1.0, order=order, measure="phase",
+                                directions=directions)[0]
+    for ppw in (5.9, 5.95, 6.0, 6.05, 6.1):
+        checked = checked_surface_error(ppw / order, 1.0, order=order, measure="phase",
+                                        directions=directions)[0]
+        raw = worst_surface_error(ppw / order, 1.0, order=order, measure="phase",
+                                  directions=directions)[0]
+        assert np.isfinite(checked) and checked >= max(finer, raw), (ppw, checked, finer)
+    assert 0.0 < ZONE_WINDOW <= 0.05
 
 
 def test_the_advisor_at_order_four():

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from mpi4py import MPI
-from spectral_soil_cases import ABSORBING, probes, small_case
+from spectral_soil_cases import ABSORBING, BASELINE, SMALL_BOX, probes, small_case
 
 from railvib_hpc.config import Case, load_case
 from railvib_hpc.errors import CaseError
@@ -104,3 +104,38 @@ def test_the_static_start_and_the_files(tmp_path):
         assert check(tmp_path / path, True) == [], path
     again = run_transient_stage(small_case(*ABSORBING), tmp_path, comm, Reporter(0))
     assert again["reused"]
+
+
+def test_the_band_the_mesh_resolves_at_its_order_is_reported_and_a_limit_refuses(tmp_path,
+                                                                                capsys):
+    """The run's own check at transient.f_max on the GLL grid of its order: 3 m elements of
+    order 2 at 90 Hz (1.5 points per S wavelength) resolve the band at the farthest probe
+    only up to a lower one-third-octave band, which the run records and says (it used to
+    record transient.f_max whatever the mesh); with mesh.max_dispersion_error the same run
+    is refused in one line, exit code 2, before any file is written. Order 3 at 40 Hz
+    resolves its band."""
+    import h5py
+
+    from railvib_hpc.cli import run
+    from railvib_hpc.io.formats.transient import transient_stats
+
+    coarse = ("transient.f_max=90", "load.x_end=5")
+    stats = run_transient_stage(small_case(*coarse, order=2), tmp_path / "coarse", comm,
+                                Reporter(0))
+    out = capsys.readouterr().out
+    assert 0.0 < stats["resolved_up_to_hz"] < 90.0
+    with h5py.File(tmp_path / "coarse" / "transient.h5", "r") as f:
+        assert transient_stats(f.attrs)["resolved_up_to_hz"] == stats["resolved_up_to_hz"]
+    assert "spectral order 2, diagonal GLL mass" in out
+    assert f"resolved up to {stats['resolved_up_to_hz']:g} Hz at the farthest probe" in out
+    fine = run_transient_stage(small_case("load.x_end=5"), tmp_path / "fine", comm,
+                               Reporter(0))
+    assert fine["resolved_up_to_hz"] == 40.0
+    sets = [a for s in [*SMALL_BOX, "mesh.order=2", *coarse, "mesh.max_dispersion_error=0.05"]
+            for a in ("--set", s)]
+    capsys.readouterr()
+    assert run(["transient", str(BASELINE), "--out", str(tmp_path / "refused"), *sets]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "(order 2: 1.54 points)" in err, err
+    assert ">= mesh.max_dispersion_error = 0.05" in err
+    assert not (tmp_path / "refused" / "transient.h5").exists()

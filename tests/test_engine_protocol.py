@@ -4,6 +4,8 @@ engine one module and one registry line (``example_engine.py``)."""
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import sys
 from pathlib import Path
@@ -25,6 +27,10 @@ SHORT = ["mesh.refinement=0.25", "vehicle.x_start=2.95", "vehicle.x_end=3.05",
          "modal.lumped_mass=true", "output.stress_times=[]"]
 
 
+#: ``SHORT`` run by the example engine, as ``--set`` arguments of the command line.
+HALFSTEP_SETS = [a for s in [*SHORT, "transient.engine=halfstep"] for a in ("--set", s)]
+
+
 @pytest.fixture
 def halfstep(monkeypatch):
     """The example engine of ``example_engine.py``, registered with its one line."""
@@ -33,6 +39,24 @@ def halfstep(monkeypatch):
     monkeypatch.setitem(time_engines.ENGINES, "halfstep", example_engine.DECLARATION)
     yield example_engine
     sys.modules.pop("example_engine", None)
+
+
+@pytest.fixture(scope="module")
+def halfstep_cli_run(tmp_path_factory):
+    """``(folder, stdout)``: the uninterrupted ``halfstep`` run of ``SHORT`` from the command
+    line (the engine registered for this run only), run once for the module: the run of the
+    command-line test and the reference the checkpoint test resumes to (the same case;
+    they ran it twice)."""
+    import example_engine
+
+    out = tmp_path_factory.mktemp("halfstep") / "cli"
+    text = io.StringIO()
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(text):
+        mp.setitem(time_engines.ENGINES, "halfstep", example_engine.DECLARATION)
+        code = run(["transient", str(BASELINE), "--out", str(out), *HALFSTEP_SETS])
+    sys.modules.pop("example_engine", None)
+    assert code == 0, text.getvalue()
+    return out, text.getvalue()
 
 
 def test_the_schema_choices_and_the_checks_read_the_declarations(halfstep):
@@ -60,13 +84,12 @@ def test_every_engine_builds_from_its_declaration():
             assert callable(getattr(cls, method)), (name, method)
 
 
-def test_a_new_engine_is_one_module_and_one_registry_line(halfstep, tmp_path, capsys):
-    """``halfstep`` from the command line and the API: the run takes half the explicit
-    engine's step, says so, records its engine and is reused by the next call."""
-    sets = [a for s in [*SHORT, "transient.engine=halfstep"] for a in ("--set", s)]
-    out = tmp_path / "cli"
-    assert run(["transient", str(BASELINE), "--out", str(out), *sets]) == 0
-    text = capsys.readouterr().out
+def test_a_new_engine_is_one_module_and_one_registry_line(halfstep, halfstep_cli_run,
+                                                          tmp_path):
+    """``halfstep`` from the command line (``halfstep_cli_run``) and the API: the run takes
+    half the explicit engine's step, says so, records its engine and is reused by the next
+    call."""
+    out, text = halfstep_cli_run
     assert "central differences at half the stable step (example), stable up to" in text
     with h5py.File(out / "transient.h5", "r") as f:
         stats = json.loads(f.attrs["stats"])
@@ -83,9 +106,10 @@ def test_a_new_engine_is_one_module_and_one_registry_line(halfstep, tmp_path, ca
     assert again.reused is True and again.summary["engine"] == "halfstep"
 
 
-def test_the_new_engine_checkpoints_and_resumes(halfstep, tmp_path, capsys):
+def test_the_new_engine_checkpoints_and_resumes(halfstep, halfstep_cli_run, tmp_path,
+                                                capsys):
     """Killed after a checkpoint, ``halfstep`` resumes through the command line to the
-    uninterrupted answer, bit for bit (one rank)."""
+    uninterrupted answer (``halfstep_cli_run``), bit for bit (one rank)."""
     from mpi4py import MPI
 
     from railvib_hpc.log import Reporter
@@ -94,15 +118,15 @@ def test_the_new_engine_checkpoints_and_resumes(halfstep, tmp_path, capsys):
 
     init_petsc([])
     case = load_case(BASELINE, [*SHORT, "transient.engine=halfstep"])
-    run_transient_stage(case, tmp_path / "ref", MPI.COMM_SELF, Reporter(0))
+    ref_folder = halfstep_cli_run[0]
     with pytest.raises(Interrupted):
         run_transient_stage(case, tmp_path / "resume", MPI.COMM_SELF, Reporter(0),
                             checkpoint_steps=400, stop_after=400)
-    sets = [a for s in [*SHORT, "transient.engine=halfstep"] for a in ("--set", s)]
     capsys.readouterr()
-    assert run(["transient", str(BASELINE), "--out", str(tmp_path / "resume"), *sets]) == 0
+    assert run(["transient", str(BASELINE), "--out", str(tmp_path / "resume"),
+                *HALFSTEP_SETS]) == 0
     assert "resuming from the checkpoint at step 400" in capsys.readouterr().out
-    with h5py.File(tmp_path / "ref" / "probes.h5", "r") as a, \
+    with h5py.File(ref_folder / "probes.h5", "r") as a, \
             h5py.File(tmp_path / "resume" / "probes.h5", "r") as b:
         for name in a["probes"]:
             ref, new = a[f"probes/{name}/velocity"][()], b[f"probes/{name}/velocity"][()]

@@ -107,9 +107,9 @@ def test_imex_auto_partition_lifts_the_step_to_the_bands(tmp_path, capsys):
     partition's 4.87e-4 s go implicit too and the step is the band's 5e-4 s (measured: 120
     elements; peaks 0.89 / 0.99 / 1.3 % from the direct path at 5e-5 s, where the direct
     path at its own 5e-4 s is 2.4 / 4.0 / 4.9 % off)."""
-    assert run(["transient", str(BASELINE), "--out", str(tmp_path), *SETS,
-                "--set", "transient.engine=imex",
-                "--set", "transient.implicit_elements=auto"]) == 0
+    # (the integration alone: only its log is read, no assessment needed)
+    run_transient_only(tmp_path, [*SETS[1::2], "transient.engine=imex",
+                                  "transient.implicit_elements=auto"])
     out = capsys.readouterr().out
     if comm.rank == 0:
         assert "dt = 5.0000e-04 s" in out

@@ -18,6 +18,7 @@ wheelset rolling 0.2 m onto the flexible rail (:data:`ONTO`).
 from __future__ import annotations
 
 import shutil
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -70,20 +71,50 @@ def _worst(new: dict, ref: dict) -> tuple[float, float]:
     return trace, peaks
 
 
+@pytest.fixture(scope="module")
+def one_rank_runs(tmp_path_factory):
+    """The one-rank runs the tests below share, each computed once per module (on one rank
+    both tests ran each of them: the same case):
+
+    * ``reference(engine)`` -> ``(folder, summary)``: the uninterrupted run;
+    * ``checkpoint(engine)`` -> the folder of the run killed after its checkpoint
+      (:data:`STOPS`), which a test copies before it resumes it (a resume removes the
+      checkpoint)."""
+    root = tmp_path_factory.mktemp("pml_resume")
+    references: dict[str, tuple] = {}
+    checkpoints: dict[str, object] = {}
+
+    def reference(engine: str) -> tuple:
+        if engine not in references:
+            folder = root / f"{engine}_uninterrupted"
+            references[engine] = (folder, _run(engine, folder))
+        return references[engine]
+
+    def checkpoint(engine: str):
+        if engine not in checkpoints:
+            folder = root / f"{engine}_killed"
+            _interrupt(engine, folder)
+            checkpoints[engine] = folder
+        return checkpoints[engine]
+
+    return SimpleNamespace(reference=reference, checkpoint=checkpoint)
+
+
 @pytest.mark.skipif(comm.size > 1, reason="one rank (the 2-rank test below)")
 @pytest.mark.parametrize("engine", ["explicit", "imex", "direct"])
-def test_a_run_with_layers_resumes_to_the_uninterrupted_answer(tmp_path, engine, capsys):
-    ref = _run(engine, tmp_path / "ref")
+def test_a_run_with_layers_resumes_to_the_uninterrupted_answer(one_rank_runs, tmp_path, engine,
+                                                               capsys):
+    ref_folder, ref = one_rank_runs.reference(engine)
     assert ref["pml_elements"] > 0
     out = tmp_path / "resume"
-    _interrupt(engine, out)
+    shutil.copytree(one_rank_runs.checkpoint(engine), out, symlinks=True)
     assert (out / TRANSIENT_CHECKPOINT_H5).exists()
     capsys.readouterr()
     stats = _run(engine, out)
     assert "resuming from the checkpoint at step" in capsys.readouterr().out
     assert 0 < stats["steps_run"] < stats["n_steps"] == ref["n_steps"]
     assert not (out / TRANSIENT_CHECKPOINT_H5).exists()
-    new, old = _probes(out), _probes(tmp_path / "ref")
+    new, old = _probes(out), _probes(ref_folder)
     trace, peaks = _worst(new, old)
     print(f"{engine}: resumed - uninterrupted, probe velocities {trace:.2e}, peaks {peaks:.2e}"
           " of the largest")
@@ -93,12 +124,19 @@ def test_a_run_with_layers_resumes_to_the_uninterrupted_answer(tmp_path, engine,
 
 @pytest.mark.mpi
 @pytest.mark.parametrize("engine", ["explicit", "direct"])
-def test_a_run_with_layers_resumes_on_two_ranks_or_one(shared_tmp, engine):
+def test_a_run_with_layers_resumes_on_two_ranks_or_one(one_rank_runs, shared_tmp, engine):
     """Killed on two ranks, resumed on two (and, from a copy of the checkpoint, on one):
-    within :data:`RANKS_BOUND` of the uninterrupted 2-rank run."""
+    within :data:`RANKS_BOUND` of the uninterrupted 2-rank run. (In the one-rank pass the
+    world is one rank: its uninterrupted run and its killed run are the one-rank test's,
+    ``one_rank_runs``.)"""
     base = shared_tmp / engine
-    _run(engine, base / "ref", comm)
-    _interrupt(engine, base / "two", comm)
+    if comm.size == 1:
+        ref_folder = one_rank_runs.reference(engine)[0]
+        shutil.copytree(one_rank_runs.checkpoint(engine), base / "two", symlinks=True)
+    else:
+        ref_folder = base / "ref"
+        _run(engine, ref_folder, comm)
+        _interrupt(engine, base / "two", comm)
     if comm.rank == 0:
         assert (base / "two" / TRANSIENT_CHECKPOINT_H5).exists()
         shutil.copytree(base / "two", base / "one", symlinks=True)
@@ -108,7 +146,7 @@ def test_a_run_with_layers_resumes_on_two_ranks_or_one(shared_tmp, engine):
     if comm.rank == 0:
         one = _run(engine, base / "one")
         assert 0 < one["steps_run"] < one["n_steps"]
-        ref = _probes(base / "ref")
+        ref = _probes(ref_folder)
         for folder in ("two", "one"):
             trace, peaks = _worst(_probes(base / folder), ref)
             print(f"{engine} on {comm.size} ranks, resumed on {folder}: probe velocities "
